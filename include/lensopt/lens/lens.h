@@ -1,0 +1,91 @@
+// The lens model: a sequence of spherical surfaces, each with the thickness to the next and the
+// medium after it; one flat surface is the aperture stop; the last thickness is the distance from
+// the last surface to the image plane. Lengths in mm, curvatures in 1/mm (flat = 0), angles in
+// degrees unless a name says otherwise.
+#pragma once
+
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "lensopt/glass/dispersion.h"
+#include "lensopt/glass/glass.h"
+
+namespace lensopt {
+
+// The medium after a surface: air, a catalog glass, or a model glass given by (nd, vd).
+struct Material {
+  enum class Kind { kAir, kCatalog, kModel };
+  Kind kind = Kind::kAir;
+  std::string glass_name;  // catalog glass name (kCatalog)
+  double nd = 1.0;         // d-line index (catalog's figure for kCatalog)
+  double vd = 0.0;         // Abbe number (catalog's figure for kCatalog); 0 for air
+  std::shared_ptr<const Glass> glass;  // the catalog entry (kCatalog), for DispersionModel::kCatalog
+
+  bool is_air() const { return kind == Kind::kAir; }
+  static Material air() { return {}; }
+  static Material model(double nd, double vd);
+  static Material from_catalog(const Glass& glass);
+  // "air", the glass name, or "model(nd, vd)".
+  std::string label() const;
+};
+
+// One refracting (or stop) surface.
+struct Surface {
+  double curvature_per_mm = 0.0;  // c = 1/R; 0 for a flat surface
+  double thickness_mm = 0.0;      // axial distance to the next surface (or the image plane)
+  Material material;              // medium from this surface to the next
+  bool is_stop = false;           // the aperture stop (must be flat)
+  double semi_diameter_mm = 0.0;  // clear semi-aperture if known; 0 = not set
+  bool written_as_radius = true;  // TOML round trip: written as radius_mm (else curvature_per_mm)
+};
+
+// First-order specifications and sampling (SPEC "Lens model").
+struct Specs {
+  double f_number = 2.0;
+  double half_field_deg = 25.0;
+  double sensor_diagonal_mm = 16.0;
+  std::vector<double> wavelengths_nm;  // default: the paper's 15 (R, G, B five each)
+  std::vector<int> wavelength_channels;  // 0 = R, 1 = G, 2 = B, one per wavelength
+  DispersionModel dispersion = DispersionModel::kAbbe;
+
+  // The paper's defaults: f/2, 25 deg, 16 mm, 15 wavelengths.
+  Specs();
+
+  // f = d / (2 tan(hfov)), mm.
+  double focal_length_mm() const;
+};
+
+// The paper's 15 wavelengths (nm), R then G then B, and their channels.
+const std::vector<double>& paper_wavelengths_nm();
+const std::vector<int>& paper_wavelength_channels();
+
+// A lens prescription with its specs.
+struct Lens {
+  std::string name;
+  std::string catalog_name;  // the catalog its glass names refer to ("ohara"), may be empty
+  Specs specs;
+  std::vector<Surface> surfaces;
+  std::string source_path;  // file it was read from, for messages
+  std::string extra_toml;   // other top-level TOML tables ([optimize], [tolerance], ...), verbatim
+
+  // Index of the stop surface; -1 if none.
+  int stop_index() const;
+  // Number of glass elements (runs of consecutive glass media).
+  int element_count() const;
+  // Sum of all thicknesses but the last (first vertex to last vertex), mm.
+  double track_length_mm() const;
+  // Sum of all thicknesses (first vertex to image plane), mm.
+  double total_track_mm() const;
+
+  // Throws Error if the lens cannot be traced: no surfaces, no stop or a curved stop, a
+  // non-finite number, a glass with nd <= 1 or vd <= 0, fewer than 2 wavelengths or a spec out of
+  // range. Messages name the surface (1-based) and source_path.
+  void validate() const;
+};
+
+// Uniformly scales a lens: curvatures / s, thicknesses and semi-diameters * s.
+Lens scaled(const Lens& lens, double scale);
+
+}  // namespace lensopt

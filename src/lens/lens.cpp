@@ -1,0 +1,137 @@
+#include "lensopt/lens/lens.h"
+
+#include <fmt/format.h>
+
+#include <cmath>
+
+#include "lensopt/core/error.h"
+
+namespace lensopt {
+
+Material Material::model(double nd, double vd) {
+  Material m;
+  m.kind = Kind::kModel;
+  m.nd = nd;
+  m.vd = vd;
+  return m;
+}
+
+Material Material::from_catalog(const Glass& glass) {
+  Material m;
+  m.kind = Kind::kCatalog;
+  m.glass_name = glass.name;
+  m.nd = glass.nd;
+  m.vd = glass.vd;
+  m.glass = std::make_shared<Glass>(glass);
+  return m;
+}
+
+std::string Material::label() const {
+  switch (kind) {
+    case Kind::kAir:
+      return "air";
+    case Kind::kCatalog:
+      return glass_name;
+    case Kind::kModel:
+      return fmt::format("model({:.5f}, {:.2f})", nd, vd);
+  }
+  return "?";
+}
+
+const std::vector<double>& paper_wavelengths_nm() {
+  // Supplement, table "Selected wavelengths": R, G, B, five each (odd 10-quantiles of the
+  // Sony IMX172 quantum efficiency per channel).
+  static const std::vector<double> wavelengths = {584.1, 604.2, 622.5, 642.2, 665.9,
+                                                  487.1, 512.1, 535.1, 560.8, 596.3,
+                                                  409.4, 435.4, 456.6, 477.9, 505.9};
+  return wavelengths;
+}
+
+const std::vector<int>& paper_wavelength_channels() {
+  static const std::vector<int> channels = {0, 0, 0, 0, 0, 1, 1, 1, 1, 1, 2, 2, 2, 2, 2};
+  return channels;
+}
+
+Specs::Specs()
+    : wavelengths_nm(paper_wavelengths_nm()), wavelength_channels(paper_wavelength_channels()) {}
+
+double Specs::focal_length_mm() const {
+  constexpr double kPi = 3.14159265358979323846;
+  return sensor_diagonal_mm / (2.0 * std::tan(half_field_deg * kPi / 180.0));
+}
+
+int Lens::stop_index() const {
+  for (std::size_t i = 0; i < surfaces.size(); ++i) {
+    if (surfaces[i].is_stop) return static_cast<int>(i);
+  }
+  return -1;
+}
+
+int Lens::element_count() const {
+  // Each glass medium between two surfaces is one element (a cemented pair counts two).
+  int count = 0;
+  for (const Surface& s : surfaces) count += s.material.is_air() ? 0 : 1;
+  return count;
+}
+
+double Lens::track_length_mm() const {
+  double sum = 0;
+  for (std::size_t i = 0; i + 1 < surfaces.size(); ++i) sum += surfaces[i].thickness_mm;
+  return sum;
+}
+
+double Lens::total_track_mm() const {
+  double sum = 0;
+  for (const Surface& s : surfaces) sum += s.thickness_mm;
+  return sum;
+}
+
+void Lens::validate() const {
+  const std::string where = source_path.empty() ? name : source_path;
+  auto fail = [&](const std::string& message) { throw Error(SourceLocation{where}, message); };
+  if (surfaces.size() < 2) fail("a lens needs at least two surfaces");
+  int stops = 0;
+  for (std::size_t i = 0; i < surfaces.size(); ++i) {
+    const Surface& s = surfaces[i];
+    const int n = static_cast<int>(i) + 1;
+    if (!std::isfinite(s.curvature_per_mm)) fail(fmt::format("surface {}: curvature is not finite", n));
+    if (!std::isfinite(s.thickness_mm)) fail(fmt::format("surface {}: thickness is not finite", n));
+    if (s.is_stop) {
+      ++stops;
+      if (s.curvature_per_mm != 0.0) fail(fmt::format("surface {}: the stop must be flat", n));
+    }
+    if (!s.material.is_air()) {
+      if (!(s.material.nd > 1.0) || !std::isfinite(s.material.nd))
+        fail(fmt::format("surface {}: glass {} has nd = {} (must be > 1)", n, s.material.label(),
+                         s.material.nd));
+      if (!(s.material.vd > 0.0) || !std::isfinite(s.material.vd))
+        fail(fmt::format("surface {}: glass {} has vd = {} (must be > 0)", n, s.material.label(),
+                         s.material.vd));
+    }
+  }
+  if (stops == 0) fail("no surface is marked as the aperture stop");
+  if (stops > 1) fail(fmt::format("{} surfaces are marked as the aperture stop; one must be", stops));
+  if (!surfaces.back().material.is_air()) fail("the last surface must be followed by air");
+  if (!(specs.f_number > 0.0)) fail(fmt::format("f_number = {} must be > 0", specs.f_number));
+  if (!(specs.half_field_deg >= 0.0 && specs.half_field_deg < 89.0))
+    fail(fmt::format("half_field_deg = {} must be in [0, 89)", specs.half_field_deg));
+  if (!(specs.sensor_diagonal_mm > 0.0))
+    fail(fmt::format("sensor_diagonal_mm = {} must be > 0", specs.sensor_diagonal_mm));
+  if (specs.wavelengths_nm.empty()) fail("no wavelengths");
+  for (double w : specs.wavelengths_nm)
+    if (!(w > 200.0 && w < 20000.0)) fail(fmt::format("wavelength {} nm is out of range", w));
+  if (specs.wavelength_channels.size() != specs.wavelengths_nm.size())
+    fail("wavelength channels and wavelengths differ in count");
+}
+
+Lens scaled(const Lens& lens, double scale) {
+  Lens out = lens;
+  for (Surface& s : out.surfaces) {
+    s.curvature_per_mm /= scale;
+    s.thickness_mm *= scale;
+    s.semi_diameter_mm *= scale;
+  }
+  return out;
+}
+
+}  // namespace lensopt

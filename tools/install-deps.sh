@@ -1,0 +1,20 @@
+#!/usr/bin/env bash
+# Installs lensopt's build and run dependencies from Debian 12 packages.
+# Skips apt entirely when every package is already installed.
+set -euo pipefail
+packages=(
+  build-essential cmake ninja-build pkg-config
+  libceres-dev libeigen3-dev libcli11-dev libfmt-dev libtomlplusplus-dev
+  libopenimageio-dev openimageio-tools doctest-dev libyaml-cpp-dev nlohmann-json3-dev
+)
+missing=()
+for p in "${packages[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if ((${#missing[@]})); then
+  echo "install-deps: installing ${missing[*]}" >&2
+  sudo_cmd=""
+  [ "$(id -u)" -eq 0 ] || sudo_cmd="sudo"
+  $sudo_cmd apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $sudo_cmd apt-get install -y -qq --no-install-recommends "${missing[@]}"
+fi
