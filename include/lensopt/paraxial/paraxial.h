@@ -1,0 +1,102 @@
+// Paraxial (first-order) optics of a TraceLens, templated so Jets carry derivatives.
+//
+// A paraxial ray is (y, w) with height y (mm) and reduced angle w = n u. At surface k with
+// curvature c_k between media n (before) and n' (after):
+//   refraction  w' = w - y c_k (n' - n)
+//   transfer    y' = y + t_k w' / n'
+// Equivalently each surface is the ABCD matrix [[1, 0], [-c (n'-n), 1]] followed by
+// [[1, t/n'], [0, 1]] acting on (y, w).
+//   EFL = -y_0 / w_K for a ray entering parallel (y_0 = 1, w_0 = 0), w_K after the last surface;
+//   BFL = -y_{K-1} / w_K (last vertex to paraxial focus);
+//   entrance pupil: with (y_s, w_s) at the stop = M (y_0, u_0) from the first vertex plane,
+//   y_s = A y_0 + B u_0, a ray through the pupil centre at z_EP has y_0 = -z_EP u_0, so
+//   z_EP = B / A (mm, from the first vertex, positive to the right).
+#pragma once
+
+#include <cmath>
+
+#include "lensopt/core/scalar.h"
+#include "lensopt/trace/trace_lens.h"
+
+namespace lensopt {
+
+// A paraxial ray state.
+template <typename T>
+struct ParaxialRay {
+  T y;  // height, mm
+  T w;  // reduced angle n u
+};
+
+// Traces a paraxial ray from the first vertex plane (object space, n = 1) through surfaces
+// [0, end) at `wavelength_nm`. If `end` == K the ray ends at the last surface after refraction,
+// i.e. (y at the last vertex, w in image space). Transfers happen between surfaces only.
+template <typename T>
+ParaxialRay<T> paraxial_trace(const TraceLens<T>& lens, ParaxialRay<T> ray, int end,
+                              double wavelength_nm) {
+  for (int k = 0; k < end; ++k) {
+    if (k > 0) {
+      // Transfer from surface k-1 to k through medium k-1.
+      ray.y = ray.y + lens.thickness_mm[k - 1] * ray.w / lens.index_at_nm(k - 1, wavelength_nm);
+    }
+    const T n_before = lens.index_at_nm(k - 1, wavelength_nm);
+    const T n_after = lens.index_at_nm(k, wavelength_nm);
+    ray.w = ray.w - ray.y * lens.curvature_per_mm[k] * (n_after - n_before);
+  }
+  return ray;
+}
+
+// First-order data at one wavelength.
+template <typename T>
+struct ParaxialData {
+  T efl_mm;                 // effective focal length
+  T bfl_mm;                 // last vertex to paraxial focus
+  T entrance_pupil_z_mm;    // entrance pupil from the first vertex (positive: to the right)
+  T stop_magnification;     // A: stop height per object-space marginal height (y_s = A y_0)
+};
+
+template <typename T>
+ParaxialData<T> paraxial_data(const TraceLens<T>& lens, double wavelength_nm) {
+  const int k_count = lens.surface_count();
+  ParaxialData<T> out;
+  const ParaxialRay<T> marginal =
+      paraxial_trace(lens, ParaxialRay<T>{K<T>(1.0), K<T>(0.0)}, k_count, wavelength_nm);
+  out.efl_mm = -K<T>(1.0) / marginal.w;
+  out.bfl_mm = -marginal.y / marginal.w;
+  // Stop plane: trace up to the stop's refraction (a flat stop does not refract), then the ray
+  // sits at the stop vertex. A from (1, 0), B from (0, 1).
+  const int s = lens.stop;
+  const ParaxialRay<T> ray_a =
+      paraxial_trace(lens, ParaxialRay<T>{K<T>(1.0), K<T>(0.0)}, s + 1, wavelength_nm);
+  const ParaxialRay<T> ray_b =
+      paraxial_trace(lens, ParaxialRay<T>{K<T>(0.0), K<T>(1.0)}, s + 1, wavelength_nm);
+  out.stop_magnification = ray_a.y;
+  out.entrance_pupil_z_mm = ray_b.y / ray_a.y;
+  return out;
+}
+
+// Paraxial image height (mm) on the actual image plane (thickness of the last surface) of the
+// chief ray at field angle tan_theta through the entrance pupil centre.
+template <typename T>
+T paraxial_image_height(const TraceLens<T>& lens, const T& entrance_pupil_z_mm, const T& tan_theta,
+                        double wavelength_nm) {
+  const int k_count = lens.surface_count();
+  ParaxialRay<T> ray{-entrance_pupil_z_mm * tan_theta, tan_theta};
+  ray = paraxial_trace(lens, ray, k_count, wavelength_nm);
+  return ray.y + lens.thickness_mm[k_count - 1] * ray.w;  // image space is air (n = 1)
+}
+
+// Curvature of the last surface that gives focal length `efl_mm` with all else fixed:
+// w_K = w - y c (1 - n) must equal -1/f for the ray (1, 0), so c = (w + 1/f) / (y (1 - n)).
+// Needs a glass before the last surface (n != 1) and y != 0.
+template <typename T>
+T solve_last_curvature(const TraceLens<T>& lens, const T& efl_mm, double wavelength_nm) {
+  const int k_count = lens.surface_count();
+  ParaxialRay<T> ray = paraxial_trace(lens, ParaxialRay<T>{K<T>(1.0), K<T>(0.0)}, k_count - 1,
+                                      wavelength_nm);
+  const int last = k_count - 1;
+  ray.y = ray.y + lens.thickness_mm[last - 1] * ray.w / lens.index_at_nm(last - 1, wavelength_nm);
+  const T n_before = lens.index_at_nm(last - 1, wavelength_nm);
+  return (ray.w + K<T>(1.0) / efl_mm) / (ray.y * (K<T>(1.0) - n_before));
+}
+
+}  // namespace lensopt

@@ -1,0 +1,176 @@
+// The exact ray-trace kernel, one template for double and ceres::Jet.
+//
+// Rays are batched structure-of-arrays. Before surface k a ray's position (x, y, z) is relative
+// to the vertex of surface k-1 (of surface 0 at the start); its direction cosines (l, m, n) have
+// unit length with n > 0. For each surface k with curvature c:
+//   1. Shift to vertex k:            z <- z - t_{k-1}
+//   2. Transfer to the vertex plane: s0 = -z / n,  (x1, y1) = (x, y) + s0 (l, m)
+//   3. Intersect the sphere c (x^2 + y^2 + z^2) - 2 z = 0 from (x1, y1, 0):
+//        F = c (x1^2 + y1^2),  G = n - c (x1 l + y1 m),  zeta = G^2 - c F = cos^2(I)
+//        s1 = F / (G + sqrt(zeta))       (finite and exact as c -> 0: a flat surface gives s1 = 0)
+//      zeta < 0: the ray misses the surface (failure flag, never NaN).
+//   4. Refract (Snell, vector form) with mu = n_before / n_after and unit normal
+//      N = (-c x, -c y, 1 - c z):
+//        zeta' = 1 - mu^2 (1 - zeta) = cos^2(I'),  zeta' < 0: total internal reflection
+//        d' = mu d + (sqrt(zeta') - mu sqrt(zeta)) N
+// After the last surface the ray is transferred to the image plane at t_{K-1}.
+// Per ray and surface the kernel can record what the design losses need: the axial travel
+// dz_k = t_k + z_{k+1} - z_k in every space k (after surface k, the last one up to the image),
+// and zeta, zeta' at every surface.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "lensopt/core/scalar.h"
+#include "lensopt/trace/trace_lens.h"
+
+namespace lensopt {
+
+// Per-ray status: 0 = traced; otherwise the failure kind (the first one wins).
+enum RayStatus : std::uint8_t {
+  kRayOk = 0,
+  kRayMissedSurface = 1,         // zeta < 0: no intersection with the sphere
+  kRayTotalInternalReflection = 2,  // zeta' < 0
+  kRayBackwards = 3,             // direction with n <= 0 (cannot reach the next surface)
+};
+
+// A batch of rays, structure of arrays. All arrays have size() entries.
+template <typename T>
+struct RayBundle {
+  std::vector<T> x, y, z;  // mm
+  std::vector<T> l, m, n;  // direction cosines
+  std::vector<std::uint8_t> status;
+  std::vector<std::int8_t> failed_surface;  // surface index of the failure, -1 if none
+
+  void resize(std::size_t count) {
+    x.resize(count);
+    y.resize(count);
+    z.resize(count);
+    l.resize(count);
+    m.resize(count);
+    n.resize(count);
+    status.assign(count, kRayOk);
+    failed_surface.assign(count, -1);
+  }
+  std::size_t size() const { return x.size(); }
+};
+
+// Optional per-ray records for the design losses. Arrays are [surface][ray].
+template <typename T>
+struct RayRecord {
+  std::vector<std::vector<T>> axial_travel_mm;  // K spaces: after surface k (the last: to image)
+  std::vector<std::vector<T>> cos2_incidence;   // K surfaces: zeta
+  std::vector<std::vector<T>> cos2_refraction;  // K surfaces: zeta'
+
+  void resize(int surface_count, std::size_t ray_count) {
+    axial_travel_mm.assign(surface_count, std::vector<T>(ray_count));
+    cos2_incidence.assign(surface_count, std::vector<T>(ray_count));
+    cos2_refraction.assign(surface_count, std::vector<T>(ray_count));
+  }
+};
+
+// Traces every ray of `rays` through surfaces [0, end) at wavelength number w (end = K for the
+// whole lens), leaving positions relative to vertex end-1 on that surface. If `to_image`, rays
+// continue to the image plane (end must be K) and end with z = 0 relative to the image plane.
+// `record` may be null.
+template <typename T>
+void trace_bundle(const TraceLens<T>& lens, int w, int end, bool to_image, RayBundle<T>& rays,
+                  RayRecord<T>* record) {
+  using std::sqrt;
+  const std::size_t count = rays.size();
+  const T one = K<T>(1.0);
+  const T zero = K<T>(0.0);
+  T* x = rays.x.data();
+  T* y = rays.y.data();
+  T* z = rays.z.data();
+  T* l = rays.l.data();
+  T* m = rays.m.data();
+  T* n = rays.n.data();
+  std::uint8_t* status = rays.status.data();
+  std::int8_t* failed_at = rays.failed_surface.data();
+
+  // A ray must travel forwards.
+  for (std::size_t i = 0; i < count; ++i) {
+    if (!(n[i] > zero) && status[i] == kRayOk) {
+      status[i] = kRayBackwards;
+      failed_at[i] = 0;
+      n[i] = one;
+    }
+  }
+
+  for (int k = 0; k < end; ++k) {
+    const T c = lens.curvature_per_mm[k];
+    const T shift = k > 0 ? lens.thickness_mm[k - 1] : zero;
+    const T mu = lens.index(k - 1, w) / lens.index(k, w);
+    const T mu2 = mu * mu;
+    T* travel = record ? (k > 0 ? record->axial_travel_mm[k - 1].data() : nullptr) : nullptr;
+    T* zeta_out = record ? record->cos2_incidence[k].data() : nullptr;
+    T* zeta_prime_out = record ? record->cos2_refraction[k].data() : nullptr;
+    for (std::size_t i = 0; i < count; ++i) {
+      // Shift to vertex k and transfer to its tangent plane.
+      const T z_rel = z[i] - shift;
+      const T s0 = -z_rel / n[i];
+      const T x1 = x[i] + s0 * l[i];
+      const T y1 = y[i] + s0 * m[i];
+      // Intersect the sphere.
+      const T f = c * (x1 * x1 + y1 * y1);
+      const T g = n[i] - c * (x1 * l[i] + y1 * m[i]);
+      T zeta = g * g - c * f;
+      if (zeta < zero) {
+        if (status[i] == kRayOk) {
+          status[i] = kRayMissedSurface;
+          failed_at[i] = static_cast<std::int8_t>(k);
+        }
+        zeta = one;  // keep numbers finite; the ray is flagged
+      }
+      const T cos_i = sqrt(zeta);
+      const T s1 = f / (g + cos_i);
+      const T x2 = x1 + s1 * l[i];
+      const T y2 = y1 + s1 * m[i];
+      const T z2 = s1 * n[i];
+      if (travel) travel[i] = z2 - z_rel;
+      // Refract.
+      T zeta_prime = one - mu2 * (one - zeta);
+      if (zeta_prime < zero) {
+        if (status[i] == kRayOk) {
+          status[i] = kRayTotalInternalReflection;
+          failed_at[i] = static_cast<std::int8_t>(k);
+        }
+        zeta_prime = zeta;
+      }
+      if (zeta_out) zeta_out[i] = zeta;
+      if (zeta_prime_out) zeta_prime_out[i] = zeta_prime;
+      const T gamma = sqrt(zeta_prime) - mu * cos_i;
+      l[i] = mu * l[i] - gamma * c * x2;
+      m[i] = mu * m[i] - gamma * c * y2;
+      n[i] = mu * n[i] + gamma * (one - c * z2);
+      x[i] = x2;
+      y[i] = y2;
+      z[i] = z2;
+    }
+  }
+
+  if (to_image) {
+    const int last = lens.surface_count() - 1;
+    const T t = lens.thickness_mm[last];
+    T* travel = record ? record->axial_travel_mm[last].data() : nullptr;
+    for (std::size_t i = 0; i < count; ++i) {
+      const T z_rel = z[i] - t;
+      if (travel) travel[i] = -z_rel;
+      if (!(n[i] > zero)) {
+        if (status[i] == kRayOk) {
+          status[i] = kRayBackwards;
+          failed_at[i] = static_cast<std::int8_t>(last);
+        }
+        continue;
+      }
+      const T s = -z_rel / n[i];
+      x[i] = x[i] + s * l[i];
+      y[i] = y[i] + s * m[i];
+      z[i] = zero;
+    }
+  }
+}
+
+}  // namespace lensopt
