@@ -5,7 +5,7 @@ set -euo pipefail
 packages=(
   build-essential cmake ninja-build pkg-config
   libceres-dev libeigen3-dev libcli11-dev libfmt-dev libtomlplusplus-dev
-  libopenimageio-dev openimageio-tools doctest-dev libyaml-cpp-dev nlohmann-json3-dev
+  libopenimageio-dev doctest-dev libyaml-cpp-dev nlohmann-json3-dev
 )
 missing=()
 for p in "${packages[@]}"; do
