@@ -21,6 +21,7 @@ struct SpotResult {
   std::vector<T> centroid_y_mm;  // per field, over all wavelengths
   std::vector<int> traced_rays;  // per field: rays that reached the image (half pupil)
   std::vector<int> failed_rays;  // per field
+  std::vector<int> failed_by_surface;  // per surface where the failure happened
   T mean_rms_spot_mm;
   int total_failed = 0;
 };
@@ -75,6 +76,9 @@ SpotResult<T> evaluate_spots(const TraceSystem<T>& sys, int threads = 0) {
   out.centroid_y_mm.assign(field_count, K<T>(0.0));
   out.traced_rays.assign(field_count, 0);
   out.failed_rays.assign(field_count, 0);
+  out.failed_by_surface.assign(sys.lens.surface_count(), 0);
+  std::vector<std::vector<int>> failed_at(field_count,
+                                          std::vector<int>(sys.lens.surface_count(), 0));
   const int nthreads = threads > 0 ? threads : omp_get_max_threads();
 #pragma omp parallel num_threads(nthreads)
   {
@@ -87,7 +91,11 @@ SpotResult<T> evaluate_spots(const TraceSystem<T>& sys, int threads = 0) {
         start_rays(sys, h, w, rays);
         trace_bundle(sys.lens, w, sys.lens.surface_count(), true, rays,
                      static_cast<RayRecord<T>*>(nullptr));
-        for (std::uint8_t s : rays.status) failed += s != kRayOk;
+        for (std::size_t i = 0; i < rays.size(); ++i) {
+          if (rays.status[i] == kRayOk) continue;
+          ++failed;
+          if (rays.failed_surface[i] >= 0) ++failed_at[h][rays.failed_surface[i]];
+        }
         acc.add(rays);
       }
       out.rms_spot_mm[h] = acc.rms();
@@ -100,6 +108,7 @@ SpotResult<T> evaluate_spots(const TraceSystem<T>& sys, int threads = 0) {
   for (int h = 0; h < field_count; ++h) {
     sum = sum + out.rms_spot_mm[h];
     out.total_failed += out.failed_rays[h];
+    for (int k = 0; k < sys.lens.surface_count(); ++k) out.failed_by_surface[k] += failed_at[h][k];
   }
   out.mean_rms_spot_mm = sum / K<T>(field_count);
   return out;

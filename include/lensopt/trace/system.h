@@ -21,6 +21,7 @@
 
 #include <ceres/jet.h>
 
+#include <array>
 #include <cmath>
 #include <vector>
 
@@ -74,8 +75,13 @@ struct TraceSystem {
   T entrance_pupil_z_mm;  // from the first vertex
   T stop_radius_mm;       // real on-axis marginal ray height at the stop
   std::vector<double> fields_deg;
-  std::vector<PupilMap<T>> pupil_maps;  // [field * W + w]
-  int wavelength_count = 0;
+  // Aimed pupils, [field * (W + 1) + w]; w = W is the reference wavelength (587.6 nm).
+  std::vector<PupilMap<T>> pupil_maps;
+  int wavelength_count = 0;  // W: the spec wavelengths (the reference one is extra)
+
+  const PupilMap<T>& pupil_map(int h, int w) const {
+    return pupil_maps[static_cast<std::size_t>(h) * (wavelength_count + 1) + w];
+  }
   PupilSamples pupil;
 };
 
@@ -118,6 +124,23 @@ void trace_aiming_rays(const TraceLens<ceres::Jet<T, 1>>& lens_a, int w, const T
 }
 
 }  // namespace detail
+
+// The three aimed rays (upper, lower, sagittal) of field h and wavelength w traced to the stop:
+// their stop coordinates y_top, y_bottom, x_side (mm) under the system's pupil map.
+template <typename T>
+std::array<T, 3> aimed_stop_coordinates(const TraceSystem<T>& sys, int h, int w) {
+  using std::cos;
+  using std::sin;
+  using J = ceres::Jet<T, 1>;
+  const TraceLens<J> lens_a =
+      convert_trace_lens<J>(sys.lens, {}, 0, 0, [](double v, int) { return K<J>(v); });
+  const double theta = sys.fields_deg[h] * kPi / 180.0;
+  T coord[3], deriv[3];
+  detail::trace_aiming_rays<T>(lens_a, w, K<T>(sin(theta)), K<T>(cos(theta)),
+                               sys.epd_mm / K<T>(2.0), sys.entrance_pupil_z_mm, sys.pupil_map(h, w),
+                               coord, deriv);
+  return {coord[0], coord[1], coord[2]};
+}
 
 // Prepares a lens for tracing. `focal_length_mm` is the spec focal length (used when scaling),
 // `f_number` the spec f-number, fields from 0 to `half_field_deg`.
@@ -165,7 +188,7 @@ TraceSystem<T> prepare_system(const TraceLens<T>& lens_in, double focal_length_m
   }
 
   const int field_count = static_cast<int>(sys.fields_deg.size());
-  const int wl = sys.wavelength_count;
+  const int wl = sys.wavelength_count + 1;  // aim the reference wavelength too
   const PupilMap<T> identity{K<T>(1.0), K<T>(0.0), K<T>(1.0)};
   sys.pupil_maps.assign(static_cast<std::size_t>(field_count) * wl, identity);
   if (!options.ray_aiming) return sys;
@@ -200,7 +223,7 @@ void start_rays(const TraceSystem<T>& sys, int h, int w, RayBundle<T>& rays) {
   using std::sin;
   const std::size_t count = sys.pupil.size();
   rays.resize(count);
-  const PupilMap<T>& map = sys.pupil_maps[static_cast<std::size_t>(h) * sys.wavelength_count + w];
+  const PupilMap<T>& map = sys.pupil_map(h, w);
   const double theta = sys.fields_deg[h] * kPi / 180.0;
   const T r_ep = sys.epd_mm / K<T>(2.0);
   const T sx = r_ep * map.scale_x;
@@ -217,6 +240,18 @@ void start_rays(const TraceSystem<T>& sys, int h, int w, RayBundle<T>& rays) {
     rays.m[i] = m0;
     rays.n[i] = n0;
   }
+}
+
+}  // namespace lensopt
+
+namespace lensopt {
+
+// prepare_system with the specs of a lens (focal length, f-number, half field).
+template <typename T>
+TraceSystem<T> prepare_system(const TraceLens<T>& lens, const Specs& specs,
+                              const TraceOptions& options) {
+  return prepare_system(lens, specs.focal_length_mm(), specs.f_number, specs.half_field_deg,
+                        options);
 }
 
 }  // namespace lensopt

@@ -1,0 +1,68 @@
+// `lensopt analyze`: first-order data, RMS spot per field, distortion, relative illumination,
+// ray failures and ray-aiming error of a lens at the paper's sampling.
+//
+// Distortion (paper Eq. distortion): D_h = (ybar_h - y_ref,h) / y_ref,last with ybar_h the
+// polychromatic centroid and y_ref,h the paraxial chief-ray height on the image plane (587.6 nm).
+// Relative illumination (Rimmer): the image-space projected solid angle of the aimed pupil,
+// approximated by the ellipse through the upper, lower and sagittal rays in direction-cosine
+// space, R_h = (dM_h L_h) / (dM_0 L_0) with dM = (M_top - M_bottom) / 2 and L the sagittal ray's
+// x direction cosine, at 587.6 nm.
+#pragma once
+
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "lensopt/lens/lens.h"
+#include "lensopt/trace/system.h"
+
+namespace lensopt {
+
+struct AnalyzeOptions {
+  TraceOptions trace;
+  std::optional<DispersionModel> dispersion;  // overrides the lens's [specs] dispersion
+};
+
+struct FieldReport {
+  double field_deg = 0;
+  std::optional<double> rms_spot_um;  // none if no ray reached the image
+  double centroid_y_mm = 0;
+  double reference_y_mm = 0;          // paraxial chief-ray height
+  double distortion_percent = 0;
+  double relative_illumination = 0;
+  int traced_rays = 0;
+  int failed_rays = 0;
+  double aiming_error = 0;  // largest |stop coord - target| / R_stop over wavelengths
+};
+
+struct AnalysisReport {
+  std::string lens_name;
+  std::string source_path;
+  double scale = 1;
+  double efl_mm = 0;
+  double bfl_mm = 0;
+  double f_number = 0;
+  double epd_mm = 0;
+  double entrance_pupil_z_mm = 0;
+  double stop_radius_mm = 0;
+  double total_track_mm = 0;
+  int rings = 0;
+  int rays_per_field_wavelength = 0;
+  int wavelength_count = 0;
+  bool ray_aiming = true;
+  std::string dispersion;
+  std::vector<FieldReport> fields;
+  std::optional<double> mean_rms_spot_um;
+  int ray_failures = 0;
+  std::vector<int> failures_by_surface;  // 0-based surface index
+  double max_aiming_error = 0;           // fraction of the stop radius
+};
+
+AnalysisReport analyze_lens(const Lens& lens, const AnalyzeOptions& options);
+
+// A readable multi-line table.
+std::string format_report_text(const AnalysisReport& report);
+// One JSON object (no NaN: missing values are null).
+std::string format_report_json(const AnalysisReport& report);
+
+}  // namespace lensopt

@@ -1,0 +1,221 @@
+#include "lensopt/analysis/analyze.h"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+#include <nlohmann/json.hpp>
+
+#include "lensopt/analysis/spot.h"
+#include "lensopt/paraxial/paraxial.h"
+
+namespace lensopt {
+namespace {
+
+// Image-space direction cosines of the aimed upper, lower and sagittal rays of field h at the
+// reference wavelength: returns (M_top, M_bottom, L_side), or nullopt if one fails.
+std::optional<std::array<double, 3>> pupil_edge_directions(const TraceSystem<double>& sys, int h) {
+  const int w = sys.wavelength_count;  // reference wavelength
+  const PupilMap<double>& map = sys.pupil_map(h, w);
+  const double theta = sys.fields_deg[h] * kPi / 180.0;
+  const double r_ep = sys.epd_mm / 2.0;
+  RayBundle<double> rays;
+  rays.resize(3);
+  const double px[3] = {0.0, 0.0, map.scale_x};
+  const double py[3] = {map.offset_y + map.scale_y, map.offset_y - map.scale_y, map.offset_y};
+  for (int i = 0; i < 3; ++i) {
+    rays.x[i] = r_ep * px[i];
+    rays.y[i] = r_ep * py[i];
+    rays.z[i] = sys.entrance_pupil_z_mm;
+    rays.l[i] = 0.0;
+    rays.m[i] = std::sin(theta);
+    rays.n[i] = std::cos(theta);
+  }
+  trace_bundle(sys.lens, w, sys.lens.surface_count(), true, rays,
+               static_cast<RayRecord<double>*>(nullptr));
+  for (int i = 0; i < 3; ++i)
+    if (rays.status[i] != kRayOk) return std::nullopt;
+  return std::array<double, 3>{rays.m[0], rays.m[1], rays.l[2]};
+}
+
+std::string dispersion_name(DispersionModel m) {
+  return m == DispersionModel::kAbbe ? "abbe" : "catalog";
+}
+
+}  // namespace
+
+AnalysisReport analyze_lens(const Lens& lens_in, const AnalyzeOptions& options) {
+  options.trace.validate();
+  Lens lens = lens_in;
+  if (options.dispersion) lens.specs.dispersion = *options.dispersion;
+  const TraceLens<double> trace_lens = make_trace_lens(lens);
+  const TraceSystem<double> sys = prepare_system(trace_lens, lens.specs, options.trace);
+  const SpotResult<double> spots = evaluate_spots(sys, options.trace.threads);
+
+  AnalysisReport r;
+  r.lens_name = lens.name;
+  r.source_path = lens.source_path;
+  r.scale = sys.scale;
+  r.efl_mm = sys.efl_mm;
+  r.bfl_mm = sys.bfl_mm;
+  r.epd_mm = sys.epd_mm;
+  r.f_number = sys.efl_mm / sys.epd_mm;
+  r.entrance_pupil_z_mm = sys.entrance_pupil_z_mm;
+  r.stop_radius_mm = sys.stop_radius_mm;
+  r.total_track_mm = 0;
+  for (double t : sys.lens.thickness_mm) r.total_track_mm += t;
+  r.rings = options.trace.rings;
+  r.rays_per_field_wavelength = static_cast<int>(sys.pupil.size());
+  r.wavelength_count = sys.wavelength_count;
+  r.ray_aiming = options.trace.ray_aiming;
+  r.dispersion = dispersion_name(lens.specs.dispersion);
+  r.ray_failures = spots.total_failed;
+  r.failures_by_surface = spots.failed_by_surface;
+
+  const int field_count = static_cast<int>(sys.fields_deg.size());
+  const double reference_nm = kWavelengthD_nm;
+  std::vector<double> y_ref(field_count);
+  for (int h = 0; h < field_count; ++h) {
+    y_ref[h] = paraxial_image_height(sys.lens, sys.entrance_pupil_z_mm,
+                                     std::tan(sys.fields_deg[h] * kPi / 180.0), reference_nm);
+  }
+  const double y_ref_last = y_ref.back();
+  const auto axis_directions = pupil_edge_directions(sys, 0);
+  const double axis_area =
+      axis_directions ? 0.5 * ((*axis_directions)[0] - (*axis_directions)[1]) * (*axis_directions)[2]
+                      : 0.0;
+
+  double spot_sum = 0;
+  bool all_fields_traced = true;
+  for (int h = 0; h < field_count; ++h) {
+    FieldReport f;
+    f.field_deg = sys.fields_deg[h];
+    f.traced_rays = spots.traced_rays[h];
+    f.failed_rays = spots.failed_rays[h];
+    if (f.traced_rays > 0) {
+      f.rms_spot_um = spots.rms_spot_mm[h] * 1000.0;
+      spot_sum += *f.rms_spot_um;
+    } else {
+      all_fields_traced = false;
+    }
+    f.centroid_y_mm = spots.centroid_y_mm[h];
+    f.reference_y_mm = y_ref[h];
+    f.distortion_percent =
+        (f.traced_rays > 0 && y_ref_last != 0.0) ? 100.0 * (f.centroid_y_mm - y_ref[h]) / y_ref_last
+                                                 : 0.0;
+    const auto directions = pupil_edge_directions(sys, h);
+    if (directions && axis_area > 0) {
+      const double area = 0.5 * ((*directions)[0] - (*directions)[1]) * (*directions)[2];
+      f.relative_illumination = area / axis_area;
+    }
+    // Ray-aiming error over all wavelengths (and the reference one).
+    double worst = 0;
+    for (int w = 0; w <= sys.wavelength_count; ++w) {
+      const auto stop = aimed_stop_coordinates(sys, h, w);
+      const double rs = sys.stop_radius_mm;
+      worst = std::max({worst, std::abs(stop[0] - rs) / rs, std::abs(stop[1] + rs) / rs,
+                        std::abs(stop[2] - rs) / rs});
+    }
+    f.aiming_error = std::isfinite(worst) ? worst : 1.0;
+    r.max_aiming_error = std::max(r.max_aiming_error, f.aiming_error);
+    r.fields.push_back(f);
+  }
+  if (all_fields_traced) r.mean_rms_spot_um = spot_sum / field_count;
+  return r;
+}
+
+std::string format_report_text(const AnalysisReport& r) {
+  std::string out;
+  auto line = [&](const std::string& s) { out += s + "\n"; };
+  line(fmt::format("Lens: {}{}", r.lens_name,
+                   r.source_path.empty() ? "" : fmt::format(" ({})", r.source_path)));
+  line(fmt::format("  effective focal length   {:10.4f} mm   (prescription scaled by {:.6f})",
+                   r.efl_mm, r.scale));
+  line(fmt::format("  back focal length        {:10.4f} mm", r.bfl_mm));
+  line(fmt::format("  f-number                 {:10.4f}", r.f_number));
+  line(fmt::format("  entrance pupil diameter  {:10.4f} mm   at {:.4f} mm from the first vertex",
+                   r.epd_mm, r.entrance_pupil_z_mm));
+  line(fmt::format("  stop radius (real ray)   {:10.4f} mm", r.stop_radius_mm));
+  line(fmt::format("  total track              {:10.4f} mm", r.total_track_mm));
+  line(fmt::format("  sampling: {} fields x {} wavelengths x {} half-pupil rays ({} rings), "
+                   "ray aiming {}, dispersion {}",
+                   r.fields.size(), r.wavelength_count, r.rays_per_field_wavelength, r.rings,
+                   r.ray_aiming ? "on" : "off", r.dispersion));
+  line("");
+  line("  field (deg)  RMS spot (um)  distortion (%)  rel. illum.  aiming err (%)  failed rays");
+  for (const FieldReport& f : r.fields) {
+    line(fmt::format("  {:11.3f}  {:>13}  {:14.4f}  {:11.4f}  {:14.4f}  {:11d}", f.field_deg,
+                     f.rms_spot_um ? fmt::format("{:.3f}", *f.rms_spot_um) : std::string("n/a"),
+                     f.distortion_percent, f.relative_illumination, 100.0 * f.aiming_error,
+                     f.failed_rays));
+  }
+  line("");
+  line(fmt::format("  mean RMS spot: {}",
+                   r.mean_rms_spot_um ? fmt::format("{:.3f} um", *r.mean_rms_spot_um)
+                                      : std::string("n/a (a field has no traced ray)")));
+  if (r.ray_failures == 0) {
+    line("  ray failures: none");
+  } else {
+    std::string where;
+    for (std::size_t k = 0; k < r.failures_by_surface.size(); ++k)
+      if (r.failures_by_surface[k] > 0)
+        where += fmt::format("{}surface {}: {}", where.empty() ? "" : ", ", k + 1,
+                             r.failures_by_surface[k]);
+    std::string fields;
+    for (const FieldReport& f : r.fields)
+      if (f.failed_rays > 0)
+        fields += fmt::format("{}{:.2f}", fields.empty() ? "" : ", ", f.field_deg);
+    line(fmt::format("  ray failures: {} ({}); fields affected (deg): {}", r.ray_failures, where,
+                     fields));
+  }
+  line(fmt::format("  largest ray-aiming error: {:.4f} % of the stop radius",
+                   100.0 * r.max_aiming_error));
+  return out;
+}
+
+std::string format_report_json(const AnalysisReport& r) {
+  using nlohmann::json;
+  auto finite_or_null = [](double v) { return std::isfinite(v) ? json(v) : json(nullptr); };
+  json j;
+  j["lens"] = r.lens_name;
+  j["source"] = r.source_path;
+  j["scale"] = finite_or_null(r.scale);
+  j["efl_mm"] = finite_or_null(r.efl_mm);
+  j["bfl_mm"] = finite_or_null(r.bfl_mm);
+  j["f_number"] = finite_or_null(r.f_number);
+  j["epd_mm"] = finite_or_null(r.epd_mm);
+  j["entrance_pupil_z_mm"] = finite_or_null(r.entrance_pupil_z_mm);
+  j["stop_radius_mm"] = finite_or_null(r.stop_radius_mm);
+  j["total_track_mm"] = finite_or_null(r.total_track_mm);
+  j["rings"] = r.rings;
+  j["rays_per_field_wavelength"] = r.rays_per_field_wavelength;
+  j["wavelength_count"] = r.wavelength_count;
+  j["ray_aiming"] = r.ray_aiming;
+  j["dispersion"] = r.dispersion;
+  json fields = json::array(), spots = json::array(), distortion = json::array(),
+       ri = json::array(), failed = json::array(), centroid = json::array(),
+       aiming = json::array();
+  for (const FieldReport& f : r.fields) {
+    fields.push_back(f.field_deg);
+    spots.push_back(f.rms_spot_um ? finite_or_null(*f.rms_spot_um) : json(nullptr));
+    distortion.push_back(finite_or_null(f.distortion_percent));
+    ri.push_back(finite_or_null(f.relative_illumination));
+    failed.push_back(f.failed_rays);
+    centroid.push_back(finite_or_null(f.centroid_y_mm));
+    aiming.push_back(finite_or_null(f.aiming_error));
+  }
+  j["fields_deg"] = fields;
+  j["rms_spot_um"] = spots;
+  j["mean_rms_spot_um"] = r.mean_rms_spot_um ? finite_or_null(*r.mean_rms_spot_um) : json(nullptr);
+  j["distortion_percent"] = distortion;
+  j["relative_illumination"] = ri;
+  j["centroid_y_mm"] = centroid;
+  j["aiming_error"] = aiming;
+  j["max_aiming_error"] = finite_or_null(r.max_aiming_error);
+  j["ray_failures"] = r.ray_failures;
+  j["ray_failures_per_field"] = failed;
+  j["ray_failures_per_surface"] = r.failures_by_surface;
+  return j.dump(2);
+}
+
+}  // namespace lensopt
