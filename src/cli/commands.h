@@ -12,8 +12,16 @@ struct ExitCode {
   int code;
 };
 
-void setup_catalog(CLI::App& app);
-void setup_analyze(CLI::App& app);
-void setup_bench(CLI::App& app);
+void setup_catalog(CLI::App& app);    // cmd_catalog.cpp
+void setup_analyze(CLI::App& app);    // cmd_analyze.cpp
+void setup_bench(CLI::App& app);      // cmd_bench.cpp
+void setup_optimize(CLI::App& app);   // cmd_optimize.cpp
+void setup_render(CLI::App& app);     // cmd_render.cpp
+void setup_export(CLI::App& app);     // cmd_export.cpp
+void setup_chart(CLI::App& app);      // cmd_chart.cpp
+void setup_tolerance(CLI::App& app);  // cmd_tolerance.cpp
+void setup_search(CLI::App& app);     // cmd_search.cpp
+void setup_plot(CLI::App& app);       // cmd_plot.cpp
+void setup_convert(CLI::App& app);    // cmd_convert.cpp
 
 }  // namespace lensopt::cli

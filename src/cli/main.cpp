@@ -13,6 +13,14 @@ int main(int argc, char** argv) {
   lensopt::cli::setup_catalog(app);
   lensopt::cli::setup_analyze(app);
   lensopt::cli::setup_bench(app);
+  lensopt::cli::setup_optimize(app);
+  lensopt::cli::setup_render(app);
+  lensopt::cli::setup_export(app);
+  lensopt::cli::setup_chart(app);
+  lensopt::cli::setup_tolerance(app);
+  lensopt::cli::setup_search(app);
+  lensopt::cli::setup_plot(app);
+  lensopt::cli::setup_convert(app);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
