@@ -100,7 +100,7 @@ void SvgDocument::text(Point at, const std::string& content, double size_px,
                        const std::string& anchor, const std::string& colour, double rotate_deg) {
   std::string transform;
   if (rotate_deg != 0.0)
-    transform = fmt::format(R"( transform="rotate({:.3g} {:.2f} {:.2f})")", rotate_deg, at.x, at.y);
+    transform = fmt::format(R"svg( transform="rotate({:.3g} {:.2f} {:.2f})")svg", rotate_deg, at.x, at.y);
   body_ += fmt::format(
       R"(<text x="{:.2f}" y="{:.2f}" font-family="DejaVu Sans, Helvetica, Arial, sans-serif" )"
       R"(font-size="{:.3g}" text-anchor="{}" fill="{}"{}>{}</text>)",
