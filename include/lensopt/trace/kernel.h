@@ -117,6 +117,7 @@ void trace_bundle(const TraceLens<T>& lens, int w, int end, bool to_image, RayBu
       const T f = c * (x1 * x1 + y1 * y1);
       const T g = n[i] - c * (x1 * l[i] + y1 * m[i]);
       T zeta = g * g - c * f;
+      if (zeta_out) zeta_out[i] = zeta;  // recorded before clamping: a miss shows as zeta < 0
       if (zeta < zero) {
         if (status[i] == kRayOk) {
           status[i] = kRayMissedSurface;
@@ -132,6 +133,7 @@ void trace_bundle(const TraceLens<T>& lens, int w, int end, bool to_image, RayBu
       if (travel) travel[i] = z2 - z_rel;
       // Refract.
       T zeta_prime = one - mu2 * (one - zeta);
+      if (zeta_prime_out) zeta_prime_out[i] = zeta_prime;  // before clamping: TIR shows as < 0
       if (zeta_prime < zero) {
         if (status[i] == kRayOk) {
           status[i] = kRayTotalInternalReflection;
@@ -139,8 +141,6 @@ void trace_bundle(const TraceLens<T>& lens, int w, int end, bool to_image, RayBu
         }
         zeta_prime = zeta;
       }
-      if (zeta_out) zeta_out[i] = zeta;
-      if (zeta_prime_out) zeta_prime_out[i] = zeta_prime;
       const T gamma = sqrt(zeta_prime) - mu * cos_i;
       l[i] = mu * l[i] - gamma * c * x2;
       m[i] = mu * m[i] - gamma * c * y2;

@@ -1,0 +1,290 @@
+// The paper's lens design loss (Eq. lens_design_loss) and its least-squares form for
+// Levenberg-Marquardt, from one templated evaluation.
+//
+// Paper:  l_lens = l_S + l_RP lambda_RP + l_RA lambda_RA + l_GV lambda_GV, with
+//   l_S  = mean_h sqrt(mean_{w,p} (y - ybar_h)^2 + x^2)                         (spot, mm)
+//   l_RP = 1/n_r sum_{k,r} max(dz_min^k - dz_{k,r}, 0) + max(dz_{k,r} - dz_max^k, 0)  (mm)
+//   l_RA = 1/n_r sum_{k,r} max(cos^2 t_max - zeta_{k,r}, 0) + max(cos^2 t_max - zeta'_{k,r}, 0)
+//   l_GV = sum_m ||g_m - g_m*||^2
+// Least squares (Ceres minimizes 1/2 sum r_i^2), residuals in this order:
+//   spot:  r = sqrt(a_h / N_h) (y - ybar_h) and sqrt(a_h / N_h) x for every traced ray of field h
+//          (N_h = W P rays; a failed ray gives 0). With the per-field weights
+//          a_h = 1 / (F S_h0), S_h0 the field's RMS at the current point (iteratively reweighted),
+//          sum of squares = sum_h S_h^2 / (F S_h0) = l_S at S = S_0, and its gradient is
+//          2 grad l_S there: LM descends the paper's mean RMS, not the RMS of all rays.
+//   path:  one per (field, space k): sqrt(lambda_RP / n_r sum_r v^2), v the hinge violation (mm)
+//   angle: one per (field, surface, incidence|refraction): sqrt(lambda_RA / n_r sum_r v^2)
+//   glass: sqrt(lambda_GV) (g - g*), two per glass.
+// The penalties are squared hinges (smooth for LM) where the paper's are linear; the optimizer
+// raises their weights when a constraint is still violated, and the report checks each
+// constraint against its bound at full sampling.
+// Failed rays: spot residuals 0; their zeta/zeta' up to the failing surface do enter the angle
+// penalty (a miss has zeta < 0), so the penalties pull failing rays back.
+#pragma once
+
+#include <omp.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <vector>
+
+#include "lensopt/optimize/variables.h"
+#include "lensopt/trace/system.h"
+
+namespace lensopt {
+
+// Weights and bounds of the design loss (paper values by default).
+struct DesignLossOptions {
+  double weight_spot = 1.0;
+  double weight_ray_path = 100.0;
+  double weight_ray_angle = 100.0;
+  double weight_glass = 0.01;
+  double min_air_mm = 0.01;
+  double min_glass_mm = 1.0;
+  double max_glass_mm = 3.0;
+  double min_image_clearance_mm = 12.0;
+  double max_ray_angle_deg = 60.0;
+
+  void validate() const;  // throws Error naming the bad value
+};
+
+// The paper's loss terms (double values; also the Jet values when evaluated on Jets).
+template <typename T>
+struct DesignLoss {
+  T spot_mm;        // l_S
+  T ray_path_mm;    // l_RP (linear hinge, as the paper)
+  T ray_angle;      // l_RA
+  T glass;          // l_GV
+  T total;          // l_lens with the options' weights
+  std::vector<T> field_rms_mm;
+  int failed_rays = 0;
+  int rays = 0;
+};
+
+// Extremes over every traced ray, for the constraint report: per space k the smallest and
+// largest axial travel (mm), and the smallest cos^2 of any incidence or refraction angle.
+struct DesignExtremes {
+  std::vector<double> min_travel_mm;
+  std::vector<double> max_travel_mm;
+  double min_cos2_angle = 1.0;
+};
+
+// Number of residuals of the least-squares form for a system of F fields, W wavelengths,
+// P pupil rays, K surfaces and M glasses.
+inline int design_residual_count(int fields, int wavelengths, int rays, int surfaces, int glasses) {
+  return fields * wavelengths * rays * 2 + fields * surfaces + fields * surfaces * 2 + glasses * 2;
+}
+
+namespace detail {
+
+template <typename T>
+T safe_norm(const T& sum_of_squares) {
+  using std::sqrt;
+  // sqrt is not differentiable at 0; an exactly inactive penalty is a constant 0.
+  if (!(sum_of_squares > K<T>(0.0))) return K<T>(0.0);
+  return sqrt(sum_of_squares);
+}
+
+template <typename T>
+T hinge(const T& v) {
+  return v > K<T>(0.0) ? v : K<T>(0.0);
+}
+
+}  // namespace detail
+
+// Evaluates the design loss of variables x. `residuals` (may be null) receives the least-squares
+// residuals (design_residual_count of them) with per-field weights `field_weights` (F values,
+// a_h above; null: a_h = 1 / F); `loss` (may be null) receives the paper's terms.
+// Returns false if the evaluation is not finite (Ceres then treats the point as infeasible).
+template <typename T>
+bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mode,
+                     const std::vector<int>& fixed_glasses, const TraceOptions& trace_options,
+                     const DesignLossOptions& options, const std::vector<double>* field_weights,
+                     T* residuals, DesignLoss<T>* loss, DesignExtremes* extremes = nullptr) {
+  using std::sqrt;
+  const TraceLens<T> lens = param.to_trace_lens(x, mode, fixed_glasses);
+  TraceOptions topt = trace_options;
+  topt.scale_to_spec = false;  // the forward map gives the spec focal length exactly
+  const Specs& specs = param.structure().specs;
+  const TraceSystem<T> sys = prepare_system(lens, specs, topt);
+  const int field_count = static_cast<int>(sys.fields_deg.size());
+  const int wl = sys.wavelength_count;
+  const int rays = static_cast<int>(sys.pupil.size());
+  const int k_count = lens.surface_count();
+  const double n_r = static_cast<double>(field_count) * wl * rays;
+  const double cos2_max = std::pow(std::cos(options.max_ray_angle_deg * kPi / 180.0), 2);
+  // Bounds per space: air >= min_air; glass in [min, max]; the last (image) >= clearance.
+  std::vector<double> lower(k_count), upper(k_count);
+  for (int k = 0; k < k_count; ++k) {
+    if (k == k_count - 1) {
+      lower[k] = options.min_image_clearance_mm;
+      upper[k] = std::numeric_limits<double>::infinity();
+    } else if (lens.is_glass[k]) {
+      lower[k] = options.min_glass_mm;
+      upper[k] = options.max_glass_mm;
+    } else {
+      lower[k] = options.min_air_mm;
+      upper[k] = std::numeric_limits<double>::infinity();
+    }
+  }
+
+  std::vector<T> field_rms(field_count, K<T>(0.0));
+  std::vector<T> path_linear(field_count, K<T>(0.0)), angle_linear(field_count, K<T>(0.0));
+  std::vector<int> failed(field_count, 0);
+  std::vector<DesignExtremes> field_extremes(field_count);
+  for (DesignExtremes& e : field_extremes) {
+    e.min_travel_mm.assign(k_count, std::numeric_limits<double>::infinity());
+    e.max_travel_mm.assign(k_count, -std::numeric_limits<double>::infinity());
+  }
+  const int spot_block = wl * rays * 2;
+  const int path_offset = field_count * spot_block;
+  const int angle_offset = path_offset + field_count * k_count;
+  const int glass_offset = angle_offset + field_count * k_count * 2;
+
+  const int nthreads = trace_options.threads > 0 ? trace_options.threads : omp_get_max_threads();
+#pragma omp parallel num_threads(nthreads)
+  {
+    RayBundle<T> bundle;
+    RayRecord<T> record;
+    std::vector<T> ys, xs;
+    std::vector<char> ok;
+    std::vector<T> path_sq(k_count), angle_sq(k_count * 2);
+#pragma omp for schedule(dynamic, 1)
+    for (int h = 0; h < field_count; ++h) {
+      ys.assign(static_cast<std::size_t>(wl) * rays, K<T>(0.0));
+      xs.assign(static_cast<std::size_t>(wl) * rays, K<T>(0.0));
+      ok.assign(static_cast<std::size_t>(wl) * rays, 0);
+      for (auto& v : path_sq) v = K<T>(0.0);
+      for (auto& v : angle_sq) v = K<T>(0.0);
+      T path_sum = K<T>(0.0), angle_sum = K<T>(0.0);
+      for (int w = 0; w < wl; ++w) {
+        start_rays(sys, h, w, bundle);
+        record.resize(k_count, bundle.size());
+        trace_bundle(sys.lens, w, k_count, true, bundle, &record);
+        for (int p = 0; p < rays; ++p) {
+          const std::size_t i = static_cast<std::size_t>(w) * rays + p;
+          const bool traced = bundle.status[p] == kRayOk;
+          ok[i] = traced;
+          if (traced) {
+            ys[i] = bundle.y[p];
+            xs[i] = bundle.x[p];
+          } else {
+            ++failed[h];
+          }
+          const int last_valid = traced ? k_count - 1 : bundle.failed_surface[p];
+          for (int k = 0; k <= last_valid && k < k_count; ++k) {
+            // Ray path: the space after surface k (only for fully traced rays beyond a failure).
+            if (traced || k < last_valid) {
+              const T dz = record.axial_travel_mm[k][p];
+              DesignExtremes& e = field_extremes[h];
+              e.min_travel_mm[k] = std::min(e.min_travel_mm[k], value_of(dz));
+              e.max_travel_mm[k] = std::max(e.max_travel_mm[k], value_of(dz));
+              T v = detail::hinge(K<T>(lower[k]) - dz);
+              if (std::isfinite(upper[k])) v = v + detail::hinge(dz - K<T>(upper[k]));
+              path_sq[k] = path_sq[k] + v * v;
+              path_sum = path_sum + v;
+            }
+            const T va = detail::hinge(K<T>(cos2_max) - record.cos2_incidence[k][p]);
+            const T vb = detail::hinge(K<T>(cos2_max) - record.cos2_refraction[k][p]);
+            field_extremes[h].min_cos2_angle =
+                std::min({field_extremes[h].min_cos2_angle, value_of(record.cos2_incidence[k][p]),
+                          value_of(record.cos2_refraction[k][p])});
+            angle_sq[2 * k] = angle_sq[2 * k] + va * va;
+            angle_sq[2 * k + 1] = angle_sq[2 * k + 1] + vb * vb;
+            angle_sum = angle_sum + va + vb;
+          }
+        }
+      }
+      // Spot of field h about its polychromatic centroid.
+      int count = 0;
+      T y_sum = K<T>(0.0);
+      for (std::size_t i = 0; i < ys.size(); ++i)
+        if (ok[i]) {
+          y_sum = y_sum + ys[i];
+          ++count;
+        }
+      const T y_mean = count > 0 ? y_sum / K<T>(count) : K<T>(0.0);
+      T s2 = K<T>(0.0);
+      for (std::size_t i = 0; i < ys.size(); ++i)
+        if (ok[i]) {
+          const T dy = ys[i] - y_mean;
+          s2 = s2 + dy * dy + xs[i] * xs[i];
+        }
+      field_rms[h] = count > 0 ? detail::safe_norm(s2 / K<T>(count)) : K<T>(0.0);
+      path_linear[h] = path_sum;
+      angle_linear[h] = angle_sum;
+      if (residuals) {
+        const double a_h = field_weights ? (*field_weights)[h] : 1.0 / field_count;
+        const T scale = K<T>(std::sqrt(options.weight_spot * a_h / (static_cast<double>(wl) * rays)));
+        T* r = residuals + static_cast<std::size_t>(h) * spot_block;
+        for (std::size_t i = 0; i < ys.size(); ++i) {
+          r[2 * i] = ok[i] ? scale * (ys[i] - y_mean) : K<T>(0.0);
+          r[2 * i + 1] = ok[i] ? scale * xs[i] : K<T>(0.0);
+        }
+        for (int k = 0; k < k_count; ++k) {
+          residuals[path_offset + h * k_count + k] =
+              detail::safe_norm(K<T>(options.weight_ray_path / n_r) * path_sq[k]);
+          for (int j = 0; j < 2; ++j)
+            residuals[angle_offset + (h * k_count + k) * 2 + j] =
+                detail::safe_norm(K<T>(options.weight_ray_angle / n_r) * angle_sq[2 * k + j]);
+        }
+      }
+    }
+  }
+
+  // Glass-variable loss and residuals.
+  T glass_loss = K<T>(0.0);
+  int glass_pair = 0;
+  for (int i = 0; i < param.size(); ++i) {
+    if (param.variables()[i].kind != LensVariable::Kind::kGlass0) continue;
+    const Eigen::Vector2d g(value_of(x[i]), value_of(x[i + 1]));
+    const Eigen::Vector2d p = param.glass_space().glass_point(param.glass_space().nearest(g));
+    const T d0 = x[i] - K<T>(p[0]);
+    const T d1 = x[i + 1] - K<T>(p[1]);
+    glass_loss = glass_loss + d0 * d0 + d1 * d1;
+    if (residuals) {
+      const T s = K<T>(std::sqrt(options.weight_glass));
+      residuals[glass_offset + 2 * glass_pair] = s * d0;
+      residuals[glass_offset + 2 * glass_pair + 1] = s * d1;
+    }
+    ++glass_pair;
+  }
+
+  T spot = K<T>(0.0), path = K<T>(0.0), angle = K<T>(0.0);
+  int failed_total = 0;
+  for (int h = 0; h < field_count; ++h) {
+    spot = spot + field_rms[h];
+    path = path + path_linear[h];
+    angle = angle + angle_linear[h];
+    failed_total += failed[h];
+  }
+  spot = spot / K<T>(field_count);
+  path = path / K<T>(n_r);
+  angle = angle / K<T>(n_r);
+  if (extremes) {
+    *extremes = field_extremes[0];
+    for (int h = 1; h < field_count; ++h) {
+      for (int k = 0; k < k_count; ++k) {
+        extremes->min_travel_mm[k] = std::min(extremes->min_travel_mm[k], field_extremes[h].min_travel_mm[k]);
+        extremes->max_travel_mm[k] = std::max(extremes->max_travel_mm[k], field_extremes[h].max_travel_mm[k]);
+      }
+      extremes->min_cos2_angle = std::min(extremes->min_cos2_angle, field_extremes[h].min_cos2_angle);
+    }
+  }
+  if (loss) {
+    loss->spot_mm = spot;
+    loss->ray_path_mm = path;
+    loss->ray_angle = angle;
+    loss->glass = glass_loss;
+    loss->total = K<T>(options.weight_spot) * spot + K<T>(options.weight_ray_path) * path +
+                  K<T>(options.weight_ray_angle) * angle + K<T>(options.weight_glass) * glass_loss;
+    loss->field_rms_mm = field_rms;
+    loss->failed_rays = failed_total;
+    loss->rays = static_cast<int>(n_r);
+  }
+  const double total_value = value_of(spot) + value_of(path) + value_of(angle) + value_of(glass_loss);
+  return std::isfinite(total_value);
+}
+
+}  // namespace lensopt

@@ -1,0 +1,198 @@
+// The paper's lens variables ("Lens Variables", "Glass Variables") and the one mapping between a
+// lens and them, shared by the Levenberg-Marquardt optimizer, the Adam joint optimizer and
+// tolerancing.
+//
+// For a lens of K surfaces scaled to focal length f (mm):
+//   c'_k = c_k f   for every surface but the stop and the last (the last is solved),
+//   s'_k = t_k / f for k < K-1, and s'_{K-1} = (t_{K-1} - BFL) / f, the normalized defocus,
+//   g_m  = W (nd_m - mu_nd, vd_m - mu_vd)  for each glass m: the catalog's (nd, vd) whitened,
+//          W = Lambda^{-1/2} E^T from the eigen-decomposition of the catalog covariance.
+// Forward map x -> lens (templated, so Jets carry derivatives):
+//   1. glasses: (nd, vd) = W^{-1} g + mu; quantized (default): the nearest catalog glass in
+//      whitened space, with the straight-through gradient g_q = g + stopgrad(g* - g);
+//   2. the normalized lens (f = 1): curvatures c', spacings s', the last curvature solved so the
+//      paraxial focal length at 587.6 nm is exactly 1 (paraxial.h: solve_last_curvature);
+//   3. the paraxial image solve: s_{K-1} = BFL' + s'_{K-1};
+//   4. scale: c = c' / f, t = s' f.
+#pragma once
+
+#include <Eigen/Core>
+#include <string>
+#include <vector>
+
+#include "lensopt/glass/glass.h"
+#include "lensopt/lens/lens.h"
+#include "lensopt/paraxial/paraxial.h"
+#include "lensopt/trace/trace_lens.h"
+
+namespace lensopt {
+
+// The whitened (nd, vd) space of a catalog's glasses.
+class GlassSpace {
+ public:
+  GlassSpace() = default;
+  // Fits the whitening on the catalog's glasses (those with nd > 1 and vd > 0).
+  explicit GlassSpace(const Catalog& catalog);
+
+  int size() const { return static_cast<int>(names_.size()); }
+  const std::string& name(int i) const { return names_[i]; }
+  double nd(int i) const { return nd_[i]; }
+  double vd(int i) const { return vd_[i]; }
+  const std::string& catalog_name() const { return catalog_name_; }
+
+  // Whitened coordinates of (nd, vd).
+  Eigen::Vector2d whiten(double nd, double vd) const;
+  // (nd, vd) of whitened coordinates, templated.
+  template <typename T>
+  void unwhiten(const T& g0, const T& g1, T& nd, T& vd) const {
+    nd = K<T>(mean_[0]) + K<T>(inverse_(0, 0)) * g0 + K<T>(inverse_(0, 1)) * g1;
+    vd = K<T>(mean_[1]) + K<T>(inverse_(1, 0)) * g0 + K<T>(inverse_(1, 1)) * g1;
+  }
+  // Index of the nearest catalog glass in whitened space; `exclude` glasses are skipped.
+  int nearest(const Eigen::Vector2d& g, const std::vector<int>& exclude = {}) const;
+  // Indices of catalog glasses ordered by whitened distance from g.
+  std::vector<int> by_distance(const Eigen::Vector2d& g) const;
+  // Whitened coordinates of catalog glass i.
+  Eigen::Vector2d glass_point(int i) const { return points_[i]; }
+
+ private:
+  std::string catalog_name_;
+  std::vector<std::string> names_;
+  std::vector<double> nd_, vd_;
+  std::vector<Eigen::Vector2d> points_;
+  Eigen::Vector2d mean_ = Eigen::Vector2d::Zero();
+  Eigen::Matrix2d whitening_ = Eigen::Matrix2d::Identity();
+  Eigen::Matrix2d inverse_ = Eigen::Matrix2d::Identity();
+};
+
+// What a variable is.
+struct LensVariable {
+  enum class Kind { kCurvature, kSpacing, kDefocus, kGlass0, kGlass1 };
+  Kind kind;
+  int surface;          // 0-based surface index
+  std::string name;     // "c1", "s3", "defocus", "g2.0", "g2.1" (1-based surface numbers)
+  std::string group;    // "curvatures", "spacings", "glasses"
+};
+
+// How glass variables enter the forward pass.
+enum class GlassMode {
+  kQuantized,   // nearest catalog glass, straight-through gradient (the paper)
+  kContinuous,  // (nd, vd) straight from g (ablation; also LM's first phase)
+  kFixed,       // each glass fixed to its assigned catalog glass (g has no effect)
+};
+
+// The mapping lens <-> variables.
+class LensParameterization {
+ public:
+  // `lens` fixes the structure (surfaces, stop, which spaces are glass) and the specs;
+  // `glasses` is the catalog's whitened space. Throws Error if the last surface's medium before
+  // it is air (the last curvature cannot be solved) or the lens has no glass.
+  LensParameterization(const Lens& lens, GlassSpace glasses);
+
+  const std::vector<LensVariable>& variables() const { return variables_; }
+  int size() const { return static_cast<int>(variables_.size()); }
+  double focal_length_mm() const { return focal_length_mm_; }
+  const GlassSpace& glass_space() const { return glasses_; }
+  const Lens& structure() const { return structure_; }
+
+  // The variables of a lens with the same structure. The lens is first scaled to the spec focal
+  // length (as analysis does). Glass variables start at the lens's (nd, vd) whitened.
+  std::vector<double> from_lens(const Lens& lens) const;
+
+  // The catalog glass index per glass variable pair (the nearest to each g), in surface order.
+  std::vector<int> nearest_glasses(const double* x) const;
+
+  // The lens of variables x (double), with catalog glass names (quantized/fixed) or model glasses
+  // (continuous). `fixed_glasses` gives the glass per element for kFixed.
+  Lens to_lens(const double* x, GlassMode mode, const std::vector<int>& fixed_glasses = {}) const;
+
+  // The TraceLens<T> of variables x: steps 1-4 of the header. Wavelengths of the specs plus the
+  // 587.6 nm reference (as make_trace_lens). Abbe dispersion model.
+  template <typename T>
+  TraceLens<T> to_trace_lens(const T* x, GlassMode mode,
+                             const std::vector<int>& fixed_glasses = {}) const {
+    TraceLens<T> lens;
+    const int k_count = static_cast<int>(structure_.surfaces.size());
+    lens.wavelengths_nm = structure_.specs.wavelengths_nm;
+    lens.wavelengths_nm.push_back(kWavelengthD_nm);
+    lens.stop = structure_.stop_index();
+    lens.curvature_per_mm.assign(k_count, K<T>(0.0));
+    lens.thickness_mm.assign(k_count, K<T>(0.0));
+    lens.nd.assign(k_count, K<T>(1.0));
+    lens.vd.assign(k_count, K<T>(0.0));
+    lens.is_glass.assign(k_count, 0);
+    for (int k = 0; k < k_count; ++k) lens.is_glass[k] = structure_.surfaces[k].material.is_air() ? 0 : 1;
+    int glass_number = 0;
+    for (int i = 0; i < size(); ++i) {
+      const LensVariable& v = variables_[i];
+      switch (v.kind) {
+        case LensVariable::Kind::kCurvature: lens.curvature_per_mm[v.surface] = x[i]; break;
+        case LensVariable::Kind::kSpacing: lens.thickness_mm[v.surface] = x[i]; break;
+        case LensVariable::Kind::kDefocus: break;  // after the image solve
+        case LensVariable::Kind::kGlass0: {
+          T g0 = x[i], g1 = x[i + 1];
+          if (mode == GlassMode::kQuantized || mode == GlassMode::kFixed) {
+            int j = 0;
+            if (mode == GlassMode::kFixed) {
+              j = fixed_glasses.at(glass_number);
+            } else {
+              j = glasses_.nearest(Eigen::Vector2d(value_of(g0), value_of(g1)));
+            }
+            const Eigen::Vector2d p = glasses_.glass_point(j);
+            if (mode == GlassMode::kFixed) {
+              g0 = K<T>(p[0]);
+              g1 = K<T>(p[1]);
+            } else {
+              // Straight-through: the value of the catalog glass, the derivative of g.
+              g0 = g0 + K<T>(p[0] - value_of(g0));
+              g1 = g1 + K<T>(p[1] - value_of(g1));
+            }
+          }
+          glasses_.unwhiten(g0, g1, lens.nd[v.surface], lens.vd[v.surface]);
+          ++glass_number;
+          break;
+        }
+        case LensVariable::Kind::kGlass1: break;  // handled with kGlass0
+      }
+    }
+    // Fixed (frozen by structure) values: the stop is flat; frozen variables are still variables.
+    const int last = k_count - 1;
+    lens.curvature_per_mm[last] = solve_last_curvature(lens, K<T>(1.0), kWavelengthD_nm);
+    const ParaxialData<T> par = paraxial_data(lens, kWavelengthD_nm);
+    lens.thickness_mm[last] = par.bfl_mm + x[defocus_index_];
+    const T f = K<T>(focal_length_mm_);
+    for (int k = 0; k < k_count; ++k) {
+      lens.curvature_per_mm[k] = lens.curvature_per_mm[k] / f;
+      lens.thickness_mm[k] = lens.thickness_mm[k] * f;
+    }
+    return lens;
+  }
+
+  // Whitened distance^2 of each glass pair to its nearest catalog glass: l_GV terms (templated).
+  template <typename T>
+  T glass_variable_loss(const T* x) const {
+    T sum = K<T>(0.0);
+    for (int i = 0; i < size(); ++i) {
+      if (variables_[i].kind != LensVariable::Kind::kGlass0) continue;
+      const int j = glasses_.nearest(Eigen::Vector2d(value_of(x[i]), value_of(x[i + 1])));
+      const Eigen::Vector2d p = glasses_.glass_point(j);
+      const T d0 = x[i] - K<T>(p[0]);
+      const T d1 = x[i + 1] - K<T>(p[1]);
+      sum = sum + d0 * d0 + d1 * d1;
+    }
+    return sum;
+  }
+
+  // Indices of the variables whose name or group is in `names` ("curvatures", "c3", "g2", ...).
+  // Throws Error naming an unknown entry.
+  std::vector<int> select(const std::vector<std::string>& names) const;
+
+ private:
+  Lens structure_;
+  GlassSpace glasses_;
+  std::vector<LensVariable> variables_;
+  double focal_length_mm_ = 1.0;
+  int defocus_index_ = -1;
+};
+
+}  // namespace lensopt

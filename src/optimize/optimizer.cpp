@@ -1,0 +1,422 @@
+#include "lensopt/optimize/optimizer.h"
+
+#include <ceres/ceres.h>
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <memory>
+
+#include "lensopt/analysis/analyze.h"
+#include "lensopt/core/error.h"
+
+namespace lensopt {
+namespace {
+
+// Jet width for the Jacobian: one pass covers lenses of up to 24 variables (the Tessar has 22).
+constexpr int kStride = 24;
+
+struct DesignFunctor {
+  const LensParameterization* param;
+  GlassMode mode;
+  std::vector<int> fixed_glasses;
+  TraceOptions sampling;
+  DesignLossOptions loss;
+  std::vector<double> field_weights;
+  std::atomic<int>* evaluations;
+
+  template <typename T>
+  bool operator()(T const* const* parameters, T* residuals) const {
+    evaluations->fetch_add(1);
+    return evaluate_design<T>(*param, parameters[0], mode, fixed_glasses, sampling, loss,
+                              &field_weights, residuals, static_cast<DesignLoss<T>*>(nullptr));
+  }
+};
+
+class ProgressCallback : public ceres::IterationCallback {
+ public:
+  ProgressCallback(std::string phase, bool verbose, const std::atomic<bool>* interrupt)
+      : phase_(std::move(phase)), verbose_(verbose), interrupt_(interrupt) {}
+  ceres::CallbackReturnType operator()(const ceres::IterationSummary& s) override {
+    if (verbose_) {
+      fmt::print(stderr, "  [{}] iter {:3d}  cost {:.6e}  |step| {:.2e}  lm radius {:.1e}\n",
+                 phase_, s.iteration, s.cost, s.step_norm, s.trust_region_radius);
+    }
+    if (interrupt_ && interrupt_->load()) return ceres::SOLVER_TERMINATE_SUCCESSFULLY;
+    return ceres::SOLVER_CONTINUE;
+  }
+
+ private:
+  std::string phase_;
+  bool verbose_;
+  const std::atomic<bool>* interrupt_;
+};
+
+DesignLoss<double> evaluate_double(const LensParameterization& param, const std::vector<double>& x,
+                                   GlassMode mode, const std::vector<int>& fixed,
+                                   const TraceOptions& sampling, const DesignLossOptions& loss,
+                                   DesignExtremes* extremes = nullptr) {
+  DesignLoss<double> out;
+  evaluate_design<double>(param, x.data(), mode, fixed, sampling, loss, nullptr, nullptr, &out,
+                          extremes);
+  return out;
+}
+
+// Bounds tightened by the design margin so that constraints met at the optimization sampling
+// stay met at full sampling.
+DesignLossOptions with_margin(DesignLossOptions loss) {
+  loss.min_air_mm += 0.002;
+  loss.min_glass_mm += 0.002;
+  loss.max_glass_mm -= 0.002;
+  loss.min_image_clearance_mm += 0.01;
+  loss.max_ray_angle_deg -= 0.1;
+  return loss;
+}
+
+struct Counters {
+  std::atomic<int> evaluations{0};
+  int jacobians = 0;
+  int iterations = 0;
+  std::string termination;
+};
+
+// Rounds of LM with reweighting; x is updated in place. Returns the final double loss.
+DesignLoss<double> run_phase(const LensParameterization& param, std::vector<double>& x,
+                             GlassMode mode, const std::vector<int>& fixed,
+                             const std::vector<int>& frozen, const OptimizeOptions& options,
+                             DesignLossOptions& loss, const std::string& name, int max_rounds,
+                             int max_iterations, Counters& counters) {
+  const int n = param.size();
+  DesignLoss<double> current = evaluate_double(param, x, mode, fixed, options.sampling, loss);
+  for (int round = 0; round < max_rounds; ++round) {
+    if (options.interrupt && options.interrupt->load()) break;
+    const int field_count = static_cast<int>(current.field_rms_mm.size());
+    std::vector<double> weights(field_count);
+    for (int h = 0; h < field_count; ++h)
+      weights[h] = 1.0 / (field_count * std::max(current.field_rms_mm[h], 1e-5));
+    auto* functor = new DesignFunctor{&param, mode, fixed, options.sampling, loss, weights,
+                                      &counters.evaluations};
+    auto* cost = new ceres::DynamicAutoDiffCostFunction<DesignFunctor, kStride>(functor);
+    cost->AddParameterBlock(n);
+    const int glass_count = static_cast<int>(param.nearest_glasses(x.data()).size());
+    const TraceSystem<double> probe_sys = [&] {
+      TraceOptions t = options.sampling;
+      t.ray_aiming = false;
+      t.scale_to_spec = false;
+      return prepare_system(param.to_trace_lens(x.data(), GlassMode::kContinuous), param.structure().specs, t);
+    }();
+    cost->SetNumResiduals(design_residual_count(static_cast<int>(probe_sys.fields_deg.size()),
+                                                probe_sys.wavelength_count,
+                                                static_cast<int>(probe_sys.pupil.size()),
+                                                probe_sys.lens.surface_count(), glass_count));
+    ceres::Problem problem;
+    problem.AddResidualBlock(cost, nullptr, x.data());
+    if (static_cast<int>(frozen.size()) == n) break;
+    if (!frozen.empty()) problem.SetManifold(x.data(), new ceres::SubsetManifold(n, frozen));
+    ceres::Solver::Options solver;
+    solver.minimizer_type = ceres::TRUST_REGION;
+    solver.trust_region_strategy_type = ceres::LEVENBERG_MARQUARDT;
+    solver.linear_solver_type = ceres::DENSE_QR;
+    solver.max_num_iterations = max_iterations;
+    solver.function_tolerance = 1e-7;
+    solver.gradient_tolerance = 1e-12;
+    solver.parameter_tolerance = 1e-9;
+    solver.num_threads = 1;  // the loss parallelizes over fields itself
+    solver.update_state_every_iteration = true;
+    solver.logging_type = ceres::SILENT;
+    ProgressCallback progress(fmt::format("{} round {}", name, round + 1), options.verbose,
+                              options.interrupt);
+    solver.callbacks.push_back(&progress);
+    ceres::Solver::Summary summary;
+    ceres::Solve(solver, &problem, &summary);
+    counters.iterations += static_cast<int>(summary.iterations.size());
+    counters.jacobians += summary.num_jacobian_evaluations;
+    counters.termination = summary.message;
+    const DesignLoss<double> next = evaluate_double(param, x, mode, fixed, options.sampling, loss);
+    // Raise the weight of a constraint still violated.
+    bool violated = false;
+    if (next.ray_path_mm > 1e-12 && loss.weight_ray_path < 1e7) {
+      loss.weight_ray_path *= 10;
+      violated = true;
+    }
+    if (next.ray_angle > 1e-12 && loss.weight_ray_angle < 1e7) {
+      loss.weight_ray_angle *= 10;
+      violated = true;
+    }
+    const double change = std::abs(next.spot_mm - current.spot_mm) / std::max(current.spot_mm, 1e-9);
+    if (options.verbose) {
+      fmt::print(stderr,
+                 "lensopt optimize: {} round {}: mean spot {:.4f} um (optimization sampling), "
+                 "l_RP {:.2e}, l_RA {:.2e}, {} failed rays, {}\n",
+                 name, round + 1, next.spot_mm * 1000, next.ray_path_mm, next.ray_angle,
+                 next.failed_rays, summary.message);
+    }
+    current = next;
+    if (!violated && change < 1e-4) break;
+  }
+  return current;
+}
+
+bool constraints_met(const DesignLoss<double>& loss) {
+  return loss.ray_path_mm <= 1e-12 && loss.ray_angle <= 1e-12 && loss.failed_rays == 0;
+}
+
+}  // namespace
+
+OptimizeOptions::OptimizeOptions() {
+  sampling.rings = 8;
+  sampling.fields = 11;
+}
+
+void OptimizeOptions::validate() const {
+  sampling.validate();
+  loss.validate();
+  if (glass_neighbours < 0 || glass_neighbours > 64)
+    throw Error(fmt::format("glass_neighbours = {} must be in [0, 64]", glass_neighbours));
+  if (max_iterations < 1) throw Error("max_iterations must be >= 1");
+  if (max_rounds < 1) throw Error("max_rounds must be >= 1");
+}
+
+void DesignLossOptions::validate() const {
+  auto positive = [](double v, const char* name) {
+    if (!(v >= 0.0) || !std::isfinite(v))
+      throw Error(fmt::format("{} = {} must be a finite number >= 0", name, v));
+  };
+  positive(weight_spot, "weight_spot");
+  positive(weight_ray_path, "weight_ray_path");
+  positive(weight_ray_angle, "weight_ray_angle");
+  positive(weight_glass, "weight_glass");
+  positive(min_air_mm, "min_air_mm");
+  positive(min_glass_mm, "min_glass_mm");
+  positive(max_glass_mm, "max_glass_mm");
+  positive(min_image_clearance_mm, "min_image_clearance_mm");
+  if (max_glass_mm < min_glass_mm)
+    throw Error(fmt::format("max_glass_mm = {} is below min_glass_mm = {}", max_glass_mm, min_glass_mm));
+  if (!(max_ray_angle_deg > 0.0 && max_ray_angle_deg < 90.0))
+    throw Error(fmt::format("max_ray_angle_deg = {} must be in (0, 90)", max_ray_angle_deg));
+}
+
+bool ConstraintReport::all_pass() const {
+  if (ray_failures > 0) return false;
+  for (const Row& r : rows)
+    if (!r.pass) return false;
+  return true;
+}
+
+namespace {
+
+GlassSpace glass_space_for(const Lens& lens) {
+  const std::string name = lens.catalog_name.empty() ? std::string("ohara") : lens.catalog_name;
+  return GlassSpace(*load_catalog(name));
+}
+
+}  // namespace
+
+ConstraintReport check_constraints(const Lens& lens, const DesignLossOptions& loss,
+                                   const TraceOptions& sampling) {
+  const LensParameterization param(lens, glass_space_for(lens));
+  const std::vector<double> x = param.from_lens(lens);
+  DesignExtremes ext;
+  const DesignLoss<double> l =
+      evaluate_double(param, x, GlassMode::kContinuous, {}, sampling, loss, &ext);
+  ConstraintReport report;
+  report.ray_failures = l.failed_rays;
+  const int k_count = static_cast<int>(lens.surfaces.size());
+  for (int k = 0; k < k_count; ++k) {
+    const bool last = k == k_count - 1;
+    const bool glass = !lens.surfaces[k].material.is_air();
+    if (last) {
+      report.rows.push_back({"image clearance", ext.min_travel_mm[k], loss.min_image_clearance_mm,
+                             true, ext.min_travel_mm[k] >= loss.min_image_clearance_mm});
+    } else if (glass) {
+      const std::string name = fmt::format("glass {}-{} ({})", k + 1, k + 2, lens.surfaces[k].material.label());
+      report.rows.push_back({name + " min", ext.min_travel_mm[k], loss.min_glass_mm, true,
+                             ext.min_travel_mm[k] >= loss.min_glass_mm});
+      report.rows.push_back({name + " max", ext.max_travel_mm[k], loss.max_glass_mm, false,
+                             ext.max_travel_mm[k] <= loss.max_glass_mm});
+    } else {
+      report.rows.push_back({fmt::format("air {}-{}", k + 1, k + 2), ext.min_travel_mm[k],
+                             loss.min_air_mm, true, ext.min_travel_mm[k] >= loss.min_air_mm});
+    }
+  }
+  const double max_angle_deg =
+      std::acos(std::sqrt(std::clamp(ext.min_cos2_angle, 0.0, 1.0))) * 180.0 / kPi;
+  report.rows.push_back({"largest ray angle (deg)", max_angle_deg, loss.max_ray_angle_deg, false,
+                         max_angle_deg <= loss.max_ray_angle_deg});
+  return report;
+}
+
+double design_spot_mm(const LensParameterization& param, const std::vector<double>& x,
+                      GlassMode mode, const std::vector<int>& fixed_glasses,
+                      const OptimizeOptions& options) {
+  return evaluate_double(param, x, mode, fixed_glasses, options.sampling, options.loss).spot_mm;
+}
+
+OptimizeResult optimize_lens(const Lens& start, const OptimizeOptions& options) {
+  options.validate();
+  const auto clock_start = std::chrono::steady_clock::now();
+  OptimizeResult result;
+  const LensParameterization param(start, glass_space_for(start));
+  std::vector<double> x = param.from_lens(start);
+  Counters counters;
+
+  // The start at full sampling.
+  AnalyzeOptions full;
+  const AnalysisReport start_report = analyze_lens(start, full);
+  result.start_spot_um = start_report.mean_rms_spot_um.value_or(std::numeric_limits<double>::infinity());
+  for (const FieldReport& f : start_report.fields) result.start_field_spot_um.push_back(f.rms_spot_um.value_or(0.0));
+  result.start_constraints = check_constraints(start, options.loss, full.trace);
+
+  const std::vector<int> frozen_user = param.select(options.freeze);
+  std::vector<int> glass_indices;
+  for (int i = 0; i < param.size(); ++i) {
+    const auto kind = param.variables()[i].kind;
+    if (kind == LensVariable::Kind::kGlass0 || kind == LensVariable::Kind::kGlass1) glass_indices.push_back(i);
+  }
+  auto merged = [](std::vector<int> a, const std::vector<int>& b) {
+    a.insert(a.end(), b.begin(), b.end());
+    std::sort(a.begin(), a.end());
+    a.erase(std::unique(a.begin(), a.end()), a.end());
+    return a;
+  };
+  const bool glasses_frozen_by_user =
+      std::all_of(glass_indices.begin(), glass_indices.end(), [&](int i) {
+        return std::find(frozen_user.begin(), frozen_user.end(), i) != frozen_user.end();
+      });
+
+  DesignLossOptions loss = with_margin(options.loss);
+  const auto interrupted = [&] { return options.interrupt && options.interrupt->load(); };
+
+  // Phase 1: continuous glasses.
+  if (options.glass_search != GlassSearch::kNone && !glasses_frozen_by_user) {
+    run_phase(param, x, GlassMode::kContinuous, {}, frozen_user, options, loss, "continuous",
+              options.max_rounds, options.max_iterations, counters);
+    result.log.push_back("phase 1 (continuous glasses) done");
+  }
+  // Phase 2: snap to the nearest catalog glasses, freeze them.
+  std::vector<int> fixed = param.nearest_glasses(x.data());
+  for (int i : glass_indices) {
+    const int pair = static_cast<int>(std::find(glass_indices.begin(), glass_indices.end(), i) - glass_indices.begin()) / 2;
+    const Eigen::Vector2d p = param.glass_space().glass_point(fixed[pair]);
+    x[i] = p[(param.variables()[i].kind == LensVariable::Kind::kGlass0) ? 0 : 1];
+  }
+  const std::vector<int> frozen_all = merged(frozen_user, glass_indices);
+  DesignLoss<double> best = run_phase(param, x, GlassMode::kFixed, fixed, frozen_all, options, loss,
+                                      "snapped", options.max_rounds, options.max_iterations, counters);
+  result.log.push_back("phase 2 (snapped glasses) done");
+
+  // Phase 3: neighbouring catalog glasses per element.
+  if (options.glass_search == GlassSearch::kNeighbours && !glasses_frozen_by_user &&
+      options.glass_neighbours > 0) {
+    for (int pass = 0; pass < 3 && !interrupted(); ++pass) {
+      bool improved = false;
+      for (std::size_t m = 0; m < fixed.size() && !interrupted(); ++m) {
+        const std::vector<int> order =
+            param.glass_space().by_distance(param.glass_space().glass_point(fixed[m]));
+        int tried = 0;
+        for (int candidate : order) {
+          if (tried >= options.glass_neighbours || interrupted()) break;
+          if (candidate == fixed[m]) continue;
+          ++tried;
+          std::vector<int> trial_fixed = fixed;
+          trial_fixed[m] = candidate;
+          std::vector<double> trial_x = x;
+          DesignLossOptions trial_loss = loss;
+          const DesignLoss<double> trial =
+              run_phase(param, trial_x, GlassMode::kFixed, trial_fixed, frozen_all, options,
+                        trial_loss, fmt::format("glass {} -> {}", m + 1, param.glass_space().name(candidate)),
+                        2, std::max(10, options.max_iterations / 4), counters);
+          if (constraints_met(trial) && trial.spot_mm < best.spot_mm * (1 - 1e-4)) {
+            if (options.verbose)
+              fmt::print(stderr, "lensopt optimize: element {}: {} -> {} improves the spot to {:.4f} um\n",
+                         m + 1, param.glass_space().name(fixed[m]), param.glass_space().name(candidate),
+                         trial.spot_mm * 1000);
+            result.log.push_back(fmt::format("element {}: {} -> {} ({:.4f} um)", m + 1,
+                                             param.glass_space().name(fixed[m]),
+                                             param.glass_space().name(candidate), trial.spot_mm * 1000));
+            fixed = trial_fixed;
+            x = trial_x;
+            best = trial;
+            loss = trial_loss;
+            improved = true;
+          }
+        }
+      }
+      if (!improved) break;
+    }
+    // A final polish with the chosen glasses.
+    best = run_phase(param, x, GlassMode::kFixed, fixed, frozen_all, options, loss, "final",
+                     options.max_rounds, options.max_iterations, counters);
+  }
+
+  result.lens = param.to_lens(x.data(), GlassMode::kFixed, fixed);
+  result.lens.name = start.name;
+  result.lens.source_path = start.source_path;
+  const AnalysisReport final_report = analyze_lens(result.lens, full);
+  result.final_spot_um = final_report.mean_rms_spot_um.value_or(std::numeric_limits<double>::infinity());
+  for (const FieldReport& f : final_report.fields) result.final_field_spot_um.push_back(f.rms_spot_um.value_or(0.0));
+  result.final_constraints = check_constraints(result.lens, options.loss, full.trace);
+  // Never return a worse lens than the start (when the start itself was feasible with catalog
+  // glasses): keep the start.
+  const bool start_catalog = std::all_of(start.surfaces.begin(), start.surfaces.end(), [](const Surface& s) {
+    return s.material.is_air() || s.material.kind == Material::Kind::kCatalog;
+  });
+  if (start_catalog && result.start_constraints.all_pass() &&
+      (result.final_spot_um > result.start_spot_um || !result.final_constraints.all_pass())) {
+    result.lens = start;
+    result.final_spot_um = result.start_spot_um;
+    result.final_field_spot_um = result.start_field_spot_um;
+    result.final_constraints = result.start_constraints;
+    result.kept_start = true;
+  }
+  for (const Surface& s : result.lens.surfaces)
+    if (!s.material.is_air()) result.glasses.push_back(s.material.label());
+  result.iterations = counters.iterations;
+  result.loss_evaluations = counters.evaluations.load();
+  result.jacobian_evaluations = counters.jacobians;
+  result.termination = interrupted() ? std::string("interrupted") : counters.termination;
+  result.interrupted = interrupted();
+  result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - clock_start).count();
+  return result;
+}
+
+AdamResult adam_on_design_loss(const LensParameterization& param, std::vector<double> x,
+                               GlassMode mode, const std::vector<int>& fixed_glasses,
+                               const OptimizeOptions& options, double learning_rate, int max_steps,
+                               double target_spot_mm) {
+  using J = ceres::Jet<double, kStride>;
+  const int n = param.size();
+  if (n > kStride) throw Error(fmt::format("adam comparison supports up to {} variables", kStride));
+  const std::vector<int> frozen = param.select(options.freeze);
+  std::vector<double> m(n, 0.0), v(n, 0.0);
+  const double beta1 = 0.9, beta2 = 0.999, eps = 1e-8;
+  AdamResult result;
+  for (int step = 1; step <= max_steps; ++step) {
+    std::vector<J> xj(n);
+    for (int i = 0; i < n; ++i) xj[i] = J(x[i], i);
+    DesignLoss<J> loss;
+    evaluate_design<J>(param, xj.data(), mode, fixed_glasses, options.sampling, options.loss,
+                       nullptr, nullptr, &loss);
+    ++result.evaluations;
+    result.spot_mm = loss.spot_mm.a;
+    if (result.spot_mm <= target_spot_mm) {
+      result.reached = true;
+      break;
+    }
+    for (int i = 0; i < n; ++i) {
+      if (std::find(frozen.begin(), frozen.end(), i) != frozen.end()) continue;
+      const double g = loss.total.v[i];
+      m[i] = beta1 * m[i] + (1 - beta1) * g;
+      v[i] = beta2 * v[i] + (1 - beta2) * g * g;
+      const double m_hat = m[i] / (1 - std::pow(beta1, step));
+      const double v_hat = v[i] / (1 - std::pow(beta2, step));
+      x[i] -= learning_rate * m_hat / (std::sqrt(v_hat) + eps);
+    }
+  }
+  result.x = x;
+  return result;
+}
+
+}  // namespace lensopt

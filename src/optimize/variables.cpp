@@ -1,0 +1,207 @@
+#include "lensopt/optimize/variables.h"
+
+#include <fmt/format.h>
+
+#include <Eigen/Eigenvalues>
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+
+#include "lensopt/core/error.h"
+#include "lensopt/trace/system.h"
+
+namespace lensopt {
+
+GlassSpace::GlassSpace(const Catalog& catalog) : catalog_name_(catalog.name) {
+  for (const Glass& g : catalog.glasses) {
+    if (!(g.nd > 1.0) || !(g.vd > 0.0)) continue;
+    names_.push_back(g.name);
+    nd_.push_back(g.nd);
+    vd_.push_back(g.vd);
+  }
+  if (names_.size() < 3) {
+    throw Error(fmt::format("catalog {} has {} usable glasses; the glass space needs at least 3",
+                            catalog.name, names_.size()));
+  }
+  const double n = static_cast<double>(names_.size());
+  mean_ = Eigen::Vector2d::Zero();
+  for (std::size_t i = 0; i < names_.size(); ++i) mean_ += Eigen::Vector2d(nd_[i], vd_[i]);
+  mean_ /= n;
+  Eigen::Matrix2d cov = Eigen::Matrix2d::Zero();
+  for (std::size_t i = 0; i < names_.size(); ++i) {
+    const Eigen::Vector2d d = Eigen::Vector2d(nd_[i], vd_[i]) - mean_;
+    cov += d * d.transpose();
+  }
+  cov /= n;
+  // PCA whitening: W = Lambda^{-1/2} E^T, so W cov W^T = I.
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> eig(cov);
+  const Eigen::Vector2d lambda = eig.eigenvalues();
+  whitening_ = lambda.cwiseSqrt().cwiseInverse().asDiagonal() * eig.eigenvectors().transpose();
+  inverse_ = whitening_.inverse();
+  for (std::size_t i = 0; i < names_.size(); ++i) points_.push_back(whiten(nd_[i], vd_[i]));
+}
+
+Eigen::Vector2d GlassSpace::whiten(double nd, double vd) const {
+  return whitening_ * (Eigen::Vector2d(nd, vd) - mean_);
+}
+
+int GlassSpace::nearest(const Eigen::Vector2d& g, const std::vector<int>& exclude) const {
+  int best = -1;
+  double best_d2 = 0;
+  for (int i = 0; i < size(); ++i) {
+    if (std::find(exclude.begin(), exclude.end(), i) != exclude.end()) continue;
+    const double d2 = (points_[i] - g).squaredNorm();
+    if (best < 0 || d2 < best_d2) {
+      best = i;
+      best_d2 = d2;
+    }
+  }
+  return best;
+}
+
+std::vector<int> GlassSpace::by_distance(const Eigen::Vector2d& g) const {
+  std::vector<int> order(size());
+  std::iota(order.begin(), order.end(), 0);
+  std::stable_sort(order.begin(), order.end(), [&](int a, int b) {
+    return (points_[a] - g).squaredNorm() < (points_[b] - g).squaredNorm();
+  });
+  return order;
+}
+
+LensParameterization::LensParameterization(const Lens& lens, GlassSpace glasses)
+    : structure_(lens), glasses_(std::move(glasses)) {
+  lens.validate();
+  focal_length_mm_ = lens.specs.focal_length_mm();
+  const int k_count = static_cast<int>(lens.surfaces.size());
+  const int last = k_count - 1;
+  if (lens.surfaces[last - 1].material.is_air()) {
+    throw Error(SourceLocation{lens.source_path},
+                "the last surface must end a glass element: its curvature is solved for the focal "
+                "length");
+  }
+  using Kind = LensVariable::Kind;
+  for (int k = 0; k < k_count; ++k) {
+    if (lens.surfaces[k].is_stop || k == last) continue;
+    variables_.push_back({Kind::kCurvature, k, fmt::format("c{}", k + 1), "curvatures"});
+  }
+  for (int k = 0; k < last; ++k)
+    variables_.push_back({Kind::kSpacing, k, fmt::format("s{}", k + 1), "spacings"});
+  defocus_index_ = static_cast<int>(variables_.size());
+  variables_.push_back({Kind::kDefocus, last, "defocus", "spacings"});
+  int glass_count = 0;
+  for (int k = 0; k < k_count; ++k) {
+    if (lens.surfaces[k].material.is_air()) continue;
+    ++glass_count;
+    variables_.push_back({Kind::kGlass0, k, fmt::format("g{}.0", k + 1), "glasses"});
+    variables_.push_back({Kind::kGlass1, k, fmt::format("g{}.1", k + 1), "glasses"});
+  }
+  if (glass_count == 0) throw Error(SourceLocation{lens.source_path}, "the lens has no glass");
+}
+
+std::vector<double> LensParameterization::from_lens(const Lens& lens_in) const {
+  if (lens_in.surfaces.size() != structure_.surfaces.size())
+    throw Error("lens structure differs from the parameterization's");
+  // Scale to the spec focal length first, as analysis does.
+  TraceOptions scale_only;
+  scale_only.ray_aiming = false;
+  scale_only.fields = 1;
+  scale_only.rings = 1;
+  const TraceSystem<double> sys =
+      prepare_system(make_trace_lens(lens_in), lens_in.specs, scale_only);
+  const Lens lens = scaled(lens_in, sys.scale);
+  const double f = focal_length_mm_;
+  std::vector<double> x(variables_.size(), 0.0);
+  for (int i = 0; i < size(); ++i) {
+    const LensVariable& v = variables_[i];
+    const Surface& s = lens.surfaces[v.surface];
+    switch (v.kind) {
+      case LensVariable::Kind::kCurvature: x[i] = s.curvature_per_mm * f; break;
+      case LensVariable::Kind::kSpacing: x[i] = s.thickness_mm / f; break;
+      case LensVariable::Kind::kDefocus: x[i] = (s.thickness_mm - sys.bfl_mm) / f; break;
+      case LensVariable::Kind::kGlass0: {
+        const Eigen::Vector2d g = glasses_.whiten(s.material.nd, s.material.vd);
+        x[i] = g[0];
+        x[i + 1] = g[1];
+        break;
+      }
+      case LensVariable::Kind::kGlass1: break;
+    }
+  }
+  return x;
+}
+
+std::vector<int> LensParameterization::nearest_glasses(const double* x) const {
+  std::vector<int> out;
+  for (int i = 0; i < size(); ++i)
+    if (variables_[i].kind == LensVariable::Kind::kGlass0)
+      out.push_back(glasses_.nearest(Eigen::Vector2d(x[i], x[i + 1])));
+  return out;
+}
+
+Lens LensParameterization::to_lens(const double* x, GlassMode mode,
+                                   const std::vector<int>& fixed_glasses) const {
+  const TraceLens<double> tl = to_trace_lens(x, mode, fixed_glasses);
+  Lens lens = structure_;
+  const std::vector<int> nearest = nearest_glasses(x);
+  int glass_number = 0;
+  for (std::size_t k = 0; k < lens.surfaces.size(); ++k) {
+    Surface& s = lens.surfaces[k];
+    s.curvature_per_mm = tl.curvature_per_mm[k];
+    s.thickness_mm = tl.thickness_mm[k];
+    s.written_as_radius = true;
+    s.semi_diameter_mm = 0.0;
+    if (s.material.is_air()) continue;
+    if (mode == GlassMode::kContinuous) {
+      s.material = Material::model(tl.nd[k], tl.vd[k]);
+    } else {
+      const int j = mode == GlassMode::kFixed ? fixed_glasses.at(glass_number) : nearest[glass_number];
+      Material m;
+      m.kind = Material::Kind::kCatalog;
+      m.glass_name = glasses_.name(j);
+      m.nd = glasses_.nd(j);
+      m.vd = glasses_.vd(j);
+      // Keep the catalog entry when the structure's glass came from the same catalog.
+      const std::shared_ptr<const Catalog> catalog = [&]() -> std::shared_ptr<const Catalog> {
+        try {
+          return load_catalog(glasses_.catalog_name());
+        } catch (const Error&) {
+          return nullptr;
+        }
+      }();
+      if (catalog) {
+        if (const Glass* g = catalog->find(m.glass_name)) m.glass = std::make_shared<Glass>(*g);
+      }
+      s.material = m;
+    }
+    ++glass_number;
+  }
+  return lens;
+}
+
+std::vector<int> LensParameterization::select(const std::vector<std::string>& names) const {
+  std::vector<int> out;
+  for (const std::string& raw : names) {
+    if (raw.empty()) continue;
+    bool found = false;
+    for (int i = 0; i < size(); ++i) {
+      const LensVariable& v = variables_[i];
+      const std::string glass_pair = fmt::format("g{}", v.surface + 1);
+      const bool glass = v.kind == LensVariable::Kind::kGlass0 || v.kind == LensVariable::Kind::kGlass1;
+      if (raw == v.name || raw == v.group || (glass && raw == glass_pair)) {
+        out.push_back(i);
+        found = true;
+      }
+    }
+    if (!found) {
+      std::string known;
+      for (const LensVariable& v : variables_) known += (known.empty() ? "" : ", ") + v.name;
+      throw Error(fmt::format("unknown variable '{}'; known: curvatures, spacings, glasses, {}", raw,
+                              known));
+    }
+  }
+  std::sort(out.begin(), out.end());
+  out.erase(std::unique(out.begin(), out.end()), out.end());
+  return out;
+}
+
+}  // namespace lensopt
