@@ -1,0 +1,616 @@
+// Native TOML lens files (toml++), and read_lens / write_lens, which pick the format by the file's
+// extension.
+//
+// Exact numbers. Every double is written with fmt "{}", the shortest decimal that reads back to
+// the same double, and toml++ reads decimals correctly rounded, so thicknesses, indices and specs
+// survive format -> parse bit for bit. A curvature c written as a radius R needs fl(1 / R) == c,
+// and R = fl(1 / c) does not always give that: fl(1 / fl(1 / c)) differs from c for some c. So the
+// writer looks at the doubles within a few ulps of fl(1 / c), keeps those R with fl(1 / R) == c
+// and writes the one with the shortest decimal (a radius the file gave, such as 9.1, is found
+// again). When no R exists (the doubles near 1/c are spaced more coarsely, relative to their size,
+// than those near c, so some c are no reciprocal of any double) it writes curvature_per_mm.
+// Either way parse(format(l)) has l's doubles, and format(parse(format(l))) == format(l).
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <array>
+#include <cctype>
+#include <cmath>
+#include <limits>
+#include <optional>
+#include <sstream>
+#include <toml++/toml.h>
+#include <vector>
+
+#include "lens_io_detail.h"
+#include "lensopt/core/atomic_file.h"
+#include "lensopt/core/error.h"
+#include "lensopt/glass/glass.h"
+#include "lensopt/lens/lens_io.h"
+
+static_assert(TOML_EXCEPTIONS, "lens_toml.cpp expects toml++ to report errors by exception");
+
+namespace lensopt {
+
+namespace detail {
+
+std::size_t edit_distance(std::string_view a, std::string_view b) {
+  // d[i][j] = min(d[i-1][j] + 1, d[i][j-1] + 1, d[i-1][j-1] + (a_i != b_j)), one row at a time.
+  std::vector<std::size_t> row(b.size() + 1);
+  for (std::size_t j = 0; j <= b.size(); ++j) row[j] = j;
+  for (std::size_t i = 1; i <= a.size(); ++i) {
+    std::size_t diagonal = row[0];
+    row[0] = i;
+    for (std::size_t j = 1; j <= b.size(); ++j) {
+      const std::size_t above = row[j];
+      row[j] = std::min({row[j] + 1, row[j - 1] + 1, diagonal + (a[i - 1] != b[j - 1] ? 1 : 0)});
+      diagonal = above;
+    }
+  }
+  return row[b.size()];
+}
+
+std::string closest_key(std::string_view key, std::span<const std::string_view> known_keys) {
+  std::string best;
+  std::size_t best_distance = std::numeric_limits<std::size_t>::max();
+  for (std::string_view known : known_keys) {
+    const std::size_t d = edit_distance(key, known);
+    if (d < best_distance && (d <= 2 || 3 * d <= known.size())) {
+      best = known;
+      best_distance = d;
+    }
+  }
+  return best;
+}
+
+std::string did_you_mean(std::string_view key, std::span<const std::string_view> known_keys) {
+  const std::string best = closest_key(key, known_keys);
+  return best.empty() ? std::string() : fmt::format(" (did you mean '{}'?)", best);
+}
+
+}  // namespace detail
+
+namespace {
+
+constexpr std::array<std::string_view, 3> kTopLevelKeys = {"lens", "specs", "surfaces"};
+constexpr std::array<std::string_view, 2> kLensKeys = {"name", "catalog"};
+constexpr std::array<std::string_view, 6> kSpecsKeys = {
+    "f_number", "half_field_deg", "sensor_diagonal_mm", "wavelengths_nm", "channels", "dispersion"};
+constexpr std::array<std::string_view, 6> kSurfaceKeys = {
+    "radius_mm", "curvature_per_mm", "thickness_mm", "material", "stop", "semi_diameter_mm"};
+constexpr std::array<std::string_view, 2> kModelGlassKeys = {"nd", "vd"};
+constexpr std::array<char, 3> kChannelLetters = {'R', 'G', 'B'};
+
+// Ulps either side of fl(1/c) searched for a radius R with fl(1/R) == c. The exact 1/c is within
+// 1/2 ulp of fl(1/c), and any such R within about 1 ulp of the exact 1/c.
+constexpr int kRadiusSearchUlps = 4;
+
+std::string lower(std::string_view text) {
+  std::string out(text);
+  for (char& ch : out) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
+  return out;
+}
+
+std::string_view type_phrase(const toml::node& node) {
+  switch (node.type()) {
+    case toml::node_type::table:
+      return "a table";
+    case toml::node_type::array:
+      return "an array";
+    case toml::node_type::string:
+      return "a string";
+    case toml::node_type::integer:
+      return "an integer";
+    case toml::node_type::floating_point:
+      return "a floating-point number";
+    case toml::node_type::boolean:
+      return "a boolean";
+    case toml::node_type::date:
+    case toml::node_type::time:
+    case toml::node_type::date_time:
+      return "a date/time";
+    default:
+      return "nothing";
+  }
+}
+
+// A key of a table with its value, both with source positions.
+struct Entry {
+  const toml::key* key = nullptr;
+  const toml::node* node = nullptr;
+  explicit operator bool() const { return node != nullptr; }
+};
+
+Entry entry(const toml::table& table, std::string_view name) {
+  const auto it = table.find(name);
+  if (it == table.end()) return {};
+  return {&it->first, &it->second};
+}
+
+// Turns toml++ nodes into lens values, throwing Error at the node's file:line:column.
+class TomlReader {
+ public:
+  explicit TomlReader(std::string file) : file_(std::move(file)) {}
+
+  SourceLocation at(const toml::source_region& region) const {
+    return {file_, static_cast<int>(region.begin.line), static_cast<int>(region.begin.column)};
+  }
+  [[noreturn]] void fail(const toml::source_region& region, const std::string& message) const {
+    throw Error(at(region), message);
+  }
+  [[noreturn]] void fail(const toml::node& node, const std::string& message) const {
+    fail(node.source(), message);
+  }
+  [[noreturn]] void fail(const Entry& e, const std::string& message) const {
+    fail(e.key->source(), message);
+  }
+  [[noreturn]] void fail_file(const std::string& message) const {
+    throw Error(SourceLocation{file_}, message);
+  }
+
+  // Every key of `table` must be one of `known`; `where` names the table ("[specs]").
+  void check_keys(const toml::table& table, std::span<const std::string_view> known,
+                  std::string_view where) const {
+    for (auto&& [key, node] : table) {
+      if (std::find(known.begin(), known.end(), key.str()) != known.end()) continue;
+      fail(key.source(), fmt::format("unknown key '{}' in {}{}", key.str(), where,
+                                     detail::did_you_mean(key.str(), known)));
+    }
+  }
+
+  double number(const toml::node& node, std::string_view what) const {
+    if (const auto* v = node.as_floating_point()) return v->get();
+    if (const auto* v = node.as_integer()) return static_cast<double>(v->get());
+    fail(node, fmt::format("{} must be a number, not {}", what, type_phrase(node)));
+  }
+
+  double finite_number(const toml::node& node, std::string_view what) const {
+    const double x = number(node, what);
+    if (!std::isfinite(x)) fail(node, fmt::format("{} = {} must be finite", what, x));
+    return x;
+  }
+
+  std::string string(const toml::node& node, std::string_view what) const {
+    if (const auto* v = node.as_string()) return v->get();
+    fail(node, fmt::format("{} must be a string, not {}", what, type_phrase(node)));
+  }
+
+  bool boolean(const toml::node& node, std::string_view what) const {
+    if (const auto* v = node.as_boolean()) return v->get();
+    fail(node, fmt::format("{} must be true or false, not {}", what, type_phrase(node)));
+  }
+
+  const toml::table& table(const toml::node& node, std::string_view what) const {
+    if (const auto* t = node.as_table()) return *t;
+    fail(node, fmt::format("{} must be a table, not {}", what, type_phrase(node)));
+  }
+
+  const toml::array& array(const toml::node& node, std::string_view what) const {
+    if (const auto* a = node.as_array()) return *a;
+    fail(node, fmt::format("{} must be an array, not {}", what, type_phrase(node)));
+  }
+
+  const std::string& file() const { return file_; }
+
+ private:
+  std::string file_;
+};
+
+// A radius value: a number (not 0), TOML's inf, or the strings "inf" / "infinity" (any case,
+// optionally signed), all meaning a flat surface.
+double read_radius_mm(const TomlReader& reader, const toml::node& node, std::string_view what) {
+  if (const auto* s = node.as_string()) {
+    std::string text = lower(s->get());
+    double sign = 1.0;
+    if (!text.empty() && (text.front() == '+' || text.front() == '-')) {
+      sign = text.front() == '-' ? -1.0 : 1.0;
+      text.erase(0, 1);
+    }
+    if (text == "inf" || text == "infinity") return sign * std::numeric_limits<double>::infinity();
+    reader.fail(node, fmt::format("{} must be a number or \"inf\" (flat), not \"{}\"", what,
+                                  s->get()));
+  }
+  const double radius_mm = reader.number(node, what);
+  if (std::isnan(radius_mm)) reader.fail(node, fmt::format("{} is nan", what));
+  if (radius_mm == 0.0)
+    reader.fail(node, fmt::format("{} = 0 is not a surface; write {} = inf for a flat surface",
+                                  what, what));
+  if (!std::isfinite(1.0 / radius_mm))
+    reader.fail(node, fmt::format("{} = {} is too small", what, radius_mm));
+  return radius_mm;
+}
+
+Specs read_specs(const TomlReader& reader, const toml::table& table) {
+  reader.check_keys(table, kSpecsKeys, "[specs]");
+  Specs specs;
+  if (const Entry e = entry(table, "f_number")) {
+    specs.f_number = reader.finite_number(*e.node, "f_number");
+    if (!(specs.f_number > 0.0))
+      reader.fail(*e.node, fmt::format("f_number = {} must be > 0", specs.f_number));
+  }
+  if (const Entry e = entry(table, "half_field_deg")) {
+    specs.half_field_deg = reader.finite_number(*e.node, "half_field_deg");
+    if (!(specs.half_field_deg >= 0.0 && specs.half_field_deg < 89.0))
+      reader.fail(*e.node,
+                  fmt::format("half_field_deg = {} must be in [0, 89)", specs.half_field_deg));
+  }
+  if (const Entry e = entry(table, "sensor_diagonal_mm")) {
+    specs.sensor_diagonal_mm = reader.finite_number(*e.node, "sensor_diagonal_mm");
+    if (!(specs.sensor_diagonal_mm > 0.0))
+      reader.fail(*e.node,
+                  fmt::format("sensor_diagonal_mm = {} must be > 0", specs.sensor_diagonal_mm));
+  }
+  const Entry wavelengths = entry(table, "wavelengths_nm");
+  const Entry channels = entry(table, "channels");
+  if (wavelengths && !channels)
+    reader.fail(wavelengths, "wavelengths_nm is given without channels; add channels = [\"R\", "
+                             "\"G\", ...], one of R, G, B per wavelength");
+  if (channels && !wavelengths)
+    reader.fail(channels, "channels is given without wavelengths_nm");
+  if (wavelengths) {
+    const toml::array& values = reader.array(*wavelengths.node, "wavelengths_nm");
+    if (values.empty()) reader.fail(*wavelengths.node, "wavelengths_nm is empty");
+    specs.wavelengths_nm.clear();
+    for (const toml::node& value : values) {
+      const double w = reader.finite_number(value, "a wavelength in wavelengths_nm");
+      if (!(w > 200.0 && w < 20000.0))
+        reader.fail(value, fmt::format("wavelength {} nm is out of range (200, 20000)", w));
+      specs.wavelengths_nm.push_back(w);
+    }
+    const toml::array& letters = reader.array(*channels.node, "channels");
+    if (letters.size() != values.size())
+      reader.fail(*channels.node, fmt::format("channels has {} entries but wavelengths_nm has {}",
+                                              letters.size(), values.size()));
+    specs.wavelength_channels.clear();
+    for (const toml::node& value : letters) {
+      const std::string letter = reader.string(value, "a channel");
+      const auto it = letter.size() == 1
+                          ? std::find(kChannelLetters.begin(), kChannelLetters.end(),
+                                      std::toupper(static_cast<unsigned char>(letter[0])))
+                          : kChannelLetters.end();
+      if (it == kChannelLetters.end())
+        reader.fail(value, fmt::format("channel \"{}\" must be \"R\", \"G\" or \"B\"", letter));
+      specs.wavelength_channels.push_back(static_cast<int>(it - kChannelLetters.begin()));
+    }
+  }
+  if (const Entry e = entry(table, "dispersion")) {
+    const std::string model = lower(reader.string(*e.node, "dispersion"));
+    if (model == "abbe") {
+      specs.dispersion = DispersionModel::kAbbe;
+    } else if (model == "catalog") {
+      specs.dispersion = DispersionModel::kCatalog;
+    } else {
+      reader.fail(*e.node, fmt::format("dispersion = \"{}\" must be \"abbe\" or \"catalog\"",
+                                       reader.string(*e.node, "dispersion")));
+    }
+  }
+  return specs;
+}
+
+Material read_material(const TomlReader& reader, const toml::node& node, int surface_number,
+                       const Lens& lens, const Catalog* catalog) {
+  if (const auto* s = node.as_string()) {
+    const std::string& name = s->get();
+    if (lower(name) == "air") return Material::air();
+    if (catalog == nullptr)
+      reader.fail(node, fmt::format("surface {}: material \"{}\" names a catalog glass, but [lens] "
+                                    "has no catalog (add catalog = \"ohara\")",
+                                    surface_number, name));
+    const Glass* glass = catalog->find(name);
+    if (glass == nullptr)
+      reader.fail(node, fmt::format("surface {}: unknown glass '{}' in catalog '{}'; closest: {}",
+                                    surface_number, name, lens.catalog_name,
+                                    fmt::join(catalog->closest_names(name, 3), ", ")));
+    if (lens.specs.dispersion == DispersionModel::kCatalog && !glass->formula_supported)
+      reader.fail(node, fmt::format("surface {}: glass '{}' uses dispersion formula {}, which "
+                                    "lensopt cannot evaluate; use dispersion = \"abbe\"",
+                                    surface_number, glass->name, formula_name(glass->formula)));
+    return Material::from_catalog(*glass);
+  }
+  if (const auto* t = node.as_table()) {
+    reader.check_keys(*t, kModelGlassKeys, fmt::format("the material of surface {}", surface_number));
+    const Entry nd = entry(*t, "nd");
+    const Entry vd = entry(*t, "vd");
+    if (!nd || !vd)
+      reader.fail(node, fmt::format("surface {}: a model glass needs both nd and vd, as in "
+                                    "{{ nd = 1.7, vd = 48 }}",
+                                    surface_number));
+    const double nd_value = reader.finite_number(*nd.node, "nd");
+    const double vd_value = reader.finite_number(*vd.node, "vd");
+    if (!(nd_value > 1.0))
+      reader.fail(*nd.node, fmt::format("surface {}: nd = {} must be > 1", surface_number, nd_value));
+    if (!(vd_value > 0.0))
+      reader.fail(*vd.node, fmt::format("surface {}: vd = {} must be > 0", surface_number, vd_value));
+    return Material::model(nd_value, vd_value);
+  }
+  reader.fail(node, fmt::format("surface {}: material must be a glass name, \"air\" or "
+                                "{{ nd = ..., vd = ... }}, not {}",
+                                surface_number, type_phrase(node)));
+}
+
+Surface read_surface(const TomlReader& reader, const toml::table& table, int surface_number,
+                     const Lens& lens, const Catalog* catalog) {
+  reader.check_keys(table, kSurfaceKeys, fmt::format("surface {}", surface_number));
+  Surface surface;
+  const Entry radius = entry(table, "radius_mm");
+  const Entry curvature = entry(table, "curvature_per_mm");
+  if (radius && curvature) {
+    const bool radius_later = curvature.key->source().begin < radius.key->source().begin;
+    reader.fail(radius_later ? radius : curvature,
+                fmt::format("surface {}: give radius_mm or curvature_per_mm, not both",
+                            surface_number));
+  }
+  if (!radius && !curvature)
+    reader.fail(table.source(), fmt::format("surface {}: missing radius_mm (or curvature_per_mm); "
+                                            "write radius_mm = inf for a flat surface",
+                                            surface_number));
+  if (radius) {
+    surface.curvature_per_mm = 1.0 / read_radius_mm(reader, *radius.node, "radius_mm");
+    surface.written_as_radius = true;
+  } else {
+    surface.curvature_per_mm = reader.finite_number(*curvature.node, "curvature_per_mm");
+    surface.written_as_radius = false;
+  }
+  const Entry thickness = entry(table, "thickness_mm");
+  if (!thickness)
+    reader.fail(table.source(), fmt::format("surface {}: missing thickness_mm", surface_number));
+  surface.thickness_mm = reader.finite_number(*thickness.node, "thickness_mm");
+  if (const Entry e = entry(table, "material"))
+    surface.material = read_material(reader, *e.node, surface_number, lens, catalog);
+  if (const Entry e = entry(table, "stop")) {
+    surface.is_stop = reader.boolean(*e.node, "stop");
+    if (surface.is_stop && surface.curvature_per_mm != 0.0)
+      reader.fail(e, fmt::format("surface {}: the stop must be flat, but its {}; write "
+                                 "radius_mm = inf, or put the stop on its own flat surface",
+                                 surface_number,
+                                 radius ? fmt::format("radius is {} mm", 1.0 / surface.curvature_per_mm)
+                                        : fmt::format("curvature is {} /mm",
+                                                      surface.curvature_per_mm)));
+  }
+  if (const Entry e = entry(table, "semi_diameter_mm")) {
+    surface.semi_diameter_mm = reader.finite_number(*e.node, "semi_diameter_mm");
+    if (surface.semi_diameter_mm < 0.0)
+      reader.fail(*e.node, fmt::format("semi_diameter_mm = {} must be >= 0",
+                                       surface.semi_diameter_mm));
+  }
+  return surface;
+}
+
+// The shortest decimal that reads back as x, always with a '.' or an exponent so TOML reads a
+// float ("3.0", not "3"); "inf", "-inf", "nan" as TOML spells them.
+std::string number_text(double x) {
+  std::string text = fmt::format("{}", x);
+  if (text.find_first_of(".eEn") == std::string::npos) text += ".0";
+  return text;
+}
+
+// A radius R with fl(1 / R) == c, the one with the shortest decimal near fl(1 / c); +-inf for a
+// flat surface (the sign of a zero curvature kept); nullopt when no double R has fl(1/R) == c.
+std::optional<double> exact_radius_mm(double curvature_per_mm) {
+  const double inf = std::numeric_limits<double>::infinity();
+  if (curvature_per_mm == 0.0) return std::signbit(curvature_per_mm) ? -inf : inf;
+  const double nearest = 1.0 / curvature_per_mm;
+  if (!std::isfinite(nearest)) return std::nullopt;
+  std::optional<double> best;
+  std::size_t best_length = 0;
+  double radius_mm = nearest;
+  for (int i = 0; i < kRadiusSearchUlps; ++i) radius_mm = std::nextafter(radius_mm, -inf);
+  for (int i = 0; i <= 2 * kRadiusSearchUlps; ++i, radius_mm = std::nextafter(radius_mm, inf)) {
+    if (1.0 / radius_mm != curvature_per_mm) continue;
+    const std::size_t length = fmt::formatted_size("{}", radius_mm);
+    if (!best || length < best_length ||
+        (length == best_length && std::abs(radius_mm - nearest) < std::abs(*best - nearest))) {
+      best = radius_mm;
+      best_length = length;
+    }
+  }
+  return best;
+}
+
+// A TOML basic string: quotes, backslashes and control characters escaped.
+std::string toml_string(std::string_view text) {
+  std::string out = "\"";
+  for (const char ch : text) {
+    const auto byte = static_cast<unsigned char>(ch);
+    if (ch == '"' || ch == '\\') {
+      out += '\\';
+      out += ch;
+    } else if (ch == '\n') {
+      out += "\\n";
+    } else if (ch == '\t') {
+      out += "\\t";
+    } else if (byte < 0x20 || byte == 0x7f) {
+      out += fmt::format("\\u{:04X}", static_cast<unsigned>(byte));
+    } else {
+      out += ch;
+    }
+  }
+  out += '"';
+  return out;
+}
+
+std::string lower_extension(const std::filesystem::path& path) {
+  return lower(path.extension().string());
+}
+
+}  // namespace
+
+Lens parse_lens_toml(std::string_view text, const std::string& source_name) {
+  const TomlReader reader(source_name);
+  toml::table root;
+  try {
+    root = toml::parse(text, source_name);
+  } catch (const toml::parse_error& e) {
+    reader.fail(e.source(), fmt::format("TOML syntax error: {}", e.description()));
+  }
+
+  Lens lens;
+  lens.source_path = source_name;
+  lens.name = std::filesystem::path(source_name).stem().string();
+
+  // Top level: [lens], [specs], [[surfaces]]; any other table is kept for other modules.
+  toml::table extra;
+  for (auto&& [key, node] : root) {
+    if (std::find(kTopLevelKeys.begin(), kTopLevelKeys.end(), key.str()) != kTopLevelKeys.end())
+      continue;
+    if (node.is_table() || node.is_array_of_tables()) {
+      extra.insert(key, node);
+      continue;
+    }
+    reader.fail(key.source(),
+                fmt::format("unknown top-level key '{}'{}; lens keys belong in [lens], [specs] or "
+                            "[[surfaces]]",
+                            key.str(), detail::did_you_mean(key.str(), kTopLevelKeys)));
+  }
+  if (!extra.empty()) {
+    std::ostringstream out;
+    out << toml::toml_formatter(extra);
+    lens.extra_toml = out.str();
+    if (!lens.extra_toml.empty() && lens.extra_toml.back() != '\n') lens.extra_toml += '\n';
+  }
+
+  std::shared_ptr<const Catalog> catalog;
+  if (const toml::node* node = root.get("lens")) {
+    const toml::table& table = reader.table(*node, "[lens]");
+    reader.check_keys(table, kLensKeys, "[lens]");
+    if (const Entry e = entry(table, "name")) lens.name = reader.string(*e.node, "name");
+    if (const Entry e = entry(table, "catalog")) {
+      lens.catalog_name = reader.string(*e.node, "catalog");
+      try {
+        catalog = load_catalog(lens.catalog_name);
+      } catch (const Error& error) {
+        reader.fail(*e.node,
+                    fmt::format("cannot load catalog '{}': {}", lens.catalog_name, error.what()));
+      }
+    }
+  }
+
+  if (const toml::node* node = root.get("specs"))
+    lens.specs = read_specs(reader, reader.table(*node, "[specs]"));
+
+  const toml::node* surfaces_node = root.get("surfaces");
+  if (surfaces_node == nullptr) reader.fail_file("no [[surfaces]]: a lens needs at least two");
+  const toml::array& surfaces = reader.array(*surfaces_node, "surfaces");
+  for (std::size_t i = 0; i < surfaces.size(); ++i) {
+    const int number = static_cast<int>(i) + 1;
+    const toml::table& table = reader.table(surfaces[i], fmt::format("surface {}", number));
+    lens.surfaces.push_back(read_surface(reader, table, number, lens, catalog.get()));
+  }
+
+  // Whole-lens checks, placed at the surface they concern.
+  if (surfaces.size() < 2)
+    reader.fail(surfaces.empty() ? surfaces_node->source() : surfaces[0].source(),
+                fmt::format("a lens needs at least two surfaces; this one has {}", surfaces.size()));
+  int stop_count = 0;
+  for (std::size_t i = 0; i < surfaces.size(); ++i) {
+    if (!lens.surfaces[i].is_stop) continue;
+    if (++stop_count > 1)
+      reader.fail(entry(*surfaces[i].as_table(), "stop"),
+                  fmt::format("surface {} is a second aperture stop; mark exactly one surface with "
+                              "stop = true",
+                              i + 1));
+  }
+  if (stop_count == 0)
+    reader.fail(surfaces[0].source(), "no surface is the aperture stop; add stop = true to the "
+                                      "flat surface where the stop is");
+  if (!lens.surfaces.back().material.is_air()) {
+    const Entry e = entry(*surfaces.back().as_table(), "material");
+    reader.fail(e, fmt::format("surface {} (the last) must be followed by air, not {}",
+                               surfaces.size(), lens.surfaces.back().material.label()));
+  }
+
+  lens.validate();
+  return lens;
+}
+
+std::string format_lens_toml(const Lens& lens) {
+  std::string out;
+  auto line = [&out](std::string_view key, const std::string& value) {
+    out += fmt::format("{} = {}\n", key, value);
+  };
+
+  out += "[lens]\n";
+  if (!lens.name.empty()) line("name", toml_string(lens.name));
+  if (!lens.catalog_name.empty()) line("catalog", toml_string(lens.catalog_name));
+
+  const Specs& specs = lens.specs;
+  out += "\n[specs]\n";
+  line("f_number", number_text(specs.f_number));
+  line("half_field_deg", number_text(specs.half_field_deg));
+  line("sensor_diagonal_mm", number_text(specs.sensor_diagonal_mm));
+  if (specs.wavelengths_nm == paper_wavelengths_nm() &&
+      specs.wavelength_channels == paper_wavelength_channels()) {
+    out += "# wavelengths: the paper's 15 (R, G, B, five each)\n";
+  } else {
+    std::vector<std::string> wavelengths;
+    for (double w : specs.wavelengths_nm) wavelengths.push_back(number_text(w));
+    std::vector<std::string> channels;
+    for (int channel : specs.wavelength_channels) {
+      if (channel < 0 || channel >= static_cast<int>(kChannelLetters.size()))
+        throw Error(fmt::format("lens '{}': wavelength channel {} is not R (0), G (1) or B (2)",
+                                lens.name, channel));
+      channels.push_back(fmt::format("\"{}\"", kChannelLetters[channel]));
+    }
+    line("wavelengths_nm", fmt::format("[{}]", fmt::join(wavelengths, ", ")));
+    line("channels", fmt::format("[{}]", fmt::join(channels, ", ")));
+  }
+  line("dispersion", specs.dispersion == DispersionModel::kCatalog ? "\"catalog\"" : "\"abbe\"");
+
+  for (const Surface& surface : lens.surfaces) {
+    out += "\n[[surfaces]]\n";
+    const std::optional<double> radius_mm =
+        surface.written_as_radius ? exact_radius_mm(surface.curvature_per_mm) : std::nullopt;
+    if (radius_mm) {
+      line("radius_mm", number_text(*radius_mm));
+    } else {
+      line("curvature_per_mm", number_text(surface.curvature_per_mm));
+    }
+    line("thickness_mm", number_text(surface.thickness_mm));
+    switch (surface.material.kind) {
+      case Material::Kind::kAir:
+        break;
+      case Material::Kind::kCatalog:
+        line("material", toml_string(surface.material.glass_name));
+        break;
+      case Material::Kind::kModel:
+        line("material", fmt::format("{{ nd = {}, vd = {} }}", number_text(surface.material.nd),
+                                     number_text(surface.material.vd)));
+        break;
+    }
+    if (surface.is_stop) line("stop", "true");
+    if (surface.semi_diameter_mm != 0.0)
+      line("semi_diameter_mm", number_text(surface.semi_diameter_mm));
+  }
+
+  if (!lens.extra_toml.empty()) {
+    out += "\n";
+    out += lens.extra_toml;
+    if (out.back() != '\n') out += '\n';
+  }
+  return out;
+}
+
+Lens read_lens(const std::filesystem::path& path) {
+  const std::string extension = lower_extension(path);
+  if (extension == ".toml") return parse_lens_toml(read_file(path), path.string());
+  if (extension == ".yml" || extension == ".yaml")
+    return parse_lens_yaml(read_file(path), path.string());
+  if (extension == ".zmx")
+    throw Error(SourceLocation{path.string()}, "Zemax .zmx import is not supported yet");
+  throw Error(SourceLocation{path.string()},
+              fmt::format("unknown lens file type '{}'; lensopt reads .toml and the paper's "
+                          ".yml/.yaml",
+                          path.extension().string()));
+}
+
+void write_lens(const Lens& lens, const std::filesystem::path& path) {
+  const std::string extension = lower_extension(path);
+  if (extension != ".toml")
+    throw Error(SourceLocation{path.string()},
+                fmt::format("cannot write a lens as '{}'; lensopt writes lenses as .toml",
+                            path.extension().string()));
+  write_file_atomic(path, format_lens_toml(lens));
+}
+
+}  // namespace lensopt
