@@ -1,0 +1,344 @@
+// Zemax AGF glass catalog reader.
+//
+// An AGF file is a list of lines "KEY field field ...", fields separated by blanks:
+//   CC comment
+//   NM name formula MIL nd vd [exclude [status [melt_frequency]]]   starts a glass
+//   GC comment, ED thermal/chemical data, TD thermal dispersion, OD other data (kept out)
+//   CD c0 c1 ... c9                  dispersion coefficients of the glass's formula
+//   LD min_um max_um                 wavelength range of the formula
+//   IT wavelength_um transmission thickness_mm   one internal-transmission sample
+// Vendors write numbers as integers or floats ("2", "2.00000E+00", "1.06000E+000").
+#include <fmt/format.h>
+
+#include <charconv>
+#include <cmath>
+#include <cstdint>
+#include <fstream>
+#include <optional>
+#include <sstream>
+
+#include "lensopt/core/error.h"
+#include "lensopt/glass/glass.h"
+
+namespace lensopt {
+namespace {
+
+// Coefficients each formula uses (CD c0..c(n-1)); a CD line with fewer is malformed.
+int coefficients_needed(DispersionFormula formula) {
+  switch (formula) {
+    case DispersionFormula::kSchott:
+    case DispersionFormula::kSellmeier1:
+    case DispersionFormula::kHerzberger:
+      return 6;
+    case DispersionFormula::kSellmeier2:
+    case DispersionFormula::kSellmeier4:
+      return 5;
+    case DispersionFormula::kConrady:
+      return 3;
+    case DispersionFormula::kSellmeier3:
+    case DispersionFormula::kExtended1:
+    case DispersionFormula::kExtended2:
+      return 8;
+    case DispersionFormula::kHandbook1:
+    case DispersionFormula::kHandbook2:
+      return 4;
+    case DispersionFormula::kSellmeier5:
+      return 10;
+    case DispersionFormula::kExtended3:
+      return 9;
+  }
+  return 0;
+}
+
+bool is_known_formula(int id) {
+  return id >= 1 && id <= 13;
+}
+
+// Appends code point `cp` to `out` as UTF-8.
+void append_utf8(std::string& out, std::uint32_t cp) {
+  if (cp < 0x80) {
+    out += static_cast<char>(cp);
+  } else if (cp < 0x800) {
+    out += static_cast<char>(0xC0 | (cp >> 6));
+    out += static_cast<char>(0x80 | (cp & 0x3F));
+  } else if (cp < 0x10000) {
+    out += static_cast<char>(0xE0 | (cp >> 12));
+    out += static_cast<char>(0x80 | ((cp >> 6) & 0x3F));
+    out += static_cast<char>(0x80 | (cp & 0x3F));
+  } else {
+    out += static_cast<char>(0xF0 | (cp >> 18));
+    out += static_cast<char>(0x80 | ((cp >> 12) & 0x3F));
+    out += static_cast<char>(0x80 | ((cp >> 6) & 0x3F));
+    out += static_cast<char>(0x80 | (cp & 0x3F));
+  }
+}
+
+// UTF-16 (without its BOM) to UTF-8. A surrogate pair (hi, lo) is the code point
+// 0x10000 + ((hi - 0xD800) << 10) + (lo - 0xDC00); an unpaired surrogate becomes U+FFFD.
+std::string utf16_to_utf8(std::string_view bytes, bool little_endian) {
+  constexpr std::uint32_t kReplacement = 0xFFFD;
+  std::string out;
+  out.reserve(bytes.size() / 2);
+  const std::size_t units = bytes.size() / 2;
+  const auto unit_at = [&](std::size_t i) -> std::uint32_t {
+    const auto b0 = static_cast<unsigned char>(bytes[2 * i]);
+    const auto b1 = static_cast<unsigned char>(bytes[2 * i + 1]);
+    return little_endian ? (b0 | (b1 << 8)) : ((b0 << 8) | b1);
+  };
+  for (std::size_t i = 0; i < units; ++i) {
+    const std::uint32_t unit = unit_at(i);
+    if (unit >= 0xD800 && unit <= 0xDBFF) {
+      const std::uint32_t next = i + 1 < units ? unit_at(i + 1) : 0;
+      if (next >= 0xDC00 && next <= 0xDFFF) {
+        append_utf8(out, 0x10000 + ((unit - 0xD800) << 10) + (next - 0xDC00));
+        ++i;
+      } else {
+        append_utf8(out, kReplacement);
+      }
+    } else if (unit >= 0xDC00 && unit <= 0xDFFF) {
+      append_utf8(out, kReplacement);
+    } else {
+      append_utf8(out, unit);
+    }
+  }
+  return out;
+}
+
+// The file's text as UTF-8: UTF-16 LE/BE with a BOM is converted, a UTF-8 BOM dropped.
+std::string decode_text(std::string_view bytes) {
+  const auto starts_with = [&](std::initializer_list<unsigned char> prefix) {
+    if (bytes.size() < prefix.size()) return false;
+    std::size_t i = 0;
+    for (unsigned char b : prefix) {
+      if (static_cast<unsigned char>(bytes[i++]) != b) return false;
+    }
+    return true;
+  };
+  if (starts_with({0xFF, 0xFE})) return utf16_to_utf8(bytes.substr(2), true);
+  if (starts_with({0xFE, 0xFF})) return utf16_to_utf8(bytes.substr(2), false);
+  if (starts_with({0xEF, 0xBB, 0xBF})) return std::string(bytes.substr(3));
+  return std::string(bytes);
+}
+
+// Blank-separated fields of a line (spaces, tabs), and the 1-based column each starts at.
+void split_fields(std::string_view line, std::vector<std::string_view>& fields,
+                  std::vector<int>& columns) {
+  fields.clear();
+  columns.clear();
+  std::size_t i = 0;
+  const auto is_blank = [](char ch) { return ch == ' ' || ch == '\t' || ch == '\r' || ch == '\f'; };
+  while (i < line.size()) {
+    while (i < line.size() && is_blank(line[i])) ++i;
+    const std::size_t start = i;
+    while (i < line.size() && !is_blank(line[i])) ++i;
+    if (i > start) {
+      fields.push_back(line.substr(start, i - start));
+      columns.push_back(static_cast<int>(start) + 1);
+    }
+  }
+}
+
+std::optional<double> to_double(std::string_view text) {
+  // from_chars takes no leading '+'; AGF writers do not use one, but accept it.
+  if (!text.empty() && text.front() == '+') text.remove_prefix(1);
+  double value = 0.0;
+  const auto [end, ec] = std::from_chars(text.data(), text.data() + text.size(), value);
+  if (ec != std::errc() || end != text.data() + text.size() || !std::isfinite(value)) {
+    return std::nullopt;
+  }
+  return value;
+}
+
+// Reads AGF lines into a Catalog; one instance per file.
+class AgfReader {
+ public:
+  AgfReader(std::string source_name, Catalog& catalog)
+      : source_name_(std::move(source_name)), catalog_(catalog) {}
+
+  void read_line(std::string_view line, int line_number) {
+    line_number_ = line_number;
+    split_fields(line, fields_, column_of_field_);
+    if (fields_.empty()) return;
+    const std::string_view key = fields_[0];
+    if (key == "NM") {
+      read_name_line();
+    } else if (key == "CD") {
+      read_coefficients_line();
+    } else if (key == "LD") {
+      read_range_line();
+    } else if (key == "IT") {
+      read_transmission_line();
+    }
+    // CC, GC, ED, TD, OD and keys this reader does not know carry nothing the catalog keeps.
+  }
+
+  // Checks the last glass once the file is read.
+  void finish() { finish_glass(); }
+
+ private:
+  [[noreturn]] void fail(const std::string& message, int column = 0) const {
+    throw Error(SourceLocation{source_name_, line_number_, column}, message);
+  }
+
+  double number(std::size_t i, std::string_view what) const {
+    if (i >= fields_.size()) fail(fmt::format("{} line: missing {}", fields_[0], what));
+    const auto value = to_double(fields_[i]);
+    if (!value) {
+      fail(fmt::format("{} line: {} '{}' is not a number", fields_[0], what, fields_[i]),
+           column_of_field_[i]);
+    }
+    return *value;
+  }
+
+  // A field that must hold an integer, written as "2" or "2.00000E+00".
+  int integer(std::size_t i, std::string_view what) const {
+    const double value = number(i, what);
+    if (value != std::round(value) || std::abs(value) > 1e6) {
+      fail(fmt::format("{} line: {} '{}' is not an integer", fields_[0], what, fields_[i]),
+           column_of_field_[i]);
+    }
+    return static_cast<int>(value);
+  }
+
+  Glass& current_glass(std::string_view key) const {
+    if (catalog_.glasses.empty()) fail(fmt::format("{} line before any NM (glass name) line", key));
+    return catalog_.glasses.back();
+  }
+
+  void warn(const std::string& message) {
+    catalog_.warnings.push_back(
+        fmt::format("{}: {}", SourceLocation{source_name_, line_number_, 0}.to_string(), message));
+  }
+
+  void read_name_line() {
+    finish_glass();
+    // NM name formula MIL nd vd: six fields at least.
+    if (fields_.size() < 6) {
+      fail(
+          fmt::format("NM line: expected 'NM name formula MIL nd vd [exclude status]', got {} "
+                      "field(s)",
+                      fields_.size()));
+    }
+    Glass glass;
+    glass.name = std::string(fields_[1]);
+    glass.catalog = catalog_.name;
+    glass.source_line = line_number_;
+    const int formula_id = integer(2, "formula id");
+    glass.formula = static_cast<DispersionFormula>(formula_id);
+    glass.formula_supported = is_known_formula(formula_id);
+    // fields_[3] is the MIL code (nd and vd digits, sometimes a placeholder such as 1): unused.
+    glass.nd = number(4, "nd");
+    glass.vd = number(5, "vd");
+    if (fields_.size() > 6) number(6, "exclude flag");
+    if (fields_.size() > 7) {
+      const int status = integer(7, "status");
+      glass.status = static_cast<GlassStatus>(status);
+      if (status < 0 || status > 4) {
+        warn(fmt::format("glass {}: unknown status code {}", glass.name, status));
+      }
+    }
+    // fields_[8], the melt frequency, is not kept (some files write '-').
+    if (!glass.formula_supported) {
+      warn(fmt::format("glass {}: unsupported dispersion formula {}; its index is not computed",
+                       glass.name, formula_id));
+    }
+    catalog_.glasses.push_back(std::move(glass));
+    has_coefficients_ = false;
+  }
+
+  void read_coefficients_line() {
+    Glass& glass = current_glass("CD");
+    std::vector<double> coefficients;
+    for (std::size_t i = 1; i < fields_.size(); ++i) {
+      coefficients.push_back(number(i, fmt::format("coefficient c{}", i - 1)));
+    }
+    const auto needed = static_cast<std::size_t>(coefficients_needed(glass.formula));
+    if (coefficients.empty() || coefficients.size() < needed) {
+      fail(fmt::format("CD line: glass {} ({}) needs {} coefficients, the line has {}", glass.name,
+                       formula_name(glass.formula), std::max<std::size_t>(needed, 1),
+                       coefficients.size()));
+    }
+    if (coefficients.size() < 10) coefficients.resize(10, 0.0);
+    glass.coefficients = std::move(coefficients);
+    has_coefficients_ = true;
+  }
+
+  void read_range_line() {
+    Glass& glass = current_glass("LD");
+    glass.min_wavelength_um = number(1, "minimum wavelength (um)");
+    glass.max_wavelength_um = number(2, "maximum wavelength (um)");
+  }
+
+  void read_transmission_line() {
+    Glass& glass = current_glass("IT");
+    TransmissionPoint point;
+    point.wavelength_um = number(1, "wavelength (um)");
+    const double second = number(2, "transmission");
+    if (fields_.size() > 3) {
+      point.transmission = second;
+      point.thickness_mm = number(3, "thickness (mm)");
+    } else if (second > 1.0) {
+      // Two numbers, the second above 1: a thickness with the transmission field left blank,
+      // as Schott writes below its measurable range. Blank = nothing measured = 0.
+      point.transmission = 0.0;
+      point.thickness_mm = second;
+    } else {
+      point.transmission = second;  // transmission with the thickness left out
+    }
+    glass.transmission.push_back(point);
+  }
+
+  // A glass without a CD line has no dispersion data: its index would be silently wrong.
+  void finish_glass() {
+    if (catalog_.glasses.empty() || has_coefficients_) return;
+    Glass& glass = catalog_.glasses.back();
+    if (!glass.formula_supported) return;
+    glass.formula_supported = false;
+    catalog_.warnings.push_back(
+        fmt::format("{}: glass {}: no CD (dispersion coefficients) line; its index is not computed",
+                    SourceLocation{source_name_, glass.source_line, 0}.to_string(), glass.name));
+  }
+
+  std::string source_name_;
+  Catalog& catalog_;
+  int line_number_ = 0;
+  std::vector<std::string_view> fields_;
+  std::vector<int> column_of_field_;
+  bool has_coefficients_ = true;
+};
+
+}  // namespace
+
+Catalog parse_agf(std::string_view bytes, const std::string& source_name) {
+  Catalog catalog;
+  catalog.path = source_name;
+  catalog.name = std::filesystem::path(source_name).stem().string();
+  const std::string text = decode_text(bytes);
+  AgfReader reader(source_name, catalog);
+  // Lines end in LF or CRLF (split_fields drops the CR); a lone CR ends a line too.
+  int line_number = 0;
+  std::size_t start = 0;
+  while (start < text.size()) {
+    std::size_t end = text.find_first_of("\r\n", start);
+    if (end == std::string::npos) end = text.size();
+    ++line_number;
+    reader.read_line(std::string_view(text).substr(start, end - start), line_number);
+    if (end < text.size() && text[end] == '\r' && end + 1 < text.size() && text[end + 1] == '\n') {
+      ++end;
+    }
+    start = end + 1;
+  }
+  reader.finish();
+  return catalog;
+}
+
+Catalog read_agf(const std::filesystem::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw Error(SourceLocation{path.string()}, "cannot open glass catalog");
+  std::ostringstream contents;
+  contents << in.rdbuf();
+  if (in.bad()) throw Error(SourceLocation{path.string()}, "cannot read glass catalog");
+  return parse_agf(contents.str(), path.string());
+}
+
+}  // namespace lensopt

@@ -1,0 +1,197 @@
+// Glass look-up in a catalog, the catalog search path, and the cache of loaded catalogs.
+#include <fmt/format.h>
+#include <fmt/ranges.h>
+
+#include <algorithm>
+#include <cctype>
+#include <cstdlib>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <numeric>
+#include <optional>
+#include <system_error>
+
+#include "lensopt/core/error.h"
+#include "lensopt/glass/glass.h"
+
+namespace lensopt {
+namespace {
+
+// The built-in catalog that the name "ohara" stands for (catalogs/ohara65.agf).
+constexpr std::string_view kOharaAlias = "ohara";
+constexpr std::string_view kOharaFile = "ohara65.agf";
+
+std::string to_lower(std::string_view text) {
+  std::string out(text);
+  for (char& ch : out) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
+  return out;
+}
+
+bool equals_ignoring_case(std::string_view a, std::string_view b) {
+  return a.size() == b.size() && std::equal(a.begin(), a.end(), b.begin(), [](char x, char y) {
+           return std::tolower(static_cast<unsigned char>(x)) ==
+                  std::tolower(static_cast<unsigned char>(y));
+         });
+}
+
+// Levenshtein distance d(a, b): the fewest single-character insertions, deletions and
+// substitutions turning a into b, by the recurrence
+//   d(i, j) = min(d(i-1, j) + 1, d(i, j-1) + 1, d(i-1, j-1) + [a_i != b_j])
+// kept one row at a time.
+std::size_t edit_distance(std::string_view a, std::string_view b) {
+  std::vector<std::size_t> row(b.size() + 1);
+  std::iota(row.begin(), row.end(), std::size_t{0});
+  for (std::size_t i = 1; i <= a.size(); ++i) {
+    std::size_t diagonal = row[0];  // d(i-1, j-1)
+    row[0] = i;
+    for (std::size_t j = 1; j <= b.size(); ++j) {
+      const std::size_t above = row[j];  // d(i-1, j)
+      const std::size_t substitution = diagonal + (a[i - 1] == b[j - 1] ? 0 : 1);
+      row[j] = std::min({above + 1, row[j - 1] + 1, substitution});
+      diagonal = above;
+    }
+  }
+  return row[b.size()];
+}
+
+// Folder of the running executable (from /proc/self/exe), or empty when unknown.
+std::filesystem::path executable_dir() {
+  std::error_code ec;
+  const auto exe = std::filesystem::read_symlink("/proc/self/exe", ec);
+  if (ec) return {};
+  return exe.parent_path();
+}
+
+// The .agf file in `dir` whose stem equals `stem` (case-insensitive), if any.
+std::optional<std::filesystem::path> find_in_dir(const std::filesystem::path& dir,
+                                                 std::string_view stem) {
+  std::error_code ec;
+  // The usual spellings first, then a case-insensitive scan of the folder.
+  for (const char* extension : {".agf", ".AGF"}) {
+    const auto candidate = dir / (std::string(stem) + extension);
+    if (std::filesystem::is_regular_file(candidate, ec)) return candidate;
+  }
+  std::filesystem::directory_iterator it(dir, ec);
+  if (ec) return std::nullopt;
+  for (const auto& entry : it) {
+    const auto& path = entry.path();
+    if (equals_ignoring_case(path.extension().string(), ".agf") &&
+        equals_ignoring_case(path.stem().string(), stem) && entry.is_regular_file(ec)) {
+      return path;
+    }
+  }
+  return std::nullopt;
+}
+
+struct CatalogCache {
+  std::mutex mutex;
+  std::map<std::string, std::shared_ptr<const Catalog>> by_path;
+};
+
+CatalogCache& catalog_cache() {
+  static CatalogCache cache;
+  return cache;
+}
+
+std::shared_ptr<const Catalog> load_cached(const std::filesystem::path& path) {
+  std::error_code ec;
+  auto key_path = std::filesystem::weakly_canonical(path, ec);
+  if (ec) key_path = std::filesystem::absolute(path);
+  const std::string key = key_path.string();
+  CatalogCache& cache = catalog_cache();
+  {
+    const std::lock_guard<std::mutex> lock(cache.mutex);
+    if (const auto it = cache.by_path.find(key); it != cache.by_path.end()) return it->second;
+  }
+  // Parse outside the lock; if another thread loaded the same file meanwhile, keep the first.
+  auto catalog = std::make_shared<const Catalog>(read_agf(path));
+  const std::lock_guard<std::mutex> lock(cache.mutex);
+  return cache.by_path.emplace(key, std::move(catalog)).first->second;
+}
+
+}  // namespace
+
+const Glass* Catalog::find(std::string_view glass_name) const {
+  for (const Glass& glass : glasses) {
+    if (equals_ignoring_case(glass.name, glass_name)) return &glass;
+  }
+  return nullptr;
+}
+
+const Glass& Catalog::at(std::string_view glass_name) const {
+  if (const Glass* glass = find(glass_name)) return *glass;
+  const auto closest = closest_names(glass_name, 3);
+  std::string message = fmt::format("unknown glass '{}' in catalog {}", glass_name, name);
+  if (!closest.empty()) message += fmt::format("; closest: {}", fmt::join(closest, ", "));
+  throw Error(message);
+}
+
+std::vector<std::string> Catalog::closest_names(std::string_view glass_name,
+                                                std::size_t count) const {
+  const std::string wanted = to_lower(glass_name);
+  std::vector<std::pair<std::size_t, std::size_t>> ranked;  // (distance, index in file)
+  ranked.reserve(glasses.size());
+  for (std::size_t i = 0; i < glasses.size(); ++i) {
+    ranked.emplace_back(edit_distance(wanted, to_lower(glasses[i].name)), i);
+  }
+  // Best first; ties keep the file's order.
+  std::sort(ranked.begin(), ranked.end());
+  std::vector<std::string> names;
+  for (std::size_t k = 0; k < ranked.size() && k < count; ++k) {
+    names.push_back(glasses[ranked[k].second].name);
+  }
+  return names;
+}
+
+std::vector<std::filesystem::path> catalog_search_path() {
+  std::vector<std::filesystem::path> folders;
+  const auto add = [&](const std::filesystem::path& folder) {
+    if (folder.empty()) return;
+    const auto normal = folder.lexically_normal();
+    if (std::find(folders.begin(), folders.end(), normal) == folders.end()) {
+      folders.push_back(normal);
+    }
+  };
+  if (const char* env = std::getenv("LENSOPT_CATALOG_PATH")) {
+    std::string_view list(env);
+    while (!list.empty()) {
+      const std::size_t colon = list.find(':');
+      add(std::filesystem::path(std::string(list.substr(0, colon))));
+      if (colon == std::string_view::npos) break;
+      list.remove_prefix(colon + 1);
+    }
+  }
+  add(std::filesystem::path(LENSOPT_SOURCE_DIR) / "catalogs");
+  if (const auto exe_dir = executable_dir(); !exe_dir.empty()) {
+    add(exe_dir / ".." / "share" / "lensopt" / "catalogs");
+    add(exe_dir / ".." / "catalogs");
+  }
+  return folders;
+}
+
+std::shared_ptr<const Catalog> load_catalog(std::string_view name_or_path) {
+  if (name_or_path.empty()) throw Error("no glass catalog named (empty catalog name)");
+  std::error_code ec;
+  const std::filesystem::path as_path{std::string(name_or_path)};
+  if (std::filesystem::is_regular_file(as_path, ec)) return load_cached(as_path);
+  // A name with a folder in it is a path that does not exist.
+  if (as_path.has_parent_path()) {
+    throw Error(SourceLocation{as_path.string()}, "glass catalog file not found");
+  }
+  // A name: "ohara" is the built-in ohara65.agf; any other name X is X.agf in the search path.
+  const bool is_ohara = equals_ignoring_case(name_or_path, kOharaAlias);
+  const std::string stem = is_ohara ? std::filesystem::path(kOharaFile).stem().string()
+                                    : std::filesystem::path(as_path).stem().string();
+  const auto folders = catalog_search_path();
+  for (const auto& folder : folders) {
+    if (const auto found = find_in_dir(folder, stem)) return load_cached(*found);
+  }
+  std::vector<std::string> searched;
+  for (const auto& folder : folders) searched.push_back(folder.string());
+  throw Error(fmt::format(
+      "glass catalog '{}' not found: looked for {}.agf in {} (LENSOPT_CATALOG_PATH adds folders)",
+      name_or_path, stem, fmt::join(searched, ", ")));
+}
+
+}  // namespace lensopt

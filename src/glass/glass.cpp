@@ -1,0 +1,179 @@
+// Glass dispersion (the AGF formulas) and internal transmission.
+//
+// Every formula takes the wavelength l in micrometres (in air) and the CD coefficients c0..c9 in
+// file order, and gives the index relative to air:
+//    1 Schott:      n^2 = c0 + c1 l^2 + c2 l^-2 + c3 l^-4 + c4 l^-6 + c5 l^-8
+//    2 Sellmeier 1: n^2 - 1 = c0 l^2/(l^2 - c1) + c2 l^2/(l^2 - c3) + c4 l^2/(l^2 - c5)
+//    3 Herzberger:  n = c0 + c1 L + c2 L^2 + c3 l^2 + c4 l^4 + c5 l^6,  L = 1/(l^2 - 0.028)
+//    4 Sellmeier 2: n^2 - 1 = c0 + c1 l^2/(l^2 - c2^2) + c3/(l^2 - c4^2)
+//    5 Conrady:     n = c0 + c1/l + c2/l^3.5
+//    6 Sellmeier 3: n^2 - 1 = sum_{k=0..3} c(2k) l^2/(l^2 - c(2k+1))
+//    7 Handbook of Optics 1: n^2 = c0 + c1/(l^2 - c2) - c3 l^2
+//    8 Handbook of Optics 2: n^2 = c0 + c1 l^2/(l^2 - c2) - c3 l^2
+//    9 Sellmeier 4: n^2 = c0 + c1 l^2/(l^2 - c2) + c3 l^2/(l^2 - c4)
+//   10 Extended:    n^2 = c0 + c1 l^2 + c2 l^-2 + c3 l^-4 + c4 l^-6 + c5 l^-8 + c6 l^-10
+//                         + c7 l^-12
+//   11 Sellmeier 5: n^2 - 1 = sum_{k=0..4} c(2k) l^2/(l^2 - c(2k+1))
+//   12 Extended 2:  n^2 = c0 + c1 l^2 + c2 l^-2 + c3 l^-4 + c4 l^-6 + c5 l^-8 + c6 l^4 + c7 l^6
+//   13 Extended 3:  n^2 = c0 + c1 l^2 + c2 l^4 + c3 l^-2 + c4 l^-4 + c5 l^-6 + c6 l^-8
+//                         + c7 l^-10 + c8 l^-12
+// (Zemax OpticStudio manual, "The Glass Dispersion Formulas".)
+#include "lensopt/glass/glass.h"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+namespace lensopt {
+namespace {
+
+constexpr double kNanometresPerMicrometre = 1000.0;
+// Herzberger's constant: L = 1/(l^2 - kHerzbergerOffset_um2), l in um.
+constexpr double kHerzbergerOffset_um2 = 0.028;
+
+// Sum of Sellmeier terms c(2k) l^2/(l^2 - c(2k+1)) for k = 0..terms-1.
+double sellmeier_terms(const double* c, int terms, double l2_um2) {
+  double sum = 0.0;
+  for (int k = 0; k < terms; ++k) sum += c[2 * k] * l2_um2 / (l2_um2 - c[2 * k + 1]);
+  return sum;
+}
+
+// sum_{k=0..count-1} a_k x^(k+1): a Horner evaluation of a polynomial in x with no constant
+// term (used for the series in l^-2).
+double series_without_constant(const double* a, int count, double x) {
+  double sum = 0.0;
+  for (int k = count - 1; k >= 0; --k) sum = (sum + a[k]) * x;
+  return sum;
+}
+
+}  // namespace
+
+std::string formula_name(DispersionFormula formula) {
+  switch (formula) {
+    case DispersionFormula::kSchott:
+      return "Schott";
+    case DispersionFormula::kSellmeier1:
+      return "Sellmeier 1";
+    case DispersionFormula::kHerzberger:
+      return "Herzberger";
+    case DispersionFormula::kSellmeier2:
+      return "Sellmeier 2";
+    case DispersionFormula::kConrady:
+      return "Conrady";
+    case DispersionFormula::kSellmeier3:
+      return "Sellmeier 3";
+    case DispersionFormula::kHandbook1:
+      return "Handbook of Optics 1";
+    case DispersionFormula::kHandbook2:
+      return "Handbook of Optics 2";
+    case DispersionFormula::kSellmeier4:
+      return "Sellmeier 4";
+    case DispersionFormula::kExtended1:
+      return "Extended";
+    case DispersionFormula::kSellmeier5:
+      return "Sellmeier 5";
+    case DispersionFormula::kExtended2:
+      return "Extended 2";
+    case DispersionFormula::kExtended3:
+      return "Extended 3";
+  }
+  return fmt::format("unknown ({})", static_cast<int>(formula));
+}
+
+std::string status_name(GlassStatus status) {
+  switch (status) {
+    case GlassStatus::kStandard:
+      return "standard";
+    case GlassStatus::kPreferred:
+      return "preferred";
+    case GlassStatus::kObsolete:
+      return "obsolete";
+    case GlassStatus::kSpecial:
+      return "special";
+    case GlassStatus::kMelt:
+      return "melt";
+  }
+  return fmt::format("unknown ({})", static_cast<int>(status));
+}
+
+double Glass::index(double wavelength_nm) const {
+  constexpr double kNan = std::numeric_limits<double>::quiet_NaN();
+  if (!formula_supported) return kNan;
+  // c0..c9, missing ones 0.
+  double c[10] = {};
+  std::copy_n(coefficients.begin(), std::min<std::size_t>(coefficients.size(), 10), c);
+  const double l_um = wavelength_nm / kNanometresPerMicrometre;
+  const double l2 = l_um * l_um;
+  const double inv_l2 = 1.0 / l2;
+  switch (formula) {
+    case DispersionFormula::kSchott:
+      // n^2 = c0 + c1 l^2 + sum_{k=1..4} c(k+1) l^-2k
+      return std::sqrt(c[0] + c[1] * l2 + series_without_constant(c + 2, 4, inv_l2));
+    case DispersionFormula::kSellmeier1:
+      return std::sqrt(1.0 + sellmeier_terms(c, 3, l2));
+    case DispersionFormula::kHerzberger: {
+      const double big_l = 1.0 / (l2 - kHerzbergerOffset_um2);
+      // n = c0 + c1 L + c2 L^2 + l^2 (c3 + l^2 (c4 + l^2 c5))
+      return c[0] + big_l * (c[1] + big_l * c[2]) + l2 * (c[3] + l2 * (c[4] + l2 * c[5]));
+    }
+    case DispersionFormula::kSellmeier2:
+      return std::sqrt(1.0 + c[0] + c[1] * l2 / (l2 - c[2] * c[2]) + c[3] / (l2 - c[4] * c[4]));
+    case DispersionFormula::kConrady:
+      return c[0] + c[1] / l_um + c[2] / std::pow(l_um, 3.5);
+    case DispersionFormula::kSellmeier3:
+      return std::sqrt(1.0 + sellmeier_terms(c, 4, l2));
+    case DispersionFormula::kHandbook1:
+      return std::sqrt(c[0] + c[1] / (l2 - c[2]) - c[3] * l2);
+    case DispersionFormula::kHandbook2:
+      return std::sqrt(c[0] + c[1] * l2 / (l2 - c[2]) - c[3] * l2);
+    case DispersionFormula::kSellmeier4:
+      // c0 + Sellmeier terms with (c1, c2) and (c3, c4)
+      return std::sqrt(c[0] + sellmeier_terms(c + 1, 2, l2));
+    case DispersionFormula::kExtended1:
+      // n^2 = c0 + c1 l^2 + sum_{k=1..6} c(k+1) l^-2k
+      return std::sqrt(c[0] + c[1] * l2 + series_without_constant(c + 2, 6, inv_l2));
+    case DispersionFormula::kSellmeier5:
+      return std::sqrt(1.0 + sellmeier_terms(c, 5, l2));
+    case DispersionFormula::kExtended2:
+      // n^2 = c0 + l^2 (c1 + l^2 (c6 + l^2 c7)) + sum_{k=1..4} c(k+1) l^-2k
+      return std::sqrt(c[0] + l2 * (c[1] + l2 * (c[6] + l2 * c[7])) +
+                       series_without_constant(c + 2, 4, inv_l2));
+    case DispersionFormula::kExtended3:
+      // n^2 = c0 + l^2 (c1 + l^2 c2) + sum_{k=1..6} c(k+2) l^-2k
+      return std::sqrt(c[0] + l2 * (c[1] + l2 * c[2]) + series_without_constant(c + 3, 6, inv_l2));
+  }
+  return kNan;
+}
+
+bool Glass::transmits(double wavelength_nm) const {
+  if (transmission.empty()) return true;
+  const double l_um = wavelength_nm / kNanometresPerMicrometre;
+  // The IT table in wavelength order (files list it ascending; sort a copy if one does not).
+  const std::vector<TransmissionPoint>* table = &transmission;
+  std::vector<TransmissionPoint> sorted;
+  const auto by_wavelength = [](const TransmissionPoint& a, const TransmissionPoint& b) {
+    return a.wavelength_um < b.wavelength_um;
+  };
+  if (!std::is_sorted(transmission.begin(), transmission.end(), by_wavelength)) {
+    sorted = transmission;
+    std::stable_sort(sorted.begin(), sorted.end(), by_wavelength);
+    table = &sorted;
+  }
+  const auto& points = *table;
+  if (l_um < points.front().wavelength_um || l_um > points.back().wavelength_um) return true;
+  // First sample at or beyond l; interpolate between it and the one before:
+  //   t(l) = t0 + (t1 - t0) (l - l0)/(l1 - l0).
+  const auto upper = std::lower_bound(
+      points.begin(), points.end(), l_um,
+      [](const TransmissionPoint& p, double value) { return p.wavelength_um < value; });
+  if (upper->wavelength_um == l_um || upper == points.begin()) return upper->transmission > 0.0;
+  const auto lower = upper - 1;
+  const double span_um = upper->wavelength_um - lower->wavelength_um;
+  const double fraction = (l_um - lower->wavelength_um) / span_um;
+  const double t = lower->transmission + (upper->transmission - lower->transmission) * fraction;
+  return t > 0.0;
+}
+
+}  // namespace lensopt
