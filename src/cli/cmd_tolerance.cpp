@@ -1,11 +1,155 @@
-// Placeholder registration until the `tolerance` command lands; it says so when run.
+// lensopt tolerance LENS: Monte-Carlo tolerancing with a focus compensator, a sensitivity table,
+// a per-trial CSV and a histogram. Tolerances come from the lens's [tolerance] table, then the
+// command line (which wins).
+#include <fmt/core.h>
+
+#include <cmath>
+#include <memory>
+
 #include "commands.h"
+#include "lensopt/core/atomic_file.h"
 #include "lensopt/core/error.h"
+#include "lensopt/lens/lens_io.h"
+#include "lensopt/tolerance/tolerance.h"
 
 namespace lensopt::cli {
-void setup_tolerance(CLI::App& app) {
-  CLI::App* sub = app.add_subcommand("tolerance", "Monte-Carlo tolerancing (not built yet)");
-  sub->allow_extras();
-  sub->callback([] { throw Error("'tolerance' is not implemented in this build yet"); });
+namespace {
+
+struct ToleranceCommand {
+  std::string lens_path;
+  int trials = 10000;
+  std::uint64_t seed = 1;
+  int jobs = 0;
+  std::string csv_path;
+  std::string histogram_path;
+  bool json = false;
+  bool quiet = false;
+  bool no_sensitivity = false;
+  double max_spot_um = 0;
+  std::string distribution = "uniform";
+  std::string compensator = "paraxial";
+  Tolerances tolerances;
+  int rings = 16;
+  int fields = 11;
+  int sensitivity_rows = 12;
+  // Options given on the command line (they override the [tolerance] table).
+  CLI::Option* trials_opt = nullptr;
+  CLI::Option* seed_opt = nullptr;
+  CLI::Option* max_spot_opt = nullptr;
+  CLI::Option* distribution_opt = nullptr;
+  CLI::Option* compensator_opt = nullptr;
+  CLI::Option* tolerance_opts[5] = {};
+};
+
+// A CLI tolerance must be a finite number >= 0; the message names the option.
+void check_cli_tolerance(const CLI::Option* opt, double value) {
+  if (opt == nullptr || opt->count() == 0) return;
+  if (!std::isfinite(value) || value < 0)
+    throw Error(fmt::format("tolerance {} = {} must be a finite number >= 0 (tolerances are +- "
+                            "limits)",
+                            opt->get_name(), value));
 }
+
+void run_tolerance_command(const ToleranceCommand& cmd) {
+  const double cli_values[5] = {cmd.tolerances.curvature_pct, cmd.tolerances.glass_thickness_mm,
+                                cmd.tolerances.air_thickness_mm, cmd.tolerances.nd,
+                                cmd.tolerances.vd_pct};
+  for (int i = 0; i < 5; ++i) check_cli_tolerance(cmd.tolerance_opts[i], cli_values[i]);
+
+  const Lens lens = read_lens(cmd.lens_path);
+  const ToleranceSettings table = tolerance_settings_of(lens);
+
+  ToleranceOptions options;
+  table.apply_to(options.tolerances);
+  double* targets[5] = {&options.tolerances.curvature_pct, &options.tolerances.glass_thickness_mm,
+                        &options.tolerances.air_thickness_mm, &options.tolerances.nd,
+                        &options.tolerances.vd_pct};
+  for (int i = 0; i < 5; ++i)
+    if (cmd.tolerance_opts[i]->count() > 0) *targets[i] = cli_values[i];
+  if (table.distribution) options.distribution = *table.distribution;
+  if (cmd.distribution_opt->count() > 0)
+    options.distribution = parse_tolerance_distribution(cmd.distribution);
+  if (table.compensator) options.compensator = *table.compensator;
+  if (cmd.compensator_opt->count() > 0)
+    options.compensator = parse_focus_compensator(cmd.compensator);
+  options.max_spot_um = table.max_spot_um;
+  if (cmd.max_spot_opt->count() > 0) options.max_spot_um = cmd.max_spot_um;
+  options.trials = cmd.trials_opt->count() > 0 ? cmd.trials : table.trials.value_or(cmd.trials);
+  options.seed = cmd.seed_opt->count() > 0 ? cmd.seed : table.seed.value_or(cmd.seed);
+  options.jobs = cmd.jobs;
+  options.rings = cmd.rings;
+  options.fields = cmd.fields;
+  options.sensitivity = !cmd.no_sensitivity;
+  if (!cmd.quiet) {
+    options.progress = [](int done, int total, double elapsed_s) {
+      const double eta = done > 0 ? elapsed_s * (total - done) / done : 0.0;
+      fmt::print(stderr, "\rlensopt tolerance: {}/{} trials ({:.0f} %), {:.1f} s, ETA {:.1f} s   ",
+                 done, total, 100.0 * done / total, elapsed_s, eta);
+      if (done == total) fmt::print(stderr, "\n");
+      std::fflush(stderr);
+    };
+  }
+  options.validate();
+
+  const ToleranceReport report = run_tolerance(lens, options);
+  if (!cmd.csv_path.empty()) write_file_atomic(cmd.csv_path, format_trials_csv(report));
+  if (!cmd.histogram_path.empty())
+    write_file_atomic(cmd.histogram_path, format_tolerance_histogram_svg(report));
+  if (cmd.json) {
+    fmt::print("{}\n", format_tolerance_json(report));
+  } else {
+    fmt::print("{}", format_tolerance_text(report, cmd.sensitivity_rows));
+  }
+}
+
+}  // namespace
+
+void setup_tolerance(CLI::App& app) {
+  auto cmd = std::make_shared<ToleranceCommand>();
+  CLI::App* sub = app.add_subcommand(
+      "tolerance", "Monte-Carlo tolerancing with a refocus compensator and a sensitivity table");
+  sub->add_option("LENS", cmd->lens_path, "lens file (.toml with an optional [tolerance] table)")
+      ->required();
+  cmd->trials_opt = sub->add_option("--trials", cmd->trials, "Monte-Carlo trials (default 10000)")
+                        ->check(CLI::Range(1, 100000000));
+  cmd->seed_opt = sub->add_option("--seed", cmd->seed, "random seed (default 1)");
+  sub->add_option("--jobs", cmd->jobs, "threads over trials (0: all cores)")
+      ->check(CLI::Range(0, 1024));
+  sub->add_option("--csv", cmd->csv_path, "per-trial CSV file (written atomically)");
+  sub->add_flag("--json", cmd->json, "everything as one JSON object on stdout");
+  sub->add_option("--histogram", cmd->histogram_path, "histogram of the mean spot (SVG)");
+  cmd->max_spot_opt =
+      sub->add_option("--max-spot-um", cmd->max_spot_um, "yield limit on the mean RMS spot (um)")
+          ->check(CLI::PositiveNumber);
+  cmd->distribution_opt =
+      sub->add_option("--distribution", cmd->distribution,
+                      "uniform (default) or normal (sigma = tolerance / 2, truncated)")
+          ->check(CLI::IsMember({"uniform", "normal"}));
+  cmd->compensator_opt =
+      sub->add_option("--compensator", cmd->compensator,
+                      "focus compensator on the last thickness: paraxial (default), best-rms, none")
+          ->check(CLI::IsMember({"paraxial", "best-rms", "none"}));
+  cmd->tolerance_opts[0] = sub->add_option("--curvature-pct", cmd->tolerances.curvature_pct,
+                                           "curvature tolerance, +- percent (default 0.2)");
+  cmd->tolerance_opts[1] = sub->add_option("--glass-thickness-mm", cmd->tolerances.glass_thickness_mm,
+                                           "glass thickness tolerance, +- mm (default 0.05)");
+  cmd->tolerance_opts[2] = sub->add_option("--air-thickness-mm", cmd->tolerances.air_thickness_mm,
+                                           "airspace tolerance, +- mm (default 0: off)");
+  cmd->tolerance_opts[3] =
+      sub->add_option("--nd", cmd->tolerances.nd, "index tolerance, +- (default 5e-4)");
+  cmd->tolerance_opts[4] = sub->add_option("--vd-pct", cmd->tolerances.vd_pct,
+                                           "Abbe number tolerance, +- percent (default 0.5)");
+  sub->add_option("--rings", cmd->rings,
+                  "pupil rings per trial (default 16; the paper's full sampling is 32)")
+      ->check(CLI::Range(1, 256));
+  sub->add_option("--fields", cmd->fields, "field angles per trial (default 11; full: 21)")
+      ->check(CLI::Range(1, 1000));
+  sub->add_option("--sensitivity-rows", cmd->sensitivity_rows,
+                  "rows of the sensitivity table in the text summary")
+      ->check(CLI::Range(0, 100000));
+  sub->add_flag("--no-sensitivity", cmd->no_sensitivity, "skip the sensitivity table");
+  sub->add_flag("--quiet", cmd->quiet, "no progress on stderr");
+  sub->callback([cmd] { run_tolerance_command(*cmd); });
+}
+
 }  // namespace lensopt::cli

@@ -1,0 +1,242 @@
+// Monte-Carlo tolerancing (SPEC "Tolerancing", supplement "Tolerancing Analysis").
+//
+// The nominal lens is scaled once to the spec focal length (as `analyze` does); tolerances apply
+// to that scaled lens, the lens as it would be made. Every trial draws one perturbation per
+// toleranced parameter and traces the perturbed lens as it is, never rescaled to the spec (that
+// would hide the focal-length error). For parameter p with tolerance limit L_p and a unit draw
+// u in [-1, 1]:
+//   curvature   c' = c (1 + L u)        L = curvature_pct / 100   (relative; flat surfaces stay flat)
+//   thickness   t' = t + L u            L = glass_thickness_mm, or air_thickness_mm for airspaces
+//   index       nd' = nd + L u          L = nd
+//   Abbe number vd' = vd (1 + L u)      L = vd_pct / 100          (relative)
+// Draws: uniform u ~ U[-1, 1) (default, as in the paper), or normal u ~ N(0, 1/2^2) truncated to
+// [-1, 1], i.e. the tolerance is the 2-sigma limit. Each trial's generator is std::mt19937_64
+// seeded with splitmix64(seed ^ splitmix64(trial index)), and the unit draws are computed from
+// its raw 64-bit output (53-bit uniforms, Box-Muller), so a trial is reproducible whatever the
+// thread count or the standard library.
+//
+// Not perturbed: the stop (flat, no curvature), the airspace that ends at the stop (the stop is
+// mounted with the group before it; an airspace split by the stop is perturbed on its part after
+// the stop), and the last thickness t_{K-1}, which is the focus compensator:
+//   paraxial  t_{K-1} = BFL' + (t0_{K-1} - BFL0): the perturbed paraxial focus plus the nominal's
+//             defocus (BFL at 587.6 nm);
+//   best-rms  t_{K-1} minimizes the mean RMS spot. With the rays traced once to a reference
+//             plane at tau = 0 (the paraxial solution), a ray reaches the plane at tau as
+//             y + tau m/n, x + tau l/n, so each field's S_h^2(tau) = A_h + 2 B_h tau + C_h tau^2
+//             is an exact quadratic and mean_h S_h(tau) is convex; Brent's method finds tau;
+//   none      t_{K-1} = t0_{K-1}.
+// The aperture stop keeps its nominal physical radius: a trial's entrance pupil radius is
+// y_stop0 / A' with A' the perturbed paraxial stop magnification (y_stop = A y_0), so a front
+// group error changes the pupil as it would on the bench. Ray aiming is redone per trial.
+//
+// Figures per trial: RMS spot per field and their mean (um), EFL (587.6 nm), the largest
+// |distortion| over the fields (%, as analyze: (centroid - paraxial chief height) / paraxial
+// height at the last field), ray failures (half-pupil rays, all fields and wavelengths).
+// The nominal is evaluated by the same code with every perturbation zero, so a trial with zero
+// tolerances equals it exactly.
+// Sensitivity: each parameter alone at +L and -L (compensated), the change in mean spot; rows are
+// ranked by max(|d+|, |d-|), the first row is what to tighten first.
+// Statistics: sample mean and standard deviation (n - 1), percentiles by linear interpolation
+// between order statistics (p = (n - 1) q), worst = largest mean spot; the yield is the fraction
+// of all trials whose mean spot is <= max_spot_um (an untraceable trial counts as a failure).
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "lensopt/lens/lens.h"
+
+namespace lensopt {
+
+enum class ToleranceDistribution { kUniform, kNormal };
+enum class FocusCompensator { kParaxial, kBestRms, kNone };
+
+// "uniform" / "normal"; "paraxial" / "best-rms" / "none". parse_* throw Error naming the value.
+std::string to_string(ToleranceDistribution distribution);
+std::string to_string(FocusCompensator compensator);
+ToleranceDistribution parse_tolerance_distribution(const std::string& text);
+FocusCompensator parse_focus_compensator(const std::string& text);
+
+// The manufacturing tolerances (+- limits). Defaults: the paper's (Optimax / Schott standard).
+struct Tolerances {
+  double curvature_pct = 0.2;        // relative curvature, percent
+  double glass_thickness_mm = 0.05;  // centre thickness of glass
+  double air_thickness_mm = 0.0;     // airspaces: off by default
+  double nd = 5e-4;                  // d-line index, absolute
+  double vd_pct = 0.5;               // Abbe number, percent
+
+  // Throws Error naming the first negative or non-finite tolerance.
+  void validate() const;
+  // Every tolerance multiplied by `factor`.
+  Tolerances times(double factor) const;
+  static Tolerances zero() { return {0, 0, 0, 0, 0}; }
+};
+
+// The tolerance names as used by the [tolerance] table and the command line (--curvature-pct).
+const std::vector<std::string>& tolerance_names();
+
+// What a [tolerance] table in a lens TOML may set; unset entries are nullopt.
+//   [tolerance]
+//   curvature_pct = 0.2, glass_thickness_mm = 0.05, air_thickness_mm = 0.0, nd = 5e-4,
+//   vd_pct = 0.5, distribution = "uniform", compensator = "paraxial", max_spot_um = 20,
+//   trials = 10000, seed = 1
+struct ToleranceSettings {
+  std::optional<double> curvature_pct, glass_thickness_mm, air_thickness_mm, nd, vd_pct;
+  std::optional<ToleranceDistribution> distribution;
+  std::optional<FocusCompensator> compensator;
+  std::optional<double> max_spot_um;
+  std::optional<int> trials;
+  std::optional<std::uint64_t> seed;
+
+  // Overwrites the tolerances that are set here.
+  void apply_to(Tolerances& tolerances) const;
+};
+
+// Parses the [tolerance] table of a TOML document (other tables are ignored; no table: all
+// unset). An unknown key, a negative tolerance or a wrong type throws Error with
+// source_name:line:column naming the key.
+ToleranceSettings parse_tolerance_table(std::string_view toml_text, const std::string& source_name);
+
+// The [tolerance] table of a lens: read from its TOML source file when that is readable (exact
+// file:line), else from Lens::extra_toml.
+ToleranceSettings tolerance_settings_of(const Lens& lens);
+
+struct ToleranceOptions {
+  Tolerances tolerances;
+  ToleranceDistribution distribution = ToleranceDistribution::kUniform;
+  FocusCompensator compensator = FocusCompensator::kParaxial;
+  int trials = 10000;
+  std::uint64_t seed = 1;
+  int jobs = 0;  // threads over trials (0: all cores); each trial runs single-threaded
+  // The default tolerancing sampling: 16 rings (256 half-pupil rays) x 11 fields (every other
+  // one of the paper's 21), 15 wavelengths, ray aiming on. The paper's full sampling is 32 x 21.
+  int rings = 16;
+  int fields = 11;
+  bool ray_aiming = true;
+  bool sensitivity = true;
+  std::optional<double> max_spot_um;
+  // Called now and then from worker threads (serialized): trials done, total, seconds elapsed.
+  std::function<void(int done, int total, double elapsed_s)> progress;
+
+  // Throws Error for out-of-range values (names the option).
+  void validate() const;
+};
+
+// One toleranced number of the lens.
+struct ToleranceParameter {
+  enum class Kind { kCurvature, kThickness, kNd, kVd };
+  Kind kind = Kind::kCurvature;
+  int surface = 0;     // 0-based surface index (kNd/kVd: the surface the glass follows)
+  bool air = false;    // kThickness: an airspace
+  double limit = 0;    // +- limit, native units: relative (curvature, vd), mm, or index
+  std::string name;    // "c1", "t1", "nd1", "vd1" (1-based surface numbers)
+  std::string column;  // CSV column of the drawn perturbation: "dc1_rel", "dt1_mm", ...
+  std::string description;  // "surface 1 radius", "element 1 (glass S-LAH64) thickness", ...
+  std::string limit_text;   // "0.2 %", "0.05 mm", "0.0005"
+};
+
+// Every parameter of a lens (with zero limits where the tolerance is zero), in a fixed order:
+// curvatures, thicknesses, nd, vd, each by surface.
+std::vector<ToleranceParameter> tolerance_parameters(const Lens& lens, const Tolerances& tolerances);
+
+struct TrialResult {
+  int index = -1;  // -1: the nominal
+  bool valid = true;  // false if a field had no traced ray or a number was not finite
+  double mean_spot_um = 0;
+  std::vector<double> rms_spot_um;  // per field
+  double efl_mm = 0;
+  double max_abs_distortion_pct = 0;
+  int ray_failures = 0;
+  double image_distance_mm = 0;  // the compensated last thickness
+  std::vector<double> perturbations;  // per parameter, native units
+};
+
+struct SpotStatistics {
+  int count = 0;  // valid trials
+  double mean = 0, std = 0, p50 = 0, p90 = 0, p95 = 0, p99 = 0, worst = 0, best = 0;
+};
+
+struct SensitivityRow {
+  int parameter = 0;  // index into ToleranceReport::parameters
+  double plus_um = 0;   // mean spot change at +limit
+  double minus_um = 0;  // at -limit
+  double efl_plus_mm = 0, efl_minus_mm = 0;  // EFL change
+  double score_um = 0;  // max(|plus|, |minus|), the ranking key
+};
+
+struct ToleranceReport {
+  std::string lens_name;
+  std::string source_path;
+  double scale = 1;  // applied to the prescription to reach the spec focal length
+  double spec_focal_length_mm = 0;
+  ToleranceOptions options;  // as run (progress callback dropped)
+  int threads = 1;
+  int wavelength_count = 0;
+  int rays_per_field_wavelength = 0;
+  std::vector<double> fields_deg;
+  std::vector<ToleranceParameter> parameters;
+  TrialResult nominal;
+  std::vector<TrialResult> trials;
+  SpotStatistics spot;  // mean RMS spot over valid trials, um
+  std::optional<double> yield;  // fraction in [0, 1], when max_spot_um is set
+  int invalid_trials = 0;
+  int trials_with_failures = 0;
+  double efl_mean_mm = 0, efl_std_mm = 0, efl_min_mm = 0, efl_max_mm = 0;
+  double distortion_mean_pct = 0, distortion_worst_pct = 0;
+  std::vector<SensitivityRow> sensitivity;  // ranked, largest first
+  double elapsed_s = 0;        // Monte-Carlo trials only
+  double ms_per_trial = 0;     // wall time per trial with `threads` threads
+  double sensitivity_s = 0;
+};
+
+// The nominal, prepared once: evaluates perturbations and draws trials.
+class ToleranceModel {
+ public:
+  ToleranceModel(const Lens& lens, const ToleranceOptions& options);
+  ~ToleranceModel();
+  ToleranceModel(const ToleranceModel&) = delete;
+  ToleranceModel& operator=(const ToleranceModel&) = delete;
+
+  const std::vector<ToleranceParameter>& parameters() const;
+  double scale() const;
+  const Lens& scaled_lens() const;  // the nominal at the spec focal length
+  std::vector<double> fields_deg() const;
+  int wavelength_count() const;
+  int rays_per_field_wavelength() const;
+
+  // The perturbations of trial `index` (per parameter, native units), from (seed, index) alone.
+  std::vector<double> draw(int index) const;
+  // Traces the nominal with `perturbations` applied (all zero: the nominal), compensated.
+  // Thread-safe; single-threaded.
+  TrialResult evaluate(const std::vector<double>& perturbations) const;
+  // The lens of a trial, as a prescription (compensated last thickness).
+  Lens perturbed_lens(const std::vector<double>& perturbations) const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+// Runs the Monte-Carlo trials and the sensitivity table.
+ToleranceReport run_tolerance(const Lens& lens, const ToleranceOptions& options);
+
+// Statistics of values (NaN-free): mean, sample std, interpolated percentiles, extremes.
+SpotStatistics spot_statistics(std::vector<double> values);
+
+// Per-trial CSV: trial, valid, mean_spot_um, efl_mm, max_abs_distortion_pct, ray_failures,
+// image_distance_mm, spot_um_<field> per field, then each parameter's perturbation. Numbers are
+// written as the shortest text that reads back exactly; the file depends only on the inputs and
+// the seed. An invalid trial's figures are empty cells.
+std::string format_trials_csv(const ToleranceReport& report);
+std::string format_tolerance_text(const ToleranceReport& report, int sensitivity_rows = 12);
+// Everything, including each trial (no NaN: missing values are null).
+std::string format_tolerance_json(const ToleranceReport& report);
+// Histogram of the trials' mean RMS spot with the nominal, p90, p99 and max-spot lines.
+std::string format_tolerance_histogram_svg(const ToleranceReport& report, int bins = 40);
+
+}  // namespace lensopt

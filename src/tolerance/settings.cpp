@@ -1,0 +1,216 @@
+// Tolerances, options and the [tolerance] table of a lens TOML.
+#include <fmt/format.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <sstream>
+#include <toml++/toml.h>
+
+#include "lensopt/core/error.h"
+#include "lensopt/tolerance/tolerance.h"
+
+namespace lensopt {
+
+std::string to_string(ToleranceDistribution distribution) {
+  return distribution == ToleranceDistribution::kUniform ? "uniform" : "normal";
+}
+
+std::string to_string(FocusCompensator compensator) {
+  switch (compensator) {
+    case FocusCompensator::kParaxial:
+      return "paraxial";
+    case FocusCompensator::kBestRms:
+      return "best-rms";
+    case FocusCompensator::kNone:
+      return "none";
+  }
+  return "?";
+}
+
+ToleranceDistribution parse_tolerance_distribution(const std::string& text) {
+  if (text == "uniform") return ToleranceDistribution::kUniform;
+  if (text == "normal") return ToleranceDistribution::kNormal;
+  throw Error(fmt::format("unknown tolerance distribution '{}' (expected uniform or normal)", text));
+}
+
+FocusCompensator parse_focus_compensator(const std::string& text) {
+  if (text == "paraxial") return FocusCompensator::kParaxial;
+  if (text == "best-rms") return FocusCompensator::kBestRms;
+  if (text == "none") return FocusCompensator::kNone;
+  throw Error(
+      fmt::format("unknown compensator '{}' (expected paraxial, best-rms or none)", text));
+}
+
+const std::vector<std::string>& tolerance_names() {
+  static const std::vector<std::string> names = {"curvature_pct", "glass_thickness_mm",
+                                                 "air_thickness_mm", "nd", "vd_pct"};
+  return names;
+}
+
+namespace {
+
+void check_tolerance(const char* name, double value) {
+  if (!std::isfinite(value))
+    throw Error(fmt::format("tolerance {} = {} is not a finite number", name, value));
+  if (value < 0)
+    throw Error(fmt::format("tolerance {} = {} is negative (tolerances are +- limits, >= 0)",
+                            name, value));
+}
+
+}  // namespace
+
+void Tolerances::validate() const {
+  check_tolerance("curvature_pct", curvature_pct);
+  check_tolerance("glass_thickness_mm", glass_thickness_mm);
+  check_tolerance("air_thickness_mm", air_thickness_mm);
+  check_tolerance("nd", nd);
+  check_tolerance("vd_pct", vd_pct);
+  if (curvature_pct >= 100)
+    throw Error(fmt::format("tolerance curvature_pct = {} must be below 100 %", curvature_pct));
+  if (vd_pct >= 100) throw Error(fmt::format("tolerance vd_pct = {} must be below 100 %", vd_pct));
+}
+
+Tolerances Tolerances::times(double factor) const {
+  return {curvature_pct * factor, glass_thickness_mm * factor, air_thickness_mm * factor,
+          nd * factor, vd_pct * factor};
+}
+
+void ToleranceSettings::apply_to(Tolerances& t) const {
+  if (curvature_pct) t.curvature_pct = *curvature_pct;
+  if (glass_thickness_mm) t.glass_thickness_mm = *glass_thickness_mm;
+  if (air_thickness_mm) t.air_thickness_mm = *air_thickness_mm;
+  if (nd) t.nd = *nd;
+  if (vd_pct) t.vd_pct = *vd_pct;
+}
+
+void ToleranceOptions::validate() const {
+  tolerances.validate();
+  if (trials < 1 || trials > 100000000)
+    throw Error(fmt::format("trials = {} must be in [1, 100000000]", trials));
+  if (jobs < 0) throw Error(fmt::format("jobs = {} must be >= 0", jobs));
+  if (rings < 1 || rings > 256) throw Error(fmt::format("rings = {} must be in [1, 256]", rings));
+  if (fields < 1 || fields > 1000)
+    throw Error(fmt::format("fields = {} must be in [1, 1000]", fields));
+  if (max_spot_um && !(std::isfinite(*max_spot_um) && *max_spot_um > 0))
+    throw Error(fmt::format("max_spot_um = {} must be a positive number", *max_spot_um));
+}
+
+ToleranceSettings parse_tolerance_table(std::string_view toml_text,
+                                        const std::string& source_name) {
+  toml::table doc;
+  try {
+    doc = toml::parse(toml_text, source_name);
+  } catch (const toml::parse_error& e) {
+    const auto& where = e.source().begin;
+    throw Error(SourceLocation{source_name, static_cast<int>(where.line),
+                               static_cast<int>(where.column)},
+                std::string(e.description()));
+  }
+  ToleranceSettings out;
+  const toml::node* node = doc.get("tolerance");
+  if (node == nullptr) return out;
+  auto location = [&](const toml::source_region& region) {
+    return SourceLocation{source_name, static_cast<int>(region.begin.line),
+                          static_cast<int>(region.begin.column)};
+  };
+  const toml::table* table = node->as_table();
+  if (table == nullptr)
+    throw Error(location(node->source()), "[tolerance] must be a table");
+
+  for (auto&& [key, value] : *table) {
+    const std::string name(key.str());
+    const SourceLocation where = location(key.source().begin.line > 0 ? key.source()
+                                                                      : value.source());
+    auto number = [&]() -> double {
+      const std::optional<double> v = value.value<double>();
+      if (!v || !(value.is_integer() || value.is_floating_point()))
+        throw Error(where, fmt::format("[tolerance] {} must be a number", name));
+      return *v;
+    };
+    auto tolerance = [&]() -> double {
+      const double v = number();
+      if (!std::isfinite(v))
+        throw Error(where, fmt::format("[tolerance] {} = {} is not a finite number", name, v));
+      if (v < 0)
+        throw Error(where, fmt::format("[tolerance] {} = {} is negative (tolerances are +- "
+                                       "limits, >= 0)",
+                                       name, v));
+      if ((name == "curvature_pct" || name == "vd_pct") && v >= 100)
+        throw Error(where, fmt::format("[tolerance] {} = {} must be below 100 %", name, v));
+      return v;
+    };
+    auto text = [&]() -> std::string {
+      const std::optional<std::string> v = value.value<std::string>();
+      if (!v) throw Error(where, fmt::format("[tolerance] {} must be a string", name));
+      return *v;
+    };
+    auto integer = [&](std::int64_t lo, std::int64_t hi) -> std::int64_t {
+      const std::optional<std::int64_t> v = value.value<std::int64_t>();
+      if (!v || !value.is_integer())
+        throw Error(where, fmt::format("[tolerance] {} must be an integer", name));
+      if (*v < lo || *v > hi)
+        throw Error(where, fmt::format("[tolerance] {} = {} must be in [{}, {}]", name, *v, lo, hi));
+      return *v;
+    };
+    try {
+      if (name == "curvature_pct") {
+        out.curvature_pct = tolerance();
+      } else if (name == "glass_thickness_mm") {
+        out.glass_thickness_mm = tolerance();
+      } else if (name == "air_thickness_mm") {
+        out.air_thickness_mm = tolerance();
+      } else if (name == "nd") {
+        out.nd = tolerance();
+      } else if (name == "vd_pct") {
+        out.vd_pct = tolerance();
+      } else if (name == "distribution") {
+        out.distribution = parse_tolerance_distribution(text());
+      } else if (name == "compensator") {
+        out.compensator = parse_focus_compensator(text());
+      } else if (name == "max_spot_um") {
+        const double v = number();
+        if (!(std::isfinite(v) && v > 0))
+          throw Error(where, fmt::format("[tolerance] max_spot_um = {} must be positive", v));
+        out.max_spot_um = v;
+      } else if (name == "trials") {
+        out.trials = static_cast<int>(integer(1, 100000000));
+      } else if (name == "seed") {
+        out.seed = static_cast<std::uint64_t>(
+            integer(0, std::numeric_limits<std::int64_t>::max()));
+      } else {
+        throw Error(where,
+                    fmt::format("unknown key '{}' in [tolerance] (known: curvature_pct, "
+                                "glass_thickness_mm, air_thickness_mm, nd, vd_pct, distribution, "
+                                "compensator, max_spot_um, trials, seed)",
+                                name));
+      }
+    } catch (const Error& e) {
+      if (e.where().line > 0) throw;
+      throw Error(where, fmt::format("[tolerance] {}: {}", name, e.message()));
+    }
+  }
+  return out;
+}
+
+ToleranceSettings tolerance_settings_of(const Lens& lens) {
+  // The source file gives exact line numbers; extra_toml is the fallback (e.g. a lens built in
+  // memory, or a source file that moved).
+  const std::filesystem::path path = lens.source_path;
+  if (!lens.source_path.empty() && path.extension() == ".toml") {
+    std::ifstream in(path, std::ios::binary);
+    if (in) {
+      std::ostringstream text;
+      text << in.rdbuf();
+      return parse_tolerance_table(text.str(), lens.source_path);
+    }
+  }
+  if (lens.extra_toml.empty()) return {};
+  const std::string name =
+      lens.source_path.empty() ? std::string("[tolerance] table")
+                               : fmt::format("{} (tables after the lens)", lens.source_path);
+  return parse_tolerance_table(lens.extra_toml, name);
+}
+
+}  // namespace lensopt

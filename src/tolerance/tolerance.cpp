@@ -1,0 +1,564 @@
+// Monte-Carlo tolerancing: the nominal model, trial draws, evaluation and the run.
+// The maths and conventions are in include/lensopt/tolerance/tolerance.h.
+#include "lensopt/tolerance/tolerance.h"
+
+#include <fmt/format.h>
+#include <omp.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <mutex>
+#include <random>
+
+#include "lensopt/core/error.h"
+#include "lensopt/paraxial/paraxial.h"
+#include "lensopt/trace/system.h"
+
+namespace lensopt {
+namespace {
+
+std::uint64_t splitmix64(std::uint64_t x) {
+  x += 0x9e3779b97f4a7c15ULL;
+  x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ULL;
+  x = (x ^ (x >> 27)) * 0x94d049bb133111ebULL;
+  return x ^ (x >> 31);
+}
+
+// A uniform double in [0, 1) from the top 53 bits of one 64-bit output.
+double unit_interval(std::mt19937_64& rng) {
+  return static_cast<double>(rng() >> 11) * 0x1.0p-53;
+}
+
+// One unit draw in [-1, 1]: uniform, or normal with sigma 1/2 truncated at +-1 (Box-Muller,
+// rejection outside the limits).
+double unit_draw(std::mt19937_64& rng, ToleranceDistribution distribution) {
+  if (distribution == ToleranceDistribution::kUniform) return 2.0 * unit_interval(rng) - 1.0;
+  for (;;) {
+    const double u1 = 1.0 - unit_interval(rng);  // (0, 1]
+    const double u2 = unit_interval(rng);
+    const double z = std::sqrt(-2.0 * std::log(u1)) * std::cos(2.0 * kPi * u2);
+    const double u = 0.5 * z;
+    if (std::abs(u) <= 1.0) return u;
+  }
+}
+
+// Spot moments of one field about a reference ray, as functions of the image-plane shift tau:
+// a ray at (x, y) on the reference plane with slopes (sx, sy) = (l/n, m/n) lands at
+// (x + tau sx, y + tau sy). With dy = y - y0, ds = sy - sy0 (y0, sy0 of the first ray):
+//   S^2(tau) = var(dy) + 2 tau cov(dy, ds) + tau^2 var(ds) + E[x^2] + 2 tau E[x sx] + tau^2 E[sx^2]
+struct FieldMoments {
+  bool has_reference = false;
+  double y0 = 0, sy0 = 0;
+  double sum_dy = 0, sum_ds = 0, sum_dy2 = 0, sum_dyds = 0, sum_ds2 = 0;
+  double sum_x2 = 0, sum_xsx = 0, sum_sx2 = 0;
+  int count = 0;
+
+  void add(const RayBundle<double>& rays) {
+    for (std::size_t i = 0; i < rays.size(); ++i) {
+      if (rays.status[i] != kRayOk) continue;
+      const double sy = rays.m[i] / rays.n[i];
+      const double sx = rays.l[i] / rays.n[i];
+      if (!has_reference) {
+        has_reference = true;
+        y0 = rays.y[i];
+        sy0 = sy;
+      }
+      const double dy = rays.y[i] - y0;
+      const double ds = sy - sy0;
+      sum_dy += dy;
+      sum_ds += ds;
+      sum_dy2 += dy * dy;
+      sum_dyds += dy * ds;
+      sum_ds2 += ds * ds;
+      sum_x2 += rays.x[i] * rays.x[i];
+      sum_xsx += rays.x[i] * sx;
+      sum_sx2 += sx * sx;
+      ++count;
+    }
+  }
+  // S^2 at the reference plane (the same arithmetic as SpotAccumulator).
+  double variance0() const {
+    const double inv = 1.0 / count;
+    const double mean_dy = sum_dy * inv;
+    return sum_dy2 * inv - mean_dy * mean_dy + sum_x2 * inv;
+  }
+  double variance(double tau) const {
+    if (tau == 0.0) return variance0();
+    const double inv = 1.0 / count;
+    const double mean_dy = sum_dy * inv;
+    const double mean_ds = sum_ds * inv;
+    const double a = sum_dy2 * inv - mean_dy * mean_dy + sum_x2 * inv;
+    const double b = sum_dyds * inv - mean_dy * mean_ds + sum_xsx * inv;
+    const double c = sum_ds2 * inv - mean_ds * mean_ds + sum_sx2 * inv;
+    return a + tau * (2.0 * b + tau * c);
+  }
+  double rms(double tau) const {
+    if (count == 0) return 0.0;
+    const double v = variance(tau);
+    return v > 0.0 ? std::sqrt(v) : 0.0;
+  }
+  double centroid(double tau) const {
+    if (count == 0) return 0.0;
+    const double inv = 1.0 / count;
+    if (tau == 0.0) return y0 + sum_dy * inv;
+    return y0 + tau * sy0 + (sum_dy + tau * sum_ds) * inv;
+  }
+};
+
+// The minimum of a convex function by golden-section search: bracket from [-h, h] outwards,
+// then shrink until the bracket is below `tolerance`.
+template <typename F>
+double minimize_convex(F&& f, double h, double tolerance) {
+  double a = -h, m = 0.0, b = h;
+  double fa = f(a), fm = f(m), fb = f(b);
+  for (int i = 0; i < 60 && (fa < fm || fb < fm); ++i) {
+    if (fa < fm) {  // move left
+      b = m, fb = fm;
+      m = a, fm = fa;
+      a = m - 2.0 * (b - m);
+      fa = f(a);
+    } else {  // move right
+      a = m, fa = fm;
+      m = b, fm = fb;
+      b = m + 2.0 * (m - a);
+      fb = f(b);
+    }
+  }
+  const double g = 0.5 * (std::sqrt(5.0) - 1.0);  // 0.618...
+  double x1 = b - g * (b - a), x2 = a + g * (b - a);
+  double f1 = f(x1), f2 = f(x2);
+  for (int i = 0; i < 200 && (b - a) > tolerance; ++i) {
+    if (f1 <= f2) {
+      b = x2;
+      x2 = x1, f2 = f1;
+      x1 = b - g * (b - a);
+      f1 = f(x1);
+    } else {
+      a = x1;
+      x1 = x2, f1 = f2;
+      x2 = a + g * (b - a);
+      f2 = f(x2);
+    }
+  }
+  const double x = 0.5 * (a + b);
+  // Never worse than the starting plane (tau = 0), e.g. for a function flat to rounding.
+  return f(x) <= f(0.0) ? x : 0.0;
+}
+
+std::string glass_label(const Material& m) {
+  if (m.kind == Material::Kind::kCatalog) return m.glass_name;
+  return fmt::format("nd {:.4f}, vd {:.2f}", m.nd, m.vd);
+}
+
+std::string format_limit(double value, const char* unit) {
+  return fmt::format("{:g}{}", value, unit);
+}
+
+}  // namespace
+
+std::vector<ToleranceParameter> tolerance_parameters(const Lens& lens, const Tolerances& tol) {
+  using Kind = ToleranceParameter::Kind;
+  std::vector<ToleranceParameter> out;
+  const int k_count = static_cast<int>(lens.surfaces.size());
+  const int stop = lens.stop_index();
+  // Element number (1-based) of the glass after surface k; 0 for air.
+  std::vector<int> element(k_count, 0);
+  int e = 0;
+  for (int k = 0; k < k_count; ++k) {
+    if (lens.surfaces[k].material.is_air()) continue;
+    if (k == 0 || lens.surfaces[k - 1].material.is_air()) ++e;
+    element[k] = e;
+  }
+  for (int k = 0; k < k_count; ++k) {
+    const Surface& s = lens.surfaces[k];
+    if (s.is_stop || s.curvature_per_mm == 0.0) continue;
+    ToleranceParameter p;
+    p.kind = Kind::kCurvature;
+    p.surface = k;
+    p.limit = tol.curvature_pct / 100.0;
+    p.name = fmt::format("c{}", k + 1);
+    p.column = fmt::format("dc{}_rel", k + 1);
+    p.description = fmt::format("surface {} curvature (R {:.4g} mm)", k + 1, 1.0 / s.curvature_per_mm);
+    p.limit_text = format_limit(tol.curvature_pct, " %");
+    out.push_back(p);
+  }
+  for (int k = 0; k + 1 < k_count; ++k) {
+    const Surface& s = lens.surfaces[k];
+    ToleranceParameter p;
+    p.kind = Kind::kThickness;
+    p.surface = k;
+    p.air = s.material.is_air();
+    p.name = fmt::format("t{}", k + 1);
+    p.column = fmt::format("dt{}_mm", k + 1);
+    if (p.air) {
+      if (k + 1 == stop) continue;  // the stop is mounted with the group before it
+      p.limit = tol.air_thickness_mm;
+      p.description = fmt::format("airspace surface {} to {}", k + 1, k + 2);
+    } else {
+      p.limit = tol.glass_thickness_mm;
+      p.description = fmt::format("element {} thickness, surface {} to {} ({})", element[k], k + 1,
+                                  k + 2, glass_label(s.material));
+    }
+    p.limit_text = format_limit(p.limit, " mm");
+    out.push_back(p);
+  }
+  for (int pass = 0; pass < 2; ++pass) {
+    for (int k = 0; k < k_count; ++k) {
+      const Surface& s = lens.surfaces[k];
+      if (s.material.is_air()) continue;
+      ToleranceParameter p;
+      p.surface = k;
+      if (pass == 0) {
+        p.kind = Kind::kNd;
+        p.limit = tol.nd;
+        p.name = fmt::format("nd{}", k + 1);
+        p.column = fmt::format("dnd{}", k + 1);
+        p.description = fmt::format("element {} index nd, glass after surface {} ({})",
+                                    element[k], k + 1, glass_label(s.material));
+        p.limit_text = format_limit(tol.nd, "");
+      } else {
+        p.kind = Kind::kVd;
+        p.limit = tol.vd_pct / 100.0;
+        p.name = fmt::format("vd{}", k + 1);
+        p.column = fmt::format("dvd{}_rel", k + 1);
+        p.description = fmt::format("element {} Abbe number vd, glass after surface {} ({})",
+                                    element[k], k + 1, glass_label(s.material));
+        p.limit_text = format_limit(tol.vd_pct, " %");
+      }
+      out.push_back(p);
+    }
+  }
+  return out;
+}
+
+struct ToleranceModel::Impl {
+  ToleranceOptions options;
+  Specs specs;
+  Lens scaled_lens;
+  TraceLens<double> nominal;
+  std::vector<ToleranceParameter> parameters;
+  double scale = 1;
+  double stop_height_mm = 0;    // paraxial marginal-ray height at the stop (fixed aperture)
+  double defocus_mm = 0;        // t0_{K-1} - BFL0
+  double image_distance0_mm = 0;
+  std::vector<double> fields_deg;
+  int rays = 0;
+
+  TraceLens<double> apply(const std::vector<double>& perturbations) const {
+    using Kind = ToleranceParameter::Kind;
+    TraceLens<double> tl = nominal;
+    for (std::size_t i = 0; i < parameters.size(); ++i) {
+      const ToleranceParameter& p = parameters[i];
+      const double d = perturbations[i];
+      switch (p.kind) {
+        case Kind::kCurvature:
+          tl.curvature_per_mm[p.surface] *= 1.0 + d;
+          break;
+        case Kind::kThickness:
+          tl.thickness_mm[p.surface] += d;
+          break;
+        case Kind::kNd:
+          tl.nd[p.surface] += d;
+          break;
+        case Kind::kVd:
+          tl.vd[p.surface] *= 1.0 + d;
+          break;
+      }
+    }
+    return tl;
+  }
+};
+
+ToleranceModel::ToleranceModel(const Lens& lens, const ToleranceOptions& options)
+    : impl_(std::make_unique<Impl>()) {
+  options.validate();
+  Impl& m = *impl_;
+  m.options = options;
+  m.options.progress = nullptr;
+  m.specs = lens.specs;
+  // The scale as analyze computes it, then the nominal at the spec focal length.
+  TraceOptions scale_options;
+  scale_options.rings = 1;
+  scale_options.fields = 1;
+  scale_options.ray_aiming = false;
+  scale_options.scale_to_spec = true;
+  const TraceSystem<double> unscaled = prepare_system(make_trace_lens(lens), lens.specs, scale_options);
+  m.scale = unscaled.scale;
+  if (!(std::isfinite(m.scale) && m.scale > 0))
+    throw Error(SourceLocation{lens.source_path},
+                fmt::format("cannot scale the lens to the spec focal length (paraxial EFL {} mm)",
+                            unscaled.efl_mm / unscaled.scale));
+  m.scaled_lens = scaled(lens, m.scale);
+  m.nominal = make_trace_lens(m.scaled_lens);
+  m.parameters = tolerance_parameters(m.scaled_lens, options.tolerances);
+
+  const ParaxialData<double> par = paraxial_data(m.nominal, kWavelengthD_nm);
+  const double r_ep = par.efl_mm / lens.specs.f_number / 2.0;
+  m.stop_height_mm = par.stop_magnification * r_ep;
+  m.image_distance0_mm = m.nominal.thickness_mm.back();
+  m.defocus_mm = m.image_distance0_mm - par.bfl_mm;
+  if (!(std::isfinite(m.stop_height_mm) && m.stop_height_mm != 0.0 && std::isfinite(m.defocus_mm)))
+    throw Error(SourceLocation{lens.source_path},
+                "the lens has no finite paraxial stop height or back focal length");
+  m.fields_deg = field_angles_deg(lens.specs.half_field_deg, options.fields);
+  m.rays = static_cast<int>(paper_pupil_samples(options.rings).size());
+}
+
+ToleranceModel::~ToleranceModel() = default;
+
+const std::vector<ToleranceParameter>& ToleranceModel::parameters() const {
+  return impl_->parameters;
+}
+double ToleranceModel::scale() const { return impl_->scale; }
+const Lens& ToleranceModel::scaled_lens() const { return impl_->scaled_lens; }
+std::vector<double> ToleranceModel::fields_deg() const { return impl_->fields_deg; }
+int ToleranceModel::wavelength_count() const {
+  return static_cast<int>(impl_->specs.wavelengths_nm.size());
+}
+int ToleranceModel::rays_per_field_wavelength() const { return impl_->rays; }
+
+std::vector<double> ToleranceModel::draw(int index) const {
+  const Impl& m = *impl_;
+  std::mt19937_64 rng(
+      splitmix64(m.options.seed ^ splitmix64(static_cast<std::uint64_t>(index))));
+  std::vector<double> out(m.parameters.size());
+  for (std::size_t i = 0; i < out.size(); ++i)
+    out[i] = m.parameters[i].limit * unit_draw(rng, m.options.distribution);
+  return out;
+}
+
+TrialResult ToleranceModel::evaluate(const std::vector<double>& perturbations) const {
+  const Impl& m = *impl_;
+  if (perturbations.size() != m.parameters.size())
+    throw Error(fmt::format("{} perturbations for {} toleranced parameters", perturbations.size(),
+                            m.parameters.size()));
+  TrialResult r;
+  r.perturbations = perturbations;
+  const int field_count = static_cast<int>(m.fields_deg.size());
+  r.rms_spot_um.assign(field_count, 0.0);
+
+  TraceLens<double> tl = m.apply(perturbations);
+  const int last = tl.surface_count() - 1;
+  const ParaxialData<double> par = paraxial_data(tl, kWavelengthD_nm);
+  // Reference image plane: the paraxial solve (also the start of the best-RMS search).
+  const double t_ref = m.options.compensator == FocusCompensator::kNone
+                           ? m.image_distance0_mm
+                           : par.bfl_mm + m.defocus_mm;
+  tl.thickness_mm[last] = t_ref;
+  r.efl_mm = par.efl_mm;
+  r.image_distance_mm = t_ref;
+  const double r_ep = m.stop_height_mm / par.stop_magnification;
+  const double f_number = par.efl_mm / (2.0 * r_ep);
+  if (!(std::isfinite(t_ref) && std::isfinite(f_number) && f_number > 0.0 &&
+        std::isfinite(par.efl_mm))) {
+    r.valid = false;
+    return r;
+  }
+
+  TraceOptions to;
+  to.rings = m.options.rings;
+  to.fields = m.options.fields;
+  to.ray_aiming = m.options.ray_aiming;
+  to.scale_to_spec = false;
+  to.threads = 1;
+  TraceSystem<double> sys =
+      prepare_system(tl, m.specs.focal_length_mm(), f_number, m.specs.half_field_deg, to);
+
+  std::vector<FieldMoments> moments(field_count);
+  RayBundle<double> rays;
+  const int k_count = sys.lens.surface_count();
+  for (int h = 0; h < field_count; ++h) {
+    for (int w = 0; w < sys.wavelength_count; ++w) {
+      start_rays(sys, h, w, rays);
+      trace_bundle(sys.lens, w, k_count, true, rays, static_cast<RayRecord<double>*>(nullptr));
+      for (std::size_t i = 0; i < rays.size(); ++i)
+        if (rays.status[i] != kRayOk) ++r.ray_failures;
+      moments[h].add(rays);
+    }
+    if (moments[h].count == 0) r.valid = false;
+  }
+
+  double tau = 0.0;
+  if (m.options.compensator == FocusCompensator::kBestRms && r.valid) {
+    auto mean_spot = [&](double t) {
+      double sum = 0.0;
+      for (const FieldMoments& fm : moments) sum += fm.rms(t);
+      return sum / field_count;
+    };
+    // Start with a bracket of +-2 % of the image distance (or 0.1 mm): focus shifts from
+    // manufacturing errors are far smaller; the bracket grows if needed.
+    const double h = std::max(0.1, 0.02 * std::abs(t_ref));
+    tau = minimize_convex(mean_spot, h, 1e-9 * std::max(1.0, std::abs(t_ref)));
+    sys.lens.thickness_mm[last] = t_ref + tau;
+    r.image_distance_mm = t_ref + tau;
+  }
+
+  double sum = 0.0;
+  std::vector<double> y_ref(field_count);
+  for (int h = 0; h < field_count; ++h) {
+    r.rms_spot_um[h] = moments[h].rms(tau) * 1000.0;
+    sum += r.rms_spot_um[h];
+    y_ref[h] = paraxial_image_height(sys.lens, sys.entrance_pupil_z_mm,
+                                     std::tan(sys.fields_deg[h] * kPi / 180.0), kWavelengthD_nm);
+  }
+  r.mean_spot_um = sum / field_count;
+  const double y_ref_last = y_ref.back();
+  for (int h = 0; h < field_count; ++h) {
+    if (moments[h].count == 0 || y_ref_last == 0.0) continue;
+    const double d = 100.0 * (moments[h].centroid(tau) - y_ref[h]) / y_ref_last;
+    r.max_abs_distortion_pct = std::max(r.max_abs_distortion_pct, std::abs(d));
+  }
+  if (!(std::isfinite(r.mean_spot_um) && std::isfinite(r.max_abs_distortion_pct) &&
+        std::isfinite(r.image_distance_mm)))
+    r.valid = false;
+  return r;
+}
+
+SpotStatistics spot_statistics(std::vector<double> values) {
+  SpotStatistics s;
+  s.count = static_cast<int>(values.size());
+  if (values.empty()) return s;
+  std::sort(values.begin(), values.end());
+  double sum = 0.0;
+  for (double v : values) sum += v;
+  s.mean = sum / s.count;
+  double ss = 0.0;
+  for (double v : values) ss += (v - s.mean) * (v - s.mean);
+  s.std = s.count > 1 ? std::sqrt(ss / (s.count - 1)) : 0.0;
+  auto quantile = [&](double q) {
+    const double pos = q * (s.count - 1);
+    const std::size_t i = static_cast<std::size_t>(std::floor(pos));
+    if (i + 1 >= values.size()) return values.back();
+    const double f = pos - static_cast<double>(i);
+    return values[i] + f * (values[i + 1] - values[i]);
+  };
+  s.p50 = quantile(0.50);
+  s.p90 = quantile(0.90);
+  s.p95 = quantile(0.95);
+  s.p99 = quantile(0.99);
+  s.best = values.front();
+  s.worst = values.back();
+  return s;
+}
+
+ToleranceReport run_tolerance(const Lens& lens, const ToleranceOptions& options) {
+  const ToleranceModel model(lens, options);
+  ToleranceReport report;
+  report.lens_name = lens.name;
+  report.source_path = lens.source_path;
+  report.scale = model.scale();
+  report.spec_focal_length_mm = lens.specs.focal_length_mm();
+  report.options = options;
+  report.options.progress = nullptr;
+  report.threads = options.jobs > 0 ? options.jobs : omp_get_max_threads();
+  report.wavelength_count = model.wavelength_count();
+  report.rays_per_field_wavelength = model.rays_per_field_wavelength();
+  report.fields_deg = model.fields_deg();
+  report.parameters = model.parameters();
+  const std::size_t parameter_count = report.parameters.size();
+  report.nominal = model.evaluate(std::vector<double>(parameter_count, 0.0));
+  if (!report.nominal.valid)
+    throw Error(SourceLocation{lens.source_path},
+                "the nominal lens cannot be traced at every field (no ray reaches the image)");
+
+  // Monte-Carlo trials: trial i depends only on (seed, i); results land at index i.
+  const int n = options.trials;
+  report.trials.resize(n);
+  std::atomic<int> done{0};
+  std::mutex progress_mutex;
+  const auto start = std::chrono::steady_clock::now();
+  auto elapsed = [&] {
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  };
+  double last_report = -1.0;
+#pragma omp parallel for schedule(dynamic, 1) num_threads(report.threads)
+  for (int i = 0; i < n; ++i) {
+    TrialResult r = model.evaluate(model.draw(i));
+    r.index = i;
+    report.trials[i] = std::move(r);
+    const int now_done = done.fetch_add(1) + 1;
+    if (options.progress && progress_mutex.try_lock()) {
+      const double t = elapsed();
+      if (t - last_report >= 0.25 || now_done == n) {
+        last_report = t;
+        options.progress(now_done, n, t);
+      }
+      progress_mutex.unlock();
+    }
+  }
+  report.elapsed_s = elapsed();
+  report.ms_per_trial = 1000.0 * report.elapsed_s / n;
+  if (options.progress) options.progress(n, n, report.elapsed_s);
+
+  // Summary.
+  std::vector<double> spots, efl, distortion;
+  int within = 0;
+  for (const TrialResult& r : report.trials) {
+    if (r.ray_failures > 0) ++report.trials_with_failures;
+    if (!r.valid) {
+      ++report.invalid_trials;
+      continue;
+    }
+    spots.push_back(r.mean_spot_um);
+    efl.push_back(r.efl_mm);
+    distortion.push_back(r.max_abs_distortion_pct);
+    if (options.max_spot_um && r.mean_spot_um <= *options.max_spot_um) ++within;
+  }
+  report.spot = spot_statistics(spots);
+  if (options.max_spot_um) report.yield = static_cast<double>(within) / n;
+  if (!efl.empty()) {
+    const SpotStatistics e = spot_statistics(efl);
+    report.efl_mean_mm = e.mean;
+    report.efl_std_mm = e.std;
+    report.efl_min_mm = e.best;
+    report.efl_max_mm = e.worst;
+    const SpotStatistics d = spot_statistics(distortion);
+    report.distortion_mean_pct = d.mean;
+    report.distortion_worst_pct = d.worst;
+  }
+
+  // Sensitivity: each parameter alone at +-limit.
+  if (options.sensitivity) {
+    const auto sens_start = std::chrono::steady_clock::now();
+    std::vector<int> active;
+    for (std::size_t p = 0; p < parameter_count; ++p)
+      if (report.parameters[p].limit > 0) active.push_back(static_cast<int>(p));
+    const int jobs = static_cast<int>(active.size()) * 2;
+    std::vector<TrialResult> results(jobs);
+#pragma omp parallel for schedule(dynamic, 1) num_threads(report.threads)
+    for (int j = 0; j < jobs; ++j) {
+      const int p = active[j / 2];
+      std::vector<double> d(parameter_count, 0.0);
+      d[p] = (j % 2 == 0 ? 1.0 : -1.0) * report.parameters[p].limit;
+      results[j] = model.evaluate(d);
+    }
+    const double nan = std::numeric_limits<double>::quiet_NaN();
+    for (std::size_t a = 0; a < active.size(); ++a) {
+      SensitivityRow row;
+      row.parameter = active[a];
+      const TrialResult& plus = results[2 * a];
+      const TrialResult& minus = results[2 * a + 1];
+      row.plus_um = plus.valid ? plus.mean_spot_um - report.nominal.mean_spot_um : nan;
+      row.minus_um = minus.valid ? minus.mean_spot_um - report.nominal.mean_spot_um : nan;
+      row.efl_plus_mm = plus.efl_mm - report.nominal.efl_mm;
+      row.efl_minus_mm = minus.efl_mm - report.nominal.efl_mm;
+      // An untraceable side ranks first.
+      row.score_um = (plus.valid && minus.valid)
+                         ? std::max(std::abs(row.plus_um), std::abs(row.minus_um))
+                         : std::numeric_limits<double>::infinity();
+      report.sensitivity.push_back(row);
+    }
+    std::stable_sort(report.sensitivity.begin(), report.sensitivity.end(),
+                     [](const SensitivityRow& a, const SensitivityRow& b) {
+                       return a.score_um > b.score_um;
+                     });
+    report.sensitivity_s =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - sens_start).count();
+  }
+  return report;
+}
+
+}  // namespace lensopt
