@@ -1,11 +1,270 @@
-// Placeholder registration until the `optimize` command lands; it says so when run.
+// lensopt optimize LENS -o OUT.toml: baseline spot-size optimization (Ceres Levenberg-Marquardt).
+#include <fmt/core.h>
+
+#include <atomic>
+#include <csignal>
+#include <filesystem>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <toml++/toml.h>
+
 #include "commands.h"
 #include "lensopt/core/error.h"
+#include "lensopt/lens/lens_io.h"
+#include "lensopt/optimize/optimizer.h"
 
 namespace lensopt::cli {
-void setup_optimize(CLI::App& app) {
-  CLI::App* sub = app.add_subcommand("optimize", "spot-size optimization (not built yet)");
-  sub->allow_extras();
-  sub->callback([] { throw Error("'optimize' is not implemented in this build yet"); });
+namespace {
+
+std::atomic<bool> g_interrupted{false};
+
+extern "C" void on_sigint(int) { g_interrupted.store(true); }
+
+struct OptimizeCommand {
+  std::string lens_path;
+  std::string output_path;
+  bool in_place = false;
+  bool json = false;
+  bool quiet = false;
+  bool compare_adam = false;
+  std::string glass_search;
+  std::vector<std::string> freeze;
+  // Command-line overrides (NaN / -1: not given).
+  int rings = -1, fields = -1, max_iterations = -1, neighbours = -1, threads = -1;
+  double weight_ray_path = NAN, weight_ray_angle = NAN, weight_glass = NAN;
+  double min_air_mm = NAN, min_glass_mm = NAN, max_glass_mm = NAN, min_image_clearance_mm = NAN,
+         max_ray_angle_deg = NAN;
+};
+
+GlassSearch parse_glass_search(const std::string& s, const SourceLocation& where) {
+  if (s == "none") return GlassSearch::kNone;
+  if (s == "snap") return GlassSearch::kSnap;
+  if (s == "neighbours" || s == "neighbors") return GlassSearch::kNeighbours;
+  throw Error(where, fmt::format("glass_search = '{}' must be none, snap or neighbours", s));
 }
+
+// Applies the lens file's [optimize] table (when the lens is a TOML file).
+void apply_optimize_table(const Lens& lens, OptimizeOptions& options) {
+  const std::filesystem::path path = lens.source_path;
+  if (path.extension() != ".toml") return;
+  toml::table file;
+  try {
+    file = toml::parse_file(path.string());
+  } catch (const toml::parse_error& e) {
+    throw Error(SourceLocation{path.string(), static_cast<int>(e.source().begin.line),
+                               static_cast<int>(e.source().begin.column)},
+                std::string(e.description()));
+  }
+  const toml::table* table = file["optimize"].as_table();
+  if (!table) return;
+  for (const auto& [key, node] : *table) {
+    const SourceLocation where{path.string(), static_cast<int>(node.source().begin.line),
+                               static_cast<int>(node.source().begin.column)};
+    auto number = [&]() {
+      const auto v = node.value<double>();
+      if (!v) throw Error(where, fmt::format("[optimize] {} must be a number", key.str()));
+      return *v;
+    };
+    auto integer = [&]() {
+      const auto v = node.value<int64_t>();
+      if (!v) throw Error(where, fmt::format("[optimize] {} must be an integer", key.str()));
+      return static_cast<int>(*v);
+    };
+    const std::string k(key.str());
+    if (k == "weight_ray_path") options.loss.weight_ray_path = number();
+    else if (k == "weight_ray_angle") options.loss.weight_ray_angle = number();
+    else if (k == "weight_glass") options.loss.weight_glass = number();
+    else if (k == "min_air_mm") options.loss.min_air_mm = number();
+    else if (k == "min_glass_mm") options.loss.min_glass_mm = number();
+    else if (k == "max_glass_mm") options.loss.max_glass_mm = number();
+    else if (k == "min_image_clearance_mm") options.loss.min_image_clearance_mm = number();
+    else if (k == "max_ray_angle_deg") options.loss.max_ray_angle_deg = number();
+    else if (k == "rings") options.sampling.rings = integer();
+    else if (k == "fields") options.sampling.fields = integer();
+    else if (k == "max_iterations") options.max_iterations = integer();
+    else if (k == "glass_neighbours") options.glass_neighbours = integer();
+    else if (k == "glass_search") {
+      const auto v = node.value<std::string>();
+      if (!v) throw Error(where, "[optimize] glass_search must be a string");
+      options.glass_search = parse_glass_search(*v, where);
+    } else if (k == "freeze") {
+      const toml::array* arr = node.as_array();
+      if (!arr) throw Error(where, "[optimize] freeze must be an array of variable names");
+      for (const auto& item : *arr) {
+        const auto v = item.value<std::string>();
+        if (!v) throw Error(where, "[optimize] freeze entries must be strings");
+        options.freeze.push_back(*v);
+      }
+    } else {
+      throw Error(where,
+                  fmt::format("unknown key '{}' in [optimize]; known: weight_ray_path, "
+                              "weight_ray_angle, weight_glass, min_air_mm, min_glass_mm, "
+                              "max_glass_mm, min_image_clearance_mm, max_ray_angle_deg, rings, "
+                              "fields, max_iterations, glass_search, glass_neighbours, freeze",
+                              k));
+    }
+  }
+}
+
+std::string format_constraints(const ConstraintReport& c) {
+  std::string out;
+  for (const ConstraintReport::Row& r : c.rows) {
+    out += fmt::format("    {:<34} {:10.4f}  {} {:8.3f}  {}\n", r.name, r.value, r.is_lower ? ">=" : "<=",
+                       r.bound, r.pass ? "pass" : "FAIL");
+  }
+  out += fmt::format("    {:<34} {:10d}  == {:8d}  {}\n", "ray failures", c.ray_failures, 0,
+                     c.ray_failures == 0 ? "pass" : "FAIL");
+  return out;
+}
+
+nlohmann::json constraints_json(const ConstraintReport& c) {
+  nlohmann::json rows = nlohmann::json::array();
+  for (const ConstraintReport::Row& r : c.rows)
+    rows.push_back({{"name", r.name}, {"value", r.value}, {"bound", r.bound},
+                    {"kind", r.is_lower ? "min" : "max"}, {"pass", r.pass}});
+  return {{"rows", rows}, {"ray_failures", c.ray_failures}, {"all_pass", c.all_pass()}};
+}
+
+void run_optimize(const OptimizeCommand& cmd) {
+  const Lens lens = read_lens(cmd.lens_path);
+  OptimizeOptions options;
+  apply_optimize_table(lens, options);
+  if (!cmd.glass_search.empty())
+    options.glass_search = parse_glass_search(cmd.glass_search, SourceLocation{"--glass-search"});
+  for (const std::string& f : cmd.freeze) options.freeze.push_back(f);
+  if (cmd.rings > 0) options.sampling.rings = cmd.rings;
+  if (cmd.fields > 0) options.sampling.fields = cmd.fields;
+  if (cmd.threads >= 0) options.sampling.threads = cmd.threads;
+  if (cmd.max_iterations > 0) options.max_iterations = cmd.max_iterations;
+  if (cmd.neighbours >= 0) options.glass_neighbours = cmd.neighbours;
+  auto override = [](double v, double& target) {
+    if (!std::isnan(v)) target = v;
+  };
+  override(cmd.weight_ray_path, options.loss.weight_ray_path);
+  override(cmd.weight_ray_angle, options.loss.weight_ray_angle);
+  override(cmd.weight_glass, options.loss.weight_glass);
+  override(cmd.min_air_mm, options.loss.min_air_mm);
+  override(cmd.min_glass_mm, options.loss.min_glass_mm);
+  override(cmd.max_glass_mm, options.loss.max_glass_mm);
+  override(cmd.min_image_clearance_mm, options.loss.min_image_clearance_mm);
+  override(cmd.max_ray_angle_deg, options.loss.max_ray_angle_deg);
+  options.verbose = !cmd.quiet;
+  options.interrupt = &g_interrupted;
+  options.validate();
+
+  std::filesystem::path out_path = cmd.output_path;
+  if (cmd.in_place) out_path = cmd.lens_path;
+  if (out_path.empty()) throw Error("give -o OUT.toml (or --in-place to overwrite the input)");
+  if (!cmd.in_place && std::filesystem::exists(out_path) &&
+      std::filesystem::equivalent(out_path, cmd.lens_path))
+    throw Error(SourceLocation{out_path.string()},
+                "refusing to overwrite the input lens; use --in-place to do that");
+  if (out_path.extension() != ".toml")
+    throw Error(SourceLocation{out_path.string()}, "the optimized lens is written as .toml");
+
+  g_interrupted.store(false);
+  auto previous = std::signal(SIGINT, on_sigint);
+  OptimizeResult result = optimize_lens(lens, options);
+  std::signal(SIGINT, previous);
+
+  // A starting lens without catalog glass names gets the result's names anyway.
+  write_lens(result.lens, out_path);
+
+  if (cmd.json) {
+    nlohmann::json j;
+    j["lens"] = lens.name;
+    j["output"] = out_path.string();
+    j["start_mean_rms_spot_um"] = result.start_spot_um;
+    j["final_mean_rms_spot_um"] = result.final_spot_um;
+    j["start_rms_spot_um"] = result.start_field_spot_um;
+    j["final_rms_spot_um"] = result.final_field_spot_um;
+    j["start_constraints"] = constraints_json(result.start_constraints);
+    j["final_constraints"] = constraints_json(result.final_constraints);
+    j["glasses"] = result.glasses;
+    j["iterations"] = result.iterations;
+    j["loss_evaluations"] = result.loss_evaluations;
+    j["jacobian_evaluations"] = result.jacobian_evaluations;
+    j["seconds"] = result.seconds;
+    j["termination"] = result.termination;
+    j["interrupted"] = result.interrupted;
+    j["kept_start"] = result.kept_start;
+    j["log"] = result.log;
+    j["sampling"] = {{"rings", options.sampling.rings}, {"fields", options.sampling.fields}};
+    fmt::print("{}\n", j.dump(2));
+  } else {
+    fmt::print("lensopt optimize: {} -> {}\n", cmd.lens_path, out_path.string());
+    fmt::print("  mean RMS spot (full sampling): {:.3f} um -> {:.3f} um{}\n", result.start_spot_um,
+               result.final_spot_um, result.kept_start ? "  (no improvement found: start kept)" : "");
+    fmt::print("  field (deg index)   before (um)   after (um)\n");
+    for (std::size_t h = 0; h < result.final_field_spot_um.size(); ++h)
+      fmt::print("  {:17d}   {:11.3f}   {:10.3f}\n", h,
+                 h < result.start_field_spot_um.size() ? result.start_field_spot_um[h] : 0.0,
+                 result.final_field_spot_um[h]);
+    fmt::print("  constraints after (full sampling):\n{}", format_constraints(result.final_constraints));
+    std::string glasses;
+    for (const std::string& g : result.glasses) glasses += (glasses.empty() ? "" : ", ") + g;
+    fmt::print("  glasses: {}\n", glasses);
+    fmt::print("  {} LM iterations, {} loss evaluations ({} with Jacobian), {:.1f} s; {}\n",
+               result.iterations, result.loss_evaluations, result.jacobian_evaluations,
+               result.seconds, result.termination);
+    for (const std::string& l : result.log) fmt::print("  {}\n", l);
+  }
+
+  if (cmd.compare_adam) {
+    // Same loss, sampling and code path: LM (glasses fixed) vs a plain Adam loop.
+    OptimizeOptions fixed = options;
+    fixed.glass_search = GlassSearch::kNone;
+    fixed.verbose = false;
+    const OptimizeResult lm = optimize_lens(lens, fixed);
+    const LensParameterization param(lens, GlassSpace(*load_catalog(lens.catalog_name.empty() ? "ohara" : lens.catalog_name)));
+    const std::vector<double> x0 = param.from_lens(lens);
+    const std::vector<int> glasses = param.nearest_glasses(x0.data());
+    const std::vector<double> x_lm = param.from_lens(lm.lens);
+    const double lm_spot = design_spot_mm(param, x_lm, GlassMode::kFixed, glasses, fixed);
+    const AdamResult adam = adam_on_design_loss(param, x0, GlassMode::kFixed, glasses, fixed, 5e-3,
+                                                20000, lm_spot * 1.01);
+    fmt::print("  LM vs Adam (glasses fixed, optimization sampling): LM reached {:.4f} um with {} "
+               "loss evaluations; Adam (lr 5e-3) {} {:.4f} um after {} evaluations ({:.1f}x)\n",
+               lm_spot * 1000, lm.loss_evaluations, adam.reached ? "reached" : "stopped at",
+               adam.spot_mm * 1000, adam.evaluations,
+               static_cast<double>(adam.evaluations) / std::max(1, lm.loss_evaluations));
+  }
+  if (result.interrupted) {
+    fmt::print(stderr, "lensopt optimize: interrupted; the best lens so far is in {}\n", out_path.string());
+    throw ExitCode{130};
+  }
+}
+
+}  // namespace
+
+void setup_optimize(CLI::App& app) {
+  auto cmd = std::make_shared<OptimizeCommand>();
+  CLI::App* sub = app.add_subcommand("optimize", "Optimize a lens for spot size (Ceres Levenberg-Marquardt)");
+  sub->add_option("LENS", cmd->lens_path, "starting lens (.toml or the paper's .yml)")->required();
+  sub->add_option("-o,--output", cmd->output_path, "optimized lens (.toml), written atomically");
+  sub->add_flag("--in-place", cmd->in_place, "overwrite the input lens (TOML)");
+  sub->add_flag("--json", cmd->json, "report as one JSON object on stdout");
+  sub->add_flag("-q,--quiet", cmd->quiet, "no per-iteration progress on stderr");
+  sub->add_option("--glass-search", cmd->glass_search, "none | snap | neighbours (default)")
+      ->check(CLI::IsMember({"none", "snap", "neighbours", "neighbors"}));
+  sub->add_option("--neighbours", cmd->neighbours, "catalog glasses tried per element");
+  sub->add_option("--freeze", cmd->freeze, "variables or groups to hold (c3, s2, defocus, g1, curvatures, spacings, glasses)")
+      ->delimiter(',');
+  sub->add_option("--rings", cmd->rings, "pupil rings during optimization (default 8)");
+  sub->add_option("--fields", cmd->fields, "fields during optimization (default 11)");
+  sub->add_option("--threads", cmd->threads, "threads (0: all cores)");
+  sub->add_option("--max-iterations", cmd->max_iterations, "LM iterations per round (default 100)");
+  sub->add_option("--weight-ray-path", cmd->weight_ray_path, "lambda_RP (default 100)");
+  sub->add_option("--weight-ray-angle", cmd->weight_ray_angle, "lambda_RA (default 100)");
+  sub->add_option("--weight-glass", cmd->weight_glass, "lambda_GV (default 0.01)");
+  sub->add_option("--min-air-mm", cmd->min_air_mm, "smallest air gap (default 0.01)");
+  sub->add_option("--min-glass-mm", cmd->min_glass_mm, "thinnest glass (default 1)");
+  sub->add_option("--max-glass-mm", cmd->max_glass_mm, "thickest glass (default 3)");
+  sub->add_option("--min-image-clearance-mm", cmd->min_image_clearance_mm, "image clearance (default 12)");
+  sub->add_option("--max-ray-angle-deg", cmd->max_ray_angle_deg, "largest ray angle (default 60)");
+  sub->add_flag("--compare-adam", cmd->compare_adam,
+                "also report loss evaluations of LM vs a plain Adam loop on the same loss");
+  sub->callback([cmd] { run_optimize(*cmd); });
+}
+
 }  // namespace lensopt::cli
