@@ -12,6 +12,7 @@
 // Either way parse(format(l)) has l's doubles, and format(parse(format(l))) == format(l).
 
 #include <fmt/format.h>
+#include <toml++/toml.h>
 
 #include <algorithm>
 #include <array>
@@ -20,7 +21,6 @@
 #include <limits>
 #include <optional>
 #include <sstream>
-#include <toml++/toml.h>
 #include <vector>
 
 #include "lens_io_detail.h"
@@ -208,8 +208,8 @@ double read_radius_mm(const TomlReader& reader, const toml::node& node, std::str
       text.erase(0, 1);
     }
     if (text == "inf" || text == "infinity") return sign * std::numeric_limits<double>::infinity();
-    reader.fail(node, fmt::format("{} must be a number or \"inf\" (flat), not \"{}\"", what,
-                                  s->get()));
+    reader.fail(node,
+                fmt::format("{} must be a number or \"inf\" (flat), not \"{}\"", what, s->get()));
   }
   const double radius_mm = reader.number(node, what);
   if (std::isnan(radius_mm)) reader.fail(node, fmt::format("{} is nan", what));
@@ -244,10 +244,10 @@ Specs read_specs(const TomlReader& reader, const toml::table& table) {
   const Entry wavelengths = entry(table, "wavelengths_nm");
   const Entry channels = entry(table, "channels");
   if (wavelengths && !channels)
-    reader.fail(wavelengths, "wavelengths_nm is given without channels; add channels = [\"R\", "
-                             "\"G\", ...], one of R, G, B per wavelength");
-  if (channels && !wavelengths)
-    reader.fail(channels, "channels is given without wavelengths_nm");
+    reader.fail(wavelengths,
+                "wavelengths_nm is given without channels; add channels = [\"R\", "
+                "\"G\", ...], one of R, G, B per wavelength");
+  if (channels && !wavelengths) reader.fail(channels, "channels is given without wavelengths_nm");
   if (wavelengths) {
     const toml::array& values = reader.array(*wavelengths.node, "wavelengths_nm");
     if (values.empty()) reader.fail(*wavelengths.node, "wavelengths_nm is empty");
@@ -309,7 +309,8 @@ Material read_material(const TomlReader& reader, const toml::node& node, int sur
     return Material::from_catalog(*glass);
   }
   if (const auto* t = node.as_table()) {
-    reader.check_keys(*t, kModelGlassKeys, fmt::format("the material of surface {}", surface_number));
+    reader.check_keys(*t, kModelGlassKeys,
+                      fmt::format("the material of surface {}", surface_number));
     const Entry nd = entry(*t, "nd");
     const Entry vd = entry(*t, "vd");
     if (!nd || !vd)
@@ -319,9 +320,11 @@ Material read_material(const TomlReader& reader, const toml::node& node, int sur
     const double nd_value = reader.finite_number(*nd.node, "nd");
     const double vd_value = reader.finite_number(*vd.node, "vd");
     if (!(nd_value > 1.0))
-      reader.fail(*nd.node, fmt::format("surface {}: nd = {} must be > 1", surface_number, nd_value));
+      reader.fail(*nd.node,
+                  fmt::format("surface {}: nd = {} must be > 1", surface_number, nd_value));
     if (!(vd_value > 0.0))
-      reader.fail(*vd.node, fmt::format("surface {}: vd = {} must be > 0", surface_number, vd_value));
+      reader.fail(*vd.node,
+                  fmt::format("surface {}: vd = {} must be > 0", surface_number, vd_value));
     return Material::model(nd_value, vd_value);
   }
   reader.fail(node, fmt::format("surface {}: material must be a glass name, \"air\" or "
@@ -337,9 +340,9 @@ Surface read_surface(const TomlReader& reader, const toml::table& table, int sur
   const Entry curvature = entry(table, "curvature_per_mm");
   if (radius && curvature) {
     const bool radius_later = curvature.key->source().begin < radius.key->source().begin;
-    reader.fail(radius_later ? radius : curvature,
-                fmt::format("surface {}: give radius_mm or curvature_per_mm, not both",
-                            surface_number));
+    reader.fail(
+        radius_later ? radius : curvature,
+        fmt::format("surface {}: give radius_mm or curvature_per_mm, not both", surface_number));
   }
   if (!radius && !curvature)
     reader.fail(table.source(), fmt::format("surface {}: missing radius_mm (or curvature_per_mm); "
@@ -361,18 +364,18 @@ Surface read_surface(const TomlReader& reader, const toml::table& table, int sur
   if (const Entry e = entry(table, "stop")) {
     surface.is_stop = reader.boolean(*e.node, "stop");
     if (surface.is_stop && surface.curvature_per_mm != 0.0)
-      reader.fail(e, fmt::format("surface {}: the stop must be flat, but its {}; write "
-                                 "radius_mm = inf, or put the stop on its own flat surface",
-                                 surface_number,
-                                 radius ? fmt::format("radius is {} mm", 1.0 / surface.curvature_per_mm)
-                                        : fmt::format("curvature is {} /mm",
-                                                      surface.curvature_per_mm)));
+      reader.fail(
+          e, fmt::format("surface {}: the stop must be flat, but its {}; write "
+                         "radius_mm = inf, or put the stop on its own flat surface",
+                         surface_number,
+                         radius ? fmt::format("radius is {} mm", 1.0 / surface.curvature_per_mm)
+                                : fmt::format("curvature is {} /mm", surface.curvature_per_mm)));
   }
   if (const Entry e = entry(table, "semi_diameter_mm")) {
     surface.semi_diameter_mm = reader.finite_number(*e.node, "semi_diameter_mm");
     if (surface.semi_diameter_mm < 0.0)
-      reader.fail(*e.node, fmt::format("semi_diameter_mm = {} must be >= 0",
-                                       surface.semi_diameter_mm));
+      reader.fail(*e.node,
+                  fmt::format("semi_diameter_mm = {} must be >= 0", surface.semi_diameter_mm));
   }
   return surface;
 }
@@ -430,6 +433,115 @@ std::string toml_string(std::string_view text) {
   return out;
 }
 
+// TOML text of the tables a lens file carries for other modules ([optimize], ...), from toml++'s
+// parsed tree. toml++'s own formatter writes floats with 17 significant digits (0.1 becomes
+// 0.10000000000000001); this writes them as the shortest exact decimal, like the lens itself.
+// Keys come in toml++'s (sorted) order; inline tables stay inline; dates print as toml++ does.
+class ExtraTomlWriter {
+ public:
+  std::string write(const toml::table& root) {
+    out_.clear();
+    write_table_body(root, "", false);
+    return out_;
+  }
+
+ private:
+  static std::string key_text(std::string_view key) {
+    const bool bare = !key.empty() && std::all_of(key.begin(), key.end(), [](char ch) {
+      return std::isalnum(static_cast<unsigned char>(ch)) || ch == '_' || ch == '-';
+    });
+    return bare ? std::string(key) : toml_string(key);
+  }
+
+  // A table written under a [header] rather than inline.
+  static bool is_header_table(const toml::node& node) {
+    const toml::table* table = node.as_table();
+    return table != nullptr && !table->is_inline();
+  }
+  static bool is_header_array(const toml::node& node) {
+    return node.is_array_of_tables() &&
+           std::all_of(node.as_array()->begin(), node.as_array()->end(),
+                       [](const toml::node& item) { return is_header_table(item); });
+  }
+
+  void write_value(const toml::node& node) {
+    if (const auto* v = node.as_floating_point()) {
+      out_ += number_text(v->get());
+    } else if (const auto* v = node.as_integer()) {
+      out_ += fmt::format("{}", v->get());
+    } else if (const auto* v = node.as_string()) {
+      out_ += toml_string(v->get());
+    } else if (const auto* v = node.as_boolean()) {
+      out_ += v->get() ? "true" : "false";
+    } else if (const auto* array = node.as_array()) {
+      out_ += '[';
+      for (std::size_t i = 0; i < array->size(); ++i) {
+        if (i > 0) out_ += ", ";
+        write_value((*array)[i]);
+      }
+      out_ += ']';
+    } else if (const auto* table = node.as_table()) {
+      out_ += '{';
+      bool first = true;
+      for (auto&& [key, value] : *table) {
+        out_ += first ? " " : ", ";
+        first = false;
+        out_ += key_text(key.str()) + " = ";
+        write_value(value);
+      }
+      out_ += first ? "}" : " }";
+    } else {
+      // Date, time, date-time: toml++ prints them as TOML spells them.
+      std::ostringstream text;
+      if (const auto* v = node.as_date()) text << *v;
+      if (const auto* v = node.as_time()) text << *v;
+      if (const auto* v = node.as_date_time()) text << *v;
+      out_ += text.str();
+    }
+  }
+
+  // The key/values of `table` (under `path`; "" is the root, where everything is a table or an
+  // array of tables, written under headers so nothing attaches to the lens's last table), then
+  // its sub-tables and arrays of tables.
+  void write_table_body(const toml::table& table, const std::string& path, bool array_element) {
+    const bool root = path.empty();
+    auto is_child_table = [root](const toml::node& node) {
+      return node.is_table() && (root || is_header_table(node));
+    };
+    auto is_child_array = [root](const toml::node& node) {
+      return node.is_array_of_tables() && (root || is_header_array(node));
+    };
+    bool has_values = false;
+    bool has_children = false;
+    for (auto&& [key, value] : table) {
+      const bool child = is_child_table(value) || is_child_array(value);
+      has_children = has_children || child;
+      has_values = has_values || !child;
+    }
+    if (!root && (array_element || has_values || !has_children)) {
+      if (!out_.empty()) out_ += '\n';
+      out_ += array_element ? fmt::format("[[{}]]\n", path) : fmt::format("[{}]\n", path);
+    }
+    for (auto&& [key, value] : table) {
+      if (is_child_table(value) || is_child_array(value)) continue;
+      out_ += key_text(key.str()) + " = ";
+      write_value(value);
+      out_ += '\n';
+    }
+    for (auto&& [key, value] : table) {
+      const std::string child_path = root ? key_text(key.str()) : path + "." + key_text(key.str());
+      if (is_child_table(value)) {
+        write_table_body(*value.as_table(), child_path, false);
+      } else if (is_child_array(value)) {
+        for (const toml::node& item : *value.as_array())
+          write_table_body(*item.as_table(), child_path, true);
+      }
+    }
+  }
+
+  std::string out_;
+};
+
 std::string lower_extension(const std::filesystem::path& path) {
   return lower(path.extension().string());
 }
@@ -464,10 +576,7 @@ Lens parse_lens_toml(std::string_view text, const std::string& source_name) {
                             key.str(), detail::did_you_mean(key.str(), kTopLevelKeys)));
   }
   if (!extra.empty()) {
-    std::ostringstream out;
-    out << toml::toml_formatter(extra);
-    lens.extra_toml = out.str();
-    if (!lens.extra_toml.empty() && lens.extra_toml.back() != '\n') lens.extra_toml += '\n';
+    lens.extra_toml = ExtraTomlWriter().write(extra);
   }
 
   std::shared_ptr<const Catalog> catalog;
@@ -500,8 +609,9 @@ Lens parse_lens_toml(std::string_view text, const std::string& source_name) {
 
   // Whole-lens checks, placed at the surface they concern.
   if (surfaces.size() < 2)
-    reader.fail(surfaces.empty() ? surfaces_node->source() : surfaces[0].source(),
-                fmt::format("a lens needs at least two surfaces; this one has {}", surfaces.size()));
+    reader.fail(
+        surfaces.empty() ? surfaces_node->source() : surfaces[0].source(),
+        fmt::format("a lens needs at least two surfaces; this one has {}", surfaces.size()));
   int stop_count = 0;
   for (std::size_t i = 0; i < surfaces.size(); ++i) {
     if (!lens.surfaces[i].is_stop) continue;
@@ -512,8 +622,9 @@ Lens parse_lens_toml(std::string_view text, const std::string& source_name) {
                               i + 1));
   }
   if (stop_count == 0)
-    reader.fail(surfaces[0].source(), "no surface is the aperture stop; add stop = true to the "
-                                      "flat surface where the stop is");
+    reader.fail(surfaces[0].source(),
+                "no surface is the aperture stop; add stop = true to the "
+                "flat surface where the stop is");
   if (!lens.surfaces.back().material.is_air()) {
     const Entry e = entry(*surfaces.back().as_table(), "material");
     reader.fail(e, fmt::format("surface {} (the last) must be followed by air, not {}",

@@ -126,16 +126,16 @@ Lens parse_lens_yaml(std::string_view text, const std::string& source_name) {
   try {
     root = YAML::Load(std::string(text));
   } catch (const YAML::Exception& e) {
-    const SourceLocation where = e.mark.is_null()
-                                     ? SourceLocation{source_name}
-                                     : SourceLocation{source_name, e.mark.line + 1,
-                                                      e.mark.column + 1};
+    const SourceLocation where =
+        e.mark.is_null() ? SourceLocation{source_name}
+                         : SourceLocation{source_name, e.mark.line + 1, e.mark.column + 1};
     throw Error(where, fmt::format("YAML syntax error: {}", e.msg));
   }
   const YamlReader reader(source_name, root);
   if (!root.IsMap())
-    reader.fail(root, "expected a map with the keys stop_idx, sequence, hfov, f_number, c, t, "
-                      "nd, v (the paper's lens format)");
+    reader.fail(root,
+                "expected a map with the keys stop_idx, sequence, hfov, f_number, c, t, "
+                "nd, v (the paper's lens format)");
 
   // sequence: one letter per surface, the medium after it.
   const YAML::Node sequence_node = reader.required("sequence");
@@ -145,14 +145,16 @@ Lens parse_lens_yaml(std::string_view text, const std::string& source_name) {
   for (std::size_t i = 0; i < sequence.size(); ++i) {
     const char letter = static_cast<char>(std::toupper(static_cast<unsigned char>(sequence[i])));
     if (letter != 'G' && letter != 'A')
-      reader.fail(sequence_node,
-                  fmt::format("sequence letter {} is '{}'; each must be G (glass after the surface) "
-                              "or A (air)",
-                              i + 1, sequence[i]));
+      reader.fail(
+          sequence_node,
+          fmt::format("sequence letter {} is '{}'; each must be G (glass after the surface) "
+                      "or A (air)",
+                      i + 1, sequence[i]));
     sequence[i] = letter;
   }
   const std::size_t surface_count = sequence.size();
-  const auto glass_count = static_cast<std::size_t>(std::count(sequence.begin(), sequence.end(), 'G'));
+  const auto glass_count =
+      static_cast<std::size_t>(std::count(sequence.begin(), sequence.end(), 'G'));
   if (sequence.back() != 'A')
     reader.fail(sequence_node,
                 fmt::format("sequence '{}' ends in glass; the last surface must be followed by air "
