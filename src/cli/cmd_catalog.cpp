@@ -40,11 +40,11 @@ std::string formula_label(const Glass& glass) {
 }
 
 void print_json(const Catalog& catalog, const std::vector<double>& wavelengths_nm) {
-  auto list = nlohmann::json::array();
+  auto list = nlohmann::ordered_json::array();
   for (const Glass& glass : catalog.glasses) {
-    auto n = nlohmann::json::array();
+    auto n = nlohmann::ordered_json::array();
     for (const auto& value : indices(glass, wavelengths_nm)) {
-      n.push_back(value ? nlohmann::json(*value) : nlohmann::json(nullptr));
+      n.push_back(value ? nlohmann::ordered_json(*value) : nlohmann::ordered_json(nullptr));
     }
     list.push_back({{"name", glass.name},
                     {"formula", formula_name(glass.formula)},
@@ -54,7 +54,7 @@ void print_json(const Catalog& catalog, const std::vector<double>& wavelengths_n
                     {"vd", glass.vd},
                     {"n", std::move(n)}});
   }
-  fmt::print("{}\n", list.dump(1));
+  fmt::print("{}\n", list.dump(2));
 }
 
 void print_table(const Catalog& catalog, const std::vector<double>& wavelengths_nm) {
@@ -116,7 +116,7 @@ void setup_catalog(CLI::App& app) {
   sub->add_option("--wavelengths-nm", cmd->wavelengths_nm,
                   "wavelengths in nm, comma-separated (default 587.5618)")
       ->delimiter(',')
-      ->check(CLI::PositiveNumber);
+      ->check(CLI::Range(1.0, 1.0e6));
   sub->callback([cmd] { run_catalog(*cmd); });
 }
 

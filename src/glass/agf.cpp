@@ -10,12 +10,14 @@
 // Vendors write numbers as integers or floats ("2", "2.00000E+00", "1.06000E+000").
 #include <fmt/format.h>
 
+#include <cctype>
 #include <charconv>
 #include <cmath>
 #include <cstdint>
 #include <fstream>
 #include <optional>
 #include <sstream>
+#include <unordered_map>
 
 #include "lensopt/core/error.h"
 #include "lensopt/glass/glass.h"
@@ -242,6 +244,14 @@ class AgfReader {
       warn(fmt::format("glass {}: unsupported dispersion formula {}; its index is not computed",
                        glass.name, formula_id));
     }
+    // Look-up is case-insensitive and takes the first of equal names: say so when that hides one.
+    std::string key;
+    for (const char ch : glass.name)
+      key += static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
+    if (const auto [it, inserted] = first_line_by_name_.emplace(key, line_number_); !inserted) {
+      warn(fmt::format("glass {} is listed again (first at line {}); look-up finds the first",
+                       glass.name, it->second));
+    }
     catalog_.glasses.push_back(std::move(glass));
     has_coefficients_ = false;
   }
@@ -305,6 +315,7 @@ class AgfReader {
   std::vector<std::string_view> fields_;
   std::vector<int> column_of_field_;
   bool has_coefficients_ = true;
+  std::unordered_map<std::string, int> first_line_by_name_;  // lower-case name -> NM line
 };
 
 }  // namespace
@@ -315,7 +326,7 @@ Catalog parse_agf(std::string_view bytes, const std::string& source_name) {
   catalog.name = std::filesystem::path(source_name).stem().string();
   const std::string text = decode_text(bytes);
   AgfReader reader(source_name, catalog);
-  // Lines end in LF or CRLF (split_fields drops the CR); a lone CR ends a line too.
+  // Lines end in LF, CRLF or a lone CR.
   int line_number = 0;
   std::size_t start = 0;
   while (start < text.size()) {

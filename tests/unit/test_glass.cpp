@@ -217,6 +217,16 @@ TEST_CASE("agf: a glass without a CD line is flagged unsupported") {
   CHECK(catalog.warnings[0].find("bare.agf:1") != std::string::npos);
 }
 
+TEST_CASE("agf: a glass name listed twice is reported") {
+  const std::string cd = "CD " + std::string(kBk7Sellmeier) + "\n";
+  const Catalog catalog =
+      parse_agf("NM TWIN 2 1 1.5 60 0 0\n" + cd + "NM twin 2 1 1.6 40 0 0\n" + cd, "dup.agf");
+  REQUIRE(catalog.glasses.size() == 2);
+  CHECK(catalog.find("Twin")->nd == 1.5);
+  REQUIRE(catalog.warnings.size() == 1);
+  CHECK(catalog.warnings[0].find("dup.agf:3") != std::string::npos);
+}
+
 TEST_CASE("agf: fields of the NM, LD and IT lines") {
   const std::string text =
       "CC a comment\n"
