@@ -20,6 +20,7 @@
 #pragma once
 
 #include <cstdint>
+#include <type_traits>
 #include <vector>
 
 #include "lensopt/core/scalar.h"
@@ -42,6 +43,7 @@ struct RayBundle {
   std::vector<T> l, m, n;  // direction cosines
   std::vector<std::uint8_t> status;
   std::vector<std::int8_t> failed_surface;  // surface index of the failure, -1 if none
+  std::vector<std::int32_t> failure_scratch;  // per-surface failure codes (kernel scratch)
 
   void resize(std::size_t count) {
     x.resize(count);
@@ -70,6 +72,66 @@ struct RayRecord {
   }
 };
 
+namespace detail {
+
+// Steps 1-4 of the header for every ray at one surface. Branch-free in the ray loop (selects,
+// not jumps) so that the double instantiation vectorizes; kRecord adds the loss records.
+template <typename T, bool kRecord>
+inline __attribute__((always_inline)) void trace_surface(const T& c, const T& shift, const T& mu, int k, std::size_t count,
+                   T* __restrict x, T* __restrict y, T* __restrict z, T* __restrict l,
+                   T* __restrict m, T* __restrict n, std::int32_t* __restrict failure,
+                   T* __restrict travel, T* __restrict zeta_out, T* __restrict zeta_prime_out) {
+  using std::sqrt;
+  const T one = K<T>(1.0);
+  const T zero = K<T>(0.0);
+  const T mu2 = mu * mu;
+  for (std::size_t i = 0; i < count; ++i) {
+    // Shift to vertex k and transfer to its tangent plane.
+    const T z_rel = z[i] - shift;
+    const T s0 = -z_rel / n[i];
+    const T x1 = x[i] + s0 * l[i];
+    const T y1 = y[i] + s0 * m[i];
+    // Intersect the sphere.
+    const T f = c * (x1 * x1 + y1 * y1);
+    const T g = n[i] - c * (x1 * l[i] + y1 * m[i]);
+    const T zeta_raw = g * g - c * f;
+    const bool miss = zeta_raw < zero;
+    const T zeta = miss ? one : zeta_raw;  // keep numbers finite; the ray is flagged
+    const T cos_i = sqrt(zeta);
+    const T s1 = f / (g + cos_i);
+    const T x2 = x1 + s1 * l[i];
+    const T y2 = y1 + s1 * m[i];
+    const T z2 = s1 * n[i];
+    // Refract.
+    const T zeta_prime_raw = one - mu2 * (one - zeta);
+    const bool tir = zeta_prime_raw < zero;
+    const T zeta_prime = tir ? zeta : zeta_prime_raw;
+    if constexpr (kRecord) {
+      if (travel) travel[i] = z2 - z_rel;
+      zeta_out[i] = zeta_raw;              // before clamping: a miss shows as zeta < 0
+      zeta_prime_out[i] = zeta_prime_raw;  // before clamping: TIR shows as zeta' < 0
+    }
+    failure[i] = miss ? kRayMissedSurface : (tir ? kRayTotalInternalReflection : kRayOk);
+    const T gamma = sqrt(zeta_prime) - mu * cos_i;
+    l[i] = mu * l[i] - gamma * c * x2;
+    m[i] = mu * m[i] - gamma * c * y2;
+    n[i] = mu * n[i] + gamma * (one - c * z2);
+    x[i] = x2;
+    y[i] = y2;
+    z[i] = z2;
+  }
+}
+
+// The double instantiation, compiled for several instruction sets (function multi-versioning,
+// src/trace/kernel_double.cpp) and picked at load time: AVX-512 / AVX2+FMA where the CPU has
+// them, plain x86-64 elsewhere.
+void trace_surface_double(double c, double shift, double mu, int k, std::size_t count, double* x,
+                          double* y, double* z, double* l, double* m, double* n,
+                          std::int32_t* failure, double* travel, double* zeta_out,
+                          double* zeta_prime_out, bool record);
+
+}  // namespace detail
+
 // Traces every ray of `rays` through surfaces [0, end) at wavelength number w (end = K for the
 // whole lens), leaving positions relative to vertex end-1 on that surface. If `to_image`, rays
 // continue to the image plane (end must be K) and end with z = 0 relative to the image plane.
@@ -89,6 +151,8 @@ void trace_bundle(const TraceLens<T>& lens, int w, int end, bool to_image, RayBu
   T* n = rays.n.data();
   std::uint8_t* status = rays.status.data();
   std::int8_t* failed_at = rays.failed_surface.data();
+  rays.failure_scratch.resize(count);
+  std::int32_t* failure = rays.failure_scratch.data();
 
   // A ray must travel forwards.
   for (std::size_t i = 0; i < count; ++i) {
@@ -103,51 +167,27 @@ void trace_bundle(const TraceLens<T>& lens, int w, int end, bool to_image, RayBu
     const T c = lens.curvature_per_mm[k];
     const T shift = k > 0 ? lens.thickness_mm[k - 1] : zero;
     const T mu = lens.index(k - 1, w) / lens.index(k, w);
-    const T mu2 = mu * mu;
-    T* travel = record ? (k > 0 ? record->axial_travel_mm[k - 1].data() : nullptr) : nullptr;
-    T* zeta_out = record ? record->cos2_incidence[k].data() : nullptr;
-    T* zeta_prime_out = record ? record->cos2_refraction[k].data() : nullptr;
+    if constexpr (std::is_same_v<T, double>) {
+      detail::trace_surface_double(
+          c, shift, mu, k, count, x, y, z, l, m, n, failure,
+          record && k > 0 ? record->axial_travel_mm[k - 1].data() : nullptr,
+          record ? record->cos2_incidence[k].data() : nullptr,
+          record ? record->cos2_refraction[k].data() : nullptr, record != nullptr);
+    } else if (record) {
+      detail::trace_surface<T, true>(c, shift, mu, k, count, x, y, z, l, m, n, failure,
+                                     k > 0 ? record->axial_travel_mm[k - 1].data() : nullptr,
+                                     record->cos2_incidence[k].data(),
+                                     record->cos2_refraction[k].data());
+    } else {
+      detail::trace_surface<T, false>(c, shift, mu, k, count, x, y, z, l, m, n, failure, nullptr,
+                                      nullptr, nullptr);
+    }
+    // The first failure of a ray wins.
     for (std::size_t i = 0; i < count; ++i) {
-      // Shift to vertex k and transfer to its tangent plane.
-      const T z_rel = z[i] - shift;
-      const T s0 = -z_rel / n[i];
-      const T x1 = x[i] + s0 * l[i];
-      const T y1 = y[i] + s0 * m[i];
-      // Intersect the sphere.
-      const T f = c * (x1 * x1 + y1 * y1);
-      const T g = n[i] - c * (x1 * l[i] + y1 * m[i]);
-      T zeta = g * g - c * f;
-      if (zeta_out) zeta_out[i] = zeta;  // recorded before clamping: a miss shows as zeta < 0
-      if (zeta < zero) {
-        if (status[i] == kRayOk) {
-          status[i] = kRayMissedSurface;
-          failed_at[i] = static_cast<std::int8_t>(k);
-        }
-        zeta = one;  // keep numbers finite; the ray is flagged
+      if (failure[i] != kRayOk && status[i] == kRayOk) {
+        status[i] = static_cast<std::uint8_t>(failure[i]);
+        failed_at[i] = static_cast<std::int8_t>(k);
       }
-      const T cos_i = sqrt(zeta);
-      const T s1 = f / (g + cos_i);
-      const T x2 = x1 + s1 * l[i];
-      const T y2 = y1 + s1 * m[i];
-      const T z2 = s1 * n[i];
-      if (travel) travel[i] = z2 - z_rel;
-      // Refract.
-      T zeta_prime = one - mu2 * (one - zeta);
-      if (zeta_prime_out) zeta_prime_out[i] = zeta_prime;  // before clamping: TIR shows as < 0
-      if (zeta_prime < zero) {
-        if (status[i] == kRayOk) {
-          status[i] = kRayTotalInternalReflection;
-          failed_at[i] = static_cast<std::int8_t>(k);
-        }
-        zeta_prime = zeta;
-      }
-      const T gamma = sqrt(zeta_prime) - mu * cos_i;
-      l[i] = mu * l[i] - gamma * c * x2;
-      m[i] = mu * m[i] - gamma * c * y2;
-      n[i] = mu * n[i] + gamma * (one - c * z2);
-      x[i] = x2;
-      y[i] = y2;
-      z[i] = z2;
     }
   }
 
