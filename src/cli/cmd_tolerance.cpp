@@ -3,7 +3,10 @@
 // command line (which wins).
 #include <fmt/core.h>
 
+#include <unistd.h>
+
 #include <cmath>
+#include <cstdio>
 #include <memory>
 
 #include "commands.h"
@@ -81,11 +84,16 @@ void run_tolerance_command(const ToleranceCommand& cmd) {
   options.fields = cmd.fields;
   options.sensitivity = !cmd.no_sensitivity;
   if (!cmd.quiet) {
-    options.progress = [](int done, int total, double elapsed_s) {
+    // On a terminal one line rewritten in place; otherwise a line every 5 s and at the end.
+    const bool tty = isatty(fileno(stderr)) != 0;
+    auto last_line_s = std::make_shared<double>(-1e9);
+    options.progress = [tty, last_line_s](int done, int total, double elapsed_s) {
+      if (!tty && done < total && elapsed_s - *last_line_s < 5.0) return;
+      *last_line_s = elapsed_s;
       const double eta = done > 0 ? elapsed_s * (total - done) / done : 0.0;
-      fmt::print(stderr, "\rlensopt tolerance: {}/{} trials ({:.0f} %), {:.1f} s, ETA {:.1f} s   ",
-                 done, total, 100.0 * done / total, elapsed_s, eta);
-      if (done == total) fmt::print(stderr, "\n");
+      fmt::print(stderr, "{}lensopt tolerance: {}/{} trials ({:.0f} %), {:.1f} s, ETA {:.1f} s{}",
+                 tty ? "\r" : "", done, total, 100.0 * done / total, elapsed_s, eta,
+                 tty && done < total ? "   " : "\n");
       std::fflush(stderr);
     };
   }

@@ -422,9 +422,10 @@ SpotStatistics spot_statistics(std::vector<double> values) {
   s.count = static_cast<int>(values.size());
   if (values.empty()) return s;
   std::sort(values.begin(), values.end());
+  // About the smallest value, so that equal values give exactly that value and std 0.
   double sum = 0.0;
-  for (double v : values) sum += v;
-  s.mean = sum / s.count;
+  for (double v : values) sum += v - values.front();
+  s.mean = values.front() + sum / s.count;
   double ss = 0.0;
   for (double v : values) ss += (v - s.mean) * (v - s.mean);
   s.std = s.count > 1 ? std::sqrt(ss / (s.count - 1)) : 0.0;
@@ -480,9 +481,9 @@ ToleranceReport run_tolerance(const Lens& lens, const ToleranceOptions& options)
     r.index = i;
     report.trials[i] = std::move(r);
     const int now_done = done.fetch_add(1) + 1;
-    if (options.progress && progress_mutex.try_lock()) {
+    if (options.progress && now_done < n && progress_mutex.try_lock()) {
       const double t = elapsed();
-      if (t - last_report >= 0.25 || now_done == n) {
+      if (t - last_report >= 0.25) {
         last_report = t;
         options.progress(now_done, n, t);
       }
