@@ -1,0 +1,63 @@
+// Float images in memory and their files (through OpenImageIO).
+//
+// Pixel values are the file's values converted to float (integer formats scaled to [0, 1]); they
+// are used as they are, proportional to scene luminance as the paper assumes (no sRGB decoding).
+// Writing converts back to the original pixel type (so 8-bit stays 8-bit, 16-bit stays 16-bit,
+// half and float stay float; integer formats clamp to [0, 1]) in the format given by the file
+// extension, through a temporary file renamed into place (core/atomic_file.h).
+#pragma once
+
+#include <OpenImageIO/imageio.h>
+
+#include <filesystem>
+#include <string>
+#include <vector>
+
+namespace lensopt {
+
+// Row-major, top row first, channels interleaved (OpenImageIO's layout).
+struct FloatImage {
+  int width = 0;
+  int height = 0;
+  int channels = 0;
+  std::vector<float> pixels;
+
+  FloatImage() = default;
+  FloatImage(int w, int h, int c, float value = 0.0f)
+      : width(w), height(h), channels(c),
+        pixels(static_cast<std::size_t>(w) * h * c, value) {}
+  std::size_t index(int x, int y, int c) const {
+    return (static_cast<std::size_t>(y) * width + x) * channels + c;
+  }
+  float& at(int x, int y, int c) { return pixels[index(x, y, c)]; }
+  float at(int x, int y, int c) const { return pixels[index(x, y, c)]; }
+  bool empty() const { return pixels.empty(); }
+};
+
+// An image read from a file, with the file's spec (pixel type, metadata) for writing it back.
+struct LoadedImage {
+  FloatImage image;
+  OIIO::ImageSpec spec;
+};
+
+// The extensions lensopt renders, lower case with the dot: .png .jpg .jpeg .tif .tiff .exr.
+const std::vector<std::string>& supported_image_extensions();
+// Whether a path's extension (any case) is one of them.
+bool is_supported_image(const std::filesystem::path& path);
+// "PNG", "JPEG", "TIFF", "EXR" from the extension (empty if unsupported).
+std::string image_format_name(const std::filesystem::path& path);
+
+// Reads the first subimage of a PNG, JPEG, TIFF or EXR file. Throws Error naming the file for a
+// missing, unreadable, empty or corrupt file, an unsupported format or a zero-sized image.
+LoadedImage read_image(const std::filesystem::path& path);
+
+// Writes `image` to `path` (format from the extension) atomically, with the pixel type and
+// metadata of `like` (the input's spec); a default spec writes 8-bit for PNG/JPEG, 16-bit for
+// TIFF and half for EXR. Throws Error naming the path.
+void write_image(const std::filesystem::path& path, const FloatImage& image,
+                 const OIIO::ImageSpec& like = OIIO::ImageSpec());
+
+// Writes a float image (EXR or TIFF, 32-bit float) atomically.
+void write_float_image(const std::filesystem::path& path, const FloatImage& image);
+
+}  // namespace lensopt

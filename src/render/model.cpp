@@ -1,0 +1,124 @@
+// The per-lens imaging model, the sensor geometry and the radial interpolations.
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include "lensopt/analysis/analyze.h"
+#include "lensopt/core/error.h"
+#include "lensopt/render/render.h"
+
+namespace lensopt {
+namespace {
+
+// Piecewise-linear interpolation of (xs, ys) at x, xs increasing; clamped to the end values
+// (extrapolate = false) or extended with the first/last piece (extrapolate = true).
+double interpolate(const std::vector<double>& xs, const std::vector<double>& ys, double x,
+                   bool extrapolate) {
+  const std::size_t n = xs.size();
+  if (n == 1) return ys[0];
+  std::size_t k;
+  if (x <= xs.front()) {
+    if (!extrapolate) return ys.front();
+    k = 0;
+  } else if (x >= xs.back()) {
+    if (!extrapolate) return ys.back();
+    k = n - 2;
+  } else {
+    k = static_cast<std::size_t>(std::upper_bound(xs.begin(), xs.end(), x) - xs.begin()) - 1;
+  }
+  const double t = (x - xs[k]) / (xs[k + 1] - xs[k]);
+  return ys[k] + t * (ys[k + 1] - ys[k]);
+}
+
+}  // namespace
+
+void RenderOptions::validate() const {
+  if (res_factor != 1 && res_factor != 2)
+    throw Error(fmt::format("resolution factor {} must be 1 or 2", res_factor));
+  if (threads < 0 || threads > 1024)
+    throw Error(fmt::format("threads = {} must be in [0, 1024]", threads));
+}
+
+int colour_channel_count(int channels) { return channels >= 3 ? 3 : 1; }
+
+ImagingModel build_imaging_model(const Lens& lens, const TraceOptions& trace,
+                                 const PsfOptions& psf) {
+  trace.validate();
+  psf.validate();
+  validate_wavelength_channels(lens.specs.wavelength_channels,
+                               static_cast<int>(lens.specs.wavelengths_nm.size()));
+  AnalyzeOptions analyze_options;
+  analyze_options.trace = trace;
+  const AnalysisReport report = analyze_lens(lens, analyze_options);
+  const TraceLens<double> trace_lens = make_trace_lens(lens);
+  const TraceSystem<double> sys = prepare_system(trace_lens, lens.specs, trace);
+
+  ImagingModel model;
+  model.lens_name = lens.name;
+  model.sensor_diagonal_mm = lens.specs.sensor_diagonal_mm;
+  model.trace = trace;
+  model.ray_failures = report.ray_failures;
+  model.psfs = compute_psfs(sys, lens.specs.wavelength_channels, psf, trace.threads);
+  const std::string where = lens.source_path.empty() ? lens.name : lens.source_path;
+  for (std::size_t h = 0; h < report.fields.size(); ++h) {
+    const FieldReport& f = report.fields[h];
+    if (f.traced_rays == 0) {
+      throw Error(SourceLocation{where},
+                  fmt::format("cannot render: no ray of field {:.2f} deg reaches the image",
+                              f.field_deg));
+    }
+    model.fields_deg.push_back(f.field_deg);
+    model.reference_y_mm.push_back(f.reference_y_mm);
+    model.centroid_y_mm.push_back(f.centroid_y_mm);
+    model.distortion.push_back(f.distortion_percent / 100.0);
+    model.relative_illumination.push_back(f.relative_illumination);
+  }
+  for (std::size_t h = 1; h < model.reference_y_mm.size(); ++h) {
+    if (!(model.reference_y_mm[h] > model.reference_y_mm[h - 1])) {
+      throw Error(SourceLocation{where},
+                  "cannot render: the paraxial image heights do not increase with the field");
+    }
+  }
+  return model;
+}
+
+SensorGeometry SensorGeometry::make(int width, int height, int res_factor,
+                                    double sensor_diagonal_mm) {
+  SensorGeometry g;
+  g.width = width;
+  g.height = height;
+  g.res_factor = res_factor;
+  const double diagonal_px = std::hypot(static_cast<double>(width), static_cast<double>(height));
+  g.pitch_mm = sensor_diagonal_mm / (res_factor * diagonal_px);
+  g.axis_x = res_factor == 1 ? 0.5 * width : static_cast<double>(width);
+  g.axis_y = res_factor == 1 ? 0.5 * height : static_cast<double>(height);
+  return g;
+}
+
+double SensorGeometry::radius_mm(int i, int j) const {
+  return pitch_mm * std::hypot(i + 0.5 - axis_x, j + 0.5 - axis_y);
+}
+
+double relative_illumination_at(const ImagingModel& model, double radius_mm) {
+  return interpolate(model.reference_y_mm, model.relative_illumination, radius_mm, false);
+}
+
+double distortion_at(const ImagingModel& model, double radius_mm) {
+  return interpolate(model.reference_y_mm, model.distortion, radius_mm, true);
+}
+
+double undistorted_radius_mm(const ImagingModel& model, double distorted_radius_mm) {
+  const std::vector<double>& ybar = model.centroid_y_mm;
+  for (std::size_t h = 1; h < ybar.size(); ++h) {
+    if (!(ybar[h] > ybar[h - 1])) {
+      throw Error(fmt::format("cannot apply distortion: the image heights of fields {:.2f} and "
+                              "{:.2f} deg do not increase ({:.6f}, {:.6f} mm); render with "
+                              "--no-distortion",
+                              model.fields_deg[h - 1], model.fields_deg[h], ybar[h - 1], ybar[h]));
+    }
+  }
+  return interpolate(ybar, model.reference_y_mm, distorted_radius_mm, true);
+}
+
+}  // namespace lensopt
