@@ -2,7 +2,6 @@
 // a per-trial CSV and a histogram. Tolerances come from the lens's [tolerance] table, then the
 // command line (which wins).
 #include <fmt/core.h>
-
 #include <unistd.h>
 
 #include <cmath>
@@ -48,9 +47,10 @@ struct ToleranceCommand {
 void check_cli_tolerance(const CLI::Option* opt, double value) {
   if (opt == nullptr || opt->count() == 0) return;
   if (!std::isfinite(value) || value < 0)
-    throw Error(fmt::format("tolerance {} = {} must be a finite number >= 0 (tolerances are +- "
-                            "limits)",
-                            opt->get_name(), value));
+    throw Error(
+        fmt::format("tolerance {} = {} must be a finite number >= 0 (tolerances are +- "
+                    "limits)",
+                    opt->get_name(), value));
 }
 
 void run_tolerance_command(const ToleranceCommand& cmd) {
@@ -139,8 +139,9 @@ void setup_tolerance(CLI::App& app) {
           ->check(CLI::IsMember({"paraxial", "best-rms", "none"}));
   cmd->tolerance_opts[0] = sub->add_option("--curvature-pct", cmd->tolerances.curvature_pct,
                                            "curvature tolerance, +- percent (default 0.2)");
-  cmd->tolerance_opts[1] = sub->add_option("--glass-thickness-mm", cmd->tolerances.glass_thickness_mm,
-                                           "glass thickness tolerance, +- mm (default 0.05)");
+  cmd->tolerance_opts[1] =
+      sub->add_option("--glass-thickness-mm", cmd->tolerances.glass_thickness_mm,
+                      "glass thickness tolerance, +- mm (default 0.05)");
   cmd->tolerance_opts[2] = sub->add_option("--air-thickness-mm", cmd->tolerances.air_thickness_mm,
                                            "airspace tolerance, +- mm (default 0: off)");
   cmd->tolerance_opts[3] =

@@ -12,7 +12,9 @@ namespace lensopt {
 namespace {
 
 // Shortest text that reads back to the same double.
-std::string exact(double v) { return fmt::format("{}", v); }
+std::string exact(double v) {
+  return fmt::format("{}", v);
+}
 
 std::string compensator_text(FocusCompensator c) {
   switch (c) {
@@ -44,17 +46,18 @@ std::string tolerance_line(const Tolerances& t) {
 }  // namespace
 
 std::string format_trials_csv(const ToleranceReport& report) {
-  std::string out = "trial,valid,mean_spot_um,efl_mm,max_abs_distortion_pct,ray_failures,"
-                    "image_distance_mm";
+  std::string out =
+      "trial,valid,mean_spot_um,efl_mm,max_abs_distortion_pct,ray_failures,"
+      "image_distance_mm";
   for (double f : report.fields_deg) out += fmt::format(",spot_um_{:g}deg", f);
   for (const ToleranceParameter& p : report.parameters) out += "," + p.column;
   out += "\n";
   for (const TrialResult& r : report.trials) {
     out += fmt::format("{},{}", r.index, r.valid ? 1 : 0);
     if (r.valid) {
-      out += fmt::format(",{},{},{},{},{}", exact(r.mean_spot_um), exact(r.efl_mm),
-                         exact(r.max_abs_distortion_pct), r.ray_failures,
-                         exact(r.image_distance_mm));
+      out +=
+          fmt::format(",{},{},{},{},{}", exact(r.mean_spot_um), exact(r.efl_mm),
+                      exact(r.max_abs_distortion_pct), r.ray_failures, exact(r.image_distance_mm));
       for (double s : r.rms_spot_um) out += "," + exact(s);
     } else {
       out += fmt::format(",,,,{},", r.ray_failures);
@@ -72,25 +75,28 @@ std::string format_tolerance_text(const ToleranceReport& r, int sensitivity_rows
   const ToleranceOptions& o = r.options;
   line(fmt::format("Tolerancing: {}{}", r.lens_name,
                    r.source_path.empty() ? "" : fmt::format(" ({})", r.source_path)));
-  line(fmt::format("  prescription scaled by {:.6f} to f = {:.4f} mm; tolerances apply to the "
-                   "scaled lens",
-                   r.scale, r.spec_focal_length_mm));
+  line(
+      fmt::format("  prescription scaled by {:.6f} to f = {:.4f} mm; tolerances apply to the "
+                  "scaled lens",
+                  r.scale, r.spec_focal_length_mm));
   line(fmt::format("  tolerances: {}", tolerance_line(o.tolerances)));
   line(fmt::format("  {} trials, seed {}, {}; compensator: {}", o.trials, o.seed,
                    distribution_text(o.distribution), compensator_text(o.compensator)));
-  line(fmt::format("  sampling: {} fields x {} wavelengths x {} half-pupil rays ({} rings), ray "
-                   "aiming {}",
-                   r.fields_deg.size(), r.wavelength_count, r.rays_per_field_wavelength, o.rings,
-                   o.ray_aiming ? "on" : "off"));
+  line(
+      fmt::format("  sampling: {} fields x {} wavelengths x {} half-pupil rays ({} rings), ray "
+                  "aiming {}",
+                  r.fields_deg.size(), r.wavelength_count, r.rays_per_field_wavelength, o.rings,
+                  o.ray_aiming ? "on" : "off"));
   line(fmt::format("  {:.2f} s on {} threads, {:.3f} ms per trial", r.elapsed_s, r.threads,
                    r.ms_per_trial));
   line("");
   line("  mean RMS spot (um)");
   line(fmt::format("    nominal {:9.3f}   mean {:9.3f}   std {:8.3f}", r.nominal.mean_spot_um,
                    r.spot.mean, r.spot.std));
-  line(fmt::format("    p50     {:9.3f}   p90  {:9.3f}   p95 {:8.3f}   p99 {:8.3f}   worst "
-                   "{:8.3f}",
-                   r.spot.p50, r.spot.p90, r.spot.p95, r.spot.p99, r.spot.worst));
+  line(
+      fmt::format("    p50     {:9.3f}   p90  {:9.3f}   p95 {:8.3f}   p99 {:8.3f}   worst "
+                  "{:8.3f}",
+                  r.spot.p50, r.spot.p90, r.spot.p95, r.spot.p99, r.spot.worst));
   if (r.yield) {
     line(fmt::format("    yield (mean spot <= {:g} um): {:.2f} %", *o.max_spot_um,
                      100.0 * *r.yield));
@@ -322,7 +328,7 @@ std::string format_tolerance_histogram_svg(const ToleranceReport& r, int bins) {
   }
   svg.line({left, top + ph}, {left + pw, top + ph}, axis);
   svg.line({left, top}, {left, top + ph}, axis);
-  svg.text({left + pw / 2, height - 18}, "mean RMS spot (um)", 12, "middle");
+  svg.text({left + pw / 2, height - 18}, "mean RMS spot (µm)", 12, "middle");
   svg.text({20, top + ph / 2}, "trials", 12, "middle", "#000000", -90);
 
   // Marker lines and legend.
@@ -347,11 +353,11 @@ std::string format_tolerance_histogram_svg(const ToleranceReport& r, int bins) {
     if (inside) svg.line({x_of(m.value), top}, {x_of(m.value), top + ph}, s);
     svg.line({legend_x, legend_y}, {legend_x + 24, legend_y}, s);
     svg.text({legend_x + 30, legend_y + 4},
-             fmt::format("{} {:.3f} um{}", m.label, m.value, inside ? "" : " (off scale)"), 11);
+             fmt::format("{} {:.3f} µm{}", m.label, m.value, inside ? "" : " (off scale)"), 11);
     legend_y += 20;
   }
   legend_y += 10;
-  svg.text({legend_x, legend_y}, fmt::format("std {:.3f} um", r.spot.std), 11);
+  svg.text({legend_x, legend_y}, fmt::format("std {:.3f} µm", r.spot.std), 11);
   if (r.yield) {
     legend_y += 18;
     svg.text({legend_x, legend_y}, fmt::format("yield {:.2f} %", 100.0 * *r.yield), 11);

@@ -1,12 +1,12 @@
 // Tolerances, options and the [tolerance] table of a lens TOML.
 #include <fmt/format.h>
+#include <toml++/toml.h>
 
 #include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <limits>
 #include <sstream>
-#include <toml++/toml.h>
 
 #include "lensopt/core/error.h"
 #include "lensopt/tolerance/tolerance.h"
@@ -32,15 +32,15 @@ std::string to_string(FocusCompensator compensator) {
 ToleranceDistribution parse_tolerance_distribution(const std::string& text) {
   if (text == "uniform") return ToleranceDistribution::kUniform;
   if (text == "normal") return ToleranceDistribution::kNormal;
-  throw Error(fmt::format("unknown tolerance distribution '{}' (expected uniform or normal)", text));
+  throw Error(
+      fmt::format("unknown tolerance distribution '{}' (expected uniform or normal)", text));
 }
 
 FocusCompensator parse_focus_compensator(const std::string& text) {
   if (text == "paraxial") return FocusCompensator::kParaxial;
   if (text == "best-rms") return FocusCompensator::kBestRms;
   if (text == "none") return FocusCompensator::kNone;
-  throw Error(
-      fmt::format("unknown compensator '{}' (expected paraxial, best-rms or none)", text));
+  throw Error(fmt::format("unknown compensator '{}' (expected paraxial, best-rms or none)", text));
 }
 
 const std::vector<std::string>& tolerance_names() {
@@ -55,8 +55,8 @@ void check_tolerance(const char* name, double value) {
   if (!std::isfinite(value))
     throw Error(fmt::format("tolerance {} = {} is not a finite number", name, value));
   if (value < 0)
-    throw Error(fmt::format("tolerance {} = {} is negative (tolerances are +- limits, >= 0)",
-                            name, value));
+    throw Error(
+        fmt::format("tolerance {} = {} is negative (tolerances are +- limits, >= 0)", name, value));
 }
 
 }  // namespace
@@ -104,9 +104,9 @@ ToleranceSettings parse_tolerance_table(std::string_view toml_text,
     doc = toml::parse(toml_text, source_name);
   } catch (const toml::parse_error& e) {
     const auto& where = e.source().begin;
-    throw Error(SourceLocation{source_name, static_cast<int>(where.line),
-                               static_cast<int>(where.column)},
-                std::string(e.description()));
+    throw Error(
+        SourceLocation{source_name, static_cast<int>(where.line), static_cast<int>(where.column)},
+        std::string(e.description()));
   }
   ToleranceSettings out;
   const toml::node* node = doc.get("tolerance");
@@ -116,13 +116,12 @@ ToleranceSettings parse_tolerance_table(std::string_view toml_text,
                           static_cast<int>(region.begin.column)};
   };
   const toml::table* table = node->as_table();
-  if (table == nullptr)
-    throw Error(location(node->source()), "[tolerance] must be a table");
+  if (table == nullptr) throw Error(location(node->source()), "[tolerance] must be a table");
 
   for (auto&& [key, value] : *table) {
     const std::string name(key.str());
-    const SourceLocation where = location(key.source().begin.line > 0 ? key.source()
-                                                                      : value.source());
+    const SourceLocation where =
+        location(key.source().begin.line > 0 ? key.source() : value.source());
     auto number = [&]() -> double {
       const std::optional<double> v = value.value<double>();
       if (!v || !(value.is_integer() || value.is_floating_point()))
@@ -151,7 +150,8 @@ ToleranceSettings parse_tolerance_table(std::string_view toml_text,
       if (!v || !value.is_integer())
         throw Error(where, fmt::format("[tolerance] {} must be an integer", name));
       if (*v < lo || *v > hi)
-        throw Error(where, fmt::format("[tolerance] {} = {} must be in [{}, {}]", name, *v, lo, hi));
+        throw Error(where,
+                    fmt::format("[tolerance] {} = {} must be in [{}, {}]", name, *v, lo, hi));
       return *v;
     };
     try {
@@ -177,8 +177,7 @@ ToleranceSettings parse_tolerance_table(std::string_view toml_text,
       } else if (name == "trials") {
         out.trials = static_cast<int>(integer(1, 100000000));
       } else if (name == "seed") {
-        out.seed = static_cast<std::uint64_t>(
-            integer(0, std::numeric_limits<std::int64_t>::max()));
+        out.seed = static_cast<std::uint64_t>(integer(0, std::numeric_limits<std::int64_t>::max()));
       } else {
         throw Error(where,
                     fmt::format("unknown key '{}' in [tolerance] (known: curvature_pct, "
@@ -207,8 +206,8 @@ ToleranceSettings tolerance_settings_of(const Lens& lens) {
     }
   }
   if (lens.extra_toml.empty()) return {};
-  const std::string name =
-      lens.source_path.empty() ? std::string("[tolerance] table")
+  const std::string name = lens.source_path.empty()
+                               ? std::string("[tolerance] table")
                                : fmt::format("{} (tables after the lens)", lens.source_path);
   return parse_tolerance_table(lens.extra_toml, name);
 }

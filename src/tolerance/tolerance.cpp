@@ -181,7 +181,8 @@ std::vector<ToleranceParameter> tolerance_parameters(const Lens& lens, const Tol
     p.limit = tol.curvature_pct / 100.0;
     p.name = fmt::format("c{}", k + 1);
     p.column = fmt::format("dc{}_rel", k + 1);
-    p.description = fmt::format("surface {} curvature (R {:.4g} mm)", k + 1, 1.0 / s.curvature_per_mm);
+    p.description =
+        fmt::format("surface {} curvature (R {:.4g} mm)", k + 1, 1.0 / s.curvature_per_mm);
     p.limit_text = format_limit(tol.curvature_pct, " %");
     out.push_back(p);
   }
@@ -216,8 +217,8 @@ std::vector<ToleranceParameter> tolerance_parameters(const Lens& lens, const Tol
         p.limit = tol.nd;
         p.name = fmt::format("nd{}", k + 1);
         p.column = fmt::format("dnd{}", k + 1);
-        p.description = fmt::format("element {} index nd, glass after surface {} ({})",
-                                    element[k], k + 1, glass_label(s.material));
+        p.description = fmt::format("element {} index nd, glass after surface {} ({})", element[k],
+                                    k + 1, glass_label(s.material));
         p.limit_text = format_limit(tol.nd, "");
       } else {
         p.kind = Kind::kVd;
@@ -241,8 +242,8 @@ struct ToleranceModel::Impl {
   TraceLens<double> nominal;
   std::vector<ToleranceParameter> parameters;
   double scale = 1;
-  double stop_height_mm = 0;    // paraxial marginal-ray height at the stop (fixed aperture)
-  double defocus_mm = 0;        // t0_{K-1} - BFL0
+  double stop_height_mm = 0;  // paraxial marginal-ray height at the stop (fixed aperture)
+  double defocus_mm = 0;      // t0_{K-1} - BFL0
   double image_distance0_mm = 0;
   std::vector<double> fields_deg;
   int rays = 0;
@@ -285,7 +286,8 @@ ToleranceModel::ToleranceModel(const Lens& lens, const ToleranceOptions& options
   scale_options.fields = 1;
   scale_options.ray_aiming = false;
   scale_options.scale_to_spec = true;
-  const TraceSystem<double> unscaled = prepare_system(make_trace_lens(lens), lens.specs, scale_options);
+  const TraceSystem<double> unscaled =
+      prepare_system(make_trace_lens(lens), lens.specs, scale_options);
   m.scale = unscaled.scale;
   if (!(std::isfinite(m.scale) && m.scale > 0))
     throw Error(SourceLocation{lens.source_path},
@@ -312,18 +314,25 @@ ToleranceModel::~ToleranceModel() = default;
 const std::vector<ToleranceParameter>& ToleranceModel::parameters() const {
   return impl_->parameters;
 }
-double ToleranceModel::scale() const { return impl_->scale; }
-const Lens& ToleranceModel::scaled_lens() const { return impl_->scaled_lens; }
-std::vector<double> ToleranceModel::fields_deg() const { return impl_->fields_deg; }
+double ToleranceModel::scale() const {
+  return impl_->scale;
+}
+const Lens& ToleranceModel::scaled_lens() const {
+  return impl_->scaled_lens;
+}
+std::vector<double> ToleranceModel::fields_deg() const {
+  return impl_->fields_deg;
+}
 int ToleranceModel::wavelength_count() const {
   return static_cast<int>(impl_->specs.wavelengths_nm.size());
 }
-int ToleranceModel::rays_per_field_wavelength() const { return impl_->rays; }
+int ToleranceModel::rays_per_field_wavelength() const {
+  return impl_->rays;
+}
 
 std::vector<double> ToleranceModel::draw(int index) const {
   const Impl& m = *impl_;
-  std::mt19937_64 rng(
-      splitmix64(m.options.seed ^ splitmix64(static_cast<std::uint64_t>(index))));
+  std::mt19937_64 rng(splitmix64(m.options.seed ^ splitmix64(static_cast<std::uint64_t>(index))));
   std::vector<double> out(m.parameters.size());
   for (std::size_t i = 0; i < out.size(); ++i)
     out[i] = m.parameters[i].limit * unit_draw(rng, m.options.distribution);
@@ -344,9 +353,8 @@ TrialResult ToleranceModel::evaluate(const std::vector<double>& perturbations) c
   const int last = tl.surface_count() - 1;
   const ParaxialData<double> par = paraxial_data(tl, kWavelengthD_nm);
   // Reference image plane: the paraxial solve (also the start of the best-RMS search).
-  const double t_ref = m.options.compensator == FocusCompensator::kNone
-                           ? m.image_distance0_mm
-                           : par.bfl_mm + m.defocus_mm;
+  const double t_ref = m.options.compensator == FocusCompensator::kNone ? m.image_distance0_mm
+                                                                        : par.bfl_mm + m.defocus_mm;
   tl.thickness_mm[last] = t_ref;
   r.efl_mm = par.efl_mm;
   r.image_distance_mm = t_ref;
@@ -552,10 +560,9 @@ ToleranceReport run_tolerance(const Lens& lens, const ToleranceOptions& options)
                          : std::numeric_limits<double>::infinity();
       report.sensitivity.push_back(row);
     }
-    std::stable_sort(report.sensitivity.begin(), report.sensitivity.end(),
-                     [](const SensitivityRow& a, const SensitivityRow& b) {
-                       return a.score_um > b.score_um;
-                     });
+    std::stable_sort(
+        report.sensitivity.begin(), report.sensitivity.end(),
+        [](const SensitivityRow& a, const SensitivityRow& b) { return a.score_um > b.score_um; });
     report.sensitivity_s =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - sens_start).count();
   }

@@ -23,7 +23,9 @@ using namespace lensopt;
 
 namespace {
 
-Lens tessar() { return read_lens(test::source_dir() / "lenses" / "tessar.toml"); }
+Lens tessar() {
+  return read_lens(test::source_dir() / "lenses" / "tessar.toml");
+}
 
 ToleranceOptions small_options(int trials) {
   ToleranceOptions o;
@@ -56,7 +58,8 @@ TEST_CASE("tolerance: with every tolerance zero every trial equals the nominal e
   const Lens lens = tessar();
   for (FocusCompensator c :
        {FocusCompensator::kParaxial, FocusCompensator::kBestRms, FocusCompensator::kNone}) {
-    for (ToleranceDistribution d : {ToleranceDistribution::kUniform, ToleranceDistribution::kNormal}) {
+    for (ToleranceDistribution d :
+         {ToleranceDistribution::kUniform, ToleranceDistribution::kNormal}) {
       ToleranceOptions o = small_options(6);
       o.tolerances = Tolerances::zero();
       o.compensator = c;
@@ -117,7 +120,8 @@ TEST_CASE("tolerance: the same seed gives an identical per-trial CSV with jobs 1
 
 TEST_CASE("tolerance: draws stay within the limits with the stated distributions") {
   const Lens lens = tessar();
-  for (ToleranceDistribution d : {ToleranceDistribution::kUniform, ToleranceDistribution::kNormal}) {
+  for (ToleranceDistribution d :
+       {ToleranceDistribution::kUniform, ToleranceDistribution::kNormal}) {
     ToleranceOptions o = small_options(1);
     o.distribution = d;
     const ToleranceModel model(lens, o);
@@ -131,7 +135,8 @@ TEST_CASE("tolerance: draws stay within the limits with the stated distributions
     bool within = true;
     for (int i = 0; i < n; ++i) {
       const std::vector<double> p = model.draw(i);
-      for (std::size_t j = 0; j < p.size(); ++j) within = within && std::abs(p[j]) <= params[j].limit;
+      for (std::size_t j = 0; j < p.size(); ++j)
+        within = within && std::abs(p[j]) <= params[j].limit;
       const double u = p[nd_index] / 5e-4;
       sum += u;
       sum2 += u * u;
@@ -158,8 +163,8 @@ TEST_CASE("tolerance: doubling every tolerance increases the spread of the mean 
   const ToleranceReport single = run_tolerance(lens, o);
   o.tolerances = o.tolerances.times(2.0);
   const ToleranceReport doubled = run_tolerance(lens, o);
-  MESSAGE("std of the mean spot: ", single.spot.std, " um, doubled tolerances: ",
-          doubled.spot.std, " um");
+  MESSAGE("std of the mean spot: ", single.spot.std, " um, doubled tolerances: ", doubled.spot.std,
+          " um");
   CHECK(single.spot.std > 0.0);
   CHECK(doubled.spot.std > 1.5 * single.spot.std);
   CHECK(doubled.spot.p90 > single.spot.p90);
@@ -203,9 +208,8 @@ TEST_CASE("tolerance: the paraxial compensator removes a thickness error's defoc
       const double error_none = without.mean_spot_um - nominal_none.mean_spot_um;
       const double error_paraxial = with.mean_spot_um - nominal.mean_spot_um;
       MESSAGE(params[i].name, sign > 0 ? "+" : "-", ": BFL shift ", shift,
-              " mm; spot change without compensator ", error_none, " um, paraxial ",
-              error_paraxial, " um, best-rms ", refocused.mean_spot_um - nominal_best.mean_spot_um,
-              " um");
+              " mm; spot change without compensator ", error_none, " um, paraxial ", error_paraxial,
+              " um, best-rms ", refocused.mean_spot_um - nominal_best.mean_spot_um, " um");
       // Where the error is mostly a focus shift (> 0.05 mm; the front elements), the paraxial
       // solve removes most of it (about 90 % or more): what is left is the aberration change.
       if (std::abs(shift) > 0.05) {

@@ -5,10 +5,10 @@
 // toleranced parameter and traces the perturbed lens as it is, never rescaled to the spec (that
 // would hide the focal-length error). For parameter p with tolerance limit L_p and a unit draw
 // u in [-1, 1]:
-//   curvature   c' = c (1 + L u)        L = curvature_pct / 100   (relative; flat surfaces stay flat)
-//   thickness   t' = t + L u            L = glass_thickness_mm, or air_thickness_mm for airspaces
-//   index       nd' = nd + L u          L = nd
-//   Abbe number vd' = vd (1 + L u)      L = vd_pct / 100          (relative)
+//   curvature   c' = c (1 + L u)        L = curvature_pct / 100   (relative; flat surfaces stay
+//   flat) thickness   t' = t + L u            L = glass_thickness_mm, or air_thickness_mm for
+//   airspaces index       nd' = nd + L u          L = nd Abbe number vd' = vd (1 + L u)      L =
+//   vd_pct / 100          (relative)
 // Draws: uniform u ~ U[-1, 1) (default, as in the paper), or normal u ~ N(0, 1/2^2) truncated to
 // [-1, 1], i.e. the tolerance is the 2-sigma limit. Each trial's generator is std::mt19937_64
 // seeded with splitmix64(seed ^ splitmix64(trial index)), and the unit draws are computed from
@@ -131,28 +131,29 @@ struct ToleranceOptions {
 struct ToleranceParameter {
   enum class Kind { kCurvature, kThickness, kNd, kVd };
   Kind kind = Kind::kCurvature;
-  int surface = 0;     // 0-based surface index (kNd/kVd: the surface the glass follows)
-  bool air = false;    // kThickness: an airspace
-  double limit = 0;    // +- limit, native units: relative (curvature, vd), mm, or index
-  std::string name;    // "c1", "t1", "nd1", "vd1" (1-based surface numbers)
-  std::string column;  // CSV column of the drawn perturbation: "dc1_rel", "dt1_mm", ...
+  int surface = 0;          // 0-based surface index (kNd/kVd: the surface the glass follows)
+  bool air = false;         // kThickness: an airspace
+  double limit = 0;         // +- limit, native units: relative (curvature, vd), mm, or index
+  std::string name;         // "c1", "t1", "nd1", "vd1" (1-based surface numbers)
+  std::string column;       // CSV column of the drawn perturbation: "dc1_rel", "dt1_mm", ...
   std::string description;  // "surface 1 radius", "element 1 (glass S-LAH64) thickness", ...
   std::string limit_text;   // "0.2 %", "0.05 mm", "0.0005"
 };
 
 // Every parameter of a lens (with zero limits where the tolerance is zero), in a fixed order:
 // curvatures, thicknesses, nd, vd, each by surface.
-std::vector<ToleranceParameter> tolerance_parameters(const Lens& lens, const Tolerances& tolerances);
+std::vector<ToleranceParameter> tolerance_parameters(const Lens& lens,
+                                                     const Tolerances& tolerances);
 
 struct TrialResult {
-  int index = -1;  // -1: the nominal
+  int index = -1;     // -1: the nominal
   bool valid = true;  // false if a field had no traced ray or a number was not finite
   double mean_spot_um = 0;
   std::vector<double> rms_spot_um;  // per field
   double efl_mm = 0;
   double max_abs_distortion_pct = 0;
   int ray_failures = 0;
-  double image_distance_mm = 0;  // the compensated last thickness
+  double image_distance_mm = 0;       // the compensated last thickness
   std::vector<double> perturbations;  // per parameter, native units
 };
 
@@ -162,11 +163,11 @@ struct SpotStatistics {
 };
 
 struct SensitivityRow {
-  int parameter = 0;  // index into ToleranceReport::parameters
-  double plus_um = 0;   // mean spot change at +limit
-  double minus_um = 0;  // at -limit
+  int parameter = 0;                         // index into ToleranceReport::parameters
+  double plus_um = 0;                        // mean spot change at +limit
+  double minus_um = 0;                       // at -limit
   double efl_plus_mm = 0, efl_minus_mm = 0;  // EFL change
-  double score_um = 0;  // max(|plus|, |minus|), the ranking key
+  double score_um = 0;                       // max(|plus|, |minus|), the ranking key
 };
 
 struct ToleranceReport {
@@ -182,15 +183,15 @@ struct ToleranceReport {
   std::vector<ToleranceParameter> parameters;
   TrialResult nominal;
   std::vector<TrialResult> trials;
-  SpotStatistics spot;  // mean RMS spot over valid trials, um
+  SpotStatistics spot;          // mean RMS spot over valid trials, um
   std::optional<double> yield;  // fraction in [0, 1], when max_spot_um is set
   int invalid_trials = 0;
   int trials_with_failures = 0;
   double efl_mean_mm = 0, efl_std_mm = 0, efl_min_mm = 0, efl_max_mm = 0;
   double distortion_mean_pct = 0, distortion_worst_pct = 0;
   std::vector<SensitivityRow> sensitivity;  // ranked, largest first
-  double elapsed_s = 0;        // Monte-Carlo trials only
-  double ms_per_trial = 0;     // wall time per trial with `threads` threads
+  double elapsed_s = 0;                     // Monte-Carlo trials only
+  double ms_per_trial = 0;                  // wall time per trial with `threads` threads
   double sensitivity_s = 0;
 };
 
