@@ -9,7 +9,7 @@
 //   5 Conrady:     n = c0 + c1/l + c2/l^3.5
 //   6 Sellmeier 3, 9 Sellmeier 4, 11 Sellmeier 5: Sellmeier 1 with 4, (special form), 5 terms
 //   7 Handbook of Optics 1, 8 Handbook of Optics 2, 10/12/13 Extended 1/2/3
-// (src/glass/dispersion.cpp states each one exactly). Indices are relative to air, as in AGF.
+// (src/glass/glass.cpp states each one exactly). Indices are relative to air, as in AGF.
 #pragma once
 
 #include <filesystem>
