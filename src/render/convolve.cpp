@@ -92,8 +92,8 @@ int reflect(int i, int n) {
 struct Renderer::GridEntry {
   std::shared_ptr<const PsfGrid> grid;
   int pad = 0;
-  std::vector<std::vector<double>> window_x, window_y;  // [patch][pixel + pad]
-  std::vector<int> lo_x, hi_x, lo_y, hi_y;              // patch extents (image coordinates)
+  std::vector<std::vector<double>> window_x, window_y;  // [patch][pixel]
+  std::vector<int> lo_x, hi_x, lo_y, hi_y;              // window extents in the image
   int nx = 0, ny = 0;
   FftPlans plans;
   std::vector<std::vector<std::complex<double>>> spectra;  // [patch * 3 + channel]
@@ -127,16 +127,19 @@ Renderer::~Renderer() = default;
 std::shared_ptr<Renderer::GridEntry> Renderer::entry(int width, int height) const {
   std::lock_guard<std::mutex> lock(mutex_);
   auto it = grids_.find({width, height});
-  if (it != grids_.end()) return it->second;
+  if (it != grids_.end()) {
+    it->second.second = ++use_counter_;
+    return it->second.first;
+  }
 
   auto e = std::make_shared<GridEntry>();
   auto grid = std::make_shared<PsfGrid>(make_psf_grid(model_, width, height, options_.res_factor));
   e->grid = grid;
   e->pad = grid->max_radius;
   std::vector<double> sum_x, sum_y;
-  e->window_x = overlap_windows(grid->bounds_x, width, e->pad, &sum_x);
-  e->window_y = overlap_windows(grid->bounds_y, height, e->pad, &sum_y);
-  // Extents: where each patch's window is non-zero.
+  e->window_x = overlap_windows(grid->bounds_x, width, 0, &sum_x);
+  e->window_y = overlap_windows(grid->bounds_y, height, 0, &sum_y);
+  // Extents: where each patch's window is non-zero inside the image.
   auto extents = [&](const std::vector<std::vector<double>>& w, std::vector<int>& lo,
                      std::vector<int>& hi) {
     int widest = 0;
@@ -148,8 +151,8 @@ std::shared_ptr<Renderer::GridEntry> Renderer::entry(int width, int height) cons
           last = i;
         }
       }
-      lo.push_back(first - e->pad);
-      hi.push_back(last + 1 - e->pad);
+      lo.push_back(first);
+      hi.push_back(last + 1);
       widest = std::max(widest, last + 1 - first);
     }
     return widest;
@@ -181,7 +184,13 @@ std::shared_ptr<Renderer::GridEntry> Renderer::entry(int width, int height) cons
         out[i] = std::complex<double>(spectrum.data[i][0], spectrum.data[i][1]) * scale;
     }
   }
-  grids_.emplace(std::make_pair(width, height), e);
+  if (grids_.size() >= kCachedSizes) {  // forget the least recently used size
+    auto oldest = grids_.begin();
+    for (auto i = grids_.begin(); i != grids_.end(); ++i)
+      if (i->second.second < oldest->second.second) oldest = i;
+    grids_.erase(oldest);
+  }
+  grids_.emplace(std::make_pair(width, height), std::make_pair(e, ++use_counter_));
   return e;
 }
 
@@ -218,34 +227,27 @@ FloatImage Renderer::blur(const FloatImage& input, int threads) const {
       const int wx = e->hi_x[px] - lo_x, wy = e->hi_y[py] - lo_y;
       const std::vector<double>& win_x = e->window_x[px];
       const std::vector<double>& win_y = e->window_y[py];
-      // Windowed patch of the reflected image.
+      // The patch's input: its window's extent plus the PSF reach on each side, from the
+      // reflected image.
+      const int pad = e->pad;
       std::memset(real.data, 0, sizeof(double) * static_cast<std::size_t>(ny) * nx);
-      for (int j = 0; j < wy; ++j) {
-        const int y = lo_y + j;
-        const double wyv = win_y[y + e->pad];
-        const int sy = e->reflect_y[y + e->pad];
+      for (int j = 0; j < wy + 2 * pad; ++j) {
+        const int sy = e->reflect_y[lo_y + j];  // image row lo_y - pad + j
+        const float* src = input.pixels.data() + static_cast<std::size_t>(sy) * width * input.channels;
         double* row = real.data + static_cast<std::size_t>(j) * nx;
-        for (int i = 0; i < wx; ++i) {
-          const int x = lo_x + i;
-          row[i] = wyv * win_x[x + e->pad] *
-                   input.pixels[(static_cast<std::size_t>(sy) * width + e->reflect_x[x + e->pad]) *
-                                    input.channels +
-                                c];
-        }
+        for (int i = 0; i < wx + 2 * pad; ++i)
+          row[i] = src[static_cast<std::size_t>(e->reflect_x[lo_x + i]) * input.channels + c];
       }
       fftw_execute_dft_r2c(e->plans.forward, real.data, spectrum.data);
       // Multiply by the kernel's spectrum (grey images: the mean kernel's, made here).
       const std::complex<double>* k;
-      const PixelKernel* kernel;
       if (colours == kColourChannels) {
         k = e->spectra[q * kColourChannels + c].data();
-        kernel = &grid.kernels[q][c];
       } else {
-        kernel = &grid.grey_kernels[q];
         grey_spectrum.resize(spectrum_size);
         RealBuffer kreal(static_cast<std::size_t>(ny) * nx);
         ComplexBuffer kspec(spectrum_size);
-        place_kernel(*kernel, ny, nx, kreal.data);
+        place_kernel(grid.grey_kernels[q], ny, nx, kreal.data);
         fftw_execute_dft_r2c(e->plans.forward, kreal.data, kspec.data);
         const double scale = 1.0 / (static_cast<double>(nx) * ny);
         for (std::size_t i = 0; i < spectrum_size; ++i)
@@ -259,15 +261,14 @@ FloatImage Renderer::blur(const FloatImage& input, int threads) const {
         spectrum.data[i][1] = v.imag();
       }
       fftw_execute_dft_c2r(e->plans.backward, spectrum.data, real.data);
-      // Add the patch's blurred light (it spills kernel.radius beyond the window) into the image.
-      const int r = kernel->radius;
+      // Weight the blurred patch by its window and add it into the image.
       float* out = acc.data() + plane * c;
-      const int j0 = std::max(-r, -lo_y), j1 = std::min(wy + r, height - lo_y);
-      const int i0 = std::max(-r, -lo_x), i1 = std::min(wx + r, width - lo_x);
-      for (int j = j0; j < j1; ++j) {
-        const double* row = real.data + static_cast<std::size_t>((j + ny) % ny) * nx;
+      for (int j = 0; j < wy; ++j) {
+        const double wyv = win_y[lo_y + j];
+        const double* row = real.data + static_cast<std::size_t>(j + pad) * nx + pad;
         float* dst = out + static_cast<std::size_t>(lo_y + j) * width + lo_x;
-        for (int i = i0; i < i1; ++i) dst[i] += static_cast<float>(row[(i + nx) % nx]);
+        const double* wxv = win_x.data() + lo_x;
+        for (int i = 0; i < wx; ++i) dst[i] += static_cast<float>(wyv * wxv[i] * row[i]);
       }
     }
   }

@@ -1,0 +1,75 @@
+// Rendering image files and whole dataset trees (`lensopt render LENS INPUT... -o OUT`).
+//
+// Inputs are files or directories (searched recursively for .png .jpg .jpeg .tif .tiff .exr, any
+// case; hidden files and folders and anything inside OUT are left out). A file inside a directory
+// input D keeps its path relative to D under OUT; a file input goes to OUT/<name>. Each output has
+// the input's format and pixel type and is written atomically. An output that already exists is
+// skipped unless `force` (resume); its metrics are taken from the previous run's
+// render_metrics.json if there is one. An input that cannot be read or rendered (missing,
+// corrupt, empty, unsupported, smaller than the PSF) is recorded as failed and the run goes on.
+// OUT/render_metrics.csv and OUT/render_metrics.json list every image with its status, PSNR and
+// SSIM (input vs blurred, before relative illumination and distortion) and their means; they are
+// rewritten atomically at least every 10 s and at the end.
+#pragma once
+
+#include <filesystem>
+#include <functional>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "lensopt/render/render.h"
+
+namespace lensopt {
+
+struct DatasetOptions {
+  std::vector<std::filesystem::path> inputs;
+  std::filesystem::path output_dir;
+  bool force = false;  // render even if the output exists
+  int jobs = 0;        // threads in all (images in parallel, and inside an image); 0: all cores
+
+  // Throws Error if there is no input, no output directory or jobs < 0.
+  void validate() const;
+};
+
+struct ImageRecord {
+  enum class Status { kRendered, kSkipped, kFailed };
+  std::filesystem::path input;
+  std::string relative_path;  // output path relative to OUT ("" if it has none)
+  Status status = Status::kFailed;
+  std::optional<double> psnr_db;  // +inf when the blur changed nothing
+  std::optional<double> ssim;
+  int width = 0, height = 0;
+  double seconds = 0;
+  std::string error;  // for kFailed
+};
+
+const char* status_name(ImageRecord::Status status);
+
+struct DatasetSummary {
+  std::vector<ImageRecord> records;  // input order
+  int rendered = 0, skipped = 0, failed = 0;
+  std::optional<double> mean_psnr_db;  // over images with a finite PSNR
+  std::optional<double> mean_ssim;
+  double seconds = 0;
+  std::filesystem::path csv_path, json_path;
+  std::vector<std::string> notes;  // e.g. previous metrics from other settings
+};
+
+// Called after each image (serialized), with the number done and the total.
+using DatasetProgress = std::function<void(const ImageRecord& record, int done, int total)>;
+
+// Renders every input. Throws Error only for problems with the run as a whole (no inputs, an
+// output directory that cannot be created or written, two inputs with the same output path).
+DatasetSummary render_dataset(const Renderer& renderer, const DatasetOptions& options,
+                              const DatasetProgress& progress = {});
+
+// Reads, renders and writes one image (atomically). Throws Error naming the file.
+RenderResult render_file(const Renderer& renderer, const std::filesystem::path& input,
+                         const std::filesystem::path& output, int threads = 0);
+
+// Checks that `dir` exists or can be created and that a file can be written in it; throws Error
+// saying why not.
+void ensure_writable_directory(const std::filesystem::path& dir);
+
+}  // namespace lensopt
