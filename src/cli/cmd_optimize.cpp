@@ -253,7 +253,7 @@ void setup_optimize(CLI::App& app) {
   sub->add_option("--rings", cmd->rings, "pupil rings during optimization (default 8)");
   sub->add_option("--fields", cmd->fields, "fields during optimization (default 11)");
   sub->add_option("--threads", cmd->threads, "threads (0: all cores)");
-  sub->add_option("--max-iterations", cmd->max_iterations, "LM iterations per round (default 100)");
+  sub->add_option("--max-iterations", cmd->max_iterations, "LM iterations per round (default 50)");
   sub->add_option("--weight-ray-path", cmd->weight_ray_path, "lambda_RP (default 100)");
   sub->add_option("--weight-ray-angle", cmd->weight_ray_angle, "lambda_RA (default 100)");
   sub->add_option("--weight-glass", cmd->weight_glass, "lambda_GV (default 0.01)");

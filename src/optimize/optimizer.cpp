@@ -15,7 +15,7 @@
 namespace lensopt {
 namespace {
 
-// Jet width for the Jacobian: one pass covers lenses of up to 24 variables (the Tessar has 22).
+// Jet widths for the Jacobian: the smallest that covers the lens's variables in one pass.
 constexpr int kStride = 24;
 
 struct DesignFunctor {
@@ -65,13 +65,13 @@ DesignLoss<double> evaluate_double(const LensParameterization& param, const std:
 }
 
 // Bounds tightened by the design margin so that constraints met at the optimization sampling
-// stay met at full sampling.
+// stay met at full sampling (which has rays nearer the pupil edge and fields in between).
 DesignLossOptions with_margin(DesignLossOptions loss) {
-  loss.min_air_mm += 0.002;
-  loss.min_glass_mm += 0.002;
-  loss.max_glass_mm -= 0.002;
-  loss.min_image_clearance_mm += 0.01;
-  loss.max_ray_angle_deg -= 0.1;
+  loss.min_air_mm += 0.005;
+  loss.min_glass_mm += 0.005;
+  loss.max_glass_mm -= 0.005;
+  loss.min_image_clearance_mm += 0.02;
+  loss.max_ray_angle_deg -= 0.5;
   return loss;
 }
 
@@ -82,47 +82,63 @@ struct Counters {
   std::string termination;
 };
 
+template <int kWidth>
+ceres::CostFunction* make_cost(DesignFunctor* functor, int n, int residuals) {
+  auto* cost = new ceres::DynamicAutoDiffCostFunction<DesignFunctor, kWidth>(functor);
+  cost->AddParameterBlock(n);
+  cost->SetNumResiduals(residuals);
+  return cost;
+}
+
+ceres::CostFunction* make_cost_for(DesignFunctor* functor, int n, int residuals) {
+  if (n <= 8) return make_cost<8>(functor, n, residuals);
+  if (n <= 12) return make_cost<12>(functor, n, residuals);
+  if (n <= 16) return make_cost<16>(functor, n, residuals);
+  if (n <= 20) return make_cost<20>(functor, n, residuals);
+  return make_cost<24>(functor, n, residuals);
+}
+
+int residual_count(const LensParameterization& param, const TraceOptions& sampling) {
+  const Specs& specs = param.structure().specs;
+  const int fields = static_cast<int>(field_angles_deg(specs.half_field_deg, sampling.fields).size());
+  const int rays = static_cast<int>(paper_pupil_samples(sampling.rings).size());
+  int glasses = 0;
+  for (const LensVariable& v : param.variables()) glasses += v.kind == LensVariable::Kind::kGlass0;
+  return design_residual_count(fields, static_cast<int>(specs.wavelengths_nm.size()), rays,
+                               static_cast<int>(param.structure().surfaces.size()), glasses);
+}
+
 // Rounds of LM with reweighting; x is updated in place. Returns the final double loss.
 DesignLoss<double> run_phase(const LensParameterization& param, std::vector<double>& x,
                              GlassMode mode, const std::vector<int>& fixed,
                              const std::vector<int>& frozen, const OptimizeOptions& options,
                              DesignLossOptions& loss, const std::string& name, int max_rounds,
-                             int max_iterations, Counters& counters) {
+                             int max_iterations, Counters& counters, double glass_weight_growth = 1.0) {
   const int n = param.size();
   DesignLoss<double> current = evaluate_double(param, x, mode, fixed, options.sampling, loss);
+  double radius = 1e4;  // Ceres's default initial trust region; carried between rounds
   for (int round = 0; round < max_rounds; ++round) {
     if (options.interrupt && options.interrupt->load()) break;
+    if (static_cast<int>(frozen.size()) >= n) break;
     const int field_count = static_cast<int>(current.field_rms_mm.size());
     std::vector<double> weights(field_count);
     for (int h = 0; h < field_count; ++h)
       weights[h] = 1.0 / (field_count * std::max(current.field_rms_mm[h], 1e-5));
     auto* functor = new DesignFunctor{&param, mode, fixed, options.sampling, loss, weights,
                                       &counters.evaluations};
-    auto* cost = new ceres::DynamicAutoDiffCostFunction<DesignFunctor, kStride>(functor);
-    cost->AddParameterBlock(n);
-    const int glass_count = static_cast<int>(param.nearest_glasses(x.data()).size());
-    const TraceSystem<double> probe_sys = [&] {
-      TraceOptions t = options.sampling;
-      t.ray_aiming = false;
-      t.scale_to_spec = false;
-      return prepare_system(param.to_trace_lens(x.data(), GlassMode::kContinuous), param.structure().specs, t);
-    }();
-    cost->SetNumResiduals(design_residual_count(static_cast<int>(probe_sys.fields_deg.size()),
-                                                probe_sys.wavelength_count,
-                                                static_cast<int>(probe_sys.pupil.size()),
-                                                probe_sys.lens.surface_count(), glass_count));
     ceres::Problem problem;
-    problem.AddResidualBlock(cost, nullptr, x.data());
-    if (static_cast<int>(frozen.size()) == n) break;
+    problem.AddResidualBlock(make_cost_for(functor, n, residual_count(param, options.sampling)),
+                             nullptr, x.data());
     if (!frozen.empty()) problem.SetManifold(x.data(), new ceres::SubsetManifold(n, frozen));
     ceres::Solver::Options solver;
     solver.minimizer_type = ceres::TRUST_REGION;
     solver.trust_region_strategy_type = ceres::LEVENBERG_MARQUARDT;
     solver.linear_solver_type = ceres::DENSE_QR;
     solver.max_num_iterations = max_iterations;
-    solver.function_tolerance = 1e-7;
+    solver.initial_trust_region_radius = radius;
+    solver.function_tolerance = 1e-6;
     solver.gradient_tolerance = 1e-12;
-    solver.parameter_tolerance = 1e-9;
+    solver.parameter_tolerance = 1e-8;
     solver.num_threads = 1;  // the loss parallelizes over fields itself
     solver.update_state_every_iteration = true;
     solver.logging_type = ceres::SILENT;
@@ -134,27 +150,30 @@ DesignLoss<double> run_phase(const LensParameterization& param, std::vector<doub
     counters.iterations += static_cast<int>(summary.iterations.size());
     counters.jacobians += summary.num_jacobian_evaluations;
     counters.termination = summary.message;
+    if (!summary.iterations.empty())
+      radius = std::max(summary.iterations.back().trust_region_radius, 1e-2);
     const DesignLoss<double> next = evaluate_double(param, x, mode, fixed, options.sampling, loss);
     // Raise the weight of a constraint still violated.
     bool violated = false;
-    if (next.ray_path_mm > 1e-12 && loss.weight_ray_path < 1e7) {
+    if (next.ray_path_mm > 0 && loss.weight_ray_path < 1e8) {
       loss.weight_ray_path *= 10;
       violated = true;
     }
-    if (next.ray_angle > 1e-12 && loss.weight_ray_angle < 1e7) {
+    if (next.ray_angle > 0 && loss.weight_ray_angle < 1e8) {
       loss.weight_ray_angle *= 10;
       violated = true;
     }
+    loss.weight_glass *= glass_weight_growth;
     const double change = std::abs(next.spot_mm - current.spot_mm) / std::max(current.spot_mm, 1e-9);
     if (options.verbose) {
       fmt::print(stderr,
                  "lensopt optimize: {} round {}: mean spot {:.4f} um (optimization sampling), "
-                 "l_RP {:.2e}, l_RA {:.2e}, {} failed rays, {}\n",
+                 "l_RP {:.2e}, l_RA {:.2e}, l_GV {:.2e}, {} failed rays; {} iterations\n",
                  name, round + 1, next.spot_mm * 1000, next.ray_path_mm, next.ray_angle,
-                 next.failed_rays, summary.message);
+                 next.glass, next.failed_rays, summary.iterations.size());
     }
     current = next;
-    if (!violated && change < 1e-4) break;
+    if (!violated && change < 2e-3 && glass_weight_growth == 1.0) break;
   }
   return current;
 }
@@ -288,28 +307,52 @@ OptimizeResult optimize_lens(const Lens& start, const OptimizeOptions& options) 
 
   DesignLossOptions loss = with_margin(options.loss);
   const auto interrupted = [&] { return options.interrupt && options.interrupt->load(); };
-
-  // Phase 1: continuous glasses.
-  if (options.glass_search != GlassSearch::kNone && !glasses_frozen_by_user) {
-    run_phase(param, x, GlassMode::kContinuous, {}, frozen_user, options, loss, "continuous",
-              options.max_rounds, options.max_iterations, counters);
-    result.log.push_back("phase 1 (continuous glasses) done");
-  }
-  // Phase 2: snap to the nearest catalog glasses, freeze them.
-  std::vector<int> fixed = param.nearest_glasses(x.data());
-  for (int i : glass_indices) {
-    const int pair = static_cast<int>(std::find(glass_indices.begin(), glass_indices.end(), i) - glass_indices.begin()) / 2;
-    const Eigen::Vector2d p = param.glass_space().glass_point(fixed[pair]);
-    x[i] = p[(param.variables()[i].kind == LensVariable::Kind::kGlass0) ? 0 : 1];
-  }
   const std::vector<int> frozen_all = merged(frozen_user, glass_indices);
-  DesignLoss<double> best = run_phase(param, x, GlassMode::kFixed, fixed, frozen_all, options, loss,
-                                      "snapped", options.max_rounds, options.max_iterations, counters);
-  result.log.push_back("phase 2 (snapped glasses) done");
+  // Puts the whitened points of catalog glasses `glasses` into the glass variables of x.
+  auto set_glasses = [&](std::vector<double>& xs, const std::vector<int>& glasses) {
+    for (std::size_t pair = 0; 2 * pair < glass_indices.size(); ++pair) {
+      const Eigen::Vector2d p = param.glass_space().glass_point(glasses[pair]);
+      xs[glass_indices[2 * pair]] = p[0];
+      xs[glass_indices[2 * pair + 1]] = p[1];
+    }
+  };
+  const int rounds = options.max_rounds;
+  const int iterations = options.max_iterations;
 
-  // Phase 3: neighbouring catalog glasses per element.
-  if (options.glass_search == GlassSearch::kNeighbours && !glasses_frozen_by_user &&
-      options.glass_neighbours > 0) {
+  // Phase A: the start's glasses, snapped to the catalog and held; LM on the rest.
+  std::vector<int> fixed = param.nearest_glasses(x.data());
+  set_glasses(x, fixed);
+  DesignLoss<double> best = run_phase(param, x, GlassMode::kFixed, fixed, frozen_all, options,
+                                      loss, "fixed glasses", rounds, iterations, counters);
+  result.log.push_back(fmt::format("fixed glasses: {:.4f} um (optimization sampling)", best.spot_mm * 1000));
+
+  const bool search = options.glass_search != GlassSearch::kNone && !glasses_frozen_by_user;
+  // Phase B: continuous glasses with an annealed glass-variable loss (its weight grows tenfold
+  // per round, pulling each g onto a catalog glass), then snapped and re-optimized; kept only if
+  // it beats phase A.
+  if (search && !interrupted()) {
+    std::vector<double> xc = x;
+    DesignLossOptions continuous_loss = loss;
+    run_phase(param, xc, GlassMode::kContinuous, {}, frozen_user, options, continuous_loss,
+              "continuous glasses", 4, iterations, counters, 10.0);
+    std::vector<int> snapped = param.nearest_glasses(xc.data());
+    set_glasses(xc, snapped);
+    DesignLossOptions snapped_loss = loss;
+    const DesignLoss<double> b = run_phase(param, xc, GlassMode::kFixed, snapped, frozen_all,
+                                           options, snapped_loss, "snapped", rounds, iterations,
+                                           counters);
+    result.log.push_back(fmt::format("continuous then snapped: {:.4f} um", b.spot_mm * 1000));
+    if (constraints_met(b) && (!constraints_met(best) || b.spot_mm < best.spot_mm)) {
+      x = xc;
+      fixed = snapped;
+      best = b;
+      loss = snapped_loss;
+      result.log.push_back("kept the snapped continuous-glass design");
+    }
+  }
+
+  // Phase C: neighbouring catalog glasses per element.
+  if (search && options.glass_search == GlassSearch::kNeighbours && options.glass_neighbours > 0) {
     for (int pass = 0; pass < 3 && !interrupted(); ++pass) {
       bool improved = false;
       for (std::size_t m = 0; m < fixed.size() && !interrupted(); ++m) {
@@ -323,19 +366,17 @@ OptimizeResult optimize_lens(const Lens& start, const OptimizeOptions& options) 
           std::vector<int> trial_fixed = fixed;
           trial_fixed[m] = candidate;
           std::vector<double> trial_x = x;
+          set_glasses(trial_x, trial_fixed);
           DesignLossOptions trial_loss = loss;
-          const DesignLoss<double> trial =
-              run_phase(param, trial_x, GlassMode::kFixed, trial_fixed, frozen_all, options,
-                        trial_loss, fmt::format("glass {} -> {}", m + 1, param.glass_space().name(candidate)),
-                        2, std::max(10, options.max_iterations / 4), counters);
-          if (constraints_met(trial) && trial.spot_mm < best.spot_mm * (1 - 1e-4)) {
-            if (options.verbose)
-              fmt::print(stderr, "lensopt optimize: element {}: {} -> {} improves the spot to {:.4f} um\n",
-                         m + 1, param.glass_space().name(fixed[m]), param.glass_space().name(candidate),
-                         trial.spot_mm * 1000);
+          const DesignLoss<double> trial = run_phase(
+              param, trial_x, GlassMode::kFixed, trial_fixed, frozen_all, options, trial_loss,
+              fmt::format("element {} as {}", m + 1, param.glass_space().name(candidate)), 2,
+              std::max(10, iterations / 3), counters);
+          if (constraints_met(trial) && trial.spot_mm < best.spot_mm * (1 - 1e-3)) {
             result.log.push_back(fmt::format("element {}: {} -> {} ({:.4f} um)", m + 1,
                                              param.glass_space().name(fixed[m]),
-                                             param.glass_space().name(candidate), trial.spot_mm * 1000));
+                                             param.glass_space().name(candidate),
+                                             trial.spot_mm * 1000));
             fixed = trial_fixed;
             x = trial_x;
             best = trial;
@@ -346,9 +387,10 @@ OptimizeResult optimize_lens(const Lens& start, const OptimizeOptions& options) 
       }
       if (!improved) break;
     }
-    // A final polish with the chosen glasses.
-    best = run_phase(param, x, GlassMode::kFixed, fixed, frozen_all, options, loss, "final",
-                     options.max_rounds, options.max_iterations, counters);
+    if (!result.log.empty() && result.log.back().rfind("element", 0) == 0) {
+      best = run_phase(param, x, GlassMode::kFixed, fixed, frozen_all, options, loss, "polish",
+                       rounds, iterations, counters);
+    }
   }
 
   result.lens = param.to_lens(x.data(), GlassMode::kFixed, fixed);

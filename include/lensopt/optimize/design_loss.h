@@ -12,11 +12,13 @@
 //          a_h = 1 / (F S_h0), S_h0 the field's RMS at the current point (iteratively reweighted),
 //          sum of squares = sum_h S_h^2 / (F S_h0) = l_S at S = S_0, and its gradient is
 //          2 grad l_S there: LM descends the paper's mean RMS, not the RMS of all rays.
-//   path:  one per (field, space k): sqrt(lambda_RP / n_r sum_r v^2), v the hinge violation (mm)
-//   angle: one per (field, surface, incidence|refraction): sqrt(lambda_RA / n_r sum_r v^2)
+//   path:  one per (field, space k): sqrt(lambda_RP sum_r v^2), v the hinge violation (mm)
+//   angle: one per (field, surface, incidence|refraction): sqrt(lambda_RA sum_r v^2)
 //   glass: sqrt(lambda_GV) (g - g*), two per glass.
-// The penalties are squared hinges (smooth for LM) where the paper's are linear; the optimizer
-// raises their weights when a constraint is still violated, and the report checks each
+// The penalties are squared hinges (smooth for LM) summed over rays, where the paper's are linear
+// hinges averaged over rays: averaged, one ray crossing its bound costs almost nothing, and the
+// paper's own baselines do cross them slightly (the Cooke reaches 63.9 deg against 60). The
+// optimizer raises a weight tenfold while its constraint is violated, and the report checks each
 // constraint against its bound at full sampling.
 // Failed rays: spot residuals 0; their zeta/zeta' up to the failing surface do enter the angle
 // penalty (a miss has zeta < 0), so the penalties pull failing rays back.
@@ -224,10 +226,10 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
         }
         for (int k = 0; k < k_count; ++k) {
           residuals[path_offset + h * k_count + k] =
-              detail::safe_norm(K<T>(options.weight_ray_path / n_r) * path_sq[k]);
+              detail::safe_norm(K<T>(options.weight_ray_path) * path_sq[k]);
           for (int j = 0; j < 2; ++j)
             residuals[angle_offset + (h * k_count + k) * 2 + j] =
-                detail::safe_norm(K<T>(options.weight_ray_angle / n_r) * angle_sq[2 * k + j]);
+                detail::safe_norm(K<T>(options.weight_ray_angle) * angle_sq[2 * k + j]);
         }
       }
     }

@@ -33,8 +33,8 @@ struct OptimizeOptions {
   GlassSearch glass_search = GlassSearch::kNeighbours;
   int glass_neighbours = 4;        // catalog glasses tried per element in phase 3
   std::vector<std::string> freeze; // variable names or groups to hold fixed
-  int max_iterations = 100;        // LM iterations per round
-  int max_rounds = 6;              // reweighting rounds per phase
+  int max_iterations = 50;         // LM iterations per round
+  int max_rounds = 4;              // reweighting rounds per phase
   bool verbose = true;             // progress on stderr
   const std::atomic<bool>* interrupt = nullptr;  // set (e.g. by SIGINT) to stop early
 
