@@ -1,11 +1,59 @@
-// Placeholder registration until the `plot` command lands; it says so when run.
+// lensopt plot LENS --kind layout|spot|fan|field|psf|report -o FILE.svg|FILE.png [--compare B]
+#include <fmt/core.h>
+
+#include <memory>
+
 #include "commands.h"
 #include "lensopt/core/error.h"
+#include "lensopt/lens/lens_io.h"
+#include "lensopt/plot/plot.h"
 
 namespace lensopt::cli {
-void setup_plot(CLI::App& app) {
-  CLI::App* sub = app.add_subcommand("plot", "plots (not built yet)");
-  sub->allow_extras();
-  sub->callback([] { throw Error("'plot' is not implemented in this build yet"); });
+namespace {
+
+struct PlotCommand {
+  std::string lens_path;
+  std::string kind = "report";
+  std::string output;
+  std::string compare_path;
+  plot::PlotOptions options;
+};
+
+void run_plot(const PlotCommand& cmd) {
+  plot::PlotOptions options = cmd.options;
+  options.kind = plot::parse_plot_kind(cmd.kind);
+  plot::output_format_for(cmd.output);  // a bad extension fails before any tracing
+  options.validate();
+  const Lens lens = read_lens(cmd.lens_path);
+  std::unique_ptr<Lens> compare;
+  if (!cmd.compare_path.empty()) compare = std::make_unique<Lens>(read_lens(cmd.compare_path));
+  const plot::PlotSummary summary = plot::write_plot(lens, compare.get(), options, cmd.output);
+  for (const std::string& w : summary.warnings)
+    fmt::print(stderr, "lensopt plot: warning: {}\n", w);
+  fmt::print(stderr, "lensopt plot: wrote {} ({} page, {:.0f} x {:.0f} px{})\n", cmd.output,
+             cmd.kind, summary.width_px, summary.height_px,
+             summary.spot_box_um > 0 ? fmt::format(", spot boxes {:g} um", summary.spot_box_um)
+                                     : std::string());
 }
+
+}  // namespace
+
+void setup_plot(CLI::App& app) {
+  auto cmd = std::make_shared<PlotCommand>();
+  CLI::App* sub = app.add_subcommand(
+      "plot", "Lens layout with rays, spot diagrams, ray fans, field curves, PSFs (SVG or PNG)");
+  sub->add_option("LENS", cmd->lens_path, "lens file (.toml, or the paper's .yml)")->required();
+  sub->add_option("--kind,-k", cmd->kind, "layout, spot, fan, field, psf or report (default)");
+  sub->add_option("-o,--output", cmd->output, "output file: .svg or .png")->required();
+  sub->add_option("--compare", cmd->compare_path,
+                  "a second lens: overlaid dashed (layout, fans, fields), one more row (spots, PSFs)");
+  sub->add_option("--spot-box-um", cmd->options.spot_box_um,
+                  "width of every spot-diagram box in um (0: fit the largest spot); give the same "
+                  "value to compare lenses across pages");
+  sub->add_option("--width", cmd->options.width_px, "page width in px (0: the kind's default)");
+  sub->add_option("--threads", cmd->options.trace.threads, "threads (0: all cores)")
+      ->check(CLI::Range(0, 1024));
+  sub->callback([cmd] { run_plot(*cmd); });
+}
+
 }  // namespace lensopt::cli

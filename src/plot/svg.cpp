@@ -97,24 +97,39 @@ void SvgDocument::rect(Point corner, double width, double height, const Style& s
 }
 
 void SvgDocument::text(Point at, const std::string& content, double size_px,
-                       const std::string& anchor, const std::string& colour, double rotate_deg) {
+                       const std::string& anchor, const std::string& colour, double rotate_deg,
+                       bool bold) {
   std::string transform;
   if (rotate_deg != 0.0)
     transform = fmt::format(R"svg( transform="rotate({:.3g} {:.2f} {:.2f})")svg", rotate_deg, at.x, at.y);
   body_ += fmt::format(
       R"(<text x="{:.2f}" y="{:.2f}" font-family="DejaVu Sans, Helvetica, Arial, sans-serif" )"
-      R"(font-size="{:.3g}" text-anchor="{}" fill="{}"{}>{}</text>)",
-      at.x, at.y, size_px, anchor, colour, transform, xml_escape(content));
+      R"(font-size="{:.3g}" text-anchor="{}" fill="{}"{}{}>{}</text>)",
+      at.x, at.y, size_px, anchor, colour, bold ? R"( font-weight="bold")" : "", transform,
+      xml_escape(content));
   body_ += '\n';
 }
 
 void SvgDocument::image_png(Point corner, double width, double height,
-                            const std::string& png_bytes) {
+                            const std::string& png_bytes, bool pixelated) {
   body_ += fmt::format(
       R"(<image x="{:.2f}" y="{:.2f}" width="{:.2f}" height="{:.2f}" )"
-      R"(preserveAspectRatio="none" href="data:image/png;base64,{}"/>)",
-      corner.x, corner.y, width, height, base64(png_bytes));
+      R"(preserveAspectRatio="none"{} href="data:image/png;base64,{}"/>)",
+      corner.x, corner.y, width, height,
+      pixelated ? R"( style="image-rendering:pixelated")" : "", base64(png_bytes));
   body_ += '\n';
+}
+
+void SvgDocument::dots(const std::vector<Point>& centres, double radius, const std::string& colour,
+                       double opacity) {
+  if (centres.empty()) return;
+  std::string d;
+  d.reserve(centres.size() * 16);
+  for (const Point& p : centres) d += fmt::format("M{:.1f} {:.1f}h0", p.x, p.y);
+  body_ += fmt::format(R"(<path d="{}" stroke="{}" stroke-width="{:.3g}" stroke-linecap="round")",
+                       d, colour, 2.0 * radius);
+  if (opacity < 1.0) body_ += fmt::format(R"( stroke-opacity="{:.3g}")", opacity);
+  body_ += " fill=\"none\"/>\n";
 }
 
 void SvgDocument::begin_group(const std::string& transform) {

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace lensopt::plot {
@@ -15,6 +16,14 @@ struct Style {
   std::string fill = "none";
   double opacity = 1.0;
   std::string dash;  // SVG dash array ("4 3"), empty for solid
+
+  Style(std::string stroke_colour = "#000000", double width = 1.0, std::string fill_colour = "none",
+        double opacity_value = 1.0, std::string dash_array = "")
+      : stroke(std::move(stroke_colour)),
+        stroke_width(width),
+        fill(std::move(fill_colour)),
+        opacity(opacity_value),
+        dash(std::move(dash_array)) {}
 };
 
 struct Point {
@@ -35,9 +44,15 @@ class SvgDocument {
   // Text anchored "start", "middle" or "end"; size in px; rotation in degrees about the anchor.
   void text(Point at, const std::string& content, double size_px = 12,
             const std::string& anchor = "start", const std::string& colour = "#000000",
-            double rotate_deg = 0);
-  // An embedded raster image (PNG bytes), e.g. a PSF strip.
-  void image_png(Point corner, double width, double height, const std::string& png_bytes);
+            double rotate_deg = 0, bool bold = false);
+  // An embedded raster image (PNG bytes), e.g. a PSF strip; `pixelated` keeps its pixels sharp
+  // when scaled up.
+  void image_png(Point corner, double width, double height, const std::string& png_bytes,
+                 bool pixelated = false);
+  // Many small round dots of one colour as one compact path (zero-length segments with round
+  // caps): a spot diagram of thousands of rays stays a small file.
+  void dots(const std::vector<Point>& centres, double radius, const std::string& colour,
+            double opacity = 1.0);
   // Starts / ends a <g> group with an optional transform.
   void begin_group(const std::string& transform = "");
   void end_group();

@@ -1,0 +1,56 @@
+// `lensopt plot`: one page per kind (layout, spot, fan, field, psf) or a report page combining
+// them, for a lens and optionally a second lens to compare, written as SVG or PNG by extension.
+// Every page is drawn once on a Canvas (canvas.h); the backend decides the format.
+#pragma once
+
+#include <filesystem>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "lensopt/lens/lens.h"
+#include "lensopt/plot/canvas.h"
+#include "lensopt/plot/plot_data.h"
+
+namespace lensopt::plot {
+
+enum class PlotKind { kLayout, kSpot, kFan, kField, kPsf, kReport };
+
+// "layout", "spot", "fan", "field", "psf", "report".
+const std::vector<std::string>& plot_kind_names();
+// Throws Error naming the valid kinds for anything else.
+PlotKind parse_plot_kind(const std::string& name);
+std::string plot_kind_name(PlotKind kind);
+
+struct PlotOptions {
+  PlotKind kind = PlotKind::kReport;
+  double spot_box_um = 0;  // width of each spot-diagram box; 0: fit the largest spot
+  double width_px = 0;     // page width; 0: the kind's default
+  TraceOptions trace;      // analysis sampling (defaults: 21 fields, 32 rings, ray aiming)
+
+  // Throws Error for out-of-range values.
+  void validate() const;
+};
+
+struct PlotSummary {
+  std::filesystem::path output;
+  OutputFormat format = OutputFormat::kSvg;
+  double width_px = 0;
+  double height_px = 0;
+  double spot_box_um = 0;  // the spot scale used (0 if the page has no spots)
+  std::vector<std::string> warnings;
+};
+
+// Draws a page on a new canvas of the format of `output` and writes it atomically.
+PlotSummary write_plot(const Lens& lens, const Lens* compare, const PlotOptions& options,
+                       const std::filesystem::path& output);
+
+// The page drawn onto a canvas made by `make` (width, height) -> canvas, without writing it;
+// for tests and for callers that want the canvas.
+using CanvasFactory = std::function<std::unique_ptr<Canvas>(double, double)>;
+std::unique_ptr<Canvas> draw_plot(const PlotContext& lens, const PlotContext* compare,
+                                  const PlotOptions& options, const CanvasFactory& make,
+                                  PlotSummary* summary = nullptr);
+
+}  // namespace lensopt::plot

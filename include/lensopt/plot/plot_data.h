@@ -1,0 +1,133 @@
+// The numbers behind the plots, computed from traced rays before anything is drawn, so tests can
+// check them against the tracer. All of it is at the analysis sampling: the prescription scaled
+// to the spec focal length, 21 fields from 0 to hfov, ray aiming on (TraceOptions defaults).
+//
+// Spot diagram of field h: the image-plane points (x, y) of every traced ray over all spec
+// wavelengths, mirrored to the full pupil (x -> -x), relative to the polychromatic centroid
+// (0, ybar_h); its RMS radius is analyze's S_h = sqrt(mean((y - ybar)^2 + x^2)) at full sampling.
+//
+// Ray fans about the chief ray of the reference wavelength (587.6 nm) at field h, pupil
+// coordinate p in [-1, 1] on the aimed pupil of wavelength w:
+//   tangential  e_y(p) = y(0, p) - y_chief       sagittal  e_x(p) = x(p, 0)
+// where (x_p, y_p) -> pupil point (R_EP s_x x_p, R_EP (o_y + s_y y_p)) with the aimed map.
+//
+// Field curvature from close rays about the aimed chief ray (pupil offset +-delta), traced to the
+// image plane (z = 0) with image-space slopes m/n and l/n:
+//   tangential focus  dz_T = -(y_+ - y_-) / (m_+/n_+ - m_-/n_-)    (meridional pair +-delta)
+//   sagittal focus    dz_S = -x_s / (l_s / n_s)                     (sagittal ray, x_p = delta)
+// both in mm along z from the image plane (positive: behind it).
+// Distortion is analyze's D_h = (ybar_h - y_ref,h) / y_ref,last in percent.
+#pragma once
+
+#include <array>
+#include <string>
+#include <vector>
+
+#include "lensopt/analysis/analyze.h"
+#include "lensopt/lens/lens.h"
+#include "lensopt/trace/system.h"
+
+namespace lensopt::plot {
+
+// A lens prepared once for every plot: the traced system and analyze's report of it.
+struct PlotContext {
+  Lens lens;
+  TraceSystem<double> sys;
+  AnalysisReport report;
+  // Wavelength number of the middle wavelength of the R, G and B channels (-1: no such channel).
+  std::array<int, 3> channel_wavelength{-1, -1, -1};
+  // The spec wavelengths' channel (0 R, 1 G, 2 B), one per wavelength.
+  std::vector<int> wavelength_channel;
+};
+
+// Traces the lens at `trace` (analysis defaults) and analyzes it.
+PlotContext make_plot_context(const Lens& lens, const TraceOptions& trace = {});
+
+// The field numbers (into sys.fields_deg) nearest to fractions of the half field.
+std::vector<int> field_indices(const PlotContext& ctx, const std::vector<double>& fractions);
+
+// A short label of a lens's glass for annotations: the catalog name or "nd/vd".
+std::string glass_label(const Material& material);
+
+// ---- spot diagrams ----------------------------------------------------------------------------
+
+struct SpotField {
+  int field = 0;  // into sys.fields_deg
+  double field_deg = 0;
+  double centroid_y_mm = 0;  // polychromatic centroid (full sampling)
+  double rms_um = 0;         // analyze's RMS spot radius
+  // Points relative to the centroid, um, with their wavelength number.
+  std::vector<double> x_um, y_um;
+  std::vector<int> wavelength;
+  double max_radius_um = 0;  // largest distance of a drawn point from the centroid
+  int failed_rays = 0;
+};
+
+struct SpotData {
+  std::string lens_name;
+  std::vector<double> wavelengths_nm;
+  std::vector<int> wavelength_channel;  // 0 R, 1 G, 2 B per wavelength
+  std::vector<SpotField> fields;
+  double mean_rms_um = 0;  // over analyze's 21 fields
+};
+
+struct SpotOptions {
+  std::vector<double> field_fractions{0.0, 0.25, 0.5, 0.75, 1.0};
+  int draw_rings = 12;  // pupil rings of the drawn points (the RMS uses the full sampling)
+  void validate() const;
+};
+
+SpotData compute_spots(const PlotContext& ctx, const SpotOptions& options = {});
+
+// ---- ray fans ---------------------------------------------------------------------------------
+
+struct FanCurve {
+  int channel = 0;  // 0 R, 1 G, 2 B
+  double wavelength_nm = 0;
+  std::vector<double> pupil;      // normalized pupil coordinate, -1..1
+  std::vector<double> error_um;   // e_y (tangential) or e_x (sagittal)
+  std::vector<char> valid;        // the ray reached the image
+};
+
+struct FanField {
+  int field = 0;
+  double field_deg = 0;
+  std::vector<FanCurve> tangential;
+  std::vector<FanCurve> sagittal;
+};
+
+struct FanData {
+  std::string lens_name;
+  std::vector<FanField> fields;
+  double max_abs_um = 0;  // over all valid points
+};
+
+struct FanOptions {
+  std::vector<double> field_fractions{0.0, 0.25, 0.5, 0.75, 1.0};
+  int samples = 61;  // pupil samples from -1 to 1
+  void validate() const;
+};
+
+FanData compute_fans(const PlotContext& ctx, const FanOptions& options = {});
+
+// ---- field curvature and distortion -------------------------------------------------------------
+
+struct FocusCurve {
+  int channel = 0;
+  double wavelength_nm = 0;
+  std::vector<double> tangential_mm;  // per field of FieldCurveData::field_deg
+  std::vector<double> sagittal_mm;
+  std::vector<char> valid;
+};
+
+struct FieldCurveData {
+  std::string lens_name;
+  std::vector<double> field_deg;  // the system's fields (21)
+  std::vector<FocusCurve> focus;  // per channel
+  std::vector<double> distortion_percent;  // analyze's, per field
+};
+
+// `delta` is the close rays' offset in normalized pupil coordinates.
+FieldCurveData compute_field_curves(const PlotContext& ctx, double delta = 1e-3);
+
+}  // namespace lensopt::plot

@@ -1,0 +1,426 @@
+#include "lensopt/plot/layout.h"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include "lensopt/core/error.h"
+#include "lensopt/plot/style.h"
+#include "lensopt/trace/kernel.h"
+
+namespace lensopt::plot {
+namespace {
+
+constexpr int kProfilePoints = 49;
+constexpr double kSphereLimit = 0.995;  // |c| y stays below this on a drawn sphere
+
+double sag(double c, double y) {
+  const double cy2 = c * y * y;
+  return cy2 / (1.0 + std::sqrt(std::max(0.0, 1.0 - c * cy2)));
+}
+
+double sphere_limit(double c) {
+  return c == 0.0 ? 1e30 : kSphereLimit / std::abs(c);
+}
+
+}  // namespace
+
+double SurfaceDrawing::sag_z(double y) const { return vertex_z_mm + sag(curvature_per_mm, y); }
+
+std::optional<double> SurfaceDrawing::z_at(double y) const {
+  const double a = std::abs(y);
+  if (a > edge_semi_diameter_mm * (1 + 1e-12)) return std::nullopt;
+  if (a <= drawn_semi_diameter_mm) return sag_z(a);
+  return sag_z(drawn_semi_diameter_mm);  // on the flat annulus
+}
+
+void LayoutOptions::validate() const {
+  if (field_fractions.empty()) throw Error("layout: no field fractions given");
+  for (double f : field_fractions)
+    if (!(f >= 0.0 && f <= 1.0))
+      throw Error(fmt::format("layout: field fraction {} is outside [0, 1]", f));
+  if (rays_per_field < 1 || rays_per_field > 101)
+    throw Error(fmt::format("layout: rays_per_field = {} must be in 1..101", rays_per_field));
+  if (!(margin_fraction >= 0 && margin_fraction < 1) || !(margin_mm >= 0))
+    throw Error("layout: aperture margins must be >= 0 (fraction < 1)");
+  if (edge_azimuths < 3) throw Error("layout: edge_azimuths must be >= 3");
+}
+
+LayoutGeometry compute_layout(const PlotContext& ctx, const LayoutOptions& options) {
+  options.validate();
+  const TraceSystem<double>& sys = ctx.sys;
+  const TraceLens<double>& lens = sys.lens;
+  const int k_count = lens.surface_count();
+  LayoutGeometry g;
+  g.lens_name = ctx.lens.name;
+  g.scale = sys.scale;
+  g.efl_mm = sys.efl_mm;
+  g.f_number = sys.efl_mm / sys.epd_mm;
+  g.half_field_deg = sys.fields_deg.back();
+  g.stop_surface = lens.stop;
+
+  std::vector<double> vertex(k_count, 0.0);
+  for (int k = 1; k < k_count; ++k) vertex[k] = vertex[k - 1] + lens.thickness_mm[k - 1];
+  g.image_z_mm = vertex[k_count - 1] + lens.thickness_mm[k_count - 1];
+  g.stop_z_mm = vertex[lens.stop];
+
+  // Largest ray height at every surface over fields, wavelengths and aimed pupil-edge rays.
+  std::vector<double> max_height(k_count, 0.0);
+  const int field_count = static_cast<int>(sys.fields_deg.size());
+  const int az = options.edge_azimuths;
+  RayBundle<double> start, rays;
+  for (int w = 0; w <= sys.wavelength_count; ++w) {
+    start.resize(static_cast<std::size_t>(field_count) * az);
+    for (int h = 0; h < field_count; ++h) {
+      const PupilMap<double>& map = sys.pupil_map(h, w);
+      const double theta = sys.fields_deg[h] * kPi / 180.0;
+      for (int a = 0; a < az; ++a) {
+        const double phi = kPi * (-0.5 + static_cast<double>(a) / (az - 1));
+        const std::size_t i = static_cast<std::size_t>(h) * az + a;
+        start.x[i] = sys.epd_mm / 2 * map.scale_x * std::cos(phi);
+        start.y[i] = sys.epd_mm / 2 * (map.offset_y + map.scale_y * std::sin(phi));
+        start.z[i] = sys.entrance_pupil_z_mm;
+        start.l[i] = 0.0;
+        start.m[i] = std::sin(theta);
+        start.n[i] = std::cos(theta);
+      }
+    }
+    for (int k = 0; k < k_count; ++k) {
+      rays = start;
+      trace_bundle(lens, w, k + 1, false, rays, static_cast<RayRecord<double>*>(nullptr));
+      for (std::size_t i = 0; i < rays.size(); ++i)
+        if (rays.status[i] == kRayOk)
+          max_height[k] = std::max(max_height[k], std::hypot(rays.x[i], rays.y[i]));
+    }
+  }
+  g.stop_radius_mm = sys.stop_radius_mm;  // the real marginal ray's height (the aperture)
+
+  // Surfaces: clear apertures, element groups, drawn radii.
+  g.surfaces.resize(k_count);
+  for (int k = 0; k < k_count; ++k) {
+    SurfaceDrawing& s = g.surfaces[k];
+    s.surface = k;
+    s.vertex_z_mm = vertex[k];
+    s.curvature_per_mm = lens.curvature_per_mm[k];
+    s.is_stop = k == lens.stop;
+    s.clear_semi_diameter_mm =
+        std::min(max_height[k] * (1 + options.margin_fraction) + options.margin_mm,
+                 sphere_limit(s.curvature_per_mm));
+    s.drawn_semi_diameter_mm = s.clear_semi_diameter_mm;
+    s.edge_semi_diameter_mm = s.clear_semi_diameter_mm;
+  }
+  // Where two surfaces across an air space meet inside their clear apertures (elements touching
+  // at the edge), the margin is given up: both are drawn only up to the meeting height (never
+  // below their ray heights).
+  // The stop counts as a flat surface here: a surface that reaches past the stop plane is drawn
+  // up to the plane (the diaphragm then rests on the element's flat rim).
+  for (int k = 0; k + 1 < k_count; ++k) {
+    if (lens.is_glass[k]) continue;
+    SurfaceDrawing& a = g.surfaces[k];
+    SurfaceDrawing& b = g.surfaces[k + 1];
+    const double reach = std::min(a.clear_semi_diameter_mm, b.clear_semi_diameter_mm);
+    auto gap = [&](double y) { return b.sag_z(y) - a.sag_z(y); };
+    const int steps = 400;
+    double lo = -1;
+    for (int i = 1; i <= steps; ++i) {
+      if (gap(reach * i / steps) <= 0) {
+        lo = reach * (i - 1) / steps;
+        double hi = reach * i / steps;
+        for (int it = 0; it < 60; ++it) {
+          const double mid = 0.5 * (lo + hi);
+          (gap(mid) > 0 ? lo : hi) = mid;
+        }
+        break;
+      }
+    }
+    if (lo < 0) continue;
+    const double meet = lo;  // gap > 0 below this height
+    if (!a.is_stop)
+      a.clear_semi_diameter_mm = std::min(a.clear_semi_diameter_mm, std::max(max_height[k], meet));
+    if (!b.is_stop)
+      b.clear_semi_diameter_mm =
+          std::min(b.clear_semi_diameter_mm, std::max(max_height[k + 1], meet));
+    if (max_height[k] > meet || max_height[k + 1] > meet)
+      g.warnings.push_back(fmt::format(
+          "surfaces {} and {} meet at height {:.3f} mm, inside the rays' height there", k + 1,
+          k + 2, meet));
+  }
+  for (SurfaceDrawing& s : g.surfaces) {
+    s.drawn_semi_diameter_mm = s.clear_semi_diameter_mm;
+    s.edge_semi_diameter_mm = s.clear_semi_diameter_mm;
+  }
+
+  std::vector<std::pair<int, int>> groups;  // glass spaces [first, last]
+  for (int k = 0; k < k_count - 1; ++k) {
+    if (!lens.is_glass[k]) continue;
+    if (!groups.empty() && groups.back().second == k - 1)
+      groups.back().second = k;
+    else
+      groups.push_back({k, k});
+  }
+  for (const auto& [first, last] : groups) {
+    double edge = 0;
+    for (int s = first; s <= last + 1; ++s)
+      edge = std::max(edge, g.surfaces[s].clear_semi_diameter_mm);
+    for (int s = first; s <= last + 1; ++s) {
+      SurfaceDrawing& d = g.surfaces[s];
+      d.in_element = true;
+      d.edge_semi_diameter_mm = edge;
+      const bool interior = s != first && s != last + 1;
+      if (interior && edge <= sphere_limit(d.curvature_per_mm)) d.drawn_semi_diameter_mm = edge;
+    }
+  }
+
+  // The stop: from the real stop radius outward, short of its neighbours' drawn curves.
+  {
+    SurfaceDrawing& stop = g.surfaces[lens.stop];
+    double outer = std::max(g.stop_radius_mm * 1.3, g.stop_radius_mm + 0.3);
+    const int steps = 200;
+    for (int side : {-1, 1}) {
+      const int k = lens.stop + side;
+      if (k < 0 || k >= k_count) continue;
+      const SurfaceDrawing& n = g.surfaces[k];
+      for (int i = 0; i <= steps; ++i) {
+        const double y = g.stop_radius_mm + (outer - g.stop_radius_mm) * i / steps;
+        const auto z = n.z_at(y);
+        if (z && (side < 0 ? *z >= g.stop_z_mm : *z <= g.stop_z_mm)) {
+          outer = std::max(g.stop_radius_mm * 1.02, y - (outer - g.stop_radius_mm) / steps);
+          break;
+        }
+      }
+    }
+    g.stop_outer_mm = outer;
+    if (!stop.in_element) {
+      stop.drawn_semi_diameter_mm = outer;
+      stop.edge_semi_diameter_mm = outer;
+    }
+  }
+
+  for (SurfaceDrawing& s : g.surfaces) {
+    const double d = s.drawn_semi_diameter_mm;
+    for (int i = 0; i < kProfilePoints; ++i) {
+      const double y = d * (1.0 - 2.0 * i / (kProfilePoints - 1));
+      s.profile.push_back({s.sag_z(y), y});
+    }
+    s.curve = s.profile;
+    if (s.edge_semi_diameter_mm > d * (1 + 1e-12)) {
+      const double z_end = s.sag_z(d);
+      s.curve.insert(s.curve.begin(), Point{z_end, s.edge_semi_diameter_mm});
+      s.curve.push_back({z_end, -s.edge_semi_diameter_mm});
+    }
+  }
+
+  for (const auto& [first, last] : groups) {
+    for (int k = first; k <= last; ++k) {
+      ElementDrawing e;
+      e.front_surface = k;
+      e.back_surface = k + 1;
+      e.glass = glass_label(ctx.lens.surfaces[k].material);
+      const SurfaceDrawing& front = g.surfaces[k];
+      const SurfaceDrawing& back = g.surfaces[k + 1];
+      e.edge_semi_diameter_mm = front.edge_semi_diameter_mm;
+      e.outline = front.curve;
+      e.outline.insert(e.outline.end(), back.curve.rbegin(), back.curve.rend());
+      e.upper_rim = {front.curve.front(), back.curve.front()};
+      e.lower_rim = {front.curve.back(), back.curve.back()};
+      const double edge_thickness = e.upper_rim[1].x - e.upper_rim[0].x;
+      if (edge_thickness <= 0)
+        g.warnings.push_back(fmt::format(
+            "element of surfaces {}-{}: edge thickness {:.3f} mm at semi-diameter {:.3f} mm", k + 1,
+            k + 2, edge_thickness, e.edge_semi_diameter_mm));
+      g.elements.push_back(std::move(e));
+    }
+  }
+
+  // Smallest drawn gap between consecutive surfaces.
+  for (int k = 0; k + 1 < k_count; ++k) {
+    const SurfaceDrawing& a = g.surfaces[k];
+    const SurfaceDrawing& b = g.surfaces[k + 1];
+    const double reach = std::min(a.edge_semi_diameter_mm, b.edge_semi_diameter_mm);
+    double gap = 1e30, at = 0;
+    for (int i = 0; i <= 400; ++i) {
+      const double y = reach * i / 400.0;
+      const double d = *b.z_at(y) - *a.z_at(y);
+      if (d < gap) {
+        gap = d;
+        at = y;
+      }
+    }
+    g.min_gap_mm.push_back(gap);
+    if (gap < 0)
+      g.warnings.push_back(fmt::format("surfaces {} and {} cross at height {:.3f} mm (by {:.3f} mm)",
+                                       k + 1, k + 2, at, -gap));
+  }
+
+  // Ray bundles at the reference wavelength.
+  const int ref = sys.wavelength_count;
+  const std::vector<int> fields = field_indices(ctx, options.field_fractions);
+  double z_first = 0;
+  for (const Point& p : g.surfaces[0].curve) z_first = std::min(z_first, p.x);
+  g.start_z_mm = z_first - std::max(1.0, 0.12 * g.image_z_mm);
+  const int n = options.rays_per_field;
+  for (std::size_t j = 0; j < fields.size(); ++j) {
+    const int h = fields[j];
+    g.field_deg.push_back(sys.fields_deg[h]);
+    const PupilMap<double>& map = sys.pupil_map(h, ref);
+    const double theta = sys.fields_deg[h] * kPi / 180.0;
+    start.resize(n);
+    std::vector<RayDrawing> drawn(n);
+    for (int i = 0; i < n; ++i) {
+      const double py = n == 1 ? 0.0 : -1.0 + 2.0 * i / (n - 1);
+      start.x[i] = 0.0;
+      start.y[i] = sys.epd_mm / 2 * (map.offset_y + map.scale_y * py);
+      start.z[i] = sys.entrance_pupil_z_mm;
+      start.l[i] = 0.0;
+      start.m[i] = std::sin(theta);
+      start.n[i] = std::cos(theta);
+      drawn[i].field = static_cast<int>(j);
+      drawn[i].pupil_y = py;
+      drawn[i].points.push_back(
+          {g.start_z_mm, start.y[i] + std::tan(theta) * (g.start_z_mm - start.z[i])});
+    }
+    for (int k = 0; k < k_count; ++k) {
+      rays = start;
+      trace_bundle(lens, ref, k + 1, false, rays, static_cast<RayRecord<double>*>(nullptr));
+      for (int i = 0; i < n; ++i)
+        if (rays.status[i] == kRayOk) drawn[i].points.push_back({vertex[k] + rays.z[i], rays.y[i]});
+    }
+    rays = start;
+    trace_bundle(lens, ref, k_count, true, rays, static_cast<RayRecord<double>*>(nullptr));
+    for (int i = 0; i < n; ++i) {
+      drawn[i].complete = rays.status[i] == kRayOk;
+      if (drawn[i].complete) {
+        drawn[i].points.push_back({g.image_z_mm, rays.y[i]});
+        g.image_half_height_mm = std::max(g.image_half_height_mm, std::abs(rays.y[i]));
+      }
+    }
+    for (RayDrawing& r : drawn) g.rays.push_back(std::move(r));
+  }
+  double widest = 0;
+  for (const SurfaceDrawing& s : g.surfaces) widest = std::max(widest, s.edge_semi_diameter_mm);
+  g.image_half_height_mm = std::max(g.image_half_height_mm * 1.08, 0.5 * widest);
+
+  g.z_lo = g.start_z_mm;
+  g.z_hi = g.image_z_mm;
+  double y_max = std::max({widest, g.image_half_height_mm, g.stop_outer_mm});
+  for (const RayDrawing& r : g.rays)
+    for (const Point& p : r.points) y_max = std::max(y_max, std::abs(p.y));
+  g.y_lo = -y_max;
+  g.y_hi = y_max;
+  return g;
+}
+
+void draw_layout(Canvas& canvas, Rect area, const LayoutGeometry& g, const LayoutGeometry* cmp,
+                 double font_px) {
+  const double dz = cmp ? g.image_z_mm - cmp->image_z_mm : 0.0;
+  double z_lo = g.z_lo, z_hi = g.z_hi, y_lo = g.y_lo, y_hi = g.y_hi;
+  if (cmp) {
+    z_lo = std::min(z_lo, cmp->z_lo + dz);
+    z_hi = std::max(z_hi, cmp->z_hi + dz);
+    y_lo = std::min(y_lo, cmp->y_lo);
+    y_hi = std::max(y_hi, cmp->y_hi);
+  }
+  const double pad_z = 0.04 * (z_hi - z_lo);
+  const double legend_band = font_px * 2.6;
+  const double label_band = font_px * 4.2;
+  const Rect frame = area.inset(8, legend_band, 8, label_band);
+  const Axes ax = Axes::equal_aspect(frame, z_lo - pad_z, z_hi + pad_z, y_lo, y_hi);
+  auto px = [&](Point p, double shift = 0.0) { return ax.to_px(p.x + shift, p.y); };
+  auto px_all = [&](const std::vector<Point>& pts, double shift = 0.0) {
+    std::vector<Point> out;
+    out.reserve(pts.size());
+    for (const Point& p : pts) out.push_back(px(p, shift));
+    return out;
+  };
+
+  // Optical axis.
+  Style axis{"#9a9a9a", 0.8};
+  axis.dash = "12 4 2 4";
+  canvas.line(ax.to_px(z_lo - pad_z / 2, 0), ax.to_px(z_hi + pad_z / 2, 0), axis);
+
+  // Glass, then rays, then outlines on top.
+  for (const ElementDrawing& e : g.elements)
+    canvas.polygon(px_all(e.outline), Style{"none", 0, kGlassFill});
+  const int nf = static_cast<int>(g.field_deg.size());
+  for (const RayDrawing& r : g.rays)
+    canvas.polyline(px_all(r.points), Style{field_colour(r.field, nf), 1.0});
+  const Style outline{kLensStroke, 1.4};
+  for (const ElementDrawing& e : g.elements) canvas.polygon(px_all(e.outline), outline);
+  for (const SurfaceDrawing& s : g.surfaces)
+    if (!s.in_element && !s.is_stop) canvas.polyline(px_all(s.curve), outline);
+
+  auto draw_stop_and_image = [&](const LayoutGeometry& l, double shift, const std::string& dash) {
+    Style stop{"#111111", 3.0};
+    stop.dash = dash;
+    for (double side : {1.0, -1.0})
+      canvas.line(px({l.stop_z_mm, side * l.stop_radius_mm}, shift),
+                  px({l.stop_z_mm, side * l.stop_outer_mm}, shift), stop);
+    Style image{"#333333", 2.0};
+    image.dash = dash;
+    canvas.line(px({l.image_z_mm, -l.image_half_height_mm}, shift),
+                px({l.image_z_mm, l.image_half_height_mm}, shift), image);
+  };
+  draw_stop_and_image(g, 0.0, "");
+  const TextStyle small{font_px * 0.85, Anchor::kMiddle, "#333333"};
+  canvas.text({px({g.stop_z_mm, g.stop_outer_mm}).x, px({g.stop_z_mm, g.stop_outer_mm}).y - 5},
+              "stop", small);
+  canvas.text(
+      {px({g.image_z_mm, g.image_half_height_mm}).x, px({g.image_z_mm, g.image_half_height_mm}).y - 5},
+      "image", small);
+
+  if (cmp) {
+    Style dashed{kCompareStroke, 1.3};
+    dashed.dash = "6 4";
+    const int nc = static_cast<int>(cmp->field_deg.size());
+    for (const RayDrawing& r : cmp->rays) {
+      Style s{field_colour(r.field, nc), 0.8, "none", 0.75};
+      s.dash = "5 4";
+      canvas.polyline(px_all(r.points, dz), s);
+    }
+    for (const ElementDrawing& e : cmp->elements) canvas.polygon(px_all(e.outline, dz), dashed);
+    for (const SurfaceDrawing& s : cmp->surfaces)
+      if (!s.in_element && !s.is_stop) canvas.polyline(px_all(s.curve, dz), dashed);
+    draw_stop_and_image(*cmp, dz, "4 3");
+  }
+
+  // Glass names under the elements, staggered when they would overlap.
+  const TextStyle glass_text{font_px * 0.8, Anchor::kMiddle, "#1b2a3a"};
+  double last_right = -1e30;
+  int row = 0;
+  double lowest = 0;
+  for (const ElementDrawing& e : g.elements) lowest = std::max(lowest, e.edge_semi_diameter_mm);
+  for (const ElementDrawing& e : g.elements) {
+    const double zc = 0.5 * (g.surfaces[e.front_surface].vertex_z_mm +
+                             g.surfaces[e.back_surface].vertex_z_mm);
+    const Point at = px({zc, -lowest});
+    const double w = text_width_px(e.glass, glass_text.size_px);
+    row = (at.x - w / 2 < last_right + 4) ? 1 - row : 0;
+    const double y = at.y + glass_text.size_px * (1.4 + 1.15 * row);
+    canvas.line({at.x, px({zc, -e.edge_semi_diameter_mm}).y + 2},
+                {at.x, y - glass_text.size_px}, Style{"#b0b0b0", 0.6});
+    canvas.text({at.x, y}, e.glass, glass_text);
+    last_right = at.x + w / 2;
+  }
+
+  // Legend (fields; the compared lens) and a scale bar.
+  std::vector<LegendEntry> entries;
+  for (int j = 0; j < nf; ++j)
+    entries.push_back({fmt::format("{:.1f}\u00b0", g.field_deg[j]), field_colour(j, nf)});
+  if (cmp) {
+    entries.push_back({g.lens_name + " (solid)", kLensStroke});
+    entries.push_back({cmp->lens_name + " (dashed)", kCompareStroke, "6 4"});
+  }
+  draw_legend(canvas, {area.x + 8, area.y + 2}, entries, font_px * 0.9, true);
+  const double bar_mm = nice_ceil((z_hi - z_lo) / 8.0);
+  const double bar_px = bar_mm * ax.px_per_x();
+  const Point b0{frame.x + 6, area.bottom() - 8};
+  const Style bar{"#222222", 1.5};
+  canvas.line(b0, {b0.x + bar_px, b0.y}, bar);
+  canvas.line({b0.x, b0.y - 4}, {b0.x, b0.y + 1}, bar);
+  canvas.line({b0.x + bar_px, b0.y - 4}, {b0.x + bar_px, b0.y + 1}, bar);
+  canvas.text({b0.x + bar_px + 6, b0.y + font_px * 0.3}, format_tick(bar_mm, bar_mm) + " mm",
+              TextStyle{font_px * 0.85, Anchor::kStart, "#222222"});
+}
+
+}  // namespace lensopt::plot

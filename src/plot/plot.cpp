@@ -1,0 +1,264 @@
+#include "lensopt/plot/plot.h"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+#include <optional>
+
+#include "lensopt/core/error.h"
+#include "lensopt/plot/charts.h"
+#include "lensopt/plot/layout.h"
+#include "lensopt/plot/psf_strip.h"
+#include "lensopt/plot/style.h"
+
+namespace lensopt::plot {
+namespace {
+
+constexpr double kFont = 13;
+
+std::string kind_title(PlotKind kind) {
+  switch (kind) {
+    case PlotKind::kLayout: return "layout";
+    case PlotKind::kSpot: return "spot diagrams";
+    case PlotKind::kFan: return "transverse ray fans";
+    case PlotKind::kField: return "field curvature and distortion";
+    case PlotKind::kPsf: return "sampled PSFs";
+    case PlotKind::kReport: return "report";
+  }
+  return "";
+}
+
+// "f 17.16 mm  f/2.00  hfov 25.0 deg  ..." from analyze's report.
+std::string first_order_line(const PlotContext& ctx) {
+  const AnalysisReport& r = ctx.report;
+  std::string s = fmt::format(
+      "EFL {:.2f} mm   f/{:.2f}   half field {:.1f}\u00b0   BFL {:.2f} mm   total track "
+      "{:.2f} mm   EPD {:.2f} mm",
+      r.efl_mm, r.f_number, ctx.lens.specs.half_field_deg, r.bfl_mm, r.total_track_mm, r.epd_mm);
+  if (std::abs(r.scale - 1.0) > 5e-4) s += fmt::format("   (scaled \u00d7{:.4f})", r.scale);
+  return s;
+}
+
+std::string spot_line(const PlotContext& ctx) {
+  const AnalysisReport& r = ctx.report;
+  std::string s = r.mean_rms_spot_um ? fmt::format("mean RMS spot {:.2f} \u00b5m", *r.mean_rms_spot_um)
+                                     : std::string("mean RMS spot n/a");
+  if (r.ray_failures > 0) s += fmt::format("   {} rays failed", r.ray_failures);
+  return s;
+}
+
+// The page header: title, first-order numbers; returns its height.
+double draw_header(Canvas& canvas, const PlotContext& ctx, const PlotContext* cmp, PlotKind kind,
+                   double width) {
+  TextStyle title{kFont * 1.6, Anchor::kStart, "#111111"};
+  title.bold = true;
+  const std::string name = ctx.lens.name.empty() ? std::string("lens") : ctx.lens.name;
+  canvas.text({16, kFont * 2.0},
+              fmt::format("{}{}: {}", name, cmp ? " vs " + cmp->lens.name : "", kind_title(kind)),
+              title);
+  const TextStyle line{kFont, Anchor::kStart, "#333333"};
+  double y = kFont * 3.6;
+  canvas.text({16, y}, fmt::format("{}   {}", first_order_line(ctx), spot_line(ctx)), line);
+  if (cmp) {
+    y += kFont * 1.45;
+    canvas.text({16, y},
+                fmt::format("{}: {}   {}", cmp->lens.name, first_order_line(*cmp), spot_line(*cmp)),
+                line);
+  }
+  canvas.line({16, y + kFont * 0.9}, {width - 16, y + kFont * 0.9}, Style{"#cccccc", 1.0});
+  return y + kFont * 1.4;
+}
+
+double default_width(PlotKind kind) {
+  switch (kind) {
+    case PlotKind::kLayout: return 1200;
+    case PlotKind::kSpot: return 1250;
+    case PlotKind::kFan: return 1300;
+    case PlotKind::kField: return 1100;
+    case PlotKind::kPsf: return 1150;
+    case PlotKind::kReport: return 1500;
+  }
+  return 1200;
+}
+
+// Height (px) a layout needs at a width, from its aspect ratio.
+double layout_height(const LayoutGeometry& g, const LayoutGeometry* cmp, double width) {
+  double z = g.z_hi - g.z_lo, y = g.y_hi - g.y_lo;
+  if (cmp) {
+    const double dz = g.image_z_mm - cmp->image_z_mm;
+    z = std::max(g.z_hi, cmp->z_hi + dz) - std::min(g.z_lo, cmp->z_lo + dz);
+    y = std::max(y, cmp->y_hi - cmp->y_lo);
+  }
+  const double h = (width - 16) / (1.08 * z) * y + kFont * 6.8;
+  return std::clamp(h, 300.0, 1.2 * width);
+}
+
+}  // namespace
+
+const std::vector<std::string>& plot_kind_names() {
+  static const std::vector<std::string> names = {"layout", "spot", "fan", "field", "psf", "report"};
+  return names;
+}
+
+PlotKind parse_plot_kind(const std::string& name) {
+  const auto& names = plot_kind_names();
+  for (std::size_t i = 0; i < names.size(); ++i)
+    if (names[i] == name) return static_cast<PlotKind>(i);
+  throw Error(fmt::format("unknown plot kind '{}': use one of layout, spot, fan, field, psf, report",
+                          name));
+}
+
+std::string plot_kind_name(PlotKind kind) { return plot_kind_names()[static_cast<int>(kind)]; }
+
+void PlotOptions::validate() const {
+  trace.validate();
+  if (!(spot_box_um >= 0) || spot_box_um > 1e5)
+    throw Error(fmt::format("spot box {} um must be in [0, 100000] (0: automatic)", spot_box_um));
+  if (width_px != 0 && !(width_px >= 300 && width_px <= 8000))
+    throw Error(fmt::format("page width {} px must be in [300, 8000] (0: default)", width_px));
+}
+
+std::unique_ptr<Canvas> draw_plot(const PlotContext& ctx, const PlotContext* cmp,
+                                  const PlotOptions& options, const CanvasFactory& make,
+                                  PlotSummary* summary) {
+  options.validate();
+  const PlotKind kind = options.kind;
+  const double width = options.width_px > 0 ? options.width_px : default_width(kind);
+  const bool report = kind == PlotKind::kReport;
+  const double header_h = kFont * (cmp ? 6.2 : 4.8);
+
+  // Data first (only what the page shows).
+  std::optional<LayoutGeometry> layout, layout_cmp;
+  std::optional<SpotData> spots, spots_cmp;
+  std::optional<FanData> fans, fans_cmp;
+  std::optional<FieldCurveData> field, field_cmp;
+  std::optional<PsfStrip> psf, psf_cmp;
+  if (report || kind == PlotKind::kLayout) {
+    layout = compute_layout(ctx);
+    if (cmp) layout_cmp = compute_layout(*cmp);
+  }
+  if (report || kind == PlotKind::kSpot) {
+    spots = compute_spots(ctx);
+    if (cmp) spots_cmp = compute_spots(*cmp);
+  }
+  if (report || kind == PlotKind::kFan) {
+    fans = compute_fans(ctx);
+    if (cmp) fans_cmp = compute_fans(*cmp);
+  }
+  if (report || kind == PlotKind::kField) {
+    field = compute_field_curves(ctx);
+    if (cmp) field_cmp = compute_field_curves(*cmp);
+  }
+  if (report || kind == PlotKind::kPsf) {
+    psf = compute_psf_strip(ctx);
+    if (cmp) psf_cmp = compute_psf_strip(*cmp);
+  }
+  std::vector<const SpotData*> spot_rows;
+  if (spots) spot_rows.push_back(&*spots);
+  if (spots_cmp) spot_rows.push_back(&*spots_cmp);
+  const double box_um = spots ? (options.spot_box_um > 0 ? options.spot_box_um
+                                                         : auto_spot_box_um(spot_rows))
+                              : 0.0;
+  std::vector<const PsfStrip*> psf_rows;
+  if (psf) psf_rows.push_back(&*psf);
+  if (psf_cmp) psf_rows.push_back(&*psf_cmp);
+  const int rows = cmp ? 2 : 1;
+  const LayoutGeometry* lc = layout_cmp ? &*layout_cmp : nullptr;
+
+  // Page size.
+  double height = 0;
+  const double spot_h_per_row = std::min(260.0, (width - 60) / 5.0) + kFont * 5;
+  const double spot_h = kFont * 5 + rows * spot_h_per_row;
+  const double psf_h_per_row = std::min(210.0, (width - 60) / 5.0) + kFont * 5;
+  const double psf_h = kFont * 5 + rows * psf_h_per_row;
+  switch (kind) {
+    case PlotKind::kLayout: height = header_h + layout_height(*layout, lc, width); break;
+    case PlotKind::kSpot: height = header_h + spot_h; break;
+    case PlotKind::kFan: height = header_h + 0.52 * width; break;
+    case PlotKind::kField: height = header_h + 0.45 * width; break;
+    case PlotKind::kPsf: height = header_h + psf_h; break;
+    case PlotKind::kReport: break;
+  }
+  double layout_h = 0, top_row_h = 0, fan_h = 0;
+  if (report) {
+    layout_h = layout_height(*layout, lc, 0.58 * width);
+    top_row_h = std::max(layout_h, 0.30 * width);
+    fan_h = 0.36 * width;
+    height = header_h + top_row_h + spot_h + fan_h + psf_h + 10;
+  }
+  std::unique_ptr<Canvas> canvas = make(width, std::round(height));
+  Canvas& c = *canvas;
+  const double top = draw_header(c, ctx, cmp, kind, width);
+  const Rect body{0, top, width, c.height() - top};
+  switch (kind) {
+    case PlotKind::kLayout: draw_layout(c, body.inset(8, 4, 8, 4), *layout, lc, kFont); break;
+    case PlotKind::kSpot: draw_spots(c, body.inset(10, 4, 10, 4), spot_rows, box_um, kFont); break;
+    case PlotKind::kFan:
+      draw_fans(c, body.inset(10, 4, 14, 4), *fans, fans_cmp ? &*fans_cmp : nullptr, kFont);
+      break;
+    case PlotKind::kField:
+      draw_field_curves(c, body.inset(10, 4, 14, 4), *field, field_cmp ? &*field_cmp : nullptr,
+                        kFont);
+      break;
+    case PlotKind::kPsf: draw_psf_strips(c, body.inset(10, 4, 10, 4), psf_rows, kFont); break;
+    case PlotKind::kReport: {
+      double y = top;
+      const Rect layout_area{0, y, 0.58 * width, top_row_h};
+      draw_layout(c, layout_area.inset(8, 4, 4, 4), *layout, lc, kFont);
+      const Rect field_area{0.58 * width, y, 0.42 * width, std::min(top_row_h, 0.36 * width)};
+      draw_field_curves(c, field_area.inset(6, 4, 14, 4), *field,
+                        field_cmp ? &*field_cmp : nullptr, kFont);
+      y += top_row_h;
+      auto section = [&](const std::string& name, double at) {
+        TextStyle t{kFont * 1.15, Anchor::kStart, "#111111"};
+        t.bold = true;
+        c.line({16, at + 2}, {width - 16, at + 2}, Style{"#dddddd", 1.0});
+        c.text({16, at + kFont * 1.5}, name, t);
+        return at + kFont * 2.0;
+      };
+      double s0 = section("spot diagrams", y);
+      draw_spots(c, Rect{0, s0, width, spot_h - (s0 - y)}.inset(10, 0, 10, 0), spot_rows, box_um,
+                 kFont);
+      y += spot_h;
+      s0 = section("transverse ray fans", y);
+      draw_fans(c, Rect{0, s0, width, fan_h - (s0 - y)}.inset(10, 0, 14, 0), *fans,
+                fans_cmp ? &*fans_cmp : nullptr, kFont);
+      y += fan_h;
+      s0 = section("sampled PSFs", y);
+      draw_psf_strips(c, Rect{0, s0, width, psf_h - (s0 - y)}.inset(10, 0, 10, 0), psf_rows,
+                      kFont);
+      break;
+    }
+  }
+  if (summary) {
+    summary->width_px = c.width();
+    summary->height_px = c.height();
+    summary->spot_box_um = box_um;
+    if (layout) summary->warnings.insert(summary->warnings.end(), layout->warnings.begin(),
+                                         layout->warnings.end());
+    if (layout_cmp)
+      for (const std::string& w : layout_cmp->warnings)
+        summary->warnings.push_back(cmp->lens.name + ": " + w);
+    for (const std::string& w : c.warnings()) summary->warnings.push_back(w);
+  }
+  return canvas;
+}
+
+PlotSummary write_plot(const Lens& lens, const Lens* compare, const PlotOptions& options,
+                       const std::filesystem::path& output) {
+  options.validate();
+  PlotSummary summary;
+  summary.output = output;
+  summary.format = output_format_for(output);  // before any tracing: a bad name fails fast
+  const PlotContext ctx = make_plot_context(lens, options.trace);
+  std::optional<PlotContext> cmp;
+  if (compare) cmp = make_plot_context(*compare, options.trace);
+  const std::unique_ptr<Canvas> canvas = draw_plot(
+      ctx, cmp ? &*cmp : nullptr, options,
+      [&](double w, double h) { return make_canvas(output, w, h); }, &summary);
+  canvas->save(output);
+  return summary;
+}
+
+}  // namespace lensopt::plot

@@ -1,0 +1,232 @@
+#include "lensopt/plot/plot_data.h"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include "lensopt/core/error.h"
+#include "lensopt/trace/kernel.h"
+
+namespace lensopt::plot {
+namespace {
+
+// A ray of field h starting on the entrance pupil at normalized (already aimed) coordinates.
+void set_pupil_ray(const TraceSystem<double>& sys, int h, double x_norm, double y_norm,
+                   RayBundle<double>& rays, std::size_t i) {
+  const double theta = sys.fields_deg[h] * kPi / 180.0;
+  const double r_ep = sys.epd_mm / 2.0;
+  rays.x[i] = r_ep * x_norm;
+  rays.y[i] = r_ep * y_norm;
+  rays.z[i] = sys.entrance_pupil_z_mm;
+  rays.l[i] = 0.0;
+  rays.m[i] = std::sin(theta);
+  rays.n[i] = std::cos(theta);
+}
+
+void trace_to_image(const TraceSystem<double>& sys, int w, RayBundle<double>& rays) {
+  trace_bundle(sys.lens, w, sys.lens.surface_count(), true, rays,
+               static_cast<RayRecord<double>*>(nullptr));
+}
+
+void validate_fractions(const std::vector<double>& fractions, const char* what) {
+  if (fractions.empty()) throw Error(fmt::format("{}: no field fractions given", what));
+  for (double f : fractions)
+    if (!(f >= 0.0 && f <= 1.0))
+      throw Error(fmt::format("{}: field fraction {} is outside [0, 1]", what, f));
+}
+
+}  // namespace
+
+std::string glass_label(const Material& material) {
+  switch (material.kind) {
+    case Material::Kind::kAir: return "air";
+    case Material::Kind::kCatalog: return material.glass_name;
+    case Material::Kind::kModel: return fmt::format("{:.4f}/{:.1f}", material.nd, material.vd);
+  }
+  return material.label();
+}
+
+PlotContext make_plot_context(const Lens& lens, const TraceOptions& trace) {
+  lens.validate();
+  trace.validate();
+  PlotContext ctx;
+  ctx.lens = lens;
+  AnalyzeOptions options;
+  options.trace = trace;
+  ctx.report = analyze_lens(lens, options);
+  ctx.sys = prepare_system(make_trace_lens(lens), lens.specs, trace);
+
+  const std::vector<double>& nm = lens.specs.wavelengths_nm;
+  const int count = static_cast<int>(nm.size());
+  ctx.wavelength_channel.resize(count);
+  for (int w = 0; w < count; ++w) {
+    if (static_cast<int>(lens.specs.wavelength_channels.size()) == count)
+      ctx.wavelength_channel[w] = lens.specs.wavelength_channels[w];
+    else  // no channels given: split the visible range
+      ctx.wavelength_channel[w] = nm[w] >= 580 ? 0 : nm[w] >= 500 ? 1 : 2;
+  }
+  for (int c = 0; c < 3; ++c) {
+    std::vector<int> members;
+    for (int w = 0; w < count; ++w)
+      if (ctx.wavelength_channel[w] == c) members.push_back(w);
+    std::sort(members.begin(), members.end(), [&](int a, int b) { return nm[a] < nm[b]; });
+    if (!members.empty()) ctx.channel_wavelength[c] = members[members.size() / 2];
+  }
+  return ctx;
+}
+
+std::vector<int> field_indices(const PlotContext& ctx, const std::vector<double>& fractions) {
+  const std::vector<double>& fields = ctx.sys.fields_deg;
+  const double hfov = fields.back();
+  std::vector<int> out;
+  for (double f : fractions) {
+    int best = 0;
+    for (int h = 1; h < static_cast<int>(fields.size()); ++h)
+      if (std::abs(fields[h] - f * hfov) < std::abs(fields[best] - f * hfov)) best = h;
+    out.push_back(best);
+  }
+  return out;
+}
+
+void SpotOptions::validate() const {
+  validate_fractions(field_fractions, "spot diagram");
+  if (draw_rings < 1 || draw_rings > 64)
+    throw Error(fmt::format("spot diagram: draw_rings = {} must be in 1..64", draw_rings));
+}
+
+SpotData compute_spots(const PlotContext& ctx, const SpotOptions& options) {
+  options.validate();
+  SpotData out;
+  out.lens_name = ctx.lens.name;
+  const TraceSystem<double>& base = ctx.sys;
+  out.wavelengths_nm.assign(base.lens.wavelengths_nm.begin(),
+                            base.lens.wavelengths_nm.begin() + base.wavelength_count);
+  out.wavelength_channel = ctx.wavelength_channel;
+  out.mean_rms_um = ctx.report.mean_rms_spot_um.value_or(0.0);
+  TraceSystem<double> sys = base;  // same aiming, fewer drawn rays
+  sys.pupil = paper_pupil_samples(options.draw_rings);
+  RayBundle<double> rays;
+  for (int h : field_indices(ctx, options.field_fractions)) {
+    const FieldReport& report = ctx.report.fields[h];
+    SpotField f;
+    f.field = h;
+    f.field_deg = sys.fields_deg[h];
+    f.centroid_y_mm = report.centroid_y_mm;
+    f.rms_um = report.rms_spot_um.value_or(0.0);
+    for (int w = 0; w < sys.wavelength_count; ++w) {
+      start_rays(sys, h, w, rays);
+      trace_to_image(sys, w, rays);
+      for (std::size_t i = 0; i < rays.size(); ++i) {
+        if (rays.status[i] != kRayOk) {
+          ++f.failed_rays;
+          continue;
+        }
+        const double x = 1000.0 * rays.x[i];
+        const double y = 1000.0 * (rays.y[i] - f.centroid_y_mm);
+        for (double sx : {1.0, -1.0}) {  // mirrored half pupil
+          f.x_um.push_back(sx * x);
+          f.y_um.push_back(y);
+          f.wavelength.push_back(w);
+        }
+        f.max_radius_um = std::max(f.max_radius_um, std::hypot(x, y));
+      }
+    }
+    out.fields.push_back(std::move(f));
+  }
+  return out;
+}
+
+void FanOptions::validate() const {
+  validate_fractions(field_fractions, "ray fan");
+  if (samples < 3 || samples > 10001)
+    throw Error(fmt::format("ray fan: samples = {} must be in 3..10001", samples));
+}
+
+FanData compute_fans(const PlotContext& ctx, const FanOptions& options) {
+  options.validate();
+  const TraceSystem<double>& sys = ctx.sys;
+  FanData out;
+  out.lens_name = ctx.lens.name;
+  const int n = options.samples;
+  RayBundle<double> rays;
+  for (int h : field_indices(ctx, options.field_fractions)) {
+    FanField field;
+    field.field = h;
+    field.field_deg = sys.fields_deg[h];
+    // Chief ray of the reference wavelength.
+    const int ref = sys.wavelength_count;
+    rays.resize(1);
+    set_pupil_ray(sys, h, 0.0, sys.pupil_map(h, ref).offset_y, rays, 0);
+    trace_to_image(sys, ref, rays);
+    const bool chief_ok = rays.status[0] == kRayOk;
+    const double y_chief = rays.y[0];
+    for (int c = 0; c < 3; ++c) {
+      const int w = ctx.channel_wavelength[c];
+      if (w < 0) continue;
+      const PupilMap<double>& map = sys.pupil_map(h, w);
+      for (int sagittal = 0; sagittal < 2; ++sagittal) {
+        FanCurve curve;
+        curve.channel = c;
+        curve.wavelength_nm = sys.lens.wavelengths_nm[w];
+        rays.resize(n);
+        for (int i = 0; i < n; ++i) {
+          const double p = -1.0 + 2.0 * i / (n - 1);
+          curve.pupil.push_back(p);
+          if (sagittal)
+            set_pupil_ray(sys, h, map.scale_x * p, map.offset_y, rays, i);
+          else
+            set_pupil_ray(sys, h, 0.0, map.offset_y + map.scale_y * p, rays, i);
+        }
+        trace_to_image(sys, w, rays);
+        for (int i = 0; i < n; ++i) {
+          const bool ok = chief_ok && rays.status[i] == kRayOk;
+          const double e = ok ? 1000.0 * (sagittal ? rays.x[i] : rays.y[i] - y_chief) : 0.0;
+          curve.error_um.push_back(e);
+          curve.valid.push_back(ok);
+          if (ok) out.max_abs_um = std::max(out.max_abs_um, std::abs(e));
+        }
+        (sagittal ? field.sagittal : field.tangential).push_back(std::move(curve));
+      }
+    }
+    out.fields.push_back(std::move(field));
+  }
+  return out;
+}
+
+FieldCurveData compute_field_curves(const PlotContext& ctx, double delta) {
+  if (!(delta > 0 && delta < 0.5)) throw Error("field curves: delta must be in (0, 0.5)");
+  const TraceSystem<double>& sys = ctx.sys;
+  FieldCurveData out;
+  out.lens_name = ctx.lens.name;
+  out.field_deg = sys.fields_deg;
+  for (const FieldReport& f : ctx.report.fields) out.distortion_percent.push_back(f.distortion_percent);
+  RayBundle<double> rays;
+  for (int c = 0; c < 3; ++c) {
+    const int w = ctx.channel_wavelength[c];
+    if (w < 0) continue;
+    FocusCurve curve;
+    curve.channel = c;
+    curve.wavelength_nm = sys.lens.wavelengths_nm[w];
+    for (int h = 0; h < static_cast<int>(sys.fields_deg.size()); ++h) {
+      const PupilMap<double>& map = sys.pupil_map(h, w);
+      rays.resize(3);
+      set_pupil_ray(sys, h, 0.0, map.offset_y + delta * map.scale_y, rays, 0);
+      set_pupil_ray(sys, h, 0.0, map.offset_y - delta * map.scale_y, rays, 1);
+      set_pupil_ray(sys, h, delta * map.scale_x, map.offset_y, rays, 2);
+      trace_to_image(sys, w, rays);
+      const bool ok = rays.status[0] == kRayOk && rays.status[1] == kRayOk &&
+                      rays.status[2] == kRayOk && rays.l[2] != 0.0;
+      const double slope_diff = rays.m[0] / rays.n[0] - rays.m[1] / rays.n[1];
+      const double dz_t = ok && slope_diff != 0.0 ? -(rays.y[0] - rays.y[1]) / slope_diff : 0.0;
+      const double dz_s = ok ? -rays.x[2] * rays.n[2] / rays.l[2] : 0.0;
+      curve.tangential_mm.push_back(dz_t);
+      curve.sagittal_mm.push_back(dz_s);
+      curve.valid.push_back(ok && slope_diff != 0.0 && std::isfinite(dz_t) && std::isfinite(dz_s));
+    }
+    out.focus.push_back(std::move(curve));
+  }
+  return out;
+}
+
+}  // namespace lensopt::plot
