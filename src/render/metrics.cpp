@@ -24,13 +24,13 @@ void check_same_size(const FloatImage& x, const FloatImage& y, int channels) {
 int thread_count(int threads) { return threads > 0 ? threads : omp_get_max_threads(); }
 
 // Normalized Gaussian weights of an odd window of `size` taps.
-std::vector<float> gaussian_window(int size, double sigma) {
-  std::vector<float> w(size);
+std::vector<double> gaussian_window(int size, double sigma) {
+  std::vector<double> w(size);
   const int half = size / 2;
   double sum = 0;
   for (int i = 0; i < size; ++i) sum += std::exp(-0.5 * (i - half) * (i - half) / (sigma * sigma));
   for (int i = 0; i < size; ++i)
-    w[i] = static_cast<float>(std::exp(-0.5 * (i - half) * (i - half) / (sigma * sigma)) / sum);
+    w[i] = std::exp(-0.5 * (i - half) * (i - half) / (sigma * sigma)) / sum;
   return w;
 }
 
@@ -67,24 +67,25 @@ double ssim(const FloatImage& x, const FloatImage& y, int channels, int threads)
   const int height = x.height;
   const int wx = window_size(width);
   const int wy = window_size(height);
-  const std::vector<float> gx = gaussian_window(wx, kSigma);
-  const std::vector<float> gy = gaussian_window(wy, kSigma);
+  const std::vector<double> gx = gaussian_window(wx, kSigma);
+  const std::vector<double> gy = gaussian_window(wy, kSigma);
   const int out_w = width - wx + 1;  // positions where the window lies inside the image
   const int out_h = height - wy + 1;
   const int nthreads = thread_count(threads);
   double total = 0;
   // Horizontal pass of x, y, x^2, y^2, xy into five height x out_w maps; vertical pass per row.
-  std::vector<float> h[5];
+  // In double: the variances are differences of nearly equal second moments.
+  std::vector<double> h[5];
   for (auto& m : h) m.resize(static_cast<std::size_t>(height) * out_w);
   for (int c = 0; c < channels; ++c) {
 #pragma omp parallel for num_threads(nthreads) schedule(static)
     for (int row = 0; row < height; ++row) {
       for (int col = 0; col < out_w; ++col) {
-        float s[5] = {0, 0, 0, 0, 0};
+        double s[5] = {0, 0, 0, 0, 0};
         for (int k = 0; k < wx; ++k) {
-          const float a = x.at(col + k, row, c);
-          const float b = y.at(col + k, row, c);
-          const float g = gx[k];
+          const double a = x.at(col + k, row, c);
+          const double b = y.at(col + k, row, c);
+          const double g = gx[k];
           s[0] += g * a;
           s[1] += g * b;
           s[2] += g * a * a;
@@ -102,7 +103,7 @@ double ssim(const FloatImage& x, const FloatImage& y, int channels, int threads)
         double s[5] = {0, 0, 0, 0, 0};
         for (int k = 0; k < wy; ++k) {
           const std::size_t i = static_cast<std::size_t>(row + k) * out_w + col;
-          for (int m = 0; m < 5; ++m) s[m] += static_cast<double>(gy[k]) * h[m][i];
+          for (int m = 0; m < 5; ++m) s[m] += gy[k] * h[m][i];
         }
         const double mx = s[0], my = s[1];
         const double vx = s[2] - mx * mx, vy = s[3] - my * my, cxy = s[4] - mx * my;

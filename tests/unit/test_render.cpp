@@ -13,6 +13,7 @@
 #include <fstream>
 #include <map>
 
+#include "lensopt/core/atomic_file.h"
 #include "lensopt/core/error.h"
 #include "lensopt/lens/lens_io.h"
 #include "lensopt/render/chart.h"
@@ -291,4 +292,304 @@ TEST_CASE("render: with distortion off the mean is the input's times the mean il
   LENSOPT_REQUIRE_SHARED(shared);
   const FloatImage sample = read_image(shared / "data/images/sample_image.png").image;
   for (const std::string name : {"doublet", "cooke", "tessar"}) check(name, sample, 1);
+}
+
+TEST_CASE("render: a point's blur matches the traced RMS spot at the centre and at 0.7 field") {
+  // 1x on a 1921 x 1081 image: pitch 7.26 um; the image centre is a pixel centre.
+  const int width = 1921, height = 1081;
+  for (const std::string name : {"tessar", "cooke"}) {
+    const Lens lens = project_lens(name);
+    const ImagingModel& model = model_of(name);
+    RenderOptions o;
+    o.distortion = false;
+    o.relative_illumination = false;
+    const Renderer renderer(model, o);
+    const std::shared_ptr<const PsfGrid> grid = renderer.psf_grid(width, height);
+    const SensorGeometry& geo = grid->geometry;
+    const double p_um = geo.pitch_mm * 1000.0;
+    const double sigma_um = model.psfs.options.sigma_um();
+    struct Probe {
+      int field, px, py, x, y;
+    };
+    std::vector<Probe> probes;
+    probes.push_back({0, 4, 4, width / 2, height / 2});
+    {  // 0.7 of the field (17.5 deg) at its reference height, towards patch (7, 7)'s centre
+      const double cx = 0.5 * (grid->bounds_x[7] + grid->bounds_x[8]) - geo.axis_x;
+      const double cy = 0.5 * (grid->bounds_y[7] + grid->bounds_y[8]) - geo.axis_y;
+      const double r_px = model.reference_y_mm[14] / geo.pitch_mm / std::hypot(cx, cy);
+      probes.push_back({14, 7, 7, static_cast<int>(std::floor(geo.axis_x + cx * r_px)),
+                        static_cast<int>(std::floor(geo.axis_y + cy * r_px))});
+    }
+    FloatImage in(width, height, 3, 0.0f);
+    for (const Probe& pr : probes)
+      for (int c = 0; c < 3; ++c) in.at(pr.x, pr.y, c) = 1.0f;
+    const FloatImage out = renderer.blur(in);
+    const auto wx = overlap_windows(grid->bounds_x, width, 0);
+    const auto wy = overlap_windows(grid->bounds_y, height, 0);
+    std::vector<ChannelMoments> traced;
+    for (int h = 0; h < 21; ++h) traced.push_back(traced_moments(lens, h));
+
+    for (const Probe& pr : probes) {
+      const int q = grid->patch_index(pr.px, pr.py);
+      const int reach = grid->max_radius + 1;
+      // Precondition: the blur lies inside the patch's flat window (no other patch's PSF).
+      for (int d = -reach; d <= reach; ++d) {
+        REQUIRE(wx[pr.px][pr.x + d] == 1.0);
+        REQUIRE(wy[pr.py][pr.y + d] == 1.0);
+      }
+      const double radius_mm = geo.radius_mm(pr.x, pr.y);
+      for (int c = 0; c < 3; ++c) {
+        // Measured: centroid and variance (pixels^2, both axes) of the blurred point.
+        double s = 0, sx = 0, sy = 0, sxx = 0;
+        for (int j = pr.y - reach; j <= pr.y + reach; ++j)
+          for (int i = pr.x - reach; i <= pr.x + reach; ++i) {
+            const double v = out.at(i, j, c);
+            s += v;
+            sx += v * i;
+            sy += v * j;
+            sxx += v * (static_cast<double>(i) * i + static_cast<double>(j) * j);
+          }
+        CHECK(s == doctest::Approx(1.0).epsilon(1e-5));
+        const double var_px = sxx / s - (sx / s) * (sx / s) - (sy / s) * (sy / s);
+        const double rms_um = std::sqrt(var_px) * p_um;
+        // Expected from the tracer: the patch PSF mixes fields with the grid's weights; each
+        // field's rays about the grid centre, plus the KDE's s^2 per axis and the bilinear
+        // resampling's p^2 / 6 per axis (its mean over bin positions).
+        double second_um2 = 0, offset_um = 0;
+        for (int h = 0; h < 21; ++h) {
+          const double a = grid->field_weights[q][h];
+          second_um2 += a * traced[h].second[c] * 1e6;
+          offset_um += a * traced[h].offset[c] * 1e3;
+        }
+        const double expected_um = std::sqrt(second_um2 - offset_um * offset_um +
+                                              2 * sigma_um * sigma_um + p_um * p_um / 3);
+        // The traced RMS spot of the probe's own field and channel, against the measured blur
+        // with the KDE and pixel terms taken out.
+        const double field_rms_um = traced[pr.field].rms_mm[c] * 1e3;
+        const double measured_spot_um =
+            std::sqrt(rms_um * rms_um - 2 * sigma_um * sigma_um - p_um * p_um / 3);
+        MESSAGE(name, " field ", pr.field, " (pixel at ", radius_mm, " mm) channel ", c,
+                ": blur RMS ", rms_um, " um, expected ", expected_um,
+                " um; without KDE and pixel terms ", measured_spot_um,
+                " um vs the field's traced RMS ", field_rms_um, " um");
+        CHECK(std::abs(rms_um / expected_um - 1) < 0.05);
+        CHECK(std::abs(measured_spot_um / field_rms_um - 1) < 0.05);
+      }
+    }
+  }
+}
+
+TEST_CASE("render: the distortion warp moves a point from y_ref,h to ybar_h") {
+  const ImagingModel& model = model_of("doublet");  // -7.6 % at full field
+  RenderOptions o;
+  const Renderer renderer(model, o);
+  const int width = 640, height = 360;
+  const SensorGeometry geo = SensorGeometry::make(width, height, 1, model.sensor_diagonal_mm);
+  for (int h : {8, 16}) {
+    // A small Gaussian spot centred at field h's reference height along the diagonal.
+    const double dir_x = width / std::hypot(width, height), dir_y = height / std::hypot(width, height);
+    const double r_px = model.reference_y_mm[h] / geo.pitch_mm;
+    const double x0 = geo.axis_x + dir_x * r_px, y0 = geo.axis_y + dir_y * r_px;
+    FloatImage in(width, height, 1, 0.0f);
+    for (int j = 0; j < height; ++j)
+      for (int i = 0; i < width; ++i) {
+        const double d2 = (i + 0.5 - x0) * (i + 0.5 - x0) + (j + 0.5 - y0) * (j + 0.5 - y0);
+        in.at(i, j, 0) = static_cast<float>(std::exp(-d2 / (2 * 1.5 * 1.5)));
+      }
+    const FloatImage out = renderer.apply_distortion(in);
+    double s = 0, sx = 0, sy = 0;
+    for (int j = 0; j < height; ++j)
+      for (int i = 0; i < width; ++i) {
+        s += out.at(i, j, 0);
+        sx += out.at(i, j, 0) * (i + 0.5);
+        sy += out.at(i, j, 0) * (j + 0.5);
+      }
+    const double r_out_mm = std::hypot(sx / s - geo.axis_x, sy / s - geo.axis_y) * geo.pitch_mm;
+    INFO("field ", h, ": imaged at ", r_out_mm, " mm, centroid ", model.centroid_y_mm[h], " mm");
+    CHECK(std::abs(r_out_mm - model.centroid_y_mm[h]) < 0.05 * geo.pitch_mm);
+    CHECK(model.centroid_y_mm[h] < model.reference_y_mm[h]);  // barrel
+  }
+  // The inverse map is the inverse.
+  for (double r : {0.5, 3.0, 7.9}) {
+    const double rd = r + distortion_at(model, r) * model.reference_y_mm.back();
+    CHECK(undistorted_radius_mm(model, rd) == doctest::Approx(r).epsilon(1e-12));
+  }
+}
+
+TEST_CASE("render: the bicubic warp gives OpenImageIO's catmull-rom st_warp values") {
+  const ImagingModel& model = model_of("doublet");
+  const Renderer renderer(model, RenderOptions{});
+  const int width = 200, height = 120;
+  FloatImage in(width, height, 3);
+  for (int j = 0; j < height; ++j)
+    for (int i = 0; i < width; ++i)
+      for (int c = 0; c < 3; ++c)
+        in.at(i, j, c) = static_cast<float>(0.5 + 0.4 * std::sin(0.21 * i + 0.13 * j + c) *
+                                                      std::cos(0.07 * i - 0.17 * j));
+  const FloatImage mine = renderer.apply_distortion(in);
+  // The same inverse map as an ST map for OpenImageIO.
+  const SensorGeometry geo = SensorGeometry::make(width, height, 1, model.sensor_diagonal_mm);
+  OIIO::ImageBuf src(OIIO::ImageSpec(width, height, 3, OIIO::TypeDesc::FLOAT), in.pixels.data());
+  std::vector<float> st(static_cast<std::size_t>(width) * height * 2);
+  std::vector<char> inside(static_cast<std::size_t>(width) * height);
+  for (int j = 0; j < height; ++j)
+    for (int i = 0; i < width; ++i) {
+      const double dx = i + 0.5 - geo.axis_x, dy = j + 0.5 - geo.axis_y;
+      const double r = geo.pitch_mm * std::hypot(dx, dy);
+      const double k = undistorted_radius_mm(model, r) / r;
+      const double sx = geo.axis_x + dx * k, sy = geo.axis_y + dy * k;
+      st[(static_cast<std::size_t>(j) * width + i) * 2] = static_cast<float>(sx / width);
+      st[(static_cast<std::size_t>(j) * width + i) * 2 + 1] = static_cast<float>(sy / height);
+      inside[static_cast<std::size_t>(j) * width + i] =
+          sx > 3 && sx < width - 3 && sy > 3 && sy < height - 3;
+    }
+  OIIO::ImageBuf stbuf(OIIO::ImageSpec(width, height, 2, OIIO::TypeDesc::FLOAT), st.data());
+  OIIO::ImageBuf theirs;
+  REQUIRE(OIIO::ImageBufAlgo::st_warp(theirs, src, stbuf, "catmull-rom", 4.0f));
+  std::vector<float> ref(static_cast<std::size_t>(width) * height * 3);
+  theirs.get_pixels(OIIO::ROI(0, width, 0, height, 0, 1, 0, 3), OIIO::TypeDesc::FLOAT, ref.data());
+  double worst = 0;
+  int compared = 0;
+  for (std::size_t p = 0; p < inside.size(); ++p) {
+    if (!inside[p]) continue;
+    ++compared;
+    for (int c = 0; c < 3; ++c)
+      worst = std::max(worst, static_cast<double>(std::abs(mine.pixels[p * 3 + c] - ref[p * 3 + c])));
+  }
+  INFO("largest difference ", worst, " over ", compared, " pixels");
+  CHECK(compared > width * height / 2);
+  CHECK(worst < 1e-4);
+}
+
+TEST_CASE("metrics: PSNR and SSIM against known values") {
+  const FloatImage x = chart(64, 48);
+  CHECK(std::isinf(psnr_db(x, x, 3)));
+  CHECK(ssim(x, x, 3) == doctest::Approx(1.0).epsilon(1e-12));
+  // A constant offset of 0.1: MSE 0.01, PSNR 20 dB.
+  FloatImage y = x;
+  for (float& v : y.pixels) v += 0.1f;
+  CHECK(psnr_db(x, y, 3) == doctest::Approx(20.0).epsilon(1e-5));
+  // OpenImageIO's PSNR of the same pair (it takes the largest pixel value as the peak: the
+  // chart's white patch is 1 and the noisy copy is clamped to [0, 1]).
+  FloatImage noisy = x;
+  unsigned seed = 12345;
+  for (float& v : noisy.pixels) {
+    seed = seed * 1664525u + 1013904223u;
+    v = std::clamp(v + 0.05f * ((seed >> 8) / 16777216.0f - 0.5f), 0.0f, 1.0f);
+  }
+  FloatImage grey_x(64, 48, 1), grey_noisy(64, 48, 1);
+  for (std::size_t p = 0; p < grey_x.pixels.size(); ++p) {
+    grey_x.pixels[p] = x.pixels[3 * p];
+    grey_noisy.pixels[p] = noisy.pixels[3 * p];
+  }
+  OIIO::ImageBuf a(OIIO::ImageSpec(64, 48, 1, OIIO::TypeDesc::FLOAT), grey_x.pixels.data());
+  OIIO::ImageBuf b(OIIO::ImageSpec(64, 48, 1, OIIO::TypeDesc::FLOAT), grey_noisy.pixels.data());
+  const auto cmp = OIIO::ImageBufAlgo::compare(a, b, 1.0f, 1.0f);
+  CHECK(psnr_db(grey_x, grey_noisy, 1) == doctest::Approx(cmp.PSNR).epsilon(1e-6));
+  // Symmetric, below 1 for a different image.
+  const double s = ssim(x, noisy, 3);
+  CHECK(s < 1.0);
+  CHECK(s > 0.5);
+  CHECK(ssim(noisy, x, 3) == doctest::Approx(s).epsilon(1e-12));
+  // Two constant images a and b: the variance terms are 0, so SSIM = (2ab + C1)/(a^2 + b^2 + C1).
+  const FloatImage ca(40, 30, 1, 0.3f), cb(40, 30, 1, 0.5f);
+  const double c1 = 1e-4;
+  const double a3 = 0.3f, b5 = 0.5f;  // the float values
+  CHECK(ssim(ca, cb, 1) ==
+        doctest::Approx((2 * a3 * b5 + c1) / (a3 * a3 + b5 * b5 + c1)).epsilon(1e-12));
+  // A contrast-inverted image is strongly dissimilar.
+  FloatImage inv = x;
+  for (float& v : inv.pixels) v = 1.0f - v;
+  CHECK(ssim(x, inv, 3) < 0.0);
+  // Sizes must match.
+  CHECK_THROWS_AS(psnr_db(x, ca, 1), Error);
+}
+
+TEST_CASE("render: the Doublet blurs the sample image more than the Cooke, the Cooke than the Tessar") {
+  LENSOPT_REQUIRE_SHARED(shared);
+  const FloatImage sample = read_image(shared / "data/images/sample_image.png").image;
+  for (int res : {1, 2}) {
+    std::vector<double> psnr, ssim_values;
+    for (const std::string name : {"doublet", "cooke", "tessar"}) {
+      RenderOptions o;
+      o.res_factor = res;
+      const RenderResult r = Renderer(model_of(name), o).render(sample);
+      MESSAGE(name, " at ", res, "x on sample_image.png: PSNR ", r.psnr_db, " dB, SSIM ", r.ssim);
+      psnr.push_back(r.psnr_db);
+      ssim_values.push_back(r.ssim);
+    }
+    CHECK(psnr[0] < psnr[1]);
+    CHECK(psnr[1] < psnr[2]);
+    CHECK(ssim_values[0] < ssim_values[1]);
+    CHECK(ssim_values[1] < ssim_values[2]);
+  }
+}
+
+TEST_CASE("render: bad inputs are reported, skipped, and leave nothing half-written") {
+  TempDir tmp;
+  const fs::path in = tmp.path / "in", out = tmp.path / "out";
+  fs::create_directories(in / "sub");
+  write_image(in / "good.png", chart(96, 64));
+  write_image(in / "sub" / "good16.tif", chart(80, 60), OIIO::ImageSpec(80, 60, 3, OIIO::TypeDesc::UINT16));
+  write_image(in / "tiny.png", FloatImage(8, 8, 3, 0.5f));
+  write_image(in / "strip.png", FloatImage(2000, 20, 3, 0.5f));
+  { std::ofstream(in / "empty.png"); }
+  { std::ofstream(in / "corrupt.jpg") << "this is not a JPEG file at all"; }
+  {  // a PNG cut in the middle of its data
+    const std::string bytes = read_file(in / "good.png");
+    std::ofstream(in / "truncated.png", std::ios::binary) << bytes.substr(0, bytes.size() / 2);
+  }
+  { std::ofstream(tmp.path / "notes.bmp") << "BM"; }
+  RenderOptions ro;
+  ro.threads = 1;
+  const Renderer renderer(model_of("doublet"), ro);  // its PSF is wider than a 32 px image
+  DatasetOptions d;
+  d.inputs = {in, tmp.path / "notes.bmp", tmp.path / "missing.png"};
+  d.output_dir = out;
+  d.jobs = 2;
+  const DatasetSummary s = render_dataset(renderer, d);
+  std::map<std::string, const ImageRecord*> by_name;
+  for (const ImageRecord& r : s.records) by_name[r.input.filename().string()] = &r;
+  CHECK(s.rendered == 2);
+  CHECK(s.failed == 7);
+  auto error_of = [&](const std::string& n) {
+    REQUIRE(by_name.count(n) == 1);
+    CHECK(by_name[n]->status == ImageRecord::Status::kFailed);
+    return by_name[n]->error;
+  };
+  CHECK(error_of("empty.png").find("empty") != std::string::npos);
+  CHECK(error_of("corrupt.jpg").find("corrupt") != std::string::npos);
+  CHECK(error_of("truncated.png").find("corrupt") != std::string::npos);
+  CHECK(error_of("notes.bmp").find("unsupported image format") != std::string::npos);
+  CHECK(error_of("missing.png").find("no such file") != std::string::npos);
+  CHECK(error_of("tiny.png").find("too small") != std::string::npos);
+  // 2000 x 20: the pitch is 8 um, the Doublet's PSF (260 um grid) about 33 pixels wide.
+  CHECK(error_of("strip.png").find("smaller than the lens's PSF") != std::string::npos);
+  // Only complete outputs and the metrics; no temporary file left behind.
+  CHECK(list_files(out) == std::vector<std::string>{"good.png", "render_metrics.csv",
+                                                    "render_metrics.json", "sub/good16.tif"});
+  // Format and bit depth kept.
+  auto spec_of = [](const fs::path& p) { return OIIO::ImageInput::open(p.string())->spec(); };
+  CHECK(spec_of(out / "sub/good16.tif").format == OIIO::TypeDesc::UINT16);
+  CHECK(spec_of(out / "good.png").format == OIIO::TypeDesc::UINT8);
+  const std::string csv = read_file(out / "render_metrics.csv");
+  CHECK(csv.find("truncated.png") != std::string::npos);
+  CHECK(csv.find("\nmean,") != std::string::npos);
+
+  // Resume: existing outputs are skipped and keep their metrics.
+  const DatasetSummary again = render_dataset(renderer, d);
+  CHECK(again.rendered == 0);
+  CHECK(again.skipped == 2);
+  REQUIRE(again.mean_psnr_db.has_value());
+  CHECK(*again.mean_psnr_db == doctest::Approx(*s.mean_psnr_db).epsilon(1e-4));
+
+  // Output directories that cannot be written.
+  DatasetOptions bad = d;
+  bad.output_dir = in / "good.png";  // a file
+  CHECK_THROWS_WITH_AS(render_dataset(renderer, bad), doctest::Contains("not a directory"), Error);
+  bad.output_dir = in / "good.png" / "sub";  // under a file
+  CHECK_THROWS_WITH_AS(render_dataset(renderer, bad), doctest::Contains("cannot create"), Error);
+  // An image too small for the PSF, directly.
+  CHECK_THROWS_WITH_AS(renderer.render(FloatImage(2000, 20, 3, 0.5f)),
+                       doctest::Contains("smaller than"), Error);
 }
