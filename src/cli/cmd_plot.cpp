@@ -45,8 +45,9 @@ void setup_plot(CLI::App& app) {
   sub->add_option("LENS", cmd->lens_path, "lens file (.toml, or the paper's .yml)")->required();
   sub->add_option("--kind,-k", cmd->kind, "layout, spot, fan, field, psf or report (default)");
   sub->add_option("-o,--output", cmd->output, "output file: .svg or .png")->required();
-  sub->add_option("--compare", cmd->compare_path,
-                  "a second lens: overlaid dashed (layout, fans, fields), one more row (spots, PSFs)");
+  sub->add_option(
+      "--compare", cmd->compare_path,
+      "a second lens: overlaid dashed (layout, fans, fields), one more row (spots, PSFs)");
   sub->add_option("--spot-box-um", cmd->options.spot_box_um,
                   "width of every spot-diagram box in um (0: fit the largest spot); give the same "
                   "value to compare lenses across pages");

@@ -148,8 +148,8 @@ Point legend_size(const std::vector<LegendEntry>& entries, double font_px, bool 
   return {w + 2 * pad, h + 2 * pad};
 }
 
-Point draw_legend(Canvas& canvas, Point at, const std::vector<LegendEntry>& entries,
-                  double font_px, bool horizontal) {
+Point draw_legend(Canvas& canvas, Point at, const std::vector<LegendEntry>& entries, double font_px,
+                  bool horizontal) {
   const double sample = 22, gap = 6, pad = 6, row = font_px + 6;
   const Point size = legend_size(entries, font_px, horizontal);
   canvas.rect(at, size.x, size.y, Style{"#c8c8c8", 0.8, "#ffffff"});

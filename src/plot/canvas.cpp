@@ -1,4 +1,6 @@
 // The SVG canvas backend and helpers shared by both backends.
+#include "lensopt/plot/canvas.h"
+
 #include <OpenImageIO/filesystem.h>
 #include <OpenImageIO/imageio.h>
 #include <fmt/format.h>
@@ -9,7 +11,6 @@
 
 #include "lensopt/core/atomic_file.h"
 #include "lensopt/core/error.h"
-#include "lensopt/plot/canvas.h"
 
 namespace lensopt::plot {
 
@@ -34,7 +35,8 @@ bool parse_colour(const std::string& css, float rgb[3]) {
   for (int c = 0; c < 3; ++c) {
     unsigned v = 0;
     for (int k = 0; k < 2; ++k) {
-      const char h = static_cast<char>(std::tolower(static_cast<unsigned char>(css[1 + 2 * c + k])));
+      const char h =
+          static_cast<char>(std::tolower(static_cast<unsigned char>(css[1 + 2 * c + k])));
       v <<= 4;
       if (h >= '0' && h <= '9')
         v |= static_cast<unsigned>(h - '0');
@@ -90,7 +92,9 @@ std::string encode_png(const RgbImage& image) {
 
 SvgCanvas::SvgCanvas(double width, double height) : Canvas(width, height), doc_(width, height) {}
 
-void SvgCanvas::line(Point a, Point b, const Style& style) { doc_.line(a, b, style); }
+void SvgCanvas::line(Point a, Point b, const Style& style) {
+  doc_.line(a, b, style);
+}
 
 void SvgCanvas::polyline(const std::vector<Point>& points, const Style& style) {
   if (points.size() >= 2) doc_.polyline(points, style);

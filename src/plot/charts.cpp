@@ -74,8 +74,8 @@ double auto_spot_box_um(const std::vector<const SpotData*>& rows) {
   return fine_ceil(std::max(1.0, 2.1 * r));
 }
 
-void draw_spots(Canvas& canvas, Rect area, const std::vector<const SpotData*>& rows,
-                double box_um, double font_px) {
+void draw_spots(Canvas& canvas, Rect area, const std::vector<const SpotData*>& rows, double box_um,
+                double font_px) {
   if (rows.empty()) return;
   const int nf = static_cast<int>(rows[0]->fields.size());
   const double top_band = font_px * 2.4;
@@ -85,8 +85,8 @@ void draw_spots(Canvas& canvas, Rect area, const std::vector<const SpotData*>& r
   const int nr = static_cast<int>(rows.size());
   const double avail_h = area.height - top_band - bottom_band;
   const double per_row_text = row_title + field_label + rms_label;
-  const double side = std::max(
-      20.0, std::min((area.width - gap * (nf - 1) - 8) / nf, avail_h / nr - per_row_text));
+  const double side =
+      std::max(20.0, std::min((area.width - gap * (nf - 1) - 8) / nf, avail_h / nr - per_row_text));
   const double row_h = side + per_row_text;
   const double total_w = nf * side + (nf - 1) * gap;
   const double x0 = area.x + (area.width - total_w) / 2;
@@ -125,9 +125,8 @@ void draw_spots(Canvas& canvas, Rect area, const std::vector<const SpotData*>& r
       // Points by wavelength, long wavelengths first.
       std::vector<int> order(spots.wavelengths_nm.size());
       for (std::size_t w = 0; w < order.size(); ++w) order[w] = static_cast<int>(w);
-      std::sort(order.begin(), order.end(), [&](int a, int b) {
-        return spots.wavelengths_nm[a] > spots.wavelengths_nm[b];
-      });
+      std::sort(order.begin(), order.end(),
+                [&](int a, int b) { return spots.wavelengths_nm[a] > spots.wavelengths_nm[b]; });
       std::vector<std::vector<Point>> by_wavelength(order.size());
       int outside = 0;
       const double half = side / 2 - 1;
@@ -159,8 +158,7 @@ void draw_spots(Canvas& canvas, Rect area, const std::vector<const SpotData*>& r
                  font_px * 0.9);
 }
 
-void draw_fans(Canvas& canvas, Rect area, const FanData& fans, const FanData* cmp,
-               double font_px) {
+void draw_fans(Canvas& canvas, Rect area, const FanData& fans, const FanData* cmp, double font_px) {
   const int nf = static_cast<int>(fans.fields.size());
   if (nf == 0) return;
   double max_abs = fans.max_abs_um;
@@ -283,8 +281,8 @@ void draw_field_curves(Canvas& canvas, Rect area, const FieldCurveData& data,
   l2.font_px = font_px * 0.9;
   a2.draw_grid(canvas, l2);
   auto draw_distortion = [&](const FieldCurveData& d, const Style& s) {
-    const std::vector<char> valid(d.field_deg.size(), 1);
-    for (const auto& run : valid_runs(a2, d.distortion_percent, d.field_deg, valid))
+    const std::vector<char> valid(d.distortion_field_deg.size(), 1);
+    for (const auto& run : valid_runs(a2, d.distortion_percent, d.distortion_field_deg, valid))
       canvas.polyline(run, s);
   };
   if (cmp) draw_distortion(*cmp, Style{"#aaaaaa", 1.4});

@@ -26,7 +26,9 @@ double sphere_limit(double c) {
 
 }  // namespace
 
-double SurfaceDrawing::sag_z(double y) const { return vertex_z_mm + sag(curvature_per_mm, y); }
+double SurfaceDrawing::sag_z(double y) const {
+  return vertex_z_mm + sag(curvature_per_mm, y);
+}
 
 std::optional<double> SurfaceDrawing::z_at(double y) const {
   const double a = std::abs(y);
@@ -95,6 +97,7 @@ LayoutGeometry compute_layout(const PlotContext& ctx, const LayoutOptions& optio
     }
   }
   g.stop_radius_mm = sys.stop_radius_mm;  // the real marginal ray's height (the aperture)
+  g.stop_clear_mm = std::max(g.stop_radius_mm, max_height[lens.stop]);
 
   // Surfaces: clear apertures, element groups, drawn radii.
   g.surfaces.resize(k_count);
@@ -142,9 +145,9 @@ LayoutGeometry compute_layout(const PlotContext& ctx, const LayoutOptions& optio
       b.clear_semi_diameter_mm =
           std::min(b.clear_semi_diameter_mm, std::max(max_height[k + 1], meet));
     if (max_height[k] > meet || max_height[k + 1] > meet)
-      g.warnings.push_back(fmt::format(
-          "surfaces {} and {} meet at height {:.3f} mm, inside the rays' height there", k + 1,
-          k + 2, meet));
+      g.warnings.push_back(
+          fmt::format("surfaces {} and {} meet at height {:.3f} mm, inside the rays' height there",
+                      k + 1, k + 2, meet));
   }
   for (SurfaceDrawing& s : g.surfaces) {
     s.drawn_semi_diameter_mm = s.clear_semi_diameter_mm;
@@ -172,20 +175,21 @@ LayoutGeometry compute_layout(const PlotContext& ctx, const LayoutOptions& optio
     }
   }
 
-  // The stop: from the real stop radius outward, short of its neighbours' drawn curves.
+  // The stop: from its clear radius outward, short of its neighbours' drawn curves.
   {
     SurfaceDrawing& stop = g.surfaces[lens.stop];
-    double outer = std::max(g.stop_radius_mm * 1.3, g.stop_radius_mm + 0.3);
+    const double inner = g.stop_clear_mm;
+    double outer = std::max(inner * 1.3, inner + 0.3);
     const int steps = 200;
     for (int side : {-1, 1}) {
       const int k = lens.stop + side;
       if (k < 0 || k >= k_count) continue;
       const SurfaceDrawing& n = g.surfaces[k];
       for (int i = 0; i <= steps; ++i) {
-        const double y = g.stop_radius_mm + (outer - g.stop_radius_mm) * i / steps;
+        const double y = inner + (outer - inner) * i / steps;
         const auto z = n.z_at(y);
         if (z && (side < 0 ? *z >= g.stop_z_mm : *z <= g.stop_z_mm)) {
-          outer = std::max(g.stop_radius_mm * 1.02, y - (outer - g.stop_radius_mm) / steps);
+          outer = std::max(inner * 1.02, y - (outer - inner) / steps);
           break;
         }
       }
@@ -249,8 +253,8 @@ LayoutGeometry compute_layout(const PlotContext& ctx, const LayoutOptions& optio
     }
     g.min_gap_mm.push_back(gap);
     if (gap < 0)
-      g.warnings.push_back(fmt::format("surfaces {} and {} cross at height {:.3f} mm (by {:.3f} mm)",
-                                       k + 1, k + 2, at, -gap));
+      g.warnings.push_back(fmt::format(
+          "surfaces {} and {} cross at height {:.3f} mm (by {:.3f} mm)", k + 1, k + 2, at, -gap));
   }
 
   // Ray bundles at the reference wavelength.
@@ -354,7 +358,7 @@ void draw_layout(Canvas& canvas, Rect area, const LayoutGeometry& g, const Layou
     Style stop{"#111111", 3.0};
     stop.dash = dash;
     for (double side : {1.0, -1.0})
-      canvas.line(px({l.stop_z_mm, side * l.stop_radius_mm}, shift),
+      canvas.line(px({l.stop_z_mm, side * l.stop_clear_mm}, shift),
                   px({l.stop_z_mm, side * l.stop_outer_mm}, shift), stop);
     Style image{"#333333", 2.0};
     image.dash = dash;
@@ -365,9 +369,9 @@ void draw_layout(Canvas& canvas, Rect area, const LayoutGeometry& g, const Layou
   const TextStyle small{font_px * 0.85, Anchor::kMiddle, "#333333"};
   canvas.text({px({g.stop_z_mm, g.stop_outer_mm}).x, px({g.stop_z_mm, g.stop_outer_mm}).y - 5},
               "stop", small);
-  canvas.text(
-      {px({g.image_z_mm, g.image_half_height_mm}).x, px({g.image_z_mm, g.image_half_height_mm}).y - 5},
-      "image", small);
+  canvas.text({px({g.image_z_mm, g.image_half_height_mm}).x,
+               px({g.image_z_mm, g.image_half_height_mm}).y - 5},
+              "image", small);
 
   if (cmp) {
     Style dashed{kCompareStroke, 1.3};
@@ -391,14 +395,14 @@ void draw_layout(Canvas& canvas, Rect area, const LayoutGeometry& g, const Layou
   double lowest = 0;
   for (const ElementDrawing& e : g.elements) lowest = std::max(lowest, e.edge_semi_diameter_mm);
   for (const ElementDrawing& e : g.elements) {
-    const double zc = 0.5 * (g.surfaces[e.front_surface].vertex_z_mm +
-                             g.surfaces[e.back_surface].vertex_z_mm);
+    const double zc =
+        0.5 * (g.surfaces[e.front_surface].vertex_z_mm + g.surfaces[e.back_surface].vertex_z_mm);
     const Point at = px({zc, -lowest});
     const double w = text_width_px(e.glass, glass_text.size_px);
     row = (at.x - w / 2 < last_right + 4) ? 1 - row : 0;
     const double y = at.y + glass_text.size_px * (1.4 + 1.15 * row);
-    canvas.line({at.x, px({zc, -e.edge_semi_diameter_mm}).y + 2},
-                {at.x, y - glass_text.size_px}, Style{"#b0b0b0", 0.6});
+    canvas.line({at.x, px({zc, -e.edge_semi_diameter_mm}).y + 2}, {at.x, y - glass_text.size_px},
+                Style{"#b0b0b0", 0.6});
     canvas.text({at.x, y}, e.glass, glass_text);
     last_right = at.x + w / 2;
   }

@@ -19,12 +19,18 @@ constexpr double kFont = 13;
 
 std::string kind_title(PlotKind kind) {
   switch (kind) {
-    case PlotKind::kLayout: return "layout";
-    case PlotKind::kSpot: return "spot diagrams";
-    case PlotKind::kFan: return "transverse ray fans";
-    case PlotKind::kField: return "field curvature and distortion";
-    case PlotKind::kPsf: return "sampled PSFs";
-    case PlotKind::kReport: return "report";
+    case PlotKind::kLayout:
+      return "layout";
+    case PlotKind::kSpot:
+      return "spot diagrams";
+    case PlotKind::kFan:
+      return "transverse ray fans";
+    case PlotKind::kField:
+      return "field curvature and distortion";
+    case PlotKind::kPsf:
+      return "sampled PSFs";
+    case PlotKind::kReport:
+      return "report";
   }
   return "";
 }
@@ -42,8 +48,9 @@ std::string first_order_line(const PlotContext& ctx) {
 
 std::string spot_line(const PlotContext& ctx) {
   const AnalysisReport& r = ctx.report;
-  std::string s = r.mean_rms_spot_um ? fmt::format("mean RMS spot {:.2f} \u00b5m", *r.mean_rms_spot_um)
-                                     : std::string("mean RMS spot n/a");
+  std::string s = r.mean_rms_spot_um
+                      ? fmt::format("mean RMS spot {:.2f} \u00b5m", *r.mean_rms_spot_um)
+                      : std::string("mean RMS spot n/a");
   if (r.ray_failures > 0) s += fmt::format("   {} rays failed", r.ray_failures);
   return s;
 }
@@ -72,12 +79,18 @@ double draw_header(Canvas& canvas, const PlotContext& ctx, const PlotContext* cm
 
 double default_width(PlotKind kind) {
   switch (kind) {
-    case PlotKind::kLayout: return 1200;
-    case PlotKind::kSpot: return 1250;
-    case PlotKind::kFan: return 1300;
-    case PlotKind::kField: return 1100;
-    case PlotKind::kPsf: return 1150;
-    case PlotKind::kReport: return 1500;
+    case PlotKind::kLayout:
+      return 1200;
+    case PlotKind::kSpot:
+      return 1250;
+    case PlotKind::kFan:
+      return 1300;
+    case PlotKind::kField:
+      return 1100;
+    case PlotKind::kPsf:
+      return 1150;
+    case PlotKind::kReport:
+      return 1500;
   }
   return 1200;
 }
@@ -105,11 +118,13 @@ PlotKind parse_plot_kind(const std::string& name) {
   const auto& names = plot_kind_names();
   for (std::size_t i = 0; i < names.size(); ++i)
     if (names[i] == name) return static_cast<PlotKind>(i);
-  throw Error(fmt::format("unknown plot kind '{}': use one of layout, spot, fan, field, psf, report",
-                          name));
+  throw Error(fmt::format(
+      "unknown plot kind '{}': use one of layout, spot, fan, field, psf, report", name));
 }
 
-std::string plot_kind_name(PlotKind kind) { return plot_kind_names()[static_cast<int>(kind)]; }
+std::string plot_kind_name(PlotKind kind) {
+  return plot_kind_names()[static_cast<int>(kind)];
+}
 
 void PlotOptions::validate() const {
   trace.validate();
@@ -157,9 +172,8 @@ std::unique_ptr<Canvas> draw_plot(const PlotContext& ctx, const PlotContext* cmp
   std::vector<const SpotData*> spot_rows;
   if (spots) spot_rows.push_back(&*spots);
   if (spots_cmp) spot_rows.push_back(&*spots_cmp);
-  const double box_um = spots ? (options.spot_box_um > 0 ? options.spot_box_um
-                                                         : auto_spot_box_um(spot_rows))
-                              : 0.0;
+  const double box_um =
+      spots ? (options.spot_box_um > 0 ? options.spot_box_um : auto_spot_box_um(spot_rows)) : 0.0;
   std::vector<const PsfStrip*> psf_rows;
   if (psf) psf_rows.push_back(&*psf);
   if (psf_cmp) psf_rows.push_back(&*psf_cmp);
@@ -173,12 +187,23 @@ std::unique_ptr<Canvas> draw_plot(const PlotContext& ctx, const PlotContext* cmp
   const double psf_h_per_row = std::min(210.0, (width - 60) / 5.0) + kFont * 5;
   const double psf_h = kFont * 5 + rows * psf_h_per_row;
   switch (kind) {
-    case PlotKind::kLayout: height = header_h + layout_height(*layout, lc, width); break;
-    case PlotKind::kSpot: height = header_h + spot_h; break;
-    case PlotKind::kFan: height = header_h + 0.52 * width; break;
-    case PlotKind::kField: height = header_h + 0.45 * width; break;
-    case PlotKind::kPsf: height = header_h + psf_h; break;
-    case PlotKind::kReport: break;
+    case PlotKind::kLayout:
+      height = header_h + layout_height(*layout, lc, width);
+      break;
+    case PlotKind::kSpot:
+      height = header_h + spot_h;
+      break;
+    case PlotKind::kFan:
+      height = header_h + 0.52 * width;
+      break;
+    case PlotKind::kField:
+      height = header_h + 0.45 * width;
+      break;
+    case PlotKind::kPsf:
+      height = header_h + psf_h;
+      break;
+    case PlotKind::kReport:
+      break;
   }
   double layout_h = 0, top_row_h = 0, fan_h = 0;
   if (report) {
@@ -192,8 +217,12 @@ std::unique_ptr<Canvas> draw_plot(const PlotContext& ctx, const PlotContext* cmp
   const double top = draw_header(c, ctx, cmp, kind, width);
   const Rect body{0, top, width, c.height() - top};
   switch (kind) {
-    case PlotKind::kLayout: draw_layout(c, body.inset(8, 4, 8, 4), *layout, lc, kFont); break;
-    case PlotKind::kSpot: draw_spots(c, body.inset(10, 4, 10, 4), spot_rows, box_um, kFont); break;
+    case PlotKind::kLayout:
+      draw_layout(c, body.inset(8, 4, 8, 4), *layout, lc, kFont);
+      break;
+    case PlotKind::kSpot:
+      draw_spots(c, body.inset(10, 4, 10, 4), spot_rows, box_um, kFont);
+      break;
     case PlotKind::kFan:
       draw_fans(c, body.inset(10, 4, 14, 4), *fans, fans_cmp ? &*fans_cmp : nullptr, kFont);
       break;
@@ -201,14 +230,16 @@ std::unique_ptr<Canvas> draw_plot(const PlotContext& ctx, const PlotContext* cmp
       draw_field_curves(c, body.inset(10, 4, 14, 4), *field, field_cmp ? &*field_cmp : nullptr,
                         kFont);
       break;
-    case PlotKind::kPsf: draw_psf_strips(c, body.inset(10, 4, 10, 4), psf_rows, kFont); break;
+    case PlotKind::kPsf:
+      draw_psf_strips(c, body.inset(10, 4, 10, 4), psf_rows, kFont);
+      break;
     case PlotKind::kReport: {
       double y = top;
       const Rect layout_area{0, y, 0.58 * width, top_row_h};
       draw_layout(c, layout_area.inset(8, 4, 4, 4), *layout, lc, kFont);
       const Rect field_area{0.58 * width, y, 0.42 * width, std::min(top_row_h, 0.36 * width)};
-      draw_field_curves(c, field_area.inset(6, 4, 14, 4), *field,
-                        field_cmp ? &*field_cmp : nullptr, kFont);
+      draw_field_curves(c, field_area.inset(6, 4, 14, 4), *field, field_cmp ? &*field_cmp : nullptr,
+                        kFont);
       y += top_row_h;
       auto section = [&](const std::string& name, double at) {
         TextStyle t{kFont * 1.15, Anchor::kStart, "#111111"};
@@ -226,8 +257,7 @@ std::unique_ptr<Canvas> draw_plot(const PlotContext& ctx, const PlotContext* cmp
                 fans_cmp ? &*fans_cmp : nullptr, kFont);
       y += fan_h;
       s0 = section("sampled PSFs", y);
-      draw_psf_strips(c, Rect{0, s0, width, psf_h - (s0 - y)}.inset(10, 0, 10, 0), psf_rows,
-                      kFont);
+      draw_psf_strips(c, Rect{0, s0, width, psf_h - (s0 - y)}.inset(10, 0, 10, 0), psf_rows, kFont);
       break;
     }
   }
@@ -235,8 +265,9 @@ std::unique_ptr<Canvas> draw_plot(const PlotContext& ctx, const PlotContext* cmp
     summary->width_px = c.width();
     summary->height_px = c.height();
     summary->spot_box_um = box_um;
-    if (layout) summary->warnings.insert(summary->warnings.end(), layout->warnings.begin(),
-                                         layout->warnings.end());
+    if (layout)
+      summary->warnings.insert(summary->warnings.end(), layout->warnings.begin(),
+                               layout->warnings.end());
     if (layout_cmp)
       for (const std::string& w : layout_cmp->warnings)
         summary->warnings.push_back(cmp->lens.name + ": " + w);

@@ -40,9 +40,12 @@ void validate_fractions(const std::vector<double>& fractions, const char* what) 
 
 std::string glass_label(const Material& material) {
   switch (material.kind) {
-    case Material::Kind::kAir: return "air";
-    case Material::Kind::kCatalog: return material.glass_name;
-    case Material::Kind::kModel: return fmt::format("{:.4f}/{:.1f}", material.nd, material.vd);
+    case Material::Kind::kAir:
+      return "air";
+    case Material::Kind::kCatalog:
+      return material.glass_name;
+    case Material::Kind::kModel:
+      return fmt::format("{:.4f}/{:.1f}", material.nd, material.vd);
   }
   return material.label();
 }
@@ -52,6 +55,7 @@ PlotContext make_plot_context(const Lens& lens, const TraceOptions& trace) {
   trace.validate();
   PlotContext ctx;
   ctx.lens = lens;
+  ctx.trace = trace;
   AnalyzeOptions options;
   options.trace = trace;
   ctx.report = analyze_lens(lens, options);
@@ -194,13 +198,24 @@ FanData compute_fans(const PlotContext& ctx, const FanOptions& options) {
   return out;
 }
 
-FieldCurveData compute_field_curves(const PlotContext& ctx, double delta) {
+FieldCurveData compute_field_curves(const PlotContext& ctx, double delta, int fields) {
   if (!(delta > 0 && delta < 0.5)) throw Error("field curves: delta must be in (0, 0.5)");
-  const TraceSystem<double>& sys = ctx.sys;
+  if (fields < 2 || fields > 1001) throw Error("field curves: fields must be in 2..1001");
+  // The same (already scaled) lens, aimed at a finer field grid.
+  TraceOptions fine = ctx.trace;
+  fine.fields = fields;
+  fine.rings = 1;
+  fine.scale_to_spec = false;
+  const TraceSystem<double> sys =
+      prepare_system(ctx.sys.lens, value_of(ctx.sys.efl_mm), ctx.lens.specs.f_number,
+                     ctx.lens.specs.half_field_deg, fine);
   FieldCurveData out;
   out.lens_name = ctx.lens.name;
   out.field_deg = sys.fields_deg;
-  for (const FieldReport& f : ctx.report.fields) out.distortion_percent.push_back(f.distortion_percent);
+  for (const FieldReport& f : ctx.report.fields) {
+    out.distortion_field_deg.push_back(f.field_deg);
+    out.distortion_percent.push_back(f.distortion_percent);
+  }
   RayBundle<double> rays;
   for (int c = 0; c < 3; ++c) {
     const int w = ctx.channel_wavelength[c];

@@ -64,9 +64,8 @@ void draw_psf_strips(Canvas& canvas, Rect area, const std::vector<const PsfStrip
   const double title_h = font_px * 1.7, label_h = font_px * 1.4, below_h = font_px * 1.5;
   const double gap = font_px * 1.2;
   const double per_row_text = title_h + label_h + below_h;
-  const double side = std::max(
-      16.0, std::min((area.width - gap * (n - 1) - 8) / n, (area.height - top - bottom) / nr -
-                                                               per_row_text));
+  const double side = std::max(16.0, std::min((area.width - gap * (n - 1) - 8) / n,
+                                              (area.height - top - bottom) / nr - per_row_text));
   const double total_w = n * side + (n - 1) * gap;
   const double x0 = area.x + (area.width - total_w) / 2;
   const PsfStrip& first = *rows[0];

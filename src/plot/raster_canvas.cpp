@@ -85,7 +85,8 @@ std::vector<std::vector<Point>> dashed_pieces(const std::vector<Point>& points,
       left = pattern[index];
     }
     left -= length;
-    if (on) current.push_back(b);
+    if (on)
+      current.push_back(b);
     else
       current = {b};
   }
@@ -136,17 +137,16 @@ void stroke_segment(OIIO::ImageBuf& dst, Point a, Point b, double w, const float
   const double len = std::hypot(b.x - a.x, b.y - a.y);
   if (len < 1e-9) return;
   const double nx = -(b.y - a.y) / len * w / 2, ny = (b.x - a.x) / len * w / 2;
-  fill_polygon(dst,
-               {{a.x + nx, a.y + ny}, {b.x + nx, b.y + ny}, {b.x - nx, b.y - ny},
-                {a.x - nx, a.y - ny}},
-               rgba);
+  fill_polygon(
+      dst, {{a.x + nx, a.y + ny}, {b.x + nx, b.y + ny}, {b.x - nx, b.y - ny}, {a.x - nx, a.y - ny}},
+      rgba);
 }
 
 // Text in runs: OpenImageIO 2.4's UTF-8 decoder keeps only the last byte of a multi-byte
 // character, so ASCII runs go through render_text and the few symbols the plots use are drawn.
 struct TextPiece {
-  std::string ascii;       // a run of ASCII characters, or
-  char32_t symbol = 0;     // one non-ASCII character
+  std::string ascii;    // a run of ASCII characters, or
+  char32_t symbol = 0;  // one non-ASCII character
 };
 
 std::vector<TextPiece> split_text(const std::string& utf8) {
@@ -182,11 +182,16 @@ double ascii_advance(const std::string& text, int size, const char* font) {
 
 double symbol_advance(char32_t symbol, int size, const char* font) {
   switch (symbol) {
-    case U'\u00b0': return 0.40 * size;                                        // degree
-    case U'\u00b5': return ascii_advance("u", size, font);                     // micro
-    case U'\u00d7': return 0.62 * size;                                        // times
-    case U'\u2013': return 0.50 * size;                                        // en dash
-    default: return ascii_advance("?", size, font);
+    case U'\u00b0':
+      return 0.40 * size;  // degree
+    case U'\u00b5':
+      return ascii_advance("u", size, font);  // micro
+    case U'\u00d7':
+      return 0.62 * size;  // times
+    case U'\u2013':
+      return 0.50 * size;  // en dash
+    default:
+      return ascii_advance("?", size, font);
   }
 }
 
@@ -277,7 +282,7 @@ struct RasterCanvas::Impl {
     for (const Point& p : page_points) pts.push_back(s(p));
     if (closed) pts.push_back(pts.front());
     const double w = std::max(1.0, s(style.stroke_width));
-    for (const auto& piece : dashed_pieces(pts, parse_dash(style.dash, s(style.stroke_width)))) {
+    for (const auto& piece : dashed_pieces(pts, parse_dash(style.dash, ss))) {
       for (std::size_t i = 0; i + 1 < piece.size(); ++i) {
         stroke_segment(buf, piece[i], piece[i + 1], w, rgba);
         // Square joins keep wide polylines free of notches.
@@ -458,6 +463,8 @@ void RasterCanvas::save(const std::filesystem::path& path) const {
   });
 }
 
-std::vector<std::string> RasterCanvas::warnings() const { return impl_->warnings; }
+std::vector<std::string> RasterCanvas::warnings() const {
+  return impl_->warnings;
+}
 
 }  // namespace lensopt::plot

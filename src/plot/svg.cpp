@@ -54,11 +54,20 @@ std::string xml_escape(const std::string& text) {
   std::string out;
   for (char c : text) {
     switch (c) {
-      case '&': out += "&amp;"; break;
-      case '<': out += "&lt;"; break;
-      case '>': out += "&gt;"; break;
-      case '"': out += "&quot;"; break;
-      default: out += c;
+      case '&':
+        out += "&amp;";
+        break;
+      case '<':
+        out += "&lt;";
+        break;
+      case '>':
+        out += "&gt;";
+        break;
+      case '"':
+        out += "&quot;";
+        break;
+      default:
+        out += c;
     }
   }
   return out;
@@ -101,7 +110,8 @@ void SvgDocument::text(Point at, const std::string& content, double size_px,
                        bool bold) {
   std::string transform;
   if (rotate_deg != 0.0)
-    transform = fmt::format(R"svg( transform="rotate({:.3g} {:.2f} {:.2f})")svg", rotate_deg, at.x, at.y);
+    transform =
+        fmt::format(R"svg( transform="rotate({:.3g} {:.2f} {:.2f})")svg", rotate_deg, at.x, at.y);
   body_ += fmt::format(
       R"(<text x="{:.2f}" y="{:.2f}" font-family="DejaVu Sans, Helvetica, Arial, sans-serif" )"
       R"(font-size="{:.3g}" text-anchor="{}" fill="{}"{}{}>{}</text>)",
@@ -110,13 +120,12 @@ void SvgDocument::text(Point at, const std::string& content, double size_px,
   body_ += '\n';
 }
 
-void SvgDocument::image_png(Point corner, double width, double height,
-                            const std::string& png_bytes, bool pixelated) {
-  body_ += fmt::format(
-      R"(<image x="{:.2f}" y="{:.2f}" width="{:.2f}" height="{:.2f}" )"
-      R"(preserveAspectRatio="none"{} href="data:image/png;base64,{}"/>)",
-      corner.x, corner.y, width, height,
-      pixelated ? R"( style="image-rendering:pixelated")" : "", base64(png_bytes));
+void SvgDocument::image_png(Point corner, double width, double height, const std::string& png_bytes,
+                            bool pixelated) {
+  body_ += fmt::format(R"(<image x="{:.2f}" y="{:.2f}" width="{:.2f}" height="{:.2f}" )"
+                       R"(preserveAspectRatio="none"{} href="data:image/png;base64,{}"/>)",
+                       corner.x, corner.y, width, height,
+                       pixelated ? R"( style="image-rendering:pixelated")" : "", base64(png_bytes));
   body_ += '\n';
 }
 
@@ -136,27 +145,25 @@ void SvgDocument::begin_group(const std::string& transform) {
   body_ += transform.empty() ? "<g>\n" : fmt::format(R"(<g transform="{}">)", transform) + "\n";
 }
 
-void SvgDocument::end_group() { body_ += "</g>\n"; }
+void SvgDocument::end_group() {
+  body_ += "</g>\n";
+}
 
 std::string SvgDocument::str() const {
-  return fmt::format(
-      R"(<?xml version="1.0" encoding="UTF-8"?>)"
-      "\n"
-      R"(<svg xmlns="http://www.w3.org/2000/svg" width="{:.0f}" height="{:.0f}" )"
-      R"(viewBox="0 0 {:.0f} {:.0f}">)"
-      "\n"
-      R"(<rect width="100%" height="100%" fill="#ffffff"/>)"
-      "\n{}</svg>\n",
-      width_, height_, width_, height_, body_);
+  return fmt::format(R"(<?xml version="1.0" encoding="UTF-8"?>)"
+                     "\n"
+                     R"(<svg xmlns="http://www.w3.org/2000/svg" width="{:.0f}" height="{:.0f}" )"
+                     R"(viewBox="0 0 {:.0f} {:.0f}">)"
+                     "\n"
+                     R"(<rect width="100%" height="100%" fill="#ffffff"/>)"
+                     "\n{}</svg>\n",
+                     width_, height_, width_, height_, body_);
 }
 
 std::string sequential_colour(int i, int n) {
   // Anchor colours of a viridis-like ramp, linearly interpolated.
-  static const std::array<std::array<double, 3>, 5> ramp = {{{68, 1, 84},
-                                                               {59, 82, 139},
-                                                               {33, 145, 140},
-                                                               {94, 201, 98},
-                                                               {253, 231, 37}}};
+  static const std::array<std::array<double, 3>, 5> ramp = {
+      {{68, 1, 84}, {59, 82, 139}, {33, 145, 140}, {94, 201, 98}, {253, 231, 37}}};
   const double t = n <= 1 ? 0.0 : std::clamp(static_cast<double>(i) / (n - 1), 0.0, 1.0);
   const double pos = t * (ramp.size() - 1);
   const std::size_t k = std::min<std::size_t>(static_cast<std::size_t>(pos), ramp.size() - 2);
@@ -188,7 +195,9 @@ std::string wavelength_colour(double nm) {
   } else {
     r = 1;
   }
-  auto to8 = [](double v) { return static_cast<int>(std::lround(255 * std::clamp(v, 0.0, 1.0) * 0.9)); };
+  auto to8 = [](double v) {
+    return static_cast<int>(std::lround(255 * std::clamp(v, 0.0, 1.0) * 0.9));
+  };
   return fmt::format("#{:02x}{:02x}{:02x}", to8(r), to8(g), to8(b));
 }
 

@@ -44,8 +44,8 @@ struct AxesLabels {
   int y_ticks = 5;
   bool grid = true;
   bool y_tick_labels = true;  // false: ticks only (a panel sharing its left neighbour's scale)
-  bool zero_x = false;  // a darker line at x = 0
-  bool zero_y = false;  // a darker line at y = 0
+  bool zero_x = false;        // a darker line at x = 0
+  bool zero_y = false;        // a darker line at y = 0
   double font_px = 11;
 };
 

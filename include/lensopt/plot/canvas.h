@@ -142,8 +142,7 @@ enum class OutputFormat { kSvg, kPng };
 OutputFormat output_format_for(const std::filesystem::path& path);
 
 // A canvas of the format `path` asks for.
-std::unique_ptr<Canvas> make_canvas(const std::filesystem::path& path, double width,
-                                    double height);
+std::unique_ptr<Canvas> make_canvas(const std::filesystem::path& path, double width, double height);
 
 // PNG bytes of an RGB image (8 bit), through OpenImageIO.
 std::string encode_png(const RgbImage& image);

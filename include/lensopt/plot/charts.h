@@ -16,8 +16,8 @@ double auto_spot_box_um(const std::vector<const SpotData*>& rows);
 
 // Spot diagrams: one row per lens (all on one scale: each box is `box_um` wide), one box per
 // field, points coloured by wavelength, the RMS radius as a circle and in numbers, a scale bar.
-void draw_spots(Canvas& canvas, Rect area, const std::vector<const SpotData*>& rows,
-                double box_um, double font_px = 12);
+void draw_spots(Canvas& canvas, Rect area, const std::vector<const SpotData*>& rows, double box_um,
+                double font_px = 12);
 
 // Ray fans: per field a tangential (e_y vs P_y) and a sagittal (e_x vs P_x) panel, one curve per
 // colour channel; a compared lens dashed.

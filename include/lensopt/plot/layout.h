@@ -12,8 +12,9 @@
 // drawn to a smaller radius d < E ends in a flat annulus at z_k + sag_k(d) from d to E (a cemented
 // interface is instead continued along its sphere to E where it can be); the rims y = +-E join the
 // ends of front and back surfaces. The stop is drawn at its vertex from the real stop radius
-// outward. Rays: `rays_per_field` meridional rays over the aimed pupil (y_p from -1 to 1) of each
-// drawn field at 587.6 nm, from a start plane before the lens to the image plane.
+// outward (from the largest ray height there). Rays: `rays_per_field` meridional rays over the
+// aimed pupil (y_p from -1 to 1) of each drawn field at 587.6 nm, from a start plane before the
+// lens to the image plane.
 #pragma once
 
 #include <array>
@@ -59,7 +60,8 @@ struct ElementDrawing {
   int back_surface = 0;
   std::string glass;
   double edge_semi_diameter_mm = 0;
-  std::vector<Point> outline;  // closed polygon: front curve top to bottom, back curve bottom to top
+  std::vector<Point>
+      outline;  // closed polygon: front curve top to bottom, back curve bottom to top
   std::array<Point, 2> upper_rim{};  // front surface's top end -> back surface's top end
   std::array<Point, 2> lower_rim{};
 };
@@ -82,12 +84,16 @@ struct LayoutGeometry {
   int stop_surface = 0;
   double stop_z_mm = 0;
   double stop_radius_mm = 0;  // the real stop radius (on-axis marginal ray, 587.6 nm)
-  double stop_outer_mm = 0;   // the stop's marks reach from stop_radius to this
-  double image_z_mm = 0;      // total track
+  // The stop's marks reach from stop_clear_mm to stop_outer_mm. The clear radius is the largest
+  // ray height at the stop: one-step ray aiming leaves the off-axis bundles a little (up to a few
+  // percent) larger than the real stop radius, and no drawn ray may cross the marks.
+  double stop_clear_mm = 0;
+  double stop_outer_mm = 0;
+  double image_z_mm = 0;  // total track
   double image_half_height_mm = 0;
   std::vector<double> field_deg;  // drawn fields
   std::vector<RayDrawing> rays;
-  double start_z_mm = 0;  // rays start here
+  double start_z_mm = 0;           // rays start here
   std::vector<double> min_gap_mm;  // per space k (surfaces k, k+1): smallest drawn gap
   std::vector<std::string> warnings;
   // Bounding box of everything drawn (mm).

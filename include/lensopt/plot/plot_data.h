@@ -32,6 +32,7 @@ namespace lensopt::plot {
 // A lens prepared once for every plot: the traced system and analyze's report of it.
 struct PlotContext {
   Lens lens;
+  TraceOptions trace;
   TraceSystem<double> sys;
   AnalysisReport report;
   // Wavelength number of the middle wavelength of the R, G and B channels (-1: no such channel).
@@ -84,9 +85,9 @@ SpotData compute_spots(const PlotContext& ctx, const SpotOptions& options = {});
 struct FanCurve {
   int channel = 0;  // 0 R, 1 G, 2 B
   double wavelength_nm = 0;
-  std::vector<double> pupil;      // normalized pupil coordinate, -1..1
-  std::vector<double> error_um;   // e_y (tangential) or e_x (sagittal)
-  std::vector<char> valid;        // the ray reached the image
+  std::vector<double> pupil;     // normalized pupil coordinate, -1..1
+  std::vector<double> error_um;  // e_y (tangential) or e_x (sagittal)
+  std::vector<char> valid;       // the ray reached the image
 };
 
 struct FanField {
@@ -122,12 +123,14 @@ struct FocusCurve {
 
 struct FieldCurveData {
   std::string lens_name;
-  std::vector<double> field_deg;  // the system's fields (21)
-  std::vector<FocusCurve> focus;  // per channel
-  std::vector<double> distortion_percent;  // analyze's, per field
+  std::vector<double> field_deg;             // fields of the focus curves (`fields` from 0 to hfov)
+  std::vector<FocusCurve> focus;             // per channel
+  std::vector<double> distortion_field_deg;  // analyze's fields
+  std::vector<double> distortion_percent;    // analyze's, per field
 };
 
-// `delta` is the close rays' offset in normalized pupil coordinates.
-FieldCurveData compute_field_curves(const PlotContext& ctx, double delta = 1e-3);
+// `delta` is the close rays' offset in normalized pupil coordinates; the focus curves are traced
+// at `fields` field angles (aimed like the analysis).
+FieldCurveData compute_field_curves(const PlotContext& ctx, double delta = 1e-3, int fields = 51);
 
 }  // namespace lensopt::plot
