@@ -23,7 +23,8 @@
 //   best-rms  t_{K-1} minimizes the mean RMS spot. With the rays traced once to a reference
 //             plane at tau = 0 (the paraxial solution), a ray reaches the plane at tau as
 //             y + tau m/n, x + tau l/n, so each field's S_h^2(tau) = A_h + 2 B_h tau + C_h tau^2
-//             is an exact quadratic and mean_h S_h(tau) is convex; Brent's method finds tau;
+//             is an exact quadratic and mean_h S_h(tau) is convex; a golden-section search
+//             (bracket grown from +-2 % of the image distance, to 1e-9 relative) finds tau;
 //   none      t_{K-1} = t0_{K-1}.
 // The aperture stop keeps its nominal physical radius: a trial's entrance pupil radius is
 // y_stop0 / A' with A' the perturbed paraxial stop magnification (y_stop = A y_0), so a front
