@@ -67,11 +67,11 @@ DesignLoss<double> evaluate_double(const LensParameterization& param, const std:
 // Bounds tightened by the design margin so that constraints met at the optimization sampling
 // stay met at full sampling (which has rays nearer the pupil edge and fields in between).
 DesignLossOptions with_margin(DesignLossOptions loss) {
-  loss.min_air_mm += 0.005;
-  loss.min_glass_mm += 0.005;
-  loss.max_glass_mm -= 0.005;
-  loss.min_image_clearance_mm += 0.02;
-  loss.max_ray_angle_deg -= 0.5;
+  loss.min_air_mm += 0.001;
+  loss.min_glass_mm += 0.001;
+  loss.max_glass_mm -= 0.001;
+  loss.min_image_clearance_mm += 0.005;
+  loss.max_ray_angle_deg -= 0.05;
   return loss;
 }
 
@@ -176,6 +176,39 @@ DesignLoss<double> run_phase(const LensParameterization& param, std::vector<doub
     if (!violated && change < 2e-3 && glass_weight_growth == 1.0) break;
   }
   return current;
+}
+
+// Bounds between the start's own extremes (t = 0: the start is feasible) and the target bounds
+// (t = 1), for the constraints the start violates: constraint continuation, so that a start
+// outside the feasible set is walked into it instead of being thrown out of its basin.
+DesignLossOptions continued_bounds(const DesignLossOptions& target, const DesignExtremes& start,
+                                   const Lens& structure, double t) {
+  DesignLossOptions out = target;
+  const int k_count = static_cast<int>(structure.surfaces.size());
+  double min_air = std::numeric_limits<double>::infinity(), min_glass = min_air;
+  double max_glass = -min_air;
+  for (int k = 0; k + 1 < k_count; ++k) {
+    if (structure.surfaces[k].material.is_air()) {
+      min_air = std::min(min_air, start.min_travel_mm[k]);
+    } else {
+      min_glass = std::min(min_glass, start.min_travel_mm[k]);
+      max_glass = std::max(max_glass, start.max_travel_mm[k]);
+    }
+  }
+  const double clearance = start.min_travel_mm[k_count - 1];
+  const double angle_deg = std::acos(std::sqrt(std::clamp(start.min_cos2_angle, 0.0, 1.0))) * 180.0 / kPi;
+  auto lower = [t](double bound, double value) {
+    return value < bound ? (value - 1e-4) + t * (bound - value + 1e-4) : bound;
+  };
+  auto upper = [t](double bound, double value) {
+    return value > bound ? (value + 1e-4) + t * (bound - value - 1e-4) : bound;
+  };
+  out.min_air_mm = lower(target.min_air_mm, min_air);
+  out.min_glass_mm = lower(target.min_glass_mm, min_glass);
+  out.max_glass_mm = upper(target.max_glass_mm, max_glass);
+  out.min_image_clearance_mm = lower(target.min_image_clearance_mm, clearance);
+  out.max_ray_angle_deg = upper(target.max_ray_angle_deg, angle_deg);
+  return out;
 }
 
 bool constraints_met(const DesignLoss<double>& loss) {
@@ -319,9 +352,21 @@ OptimizeResult optimize_lens(const Lens& start, const OptimizeOptions& options) 
   const int rounds = options.max_rounds;
   const int iterations = options.max_iterations;
 
-  // Phase A: the start's glasses, snapped to the catalog and held; LM on the rest.
+  // Phase A: the start's glasses, snapped to the catalog and held; LM on the rest, with the
+  // bounds the start violates tightened in stages from its own values to the targets.
   std::vector<int> fixed = param.nearest_glasses(x.data());
   set_glasses(x, fixed);
+  DesignExtremes start_extremes;
+  evaluate_double(param, x, GlassMode::kFixed, fixed, options.sampling, loss, &start_extremes);
+  const DesignLossOptions target_loss = loss;
+  for (double t : {0.25, 0.5, 0.75}) {
+    if (interrupted()) break;
+    DesignLossOptions stage = continued_bounds(target_loss, start_extremes, start, t);
+    run_phase(param, x, GlassMode::kFixed, fixed, frozen_all, options, stage,
+              fmt::format("constraints {:.0f}%", 100 * t), 1, iterations, counters);
+    loss.weight_ray_path = std::max(loss.weight_ray_path, stage.weight_ray_path);
+    loss.weight_ray_angle = std::max(loss.weight_ray_angle, stage.weight_ray_angle);
+  }
   DesignLoss<double> best = run_phase(param, x, GlassMode::kFixed, fixed, frozen_all, options,
                                       loss, "fixed glasses", rounds, iterations, counters);
   result.log.push_back(fmt::format("fixed glasses: {:.4f} um (optimization sampling)", best.spot_mm * 1000));

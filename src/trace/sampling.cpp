@@ -28,6 +28,16 @@ PupilSamples paper_pupil_samples(int rings) {
   return out;
 }
 
+PupilSamples pupil_edge_samples(int count) {
+  PupilSamples out;
+  for (int j = 0; j < count; ++j) {
+    const double azimuth = count == 1 ? 0.0 : (-0.5 + static_cast<double>(j) / (count - 1)) * kPi;
+    out.x.push_back(std::cos(azimuth));
+    out.y.push_back(std::sin(azimuth));
+  }
+  return out;
+}
+
 std::vector<double> field_angles_deg(double half_field_deg, int count) {
   std::vector<double> out;
   if (count == 1) return {0.0};

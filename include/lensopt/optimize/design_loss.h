@@ -20,6 +20,9 @@
 // paper's own baselines do cross them slightly (the Cooke reaches 63.9 deg against 60). The
 // optimizer raises a weight tenfold while its constraint is violated, and the report checks each
 // constraint against its bound at full sampling.
+// Constraint rays: besides the spot rays, every field and wavelength traces kEdgeRays rays on
+// the pupil edge (r = 1, azimuth -90..90 deg), which hold the extreme travels and angles that a
+// coarse ring pattern misses; they enter the penalties and extremes, not the spot.
 // Failed rays: spot residuals 0; their zeta/zeta' up to the failing surface do enter the angle
 // penalty (a miss has zeta < 0), so the penalties pull failing rays back.
 #pragma once
@@ -35,6 +38,8 @@
 #include "lensopt/trace/system.h"
 
 namespace lensopt {
+
+inline constexpr int kEdgeRays = 9;
 
 // Weights and bounds of the design loss (paper values by default).
 struct DesignLossOptions {
@@ -115,6 +120,7 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
   const int rays = static_cast<int>(sys.pupil.size());
   const int k_count = lens.surface_count();
   const double n_r = static_cast<double>(field_count) * wl * rays;
+  const PupilSamples edge = pupil_edge_samples(kEdgeRays);
   const double cos2_max = std::pow(std::cos(options.max_ray_angle_deg * kPi / 180.0), 2);
   // Bounds per space: air >= min_air; glass in [min, max]; the last (image) >= clearance.
   std::vector<double> lower(k_count), upper(k_count);
@@ -147,8 +153,8 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
   const int nthreads = trace_options.threads > 0 ? trace_options.threads : omp_get_max_threads();
 #pragma omp parallel num_threads(nthreads)
   {
-    RayBundle<T> bundle;
-    RayRecord<T> record;
+    RayBundle<T> bundle, edge_bundle;
+    RayRecord<T> record, edge_record;
     std::vector<T> ys, xs;
     std::vector<char> ok;
     std::vector<T> path_sq(k_count), angle_sq(k_count * 2);
@@ -160,6 +166,34 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
       for (auto& v : path_sq) v = K<T>(0.0);
       for (auto& v : angle_sq) v = K<T>(0.0);
       T path_sum = K<T>(0.0), angle_sum = K<T>(0.0);
+      // Adds the path and angle penalties of the traced rays of `b` (records in `rec`).
+      auto add_constraints = [&](const RayBundle<T>& b, const RayRecord<T>& rec) {
+        for (std::size_t p = 0; p < b.size(); ++p) {
+          const bool traced = b.status[p] == kRayOk;
+          const int last_valid = traced ? k_count - 1 : b.failed_surface[p];
+          for (int k = 0; k <= last_valid && k < k_count; ++k) {
+            // Ray path: the space after surface k (only up to a failure).
+            if (traced || k < last_valid) {
+              const T dz = rec.axial_travel_mm[k][p];
+              DesignExtremes& e = field_extremes[h];
+              e.min_travel_mm[k] = std::min(e.min_travel_mm[k], value_of(dz));
+              e.max_travel_mm[k] = std::max(e.max_travel_mm[k], value_of(dz));
+              T v = detail::hinge(K<T>(lower[k]) - dz);
+              if (std::isfinite(upper[k])) v = v + detail::hinge(dz - K<T>(upper[k]));
+              path_sq[k] = path_sq[k] + v * v;
+              path_sum = path_sum + v;
+            }
+            field_extremes[h].min_cos2_angle =
+                std::min({field_extremes[h].min_cos2_angle, value_of(rec.cos2_incidence[k][p]),
+                          value_of(rec.cos2_refraction[k][p])});
+            const T va = detail::hinge(K<T>(cos2_max) - rec.cos2_incidence[k][p]);
+            const T vb = detail::hinge(K<T>(cos2_max) - rec.cos2_refraction[k][p]);
+            angle_sq[2 * k] = angle_sq[2 * k] + va * va;
+            angle_sq[2 * k + 1] = angle_sq[2 * k + 1] + vb * vb;
+            angle_sum = angle_sum + va + vb;
+          }
+        }
+      };
       for (int w = 0; w < wl; ++w) {
         start_rays(sys, h, w, bundle);
         record.resize(k_count, bundle.size());
@@ -174,29 +208,13 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
           } else {
             ++failed[h];
           }
-          const int last_valid = traced ? k_count - 1 : bundle.failed_surface[p];
-          for (int k = 0; k <= last_valid && k < k_count; ++k) {
-            // Ray path: the space after surface k (only for fully traced rays beyond a failure).
-            if (traced || k < last_valid) {
-              const T dz = record.axial_travel_mm[k][p];
-              DesignExtremes& e = field_extremes[h];
-              e.min_travel_mm[k] = std::min(e.min_travel_mm[k], value_of(dz));
-              e.max_travel_mm[k] = std::max(e.max_travel_mm[k], value_of(dz));
-              T v = detail::hinge(K<T>(lower[k]) - dz);
-              if (std::isfinite(upper[k])) v = v + detail::hinge(dz - K<T>(upper[k]));
-              path_sq[k] = path_sq[k] + v * v;
-              path_sum = path_sum + v;
-            }
-            const T va = detail::hinge(K<T>(cos2_max) - record.cos2_incidence[k][p]);
-            const T vb = detail::hinge(K<T>(cos2_max) - record.cos2_refraction[k][p]);
-            field_extremes[h].min_cos2_angle =
-                std::min({field_extremes[h].min_cos2_angle, value_of(record.cos2_incidence[k][p]),
-                          value_of(record.cos2_refraction[k][p])});
-            angle_sq[2 * k] = angle_sq[2 * k] + va * va;
-            angle_sq[2 * k + 1] = angle_sq[2 * k + 1] + vb * vb;
-            angle_sum = angle_sum + va + vb;
-          }
         }
+        add_constraints(bundle, record);
+        start_rays(sys, h, w, edge_bundle, &edge);
+        edge_record.resize(k_count, edge_bundle.size());
+        trace_bundle(sys.lens, w, k_count, true, edge_bundle, &edge_record);
+        for (std::size_t p = 0; p < edge_bundle.size(); ++p) failed[h] += edge_bundle.status[p] != kRayOk;
+        add_constraints(edge_bundle, edge_record);
       }
       // Spot of field h about its polychromatic centroid.
       int count = 0;

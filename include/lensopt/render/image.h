@@ -57,7 +57,9 @@ LoadedImage read_image(const std::filesystem::path& path);
 void write_image(const std::filesystem::path& path, const FloatImage& image,
                  const OIIO::ImageSpec& like = OIIO::ImageSpec());
 
-// Writes a float image (EXR or TIFF, 32-bit float) atomically.
-void write_float_image(const std::filesystem::path& path, const FloatImage& image);
+// Writes a float image (EXR or TIFF, 32-bit float) atomically, with the given channel names
+// (default: R, G, B, A or Y for one channel).
+void write_float_image(const std::filesystem::path& path, const FloatImage& image,
+                       const std::vector<std::string>& channel_names = {});
 
 }  // namespace lensopt

@@ -54,6 +54,10 @@ struct PupilSamples {
 };
 PupilSamples paper_pupil_samples(int rings);
 
+// `count` samples on the edge of the half pupil (r = 1), azimuths from -90 to +90 deg inclusive:
+// the meridional top and bottom rays and the sagittal ray are among them for odd counts.
+PupilSamples pupil_edge_samples(int count);
+
 // Field angles (deg): count equidistant values from 0 to half_field_deg.
 std::vector<double> field_angles_deg(double half_field_deg, int count);
 
@@ -216,12 +220,15 @@ TraceSystem<T> prepare_system(const TraceLens<T>& lens_in, double focal_length_m
   return sys;
 }
 
-// Fills `rays` with the half-pupil rays of field h and wavelength w, at the entrance pupil.
+// Fills `rays` with rays of field h and wavelength w at the entrance pupil, for normalized pupil
+// samples `pupil` (default: the system's half-pupil pattern) under the aimed pupil map.
 template <typename T>
-void start_rays(const TraceSystem<T>& sys, int h, int w, RayBundle<T>& rays) {
+void start_rays(const TraceSystem<T>& sys, int h, int w, RayBundle<T>& rays,
+                const PupilSamples* samples = nullptr) {
   using std::cos;
   using std::sin;
-  const std::size_t count = sys.pupil.size();
+  const PupilSamples& pupil = samples ? *samples : sys.pupil;
+  const std::size_t count = pupil.size();
   rays.resize(count);
   const PupilMap<T>& map = sys.pupil_map(h, w);
   const double theta = sys.fields_deg[h] * kPi / 180.0;
@@ -233,8 +240,8 @@ void start_rays(const TraceSystem<T>& sys, int h, int w, RayBundle<T>& rays) {
   const T n0 = K<T>(cos(theta));
   const T l0 = K<T>(0.0);
   for (std::size_t i = 0; i < count; ++i) {
-    rays.x[i] = sx * K<T>(sys.pupil.x[i]);
-    rays.y[i] = oy + sy * K<T>(sys.pupil.y[i]);
+    rays.x[i] = sx * K<T>(pupil.x[i]);
+    rays.y[i] = oy + sy * K<T>(pupil.y[i]);
     rays.z[i] = sys.entrance_pupil_z_mm;
     rays.l[i] = l0;
     rays.m[i] = m0;
