@@ -1,11 +1,83 @@
-// Placeholder registration until the `convert` command lands; it says so when run.
+// lensopt convert IN OUT: between lensopt TOML, the paper's YAML (read only) and Zemax .zmx,
+// chosen by the files' extensions. Import warnings (lines a .zmx has that lensopt does not model)
+// go to stderr; the output is written atomically.
+#include <fmt/core.h>
+
+#include <algorithm>
+#include <cctype>
+#include <filesystem>
+#include <memory>
+#include <string>
+
 #include "commands.h"
+#include "lensopt/core/atomic_file.h"
 #include "lensopt/core/error.h"
+#include "lensopt/formats/zmx.h"
+#include "lensopt/lens/lens_io.h"
 
 namespace lensopt::cli {
-void setup_convert(CLI::App& app) {
-  CLI::App* sub = app.add_subcommand("convert", "convert lens formats (not built yet)");
-  sub->allow_extras();
-  sub->callback([] { throw Error("'convert' is not implemented in this build yet"); });
+namespace {
+
+struct ConvertCommand {
+  std::string input_path;
+  std::string output_path;
+};
+
+std::string lower_extension(const std::filesystem::path& path) {
+  std::string extension = path.extension().string();
+  std::transform(extension.begin(), extension.end(), extension.begin(),
+                 [](unsigned char ch) { return static_cast<char>(std::tolower(ch)); });
+  return extension;
 }
+
+Lens read_input(const std::filesystem::path& path) {
+  const std::string extension = lower_extension(path);
+  if (extension == ".zmx") {
+    ZmxImport imported = read_zmx(path);
+    for (const std::string& warning : imported.warnings)
+      fmt::print(stderr, "lensopt convert: warning: {}\n", warning);
+    return std::move(imported.lens);
+  }
+  if (extension == ".toml") return parse_lens_toml(read_file(path), path.string());
+  if (extension == ".yml" || extension == ".yaml")
+    return parse_lens_yaml(read_file(path), path.string());
+  throw Error(SourceLocation{path.string()},
+              fmt::format("cannot read '{}' files; convert reads .toml, the paper's .yml/.yaml "
+                          "and Zemax .zmx",
+                          path.extension().string()));
+}
+
+void run_convert(const ConvertCommand& cmd) {
+  const std::filesystem::path output(cmd.output_path);
+  const std::string out_extension = lower_extension(output);
+  // Check the output type before reading, so a bad OUT fails fast.
+  if (out_extension == ".yml" || out_extension == ".yaml")
+    throw Error(SourceLocation{output.string()},
+                "writing the paper's YAML format is not supported; write .toml or .zmx");
+  if (out_extension != ".toml" && out_extension != ".zmx")
+    throw Error(SourceLocation{output.string()},
+                fmt::format("cannot write '{}' files; convert writes .toml and Zemax .zmx",
+                            output.extension().string()));
+  const Lens lens = read_input(cmd.input_path);
+  if (out_extension == ".zmx") {
+    write_zmx(lens, output);
+  } else {
+    write_file_atomic(output, format_lens_toml(lens));
+  }
+  fmt::print("{} -> {}: {} surfaces, f/{}, half field {} deg, {} wavelengths\n", cmd.input_path,
+             cmd.output_path, lens.surfaces.size(), lens.specs.f_number, lens.specs.half_field_deg,
+             lens.specs.wavelengths_nm.size());
+}
+
+}  // namespace
+
+void setup_convert(CLI::App& app) {
+  auto cmd = std::make_shared<ConvertCommand>();
+  CLI::App* sub = app.add_subcommand(
+      "convert", "Convert a lens between .toml, the paper's .yml (read) and Zemax .zmx");
+  sub->add_option("IN", cmd->input_path, "input lens (.toml, .yml/.yaml or .zmx)")->required();
+  sub->add_option("OUT", cmd->output_path, "output lens (.toml or .zmx)")->required();
+  sub->callback([cmd] { run_convert(*cmd); });
+}
+
 }  // namespace lensopt::cli

@@ -20,6 +20,7 @@
 #include <unordered_map>
 
 #include "lensopt/core/error.h"
+#include "lensopt/core/text.h"
 #include "lensopt/glass/glass.h"
 
 namespace lensopt {
@@ -54,72 +55,6 @@ int coefficients_needed(DispersionFormula formula) {
 
 bool is_known_formula(int id) {
   return id >= 1 && id <= 13;
-}
-
-// Appends code point `cp` to `out` as UTF-8.
-void append_utf8(std::string& out, std::uint32_t cp) {
-  if (cp < 0x80) {
-    out += static_cast<char>(cp);
-  } else if (cp < 0x800) {
-    out += static_cast<char>(0xC0 | (cp >> 6));
-    out += static_cast<char>(0x80 | (cp & 0x3F));
-  } else if (cp < 0x10000) {
-    out += static_cast<char>(0xE0 | (cp >> 12));
-    out += static_cast<char>(0x80 | ((cp >> 6) & 0x3F));
-    out += static_cast<char>(0x80 | (cp & 0x3F));
-  } else {
-    out += static_cast<char>(0xF0 | (cp >> 18));
-    out += static_cast<char>(0x80 | ((cp >> 12) & 0x3F));
-    out += static_cast<char>(0x80 | ((cp >> 6) & 0x3F));
-    out += static_cast<char>(0x80 | (cp & 0x3F));
-  }
-}
-
-// UTF-16 (without its BOM) to UTF-8. A surrogate pair (hi, lo) is the code point
-// 0x10000 + ((hi - 0xD800) << 10) + (lo - 0xDC00); an unpaired surrogate becomes U+FFFD.
-std::string utf16_to_utf8(std::string_view bytes, bool little_endian) {
-  constexpr std::uint32_t kReplacement = 0xFFFD;
-  std::string out;
-  out.reserve(bytes.size() / 2);
-  const std::size_t units = bytes.size() / 2;
-  const auto unit_at = [&](std::size_t i) -> std::uint32_t {
-    const auto b0 = static_cast<unsigned char>(bytes[2 * i]);
-    const auto b1 = static_cast<unsigned char>(bytes[2 * i + 1]);
-    return little_endian ? (b0 | (b1 << 8)) : ((b0 << 8) | b1);
-  };
-  for (std::size_t i = 0; i < units; ++i) {
-    const std::uint32_t unit = unit_at(i);
-    if (unit >= 0xD800 && unit <= 0xDBFF) {
-      const std::uint32_t next = i + 1 < units ? unit_at(i + 1) : 0;
-      if (next >= 0xDC00 && next <= 0xDFFF) {
-        append_utf8(out, 0x10000 + ((unit - 0xD800) << 10) + (next - 0xDC00));
-        ++i;
-      } else {
-        append_utf8(out, kReplacement);
-      }
-    } else if (unit >= 0xDC00 && unit <= 0xDFFF) {
-      append_utf8(out, kReplacement);
-    } else {
-      append_utf8(out, unit);
-    }
-  }
-  return out;
-}
-
-// The file's text as UTF-8: UTF-16 LE/BE with a BOM is converted, a UTF-8 BOM dropped.
-std::string decode_text(std::string_view bytes) {
-  const auto starts_with = [&](std::initializer_list<unsigned char> prefix) {
-    if (bytes.size() < prefix.size()) return false;
-    std::size_t i = 0;
-    for (unsigned char b : prefix) {
-      if (static_cast<unsigned char>(bytes[i++]) != b) return false;
-    }
-    return true;
-  };
-  if (starts_with({0xFF, 0xFE})) return utf16_to_utf8(bytes.substr(2), true);
-  if (starts_with({0xFE, 0xFF})) return utf16_to_utf8(bytes.substr(2), false);
-  if (starts_with({0xEF, 0xBB, 0xBF})) return std::string(bytes.substr(3));
-  return std::string(bytes);
 }
 
 // Blank-separated fields of a line (spaces, tabs), and the 1-based column each starts at.

@@ -26,6 +26,7 @@
 #include "lens_io_detail.h"
 #include "lensopt/core/atomic_file.h"
 #include "lensopt/core/error.h"
+#include "lensopt/formats/zmx.h"
 #include "lensopt/glass/glass.h"
 #include "lensopt/lens/lens_io.h"
 
@@ -707,19 +708,26 @@ Lens read_lens(const std::filesystem::path& path) {
   if (extension == ".toml") return parse_lens_toml(read_file(path), path.string());
   if (extension == ".yml" || extension == ".yaml")
     return parse_lens_yaml(read_file(path), path.string());
-  if (extension == ".zmx")
-    throw Error(SourceLocation{path.string()}, "Zemax .zmx import is not supported yet");
+  if (extension == ".zmx") {
+    // Zemax import (src/formats/zmx.cpp); its warnings (ignored lines) go to stderr.
+    ZmxImport imported = read_zmx(path);
+    for (const std::string& warning : imported.warnings)
+      fmt::print(stderr, "lensopt: warning: {}\n", warning);
+    return std::move(imported.lens);
+  }
   throw Error(SourceLocation{path.string()},
-              fmt::format("unknown lens file type '{}'; lensopt reads .toml and the paper's "
-                          ".yml/.yaml",
+              fmt::format("unknown lens file type '{}'; lensopt reads .toml, the paper's "
+                          ".yml/.yaml and Zemax .zmx",
                           path.extension().string()));
 }
 
 void write_lens(const Lens& lens, const std::filesystem::path& path) {
   const std::string extension = lower_extension(path);
+  if (extension == ".zmx") return write_zmx(lens, path);
   if (extension != ".toml")
     throw Error(SourceLocation{path.string()},
-                fmt::format("cannot write a lens as '{}'; lensopt writes lenses as .toml",
+                fmt::format("cannot write a lens as '{}'; lensopt writes lenses as .toml or "
+                            "Zemax .zmx",
                             path.extension().string()));
   write_file_atomic(path, format_lens_toml(lens));
 }

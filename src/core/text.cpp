@@ -1,0 +1,75 @@
+// UTF-16 -> UTF-8 and BOM-aware decoding (include/lensopt/core/text.h).
+#include "lensopt/core/text.h"
+
+#include <cstdint>
+#include <initializer_list>
+
+namespace lensopt {
+namespace {
+
+// Appends code point `cp` to `out` as UTF-8 (1 to 4 bytes).
+void append_utf8(std::string& out, std::uint32_t cp) {
+  if (cp < 0x80) {
+    out += static_cast<char>(cp);
+  } else if (cp < 0x800) {
+    out += static_cast<char>(0xC0 | (cp >> 6));
+    out += static_cast<char>(0x80 | (cp & 0x3F));
+  } else if (cp < 0x10000) {
+    out += static_cast<char>(0xE0 | (cp >> 12));
+    out += static_cast<char>(0x80 | ((cp >> 6) & 0x3F));
+    out += static_cast<char>(0x80 | (cp & 0x3F));
+  } else {
+    out += static_cast<char>(0xF0 | (cp >> 18));
+    out += static_cast<char>(0x80 | ((cp >> 12) & 0x3F));
+    out += static_cast<char>(0x80 | ((cp >> 6) & 0x3F));
+    out += static_cast<char>(0x80 | (cp & 0x3F));
+  }
+}
+
+}  // namespace
+
+std::string utf16_to_utf8(std::string_view bytes, bool little_endian) {
+  constexpr std::uint32_t kReplacement = 0xFFFD;
+  std::string out;
+  out.reserve(bytes.size() / 2);
+  const std::size_t units = bytes.size() / 2;
+  const auto unit_at = [&](std::size_t i) -> std::uint32_t {
+    const auto b0 = static_cast<unsigned char>(bytes[2 * i]);
+    const auto b1 = static_cast<unsigned char>(bytes[2 * i + 1]);
+    return little_endian ? (b0 | (b1 << 8)) : ((b0 << 8) | b1);
+  };
+  for (std::size_t i = 0; i < units; ++i) {
+    const std::uint32_t unit = unit_at(i);
+    if (unit >= 0xD800 && unit <= 0xDBFF) {
+      const std::uint32_t next = i + 1 < units ? unit_at(i + 1) : 0;
+      if (next >= 0xDC00 && next <= 0xDFFF) {
+        append_utf8(out, 0x10000 + ((unit - 0xD800) << 10) + (next - 0xDC00));
+        ++i;
+      } else {
+        append_utf8(out, kReplacement);
+      }
+    } else if (unit >= 0xDC00 && unit <= 0xDFFF) {
+      append_utf8(out, kReplacement);
+    } else {
+      append_utf8(out, unit);
+    }
+  }
+  return out;
+}
+
+std::string decode_text(std::string_view bytes) {
+  const auto starts_with = [&](std::initializer_list<unsigned char> prefix) {
+    if (bytes.size() < prefix.size()) return false;
+    std::size_t i = 0;
+    for (unsigned char b : prefix) {
+      if (static_cast<unsigned char>(bytes[i++]) != b) return false;
+    }
+    return true;
+  };
+  if (starts_with({0xFF, 0xFE})) return utf16_to_utf8(bytes.substr(2), true);
+  if (starts_with({0xFE, 0xFF})) return utf16_to_utf8(bytes.substr(2), false);
+  if (starts_with({0xEF, 0xBB, 0xBF})) return std::string(bytes.substr(3));
+  return std::string(bytes);
+}
+
+}  // namespace lensopt

@@ -1,0 +1,968 @@
+// Zemax .zmx import and export (include/lensopt/formats/zmx.h states the mapping).
+//
+// Exact numbers. Curvatures, thicknesses, semi-diameters, the F/# and the field are written with
+// fmt "{}", the shortest decimal that reads back to the same double, and read with from_chars
+// (correctly rounded). Wavelengths go in micrometres: the writer picks, among the doubles within
+// a few ulps of w / 1000, one u with fl(u * 1000) == w (the shortest), so the reader's
+// fl(u * 1000) is w again; a NOTE line carries the nm values as well.
+#include "lensopt/formats/zmx.h"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <array>
+#include <cctype>
+#include <charconv>
+#include <cmath>
+#include <limits>
+#include <map>
+#include <memory>
+#include <optional>
+#include <set>
+
+#include "lensopt/core/atomic_file.h"
+#include "lensopt/core/error.h"
+#include "lensopt/core/text.h"
+#include "lensopt/glass/dispersion.h"
+#include "lensopt/glass/glass.h"
+#include "lensopt/paraxial/paraxial.h"
+#include "lensopt/trace/trace_lens.h"
+
+namespace lensopt {
+namespace {
+
+constexpr std::array<char, 3> kChannelLetters = {'R', 'G', 'B'};
+// Channel boundaries for wavelengths without a lensopt note: < 490 nm B, < 580 nm G, else R.
+constexpr double kBlueBelowNm = 490.0;
+constexpr double kGreenBelowNm = 580.0;
+// Ulps searched either side of w / 1000 for an exact micrometre value.
+constexpr int kMicrometreSearchUlps = 8;
+// Relative agreement a lensopt note must have with the Zemax value it refines.
+constexpr double kNoteTolerance = 1e-9;
+// Line numbers listed per ignored keyword before "and N more".
+constexpr std::size_t kListedLines = 6;
+
+std::string upper(std::string_view text) {
+  std::string out(text);
+  for (char& ch : out) ch = static_cast<char>(std::toupper(static_cast<unsigned char>(ch)));
+  return out;
+}
+
+bool is_blank(char ch) {
+  return ch == ' ' || ch == '\t' || ch == '\r' || ch == '\f' || ch == '\v';
+}
+
+// One line of the file: its blank-separated fields and their 1-based columns.
+struct Line {
+  int number = 0;
+  std::string_view text;  // the whole line, without its line end
+  std::vector<std::string_view> fields;
+  std::vector<int> columns;
+
+  // The text from field i to the end of the line ("" past the last field).
+  std::string_view rest(std::size_t i) const {
+    if (i >= fields.size()) return {};
+    std::string_view out = text.substr(static_cast<std::size_t>(columns[i] - 1));
+    while (!out.empty() && is_blank(out.back())) out.remove_suffix(1);
+    return out;
+  }
+};
+
+std::vector<Line> split_lines(std::string_view text) {
+  std::vector<Line> lines;
+  int number = 0;
+  std::size_t start = 0;
+  while (start <= text.size()) {
+    std::size_t end = text.find('\n', start);
+    if (end == std::string_view::npos) end = text.size();
+    ++number;
+    std::string_view raw = text.substr(start, end - start);
+    if (!raw.empty() && raw.back() == '\r') raw.remove_suffix(1);
+    Line line;
+    line.number = number;
+    line.text = raw;
+    std::size_t i = 0;
+    while (i < raw.size()) {
+      while (i < raw.size() && is_blank(raw[i])) ++i;
+      const std::size_t field_start = i;
+      while (i < raw.size() && !is_blank(raw[i])) ++i;
+      if (i > field_start) {
+        line.fields.push_back(raw.substr(field_start, i - field_start));
+        line.columns.push_back(static_cast<int>(field_start) + 1);
+      }
+    }
+    lines.push_back(std::move(line));
+    if (end == text.size()) break;
+    start = end + 1;
+  }
+  return lines;
+}
+
+// A surface as the file gives it, before it becomes a lensopt Surface.
+struct RawSurface {
+  int number = 0;
+  int line = 0;  // the SURF line
+  double curvature_per_mm = 0.0;
+  int curv_line = 0;
+  double thickness_mm = 0.0;
+  bool thickness_infinite = false;
+  int disz_line = 0;
+  std::string glass;  // "" = air
+  bool model_glass = false;
+  double model_nd = 0.0;
+  double model_vd = 0.0;
+  int glas_line = 0;
+  int glas_column = 0;
+  bool is_stop = false;
+  int stop_line = 0;
+  double semi_diameter_mm = 0.0;
+};
+
+struct Wavelength {
+  double um = 0.0;
+  double weight = 1.0;
+  int line = 0;
+};
+
+// A catalog the file's GCAT (or lensopt note) names, as loaded.
+struct CatalogEntry {
+  std::string requested;  // as the file names it
+  std::string load_name;  // the name load_catalog finds it by ("" if not found)
+  std::shared_ptr<const Catalog> catalog;
+  std::string failure;  // why it was not found
+};
+
+class ZmxParser {
+ public:
+  explicit ZmxParser(std::string file) : file_(std::move(file)) {}
+
+  ZmxImport parse(std::string_view bytes);
+
+ private:
+  [[noreturn]] void fail(const Line& line, std::size_t field, const std::string& message) const {
+    const int column = field < line.columns.size() ? line.columns[field] : 1;
+    throw Error(SourceLocation{file_, line.number, column}, message);
+  }
+  [[noreturn]] void fail_at(int line, int column, const std::string& message) const {
+    throw Error(SourceLocation{file_, line, column}, message);
+  }
+  void warn(int line, const std::string& message) {
+    warnings_.push_back(line > 0 ? fmt::format("{}:{}: {}", file_, line, message)
+                                 : fmt::format("{}: {}", file_, message));
+  }
+  void ignore(const Line& line) { ignored_[upper(line.fields[0])].push_back(line.number); }
+
+  double number(const Line& line, std::size_t field, std::string_view what) const {
+    if (field >= line.fields.size())
+      fail(line, line.fields.size() - 1,
+           fmt::format("{} is missing: '{}' needs a number there", what, line.text));
+    std::string_view text = line.fields[field];
+    if (!text.empty() && text.front() == '+') text.remove_prefix(1);
+    double value = 0.0;
+    const auto [end, ec] = std::from_chars(text.data(), text.data() + text.size(), value);
+    if (ec != std::errc() || end != text.data() + text.size() || !std::isfinite(value))
+      fail(line, field,
+           fmt::format("{} must be a finite number, not '{}'", what, line.fields[field]));
+    return value;
+  }
+
+  int integer(const Line& line, std::size_t field, std::string_view what) const {
+    const double value = number(line, field, what);
+    if (value != std::floor(value) || std::abs(value) > 1e6)
+      fail(line, field, fmt::format("{} must be an integer, not '{}'", what, line.fields[field]));
+    return static_cast<int>(value);
+  }
+
+  RawSurface& surface(const Line& line) {
+    if (surfaces_.empty())
+      fail(line, 0, fmt::format("'{}' comes before the first SURF line", line.fields[0]));
+    return surfaces_.back();
+  }
+
+  bool surface_line(const Line& line, const std::string& key);
+  void system_line(const Line& line, const std::string& key);
+  void note_line(const Line& line);
+  std::vector<CatalogEntry> load_catalogs();
+  Material resolve_glass(const RawSurface& raw, std::vector<CatalogEntry>& catalogs,
+                         std::vector<std::string>& used_catalogs, DispersionModel dispersion);
+  void report_ignored();
+
+  std::string file_;
+  std::vector<std::string> warnings_;
+  std::map<std::string, std::vector<int>> ignored_;
+
+  std::string name_;
+  bool has_name_ = false;
+  double unit_mm_ = 1.0;
+  std::optional<double> enpd_;
+  std::optional<double> fnum_;
+  int aperture_line_ = 0;
+  std::map<int, Wavelength> wavm_;
+  std::vector<Wavelength> wavl_;
+  int wavelength_line_ = 0;
+  bool has_ftyp_ = false;
+  int ftyp_line_ = 0;
+  int field_count_ = -1;
+  int wavelength_count_ = -1;
+  std::vector<double> xfln_;
+  std::vector<double> yfln_;
+  int yfln_line_ = 0;
+  std::vector<std::pair<std::string, int>> gcat_;  // name, line
+  std::vector<RawSurface> surfaces_;
+
+  // lensopt notes.
+  std::optional<std::string> note_catalog_;
+  std::optional<double> note_sensor_mm_;
+  std::optional<DispersionModel> note_dispersion_;
+  std::optional<std::vector<int>> note_channels_;
+  std::optional<std::vector<double>> note_wavelengths_nm_;
+  std::string note_toml_;
+  int note_line_ = 0;
+};
+
+// Keywords of OpticStudio's system and surface settings that do not change a sequential spherical
+// prescription at infinity as lensopt models it (display, analysis and environment defaults,
+// tolerances, coatings, drawing). They are reported together, by keyword and line.
+bool is_setting_keyword(const std::string& key) {
+  static const std::set<std::string> kSettings = {
+      "VERS", "PFIL", "LANG", "GFAC", "RAIM", "PUSH", "SDMA", "ROPD", "PICB", "POLS", "GLRS",
+      "GSTD", "NSCD", "COFN", "SUMM", "DMFS", "BLNK", "RWRE", "TOL",  "MNUM", "MOFF", "OPDX",
+      "SCOL", "SQFN", "FWGT", "FWGN", "WWGT", "PWAV", "VDXN", "VDYN", "VCXN", "VCYN", "VANN",
+      "HIDE", "MIRR", "SLAB", "POPS", "FLAP", "MEMA", "COAT", "TCE",  "ENVD", "EFFL", "ZVDX",
+      "ZVDY", "ZVCX", "ZVCY", "ZVAN", "WAVN", "XFLD", "YFLD", "FIMP", "BLAN", "CONF", "DESC"};
+  return kSettings.count(key) > 0;
+}
+
+bool ZmxParser::surface_line(const Line& line, const std::string& key) {
+  if (key == "TYPE") {
+    RawSurface& s = surface(line);
+    const std::string type = line.fields.size() > 1 ? upper(line.fields[1]) : "";
+    if (type != "STANDARD")
+      fail(line, 1,
+           fmt::format("surface {} has type {}; lensopt imports spherical STANDARD surfaces only "
+                       "(an asphere, coordinate break, toroid or other surface type changes the "
+                       "optics and cannot be dropped)",
+                       s.number, type.empty() ? std::string("(none)") : type));
+    return true;
+  }
+  if (key == "CURV") {
+    RawSurface& s = surface(line);
+    s.curvature_per_mm = number(line, 1, "CURV (curvature, 1/lens unit)");
+    s.curv_line = line.number;
+    return true;
+  }
+  if (key == "DISZ") {
+    RawSurface& s = surface(line);
+    s.disz_line = line.number;
+    const std::string value = line.fields.size() > 1 ? upper(line.fields[1]) : "";
+    if (value == "INFINITY" || value == "INF" || value == "1.#INF") {
+      s.thickness_infinite = true;
+    } else {
+      s.thickness_mm = number(line, 1, "DISZ (thickness)");
+      if (std::abs(s.thickness_mm) >= 1e10) s.thickness_infinite = true;
+    }
+    return true;
+  }
+  if (key == "GLAS") {
+    RawSurface& s = surface(line);
+    if (line.fields.size() < 2) fail(line, 0, "GLAS without a glass name");
+    const std::string name(line.fields[1]);
+    s.glas_line = line.number;
+    s.glas_column = line.columns[1];
+    if (upper(name) == "MIRROR")
+      fail(line, 1,
+           fmt::format("surface {} is a mirror; lensopt models refracting lenses only", s.number));
+    if (name == "___BLANK") {
+      s.model_glass = true;
+      s.model_nd = number(line, 4, "the model glass's nd (GLAS ___BLANK 1 0 nd vd)");
+      s.model_vd = number(line, 5, "the model glass's vd (GLAS ___BLANK 1 0 nd vd)");
+      if (!(s.model_nd > 1.0))
+        fail(line, 4, fmt::format("model glass nd = {} must be > 1", s.model_nd));
+      if (!(s.model_vd > 0.0))
+        fail(line, 5, fmt::format("model glass vd = {} must be > 0", s.model_vd));
+      s.glass = name;
+    } else if (upper(name) != "AIR") {
+      s.glass = name;
+    }
+    return true;
+  }
+  if (key == "STOP") {
+    RawSurface& s = surface(line);
+    s.is_stop = true;
+    s.stop_line = line.number;
+    return true;
+  }
+  if (key == "DIAM") {
+    RawSurface& s = surface(line);
+    s.semi_diameter_mm = std::abs(number(line, 1, "DIAM (semi-diameter)"));
+    return true;
+  }
+  if (key == "CONI") {
+    RawSurface& s = surface(line);
+    const double conic = number(line, 1, "CONI (conic constant)");
+    if (conic != 0.0)
+      fail(line, 1,
+           fmt::format("surface {} has conic constant {}; lensopt imports spherical surfaces "
+                       "only (CONI must be 0)",
+                       s.number, line.fields[1]));
+    return true;
+  }
+  if (key == "COMM") {
+    surface(line);  // a surface comment: nothing to keep
+    return true;
+  }
+  if (key == "PARM" || key == "XDAT") {
+    RawSurface& s = surface(line);
+    bool all_zero = true;
+    for (std::size_t i = 2; i < line.fields.size(); ++i) {
+      double value = 0.0;
+      const auto [end, ec] = std::from_chars(line.fields[i].data(),
+                                             line.fields[i].data() + line.fields[i].size(), value);
+      if (ec != std::errc() || value != 0.0) all_zero = false;
+    }
+    if (all_zero) {
+      ignore(line);
+    } else {
+      warn(line.number, fmt::format("surface {}: '{}' ignored (a STANDARD surface has no "
+                                    "parameters)",
+                                    s.number, line.text));
+    }
+    return true;
+  }
+  if (key == "CLAP" || key == "SQAP" || key == "ELAP" || key == "OBSC" || key == "OBSQ" ||
+      key == "OBEL" || key == "OBDC" || key == "UDAD" || key == "FLOP") {
+    RawSurface& s = surface(line);
+    warn(line.number, fmt::format("surface {}: the surface aperture '{}' is ignored (lensopt "
+                                  "limits rays by the stop only)",
+                                  s.number, line.text));
+    return true;
+  }
+  return false;
+}
+
+void ZmxParser::note_line(const Line& line) {
+  // "NOTE n lensopt key value..." carries lensopt data; any other NOTE is a comment.
+  if (line.fields.size() < 3) return;
+  if (line.fields[2] == "lensopt-toml") {
+    std::string_view rest = line.rest(3);
+    note_toml_ += std::string(rest) + "\n";
+    note_line_ = note_line_ == 0 ? line.number : note_line_;
+    return;
+  }
+  if (line.fields[2] != "lensopt" || line.fields.size() < 5) return;
+  note_line_ = note_line_ == 0 ? line.number : note_line_;
+  const std::string_view key = line.fields[3];
+  if (key == "catalog") {
+    note_catalog_ = std::string(line.rest(4));
+  } else if (key == "sensor_diagonal_mm") {
+    note_sensor_mm_ = number(line, 4, "sensor_diagonal_mm");
+  } else if (key == "dispersion") {
+    if (line.fields[4] == "abbe") note_dispersion_ = DispersionModel::kAbbe;
+    if (line.fields[4] == "catalog") note_dispersion_ = DispersionModel::kCatalog;
+  } else if (key == "channels") {
+    std::vector<int> channels;
+    for (const char ch : line.fields[4]) {
+      const auto it = std::find(kChannelLetters.begin(), kChannelLetters.end(), ch);
+      if (it == kChannelLetters.end()) return;
+      channels.push_back(static_cast<int>(it - kChannelLetters.begin()));
+    }
+    note_channels_ = channels;
+  } else if (key == "wavelengths_nm") {
+    std::vector<double> values;
+    for (std::size_t i = 4; i < line.fields.size(); ++i)
+      values.push_back(number(line, i, "a wavelength (nm)"));
+    note_wavelengths_nm_ = values;
+  } else {
+    warn(line.number, fmt::format("unknown lensopt note '{}' ignored", key));
+  }
+}
+
+void ZmxParser::system_line(const Line& line, const std::string& key) {
+  if (key == "MODE") {
+    const std::string mode = line.fields.size() > 1 ? upper(line.fields[1]) : "";
+    if (mode != "SEQ")
+      fail(line, 1,
+           fmt::format("MODE {}: lensopt imports sequential systems only (MODE SEQ)", mode));
+  } else if (key == "NAME") {
+    name_ = std::string(line.rest(1));
+    has_name_ = true;
+  } else if (key == "NOTE") {
+    note_line(line);
+  } else if (key == "UNIT") {
+    const std::string unit = line.fields.size() > 1 ? upper(line.fields[1]) : "";
+    if (unit == "MM") {
+      unit_mm_ = 1.0;
+    } else if (unit == "CM") {
+      unit_mm_ = 10.0;
+    } else if (unit == "IN") {
+      unit_mm_ = 25.4;
+    } else if (unit == "METER" || unit == "M") {
+      unit_mm_ = 1000.0;
+    } else {
+      fail(line, 1, fmt::format("lens unit '{}' is not MM, CM, IN or METER", unit));
+    }
+    if (unit != "MM")
+      warn(line.number,
+           fmt::format("lens units are {}; lengths converted to mm (x {})", unit, unit_mm_));
+  } else if (key == "ENPD") {
+    enpd_ = number(line, 1, "ENPD (entrance pupil diameter)");
+    if (!(*enpd_ > 0.0)) fail(line, 1, "ENPD must be > 0");
+    aperture_line_ = line.number;
+  } else if (key == "FNUM") {
+    fnum_ = number(line, 1, "FNUM (image-space F/#)");
+    if (!(*fnum_ > 0.0)) fail(line, 1, "FNUM must be > 0");
+    aperture_line_ = line.number;
+    if (line.fields.size() > 2 && line.fields[2] != "0")
+      warn(line.number, "FNUM with a non-zero flag: taken as the image-space F/# (EFL / EPD)");
+  } else if (key == "FLOA" || key == "OBNA" || key == "OBSA" || key == "PWFN" || key == "FNUO") {
+    fail(line, 0,
+         fmt::format("aperture type {} is not supported; lensopt needs the entrance pupil "
+                     "diameter (ENPD) or the image-space F/# (FNUM)",
+                     key));
+  } else if (key == "WAVM") {
+    const int index = integer(line, 1, "the wavelength number");
+    Wavelength w;
+    w.um = number(line, 2, "the wavelength (um)");
+    if (line.fields.size() > 3) w.weight = number(line, 3, "the wavelength weight");
+    w.line = line.number;
+    wavm_[index] = w;
+    if (wavelength_line_ == 0) wavelength_line_ = line.number;
+  } else if (key == "WAVL") {
+    for (std::size_t i = 1; i < line.fields.size(); ++i)
+      wavl_.push_back({number(line, i, "a wavelength (um)"), 1.0, line.number});
+    if (wavelength_line_ == 0) wavelength_line_ = line.number;
+  } else if (key == "FTYP") {
+    has_ftyp_ = true;
+    ftyp_line_ = line.number;
+    const int type = integer(line, 1, "the field type");
+    if (type != 0) {
+      static const std::array<const char*, 4> kTypes = {
+          "angle", "object height", "paraxial image height", "real image height"};
+      fail(line, 1,
+           fmt::format("field type {} ({}) is not supported; lensopt needs field angles in "
+                       "degrees (FTYP 0) for an object at infinity",
+                       type, type >= 0 && type < 4 ? kTypes[type] : "unknown"));
+    }
+    if (line.fields.size() > 3) field_count_ = integer(line, 3, "the number of fields");
+    if (line.fields.size() > 4) wavelength_count_ = integer(line, 4, "the number of wavelengths");
+  } else if (key == "XFLN" || key == "YFLN") {
+    std::vector<double>& values = key == "XFLN" ? xfln_ : yfln_;
+    values.clear();
+    for (std::size_t i = 1; i < line.fields.size(); ++i)
+      values.push_back(number(line, i, "a field value"));
+    if (key == "YFLN") yfln_line_ = line.number;
+  } else if (key == "GCAT") {
+    for (std::size_t i = 1; i < line.fields.size(); ++i)
+      gcat_.emplace_back(std::string(line.fields[i]), line.number);
+  } else if (is_setting_keyword(key) || key.rfind("TOL", 0) == 0) {
+    ignore(line);
+  } else {
+    warn(line.number, fmt::format("unknown line '{}' ignored", line.text));
+  }
+}
+
+std::vector<CatalogEntry> ZmxParser::load_catalogs() {
+  std::vector<CatalogEntry> out;
+  std::set<std::string> paths;
+  auto add = [&](CatalogEntry entry) {
+    if (entry.catalog && !paths.insert(entry.catalog->path).second) return;
+    out.push_back(std::move(entry));
+  };
+  auto try_load = [&](const std::string& requested, const std::string& name) -> bool {
+    try {
+      add({requested, name, load_catalog(name), ""});
+      return true;
+    } catch (const Error& error) {
+      return false;
+    }
+  };
+  std::vector<std::string> names;
+  if (note_catalog_) names.push_back(*note_catalog_);
+  for (const auto& [name, line] : gcat_) names.push_back(name);
+  for (const std::string& name : names) {
+    bool found = try_load(name, name);
+    // OpticStudio names catalogs by family ("SCHOTT"); vendor files are often dated
+    // ("SCHOTT_202002.AGF"): take those in the search path as well.
+    for (const auto& folder : catalog_search_path()) {
+      std::error_code ec;
+      std::filesystem::directory_iterator it(folder, ec);
+      if (ec) continue;
+      std::vector<std::filesystem::path> matches;
+      for (const auto& entry : it) {
+        const std::string stem = upper(entry.path().stem().string());
+        if (upper(entry.path().extension().string()) != ".AGF") continue;
+        const std::string wanted = upper(name);
+        if (stem == wanted || stem.rfind(wanted + "_", 0) == 0) matches.push_back(entry.path());
+      }
+      std::sort(matches.begin(), matches.end());
+      for (const auto& path : matches) found = try_load(name, path.stem().string()) || found;
+    }
+    if (!found) {
+      std::vector<std::string> folders;
+      for (const auto& folder : catalog_search_path()) folders.push_back(folder.string());
+      add({name, "", nullptr,
+           fmt::format("not found in {}", folders.empty()
+                                              ? "(no folders)"
+                                              : fmt::format("{}", fmt::join(folders, ", ")))});
+    }
+  }
+  return out;
+}
+
+Material ZmxParser::resolve_glass(const RawSurface& raw, std::vector<CatalogEntry>& catalogs,
+                                  std::vector<std::string>& used_catalogs,
+                                  DispersionModel dispersion) {
+  if (raw.glass.empty()) return Material::air();
+  if (raw.model_glass) return Material::model(raw.model_nd, raw.model_vd);
+  for (const CatalogEntry& entry : catalogs) {
+    if (!entry.catalog) continue;
+    const Glass* glass = entry.catalog->find(raw.glass);
+    if (glass == nullptr) continue;
+    if (dispersion == DispersionModel::kCatalog && !glass->formula_supported)
+      fail_at(raw.glas_line, raw.glas_column,
+              fmt::format("glass '{}' (catalog {}) uses dispersion formula {}, which lensopt "
+                          "cannot evaluate",
+                          glass->name, entry.catalog->name, formula_name(glass->formula)));
+    if (std::find(used_catalogs.begin(), used_catalogs.end(), entry.load_name) ==
+        used_catalogs.end())
+      used_catalogs.push_back(entry.load_name);
+    return Material::from_catalog(*glass);
+  }
+  std::vector<std::string> searched;
+  std::vector<std::string> closest;
+  for (const CatalogEntry& entry : catalogs) {
+    if (entry.catalog) {
+      searched.push_back(fmt::format("{} ({})", entry.requested, entry.catalog->path));
+      for (const std::string& name : entry.catalog->closest_names(raw.glass, 3))
+        if (closest.size() < 3) closest.push_back(name);
+    } else {
+      searched.push_back(fmt::format("{} ({})", entry.requested, entry.failure));
+    }
+  }
+  fail_at(raw.glas_line, raw.glas_column,
+          fmt::format("surface {}: unknown glass '{}': not in the catalogs searched: {}{}",
+                      raw.number, raw.glass,
+                      searched.empty() ? std::string("none (the file has no GCAT line)")
+                                       : fmt::format("{}", fmt::join(searched, "; ")),
+                      closest.empty() ? std::string()
+                                      : fmt::format("; closest: {}", fmt::join(closest, ", "))));
+}
+
+void ZmxParser::report_ignored() {
+  if (ignored_.empty()) return;
+  std::vector<std::string> parts;
+  for (const auto& [key, lines] : ignored_) {
+    std::vector<std::string> numbers;
+    for (std::size_t i = 0; i < lines.size() && i < kListedLines; ++i)
+      numbers.push_back(std::to_string(lines[i]));
+    std::string part =
+        fmt::format("{} (line{} {}", key, lines.size() > 1 ? "s" : "", fmt::join(numbers, ", "));
+    if (lines.size() > kListedLines)
+      part += fmt::format(" and {} more", lines.size() - kListedLines);
+    parts.push_back(part + ")");
+  }
+  warn(0, fmt::format("ignored settings that do not change the prescription: {}",
+                      fmt::join(parts, ", ")));
+}
+
+ZmxImport ZmxParser::parse(std::string_view bytes) {
+  const std::string text = decode_text(bytes);
+  const std::vector<Line> lines = split_lines(text);
+  for (const Line& line : lines) {
+    if (line.fields.empty()) continue;
+    const char first = line.fields[0].front();
+    if (first == '!' || first == '#') continue;  // a comment line
+    const std::string key = upper(line.fields[0]);
+    if (key == "SURF") {
+      RawSurface s;
+      s.number = integer(line, 1, "the surface number");
+      s.line = line.number;
+      if (s.number != static_cast<int>(surfaces_.size()))
+        fail(line, 1,
+             fmt::format("SURF {} is out of order: surface {} was expected", s.number,
+                         surfaces_.size()));
+      surfaces_.push_back(s);
+      continue;
+    }
+    if (surface_line(line, key)) continue;
+    system_line(line, key);
+  }
+
+  const int last_line = lines.empty() ? 1 : lines.back().number;
+  if (surfaces_.size() < 4)
+    fail_at(last_line, 1,
+            fmt::format("{} SURF block{}: a lens needs the object surface, at least two lens "
+                        "surfaces and the image surface",
+                        surfaces_.size(), surfaces_.size() == 1 ? "" : "s"));
+
+  // Object and image.
+  const RawSurface& object = surfaces_.front();
+  if (!object.thickness_infinite)
+    fail_at(object.disz_line > 0 ? object.disz_line : object.line, 1,
+            fmt::format("the object is at {} mm; lensopt images objects at infinity (DISZ "
+                        "INFINITY on SURF 0)",
+                        object.thickness_mm * unit_mm_));
+  if (!object.glass.empty())
+    fail_at(object.glas_line, object.glas_column, "the object space must be air");
+  if (object.is_stop) fail_at(object.stop_line, 1, "the object surface cannot be the stop");
+  const RawSurface& image = surfaces_.back();
+  if (image.curvature_per_mm != 0.0)
+    fail_at(image.curv_line, 1, "the image surface is curved; lensopt's image plane is flat");
+  if (image.is_stop) fail_at(image.stop_line, 1, "the image surface cannot be the stop");
+
+  // Specs that decide how glasses resolve.
+  std::vector<CatalogEntry> catalogs = load_catalogs();
+  for (const CatalogEntry& entry : catalogs)
+    if (!entry.catalog)
+      warn(0, fmt::format("glass catalog '{}' {}", entry.requested, entry.failure));
+  bool has_catalog_glass = false;
+  for (std::size_t k = 1; k + 1 < surfaces_.size(); ++k)
+    has_catalog_glass =
+        has_catalog_glass || (!surfaces_[k].glass.empty() && !surfaces_[k].model_glass);
+  const DispersionModel dispersion =
+      note_dispersion_ ? *note_dispersion_
+                       : (has_catalog_glass ? DispersionModel::kCatalog : DispersionModel::kAbbe);
+
+  ZmxImport result;
+  Lens& lens = result.lens;
+  lens.source_path = file_;
+  lens.name = has_name_ && !name_.empty() ? name_ : std::filesystem::path(file_).stem().string();
+  lens.specs.dispersion = dispersion;
+
+  std::vector<std::string> used_catalogs;
+  int stop_count = 0;
+  for (std::size_t k = 1; k + 1 < surfaces_.size(); ++k) {
+    const RawSurface& raw = surfaces_[k];
+    if (raw.thickness_infinite)
+      fail_at(raw.disz_line, 1, fmt::format("surface {} has an infinite thickness", raw.number));
+    Surface surface;
+    surface.curvature_per_mm = raw.curvature_per_mm / unit_mm_;
+    surface.thickness_mm = raw.thickness_mm * unit_mm_;
+    surface.semi_diameter_mm = raw.semi_diameter_mm * unit_mm_;
+    surface.material = resolve_glass(raw, catalogs, used_catalogs, dispersion);
+    if (raw.is_stop) {
+      if (++stop_count > 1)
+        fail_at(
+            raw.stop_line, 1,
+            fmt::format("surface {} is a second STOP; a lens has one aperture stop", raw.number));
+      if (surface.curvature_per_mm != 0.0) {
+        // A flat stop at the vertex of the curved surface, in the medium before it.
+        Surface stop;
+        stop.is_stop = true;
+        stop.thickness_mm = 0.0;
+        stop.material = lens.surfaces.empty() ? Material::air() : lens.surfaces.back().material;
+        stop.semi_diameter_mm = surface.semi_diameter_mm;
+        lens.surfaces.push_back(stop);
+        warn(raw.stop_line,
+             fmt::format("the stop is on curved surface {}; lensopt's stop is flat, so a flat "
+                         "stop surface is inserted at its vertex (0 mm before it)",
+                         raw.number));
+      } else {
+        surface.is_stop = true;
+      }
+    }
+    lens.surfaces.push_back(surface);
+  }
+  if (stop_count == 0) {
+    // OpticStudio's default stop is surface 1.
+    warn(surfaces_[1].line, "no STOP line: surface 1 is the stop (OpticStudio's default)");
+    if (lens.surfaces.front().curvature_per_mm == 0.0) {
+      lens.surfaces.front().is_stop = true;
+    } else {
+      Surface stop;
+      stop.is_stop = true;
+      lens.surfaces.insert(lens.surfaces.begin(), stop);
+    }
+  }
+  if (!lens.surfaces.back().material.is_air()) {
+    const RawSurface& raw = surfaces_[surfaces_.size() - 2];
+    fail_at(raw.glas_line, raw.glas_column,
+            fmt::format("surface {} (the last before the image) must be followed by air, not {}",
+                        raw.number, raw.glass));
+  }
+  if (!used_catalogs.empty()) {
+    lens.catalog_name = note_catalog_ && std::find(used_catalogs.begin(), used_catalogs.end(),
+                                                   *note_catalog_) != used_catalogs.end()
+                            ? *note_catalog_
+                            : used_catalogs.front();
+    if (used_catalogs.size() > 1)
+      warn(0, fmt::format("glasses come from {} catalogs ({}); a lensopt TOML lens names one "
+                          "(catalog = \"{}\"), so written as TOML the others would not resolve",
+                          used_catalogs.size(), fmt::join(used_catalogs, ", "), lens.catalog_name));
+  } else if (note_catalog_) {
+    lens.catalog_name = *note_catalog_;
+  }
+
+  // Wavelengths: the active ones (FTYP's count), in um.
+  std::vector<Wavelength> waves;
+  if (!wavm_.empty()) {
+    for (const auto& [index, w] : wavm_) {
+      if (wavelength_count_ >= 0 && index > wavelength_count_) continue;
+      waves.push_back(w);
+    }
+  } else {
+    waves = wavl_;
+    if (wavelength_count_ >= 0 && static_cast<int>(waves.size()) > wavelength_count_)
+      waves.resize(static_cast<std::size_t>(wavelength_count_));
+  }
+  if (waves.size() < 2)
+    fail_at(wavelength_line_ > 0 ? wavelength_line_ : last_line, 1,
+            fmt::format("{} wavelength{}; lensopt needs at least 2 (WAVM lines)", waves.size(),
+                        waves.size() == 1 ? "" : "s"));
+  std::vector<double> wavelengths_nm;
+  bool equal_weights = true;
+  for (const Wavelength& w : waves) {
+    const double nm = w.um * 1000.0;
+    if (!(nm > 200.0 && nm < 20000.0))
+      fail_at(w.line, 1, fmt::format("wavelength {} um is out of range", w.um));
+    wavelengths_nm.push_back(nm);
+    equal_weights = equal_weights && w.weight == waves.front().weight;
+  }
+  if (!equal_weights)
+    warn(waves.front().line, "wavelength weights ignored (lensopt weights wavelengths equally)");
+  if (note_wavelengths_nm_) {
+    bool agrees = note_wavelengths_nm_->size() == wavelengths_nm.size();
+    for (std::size_t i = 0; agrees && i < wavelengths_nm.size(); ++i)
+      agrees = std::abs((*note_wavelengths_nm_)[i] - wavelengths_nm[i]) <=
+               kNoteTolerance * wavelengths_nm[i];
+    if (agrees) {
+      wavelengths_nm = *note_wavelengths_nm_;
+    } else {
+      warn(note_line_, "the lensopt wavelengths note disagrees with the WAVM lines; ignored");
+    }
+  }
+  lens.specs.wavelengths_nm = wavelengths_nm;
+  if (note_channels_ && note_channels_->size() == wavelengths_nm.size()) {
+    lens.specs.wavelength_channels = *note_channels_;
+  } else {
+    std::vector<std::string> assigned;
+    lens.specs.wavelength_channels.clear();
+    for (const double nm : wavelengths_nm) {
+      const int channel = nm < kBlueBelowNm ? 2 : (nm < kGreenBelowNm ? 1 : 0);
+      lens.specs.wavelength_channels.push_back(channel);
+      assigned.push_back(fmt::format("{} nm {}", nm, kChannelLetters[channel]));
+    }
+    warn(wavelength_line_,
+         fmt::format("colour channels assigned by wavelength (< 490 nm B, < 580 nm G, else R): {}",
+                     fmt::join(assigned, ", ")));
+  }
+
+  // Field: the largest active field, in degrees.
+  std::size_t fields = std::max(xfln_.size(), yfln_.size());
+  if (field_count_ >= 0) fields = std::min(fields, static_cast<std::size_t>(field_count_));
+  double half_field_deg = 0.0;
+  for (std::size_t i = 0; i < fields; ++i) {
+    const double x = i < xfln_.size() ? xfln_[i] : 0.0;
+    const double y = i < yfln_.size() ? yfln_[i] : 0.0;
+    half_field_deg = std::max(half_field_deg, x == 0.0 ? std::abs(y) : std::hypot(x, y));
+  }
+  if (!(half_field_deg < 89.0))
+    fail_at(yfln_line_ > 0 ? yfln_line_ : last_line, 1,
+            fmt::format("the largest field is {} deg; lensopt needs less than 89", half_field_deg));
+  lens.specs.half_field_deg = half_field_deg;
+
+  // Aperture.
+  if (!fnum_ && !enpd_)
+    fail_at(last_line, 1, "no aperture: the file needs ENPD (entrance pupil diameter) or FNUM");
+  lens.specs.f_number = fnum_ ? *fnum_ : 2.0;
+  try {
+    lens.validate();
+  } catch (const Error& error) {
+    throw Error(SourceLocation{file_}, error.message());
+  }
+  const double efl_mm = paraxial_data(make_trace_lens(lens), kWavelengthD_nm).efl_mm;
+  if (!fnum_) {
+    const double epd_mm = *enpd_ * unit_mm_;
+    if (!(efl_mm > 0.0) || !std::isfinite(efl_mm))
+      fail_at(
+          aperture_line_, 1,
+          fmt::format("ENPD needs a positive focal length, but the paraxial EFL is {} mm", efl_mm));
+    lens.specs.f_number = efl_mm / epd_mm;
+  }
+
+  // Sensor: the note's, else the one whose spec focal length is the lens's EFL.
+  if (note_sensor_mm_) {
+    lens.specs.sensor_diagonal_mm = *note_sensor_mm_;
+  } else if (half_field_deg > 0.0 && efl_mm > 0.0 && std::isfinite(efl_mm)) {
+    constexpr double kPi = 3.14159265358979323846;
+    lens.specs.sensor_diagonal_mm = 2.0 * efl_mm * std::tan(half_field_deg * kPi / 180.0);
+  } else {
+    warn(yfln_line_, fmt::format("the largest field is 0 deg: sensor diagonal left at {} mm",
+                                 lens.specs.sensor_diagonal_mm));
+  }
+  lens.extra_toml = note_toml_;
+  try {
+    lens.validate();
+  } catch (const Error& error) {
+    throw Error(SourceLocation{file_}, error.message());
+  }
+
+  report_ignored();
+  result.warnings = std::move(warnings_);
+  return result;
+}
+
+// The shortest decimal reading back as x.
+std::string number_text(double x) {
+  return fmt::format("{}", x);
+}
+
+// A micrometre value u with fl(u * 1000) == nm, the shortest near nm / 1000.
+std::string micrometre_text(double nm) {
+  const double inf = std::numeric_limits<double>::infinity();
+  const double nearest = nm / 1000.0;
+  std::optional<double> best;
+  std::size_t best_length = 0;
+  double u = nearest;
+  for (int i = 0; i < kMicrometreSearchUlps; ++i) u = std::nextafter(u, -inf);
+  for (int i = 0; i <= 2 * kMicrometreSearchUlps; ++i, u = std::nextafter(u, inf)) {
+    if (u * 1000.0 != nm) continue;
+    const std::size_t length = fmt::formatted_size("{}", u);
+    if (!best || length < best_length) {
+      best = u;
+      best_length = length;
+    }
+  }
+  return number_text(best ? *best : nearest);
+}
+
+}  // namespace
+
+std::string zemax_catalog_name(std::string_view catalog_name) {
+  if (upper(catalog_name) == "OHARA") return "OHARA";
+  const std::filesystem::path path{std::string(catalog_name)};
+  if (path.has_parent_path() || path.has_extension()) return path.stem().string();
+  return std::string(catalog_name);
+}
+
+ZmxImport parse_zmx(std::string_view bytes, const std::string& source_name) {
+  return ZmxParser(source_name).parse(bytes);
+}
+
+ZmxImport read_zmx(const std::filesystem::path& path) {
+  return parse_zmx(read_file(path), path.string());
+}
+
+std::string format_zmx(const Lens& lens) {
+  std::string out;
+  auto line = [&out](const std::string& text) { out += text + "\r\n"; };
+  const Specs& specs = lens.specs;
+  if (specs.wavelengths_nm.size() != specs.wavelength_channels.size())
+    throw Error(fmt::format("lens '{}': {} wavelengths but {} channels", lens.name,
+                            specs.wavelengths_nm.size(), specs.wavelength_channels.size()));
+
+  line("VERS 190513 80 123457 L123457");
+  line("MODE SEQ");
+  std::string name = lens.name;
+  std::replace(name.begin(), name.end(), '\n', ' ');
+  std::replace(name.begin(), name.end(), '\r', ' ');
+  line("NAME " + name);
+  line("NOTE 0 Written by lensopt; the lensopt notes below keep what Zemax has no field for");
+  if (!lens.catalog_name.empty()) line("NOTE 0 lensopt catalog " + lens.catalog_name);
+  line("NOTE 0 lensopt sensor_diagonal_mm " + number_text(specs.sensor_diagonal_mm));
+  line(std::string("NOTE 0 lensopt dispersion ") +
+       (specs.dispersion == DispersionModel::kCatalog ? "catalog" : "abbe"));
+  std::string channels;
+  for (const int channel : specs.wavelength_channels) {
+    if (channel < 0 || channel > 2)
+      throw Error(
+          fmt::format("lens '{}': wavelength channel {} is not R, G or B", lens.name, channel));
+    channels += kChannelLetters[static_cast<std::size_t>(channel)];
+  }
+  line("NOTE 0 lensopt channels " + channels);
+  std::vector<std::string> nm_texts;
+  for (const double nm : specs.wavelengths_nm) nm_texts.push_back(number_text(nm));
+  line(fmt::format("NOTE 0 lensopt wavelengths_nm {}", fmt::join(nm_texts, " ")));
+  if (!lens.extra_toml.empty()) {
+    std::size_t start = 0;
+    const std::string& extra = lens.extra_toml;
+    while (start < extra.size()) {
+      std::size_t end = extra.find('\n', start);
+      if (end == std::string::npos) end = extra.size();
+      std::string text = extra.substr(start, end - start);
+      if (!text.empty() && text.back() == '\r') text.pop_back();
+      line(text.empty() ? "NOTE 0 lensopt-toml" : "NOTE 0 lensopt-toml " + text);
+      start = end + 1;
+    }
+  }
+  line("UNIT MM X W X CM MR CPMM");
+  line(fmt::format("FNUM {} 0", number_text(specs.f_number)));
+
+  // Catalogs: the lens's, then any other its glasses come from.
+  std::vector<std::string> gcat;
+  auto add_catalog = [&gcat](const std::string& zemax_name) {
+    if (!zemax_name.empty() && std::find(gcat.begin(), gcat.end(), zemax_name) == gcat.end())
+      gcat.push_back(zemax_name);
+  };
+  bool has_catalog_glass = false;
+  for (const Surface& s : lens.surfaces)
+    has_catalog_glass = has_catalog_glass || s.material.kind == Material::Kind::kCatalog;
+  if (has_catalog_glass) {
+    if (!lens.catalog_name.empty()) add_catalog(zemax_catalog_name(lens.catalog_name));
+    for (const Surface& s : lens.surfaces)
+      if (s.material.kind == Material::Kind::kCatalog && s.material.glass &&
+          lens.catalog_name.empty())
+        add_catalog(zemax_catalog_name(s.material.glass->catalog));
+    if (!gcat.empty()) line(fmt::format("GCAT {}", fmt::join(gcat, " ")));
+  }
+
+  // Fields: 0, 0.7 and 1 of the half field (one field on axis when it is 0).
+  std::vector<double> fields = {0.0};
+  if (specs.half_field_deg != 0.0) fields = {0.0, 0.7 * specs.half_field_deg, specs.half_field_deg};
+  std::vector<std::string> x_texts, y_texts, weight_texts;
+  for (const double f : fields) {
+    x_texts.push_back("0");
+    y_texts.push_back(number_text(f));
+    weight_texts.push_back("1");
+  }
+  line(fmt::format("FTYP 0 0 {} {} 0 0 0", fields.size(), specs.wavelengths_nm.size()));
+  line(fmt::format("XFLN {}", fmt::join(x_texts, " ")));
+  line(fmt::format("YFLN {}", fmt::join(y_texts, " ")));
+  line(fmt::format("FWGN {}", fmt::join(weight_texts, " ")));
+  std::size_t primary = 0;
+  for (std::size_t i = 0; i < specs.wavelengths_nm.size(); ++i) {
+    line(fmt::format("WAVM {} {} 1", i + 1, micrometre_text(specs.wavelengths_nm[i])));
+    if (std::abs(specs.wavelengths_nm[i] - kWavelengthD_nm) <
+        std::abs(specs.wavelengths_nm[primary] - kWavelengthD_nm))
+      primary = i;
+  }
+  line(fmt::format("PWAV {}", primary + 1));
+
+  line("SURF 0");
+  line("  TYPE STANDARD");
+  line("  CURV 0");
+  line("  DISZ INFINITY");
+  int number = 1;
+  for (const Surface& s : lens.surfaces) {
+    line(fmt::format("SURF {}", number++));
+    line("  TYPE STANDARD");
+    line(fmt::format("  CURV {}", number_text(s.curvature_per_mm)));
+    line(fmt::format("  DISZ {}", number_text(s.thickness_mm)));
+    switch (s.material.kind) {
+      case Material::Kind::kAir:
+        break;
+      case Material::Kind::kCatalog:
+        line(fmt::format("  GLAS {} 0 0 {} {} 0 0 0 0 0 0", s.material.glass_name,
+                         number_text(s.material.nd), number_text(s.material.vd)));
+        break;
+      case Material::Kind::kModel:
+        line(fmt::format("  GLAS ___BLANK 1 0 {} {} 0 0 0 0 0 0", number_text(s.material.nd),
+                         number_text(s.material.vd)));
+        break;
+    }
+    if (s.is_stop) line("  STOP");
+    if (s.semi_diameter_mm != 0.0)
+      line(fmt::format("  DIAM {} 1", number_text(s.semi_diameter_mm)));
+  }
+  line(fmt::format("SURF {}", number));
+  line("  TYPE STANDARD");
+  line("  CURV 0");
+  line("  DISZ 0");
+  return out;
+}
+
+void write_zmx(const Lens& lens, const std::filesystem::path& path) {
+  write_file_atomic(path, format_zmx(lens));
+}
+
+}  // namespace lensopt

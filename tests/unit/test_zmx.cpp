@@ -1,0 +1,331 @@
+// Zemax .zmx import and export: TOML -> ZMX -> TOML is exact for the baselines; UTF-16 and ASCII,
+// CRLF and LF read the same; the hand-written textbook files have their stated focal lengths;
+// aspheres, coordinate breaks and unknown glasses are errors at their line; other lines warnings.
+#include <doctest/doctest.h>
+#include <fmt/format.h>
+
+#include <bit>
+#include <cmath>
+#include <cstdint>
+#include <filesystem>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "lensopt/analysis/analyze.h"
+#include "lensopt/core/atomic_file.h"
+#include "lensopt/core/error.h"
+#include "lensopt/core/text.h"
+#include "lensopt/formats/zmx.h"
+#include "lensopt/glass/dispersion.h"
+#include "lensopt/lens/lens_io.h"
+#include "lensopt/paraxial/paraxial.h"
+#include "lensopt/trace/trace_lens.h"
+#include "test_support.h"
+
+using namespace lensopt;
+
+namespace {
+
+std::uint64_t bits(double x) {
+  return std::bit_cast<std::uint64_t>(x);
+}
+
+// Every field of two lenses equal, doubles bit for bit (stronger than 1e-9 relative).
+void check_same_lens(const Lens& a, const Lens& b) {
+  CHECK(a.name == b.name);
+  CHECK(a.catalog_name == b.catalog_name);
+  CHECK(a.extra_toml == b.extra_toml);
+  CHECK(bits(a.specs.f_number) == bits(b.specs.f_number));
+  CHECK(bits(a.specs.half_field_deg) == bits(b.specs.half_field_deg));
+  CHECK(bits(a.specs.sensor_diagonal_mm) == bits(b.specs.sensor_diagonal_mm));
+  REQUIRE(a.specs.wavelengths_nm.size() == b.specs.wavelengths_nm.size());
+  for (std::size_t i = 0; i < a.specs.wavelengths_nm.size(); ++i)
+    CHECK(bits(a.specs.wavelengths_nm[i]) == bits(b.specs.wavelengths_nm[i]));
+  CHECK(a.specs.wavelength_channels == b.specs.wavelength_channels);
+  CHECK(a.specs.dispersion == b.specs.dispersion);
+  REQUIRE(a.surfaces.size() == b.surfaces.size());
+  for (std::size_t i = 0; i < a.surfaces.size(); ++i) {
+    CAPTURE(i);
+    const Surface& s = a.surfaces[i];
+    const Surface& t = b.surfaces[i];
+    CHECK(bits(s.curvature_per_mm) == bits(t.curvature_per_mm));
+    CHECK(bits(s.thickness_mm) == bits(t.thickness_mm));
+    CHECK(bits(s.semi_diameter_mm) == bits(t.semi_diameter_mm));
+    CHECK(s.is_stop == t.is_stop);
+    CHECK(s.material.kind == t.material.kind);
+    CHECK(s.material.glass_name == t.material.glass_name);
+    CHECK(bits(s.material.nd) == bits(t.material.nd));
+    CHECK(bits(s.material.vd) == bits(t.material.vd));
+  }
+}
+
+std::string to_lf(const std::string& text) {
+  std::string out;
+  for (char ch : text)
+    if (ch != '\r') out += ch;
+  return out;
+}
+
+// ASCII text as UTF-16 LE with a BOM, as OpticStudio writes .zmx files.
+std::string to_utf16le(const std::string& text) {
+  std::string out = "\xFF\xFE";
+  for (char ch : text) {
+    out += ch;
+    out += '\0';
+  }
+  return out;
+}
+
+// A minimal valid file with `surface_lines` as the body of SURF 1 (f/4 singlet-like system).
+std::string small_zmx(const std::string& header_extra, const std::string& surface_lines) {
+  return "VERS 190513 80 123457 L123457\n"
+         "MODE SEQ\n"
+         "NAME small\n"
+         "UNIT MM X W X CM MR CPMM\n"
+         "FNUM 4 0\n" +
+         header_extra +
+         "FTYP 0 0 2 2 0 0 0\n"
+         "XFLN 0 0\n"
+         "YFLN 0 10\n"
+         "WAVM 1 0.4861327 1\n"
+         "WAVM 2 0.6562725 1\n"
+         "SURF 0\n"
+         "  TYPE STANDARD\n"
+         "  CURV 0\n"
+         "  DISZ INFINITY\n"
+         "SURF 1\n"
+         "  TYPE STANDARD\n"
+         "  CURV 0\n"
+         "  DISZ 2\n"
+         "  STOP\n"
+         "SURF 2\n" +
+         surface_lines +
+         "SURF 3\n"
+         "  TYPE STANDARD\n"
+         "  CURV -0.02\n"
+         "  DISZ 45\n"
+         "SURF 4\n"
+         "  TYPE STANDARD\n"
+         "  CURV 0\n"
+         "  DISZ 0\n";
+}
+
+// Line (1-based) of the first line of `text` containing `needle`.
+int line_of(const std::string& text, const std::string& needle) {
+  const std::size_t at = text.find(needle);
+  REQUIRE(at != std::string::npos);
+  int line = 1;
+  for (std::size_t i = 0; i < at; ++i) line += text[i] == '\n' ? 1 : 0;
+  return line;
+}
+
+Error error_of(const std::string& text) {
+  try {
+    parse_zmx(text, "bad.zmx");
+  } catch (const Error& error) {
+    return error;
+  }
+  FAIL("no error for a bad .zmx");
+  return Error("unreachable");
+}
+
+double paraxial_efl_mm(const Lens& lens) {
+  return paraxial_data(make_trace_lens(lens), kWavelengthD_nm).efl_mm;
+}
+
+}  // namespace
+
+TEST_CASE("zmx: TOML -> ZMX -> TOML is exact for the baselines") {
+  for (const char* name : {"doublet", "cooke", "tessar"}) {
+    CAPTURE(name);
+    const auto toml_path = test::source_dir() / "lenses" / (std::string(name) + ".toml");
+    const Lens lens = read_lens(toml_path);
+    const std::string zmx = format_zmx(lens);
+    CHECK(zmx.find("TYPE STANDARD") != std::string::npos);
+    CHECK(zmx.find("GCAT OHARA") != std::string::npos);
+    CHECK(zmx.find("FNUM 2 0") != std::string::npos);
+    const ZmxImport imported = parse_zmx(zmx, std::string(name) + ".zmx");
+    check_same_lens(lens, imported.lens);
+    CHECK(imported.lens.source_path == std::string(name) + ".zmx");
+    // And on to TOML: the same text as the original lens gives.
+    CHECK(format_lens_toml(imported.lens) == format_lens_toml(lens));
+    const Lens again = parse_lens_toml(format_lens_toml(imported.lens), "again.toml");
+    check_same_lens(lens, again);
+    // ZMX is a fixed point as well.
+    CHECK(format_zmx(imported.lens) == zmx);
+  }
+}
+
+TEST_CASE("zmx: model glasses, semi-diameters and extra tables survive") {
+  Lens lens = read_lens(test::source_dir() / "lenses" / "doublet.toml");
+  lens.surfaces[0].material = Material::model(1.7234567890123, 41.123456789);
+  lens.surfaces[0].semi_diameter_mm = 5.123456789;
+  lens.surfaces[1].curvature_per_mm = 0.1 / 3.0;  // no short decimal
+  lens.specs.wavelengths_nm = {450.1, 550.3, 650.7};
+  lens.specs.wavelength_channels = {2, 1, 0};
+  lens.extra_toml = "[optimize]\nsteps = 10\n";
+  const std::string zmx = format_zmx(lens);
+  CHECK(zmx.find("GLAS ___BLANK 1 0 1.7234567890123 41.123456789") != std::string::npos);
+  CHECK(zmx.find("DIAM 5.123456789") != std::string::npos);
+  const ZmxImport imported = parse_zmx(zmx, "model.zmx");
+  check_same_lens(lens, imported.lens);
+}
+
+TEST_CASE("zmx: UTF-16 LE and ASCII, CRLF and LF read the same") {
+  const Lens lens = read_lens(test::source_dir() / "lenses" / "tessar.toml");
+  const std::string crlf = format_zmx(lens);
+  REQUIRE(crlf.find("\r\n") != std::string::npos);
+  const std::string lf = to_lf(crlf);
+  for (const std::string& bytes : {crlf, lf, to_utf16le(crlf), to_utf16le(lf)}) {
+    const ZmxImport imported = parse_zmx(bytes, "tessar.zmx");
+    check_same_lens(lens, imported.lens);
+  }
+  CHECK(decode_text(to_utf16le("GLAS")) == "GLAS");
+}
+
+TEST_CASE("zmx: textbook designs import and analyse to their stated focal lengths") {
+  struct Case {
+    const char* file;
+    double stated_efl_mm;
+    double precision_mm;  // of the source's figure
+  };
+  // AC254-100-A: 100.1 mm stated to 0.1 mm; the Cooke triplet 50 mm; the double Gauss nominally
+  // 100 mm (its paraxial EFL is 99.50 mm, within the half-unit of the nominal figure).
+  for (const Case& c :
+       {Case{"achromat_ac254_100.zmx", 100.1, 0.05}, Case{"cooke_triplet_50.zmx", 50.0, 0.05},
+        Case{"double_gauss_100.zmx", 100.0, 0.5}}) {
+    CAPTURE(c.file);
+    const ZmxImport imported = read_zmx(test::source_dir() / "lenses" / "zmx" / c.file);
+    const Lens& lens = imported.lens;
+    const double efl_mm = paraxial_efl_mm(lens);
+    MESSAGE(c.file << ": paraxial EFL " << efl_mm << " mm (stated " << c.stated_efl_mm << ")");
+    CHECK(std::abs(efl_mm - c.stated_efl_mm) <= c.precision_mm);
+    CHECK(lens.stop_index() >= 0);
+    CHECK(lens.specs.wavelengths_nm.size() == 3);
+    // The spec focal length is the lens's own, so analysis needs no scaling either way.
+    CHECK(lens.specs.focal_length_mm() == doctest::Approx(efl_mm).epsilon(1e-12));
+    AnalyzeOptions options;
+    options.trace.scale_to_spec = false;
+    options.trace.rings = 4;
+    options.trace.fields = 3;
+    options.trace.threads = 1;
+    const AnalysisReport report = analyze_lens(lens, options);
+    CHECK(report.efl_mm == doctest::Approx(efl_mm).epsilon(1e-9));
+    CHECK(report.ray_failures == 0);
+    REQUIRE(report.mean_rms_spot_um.has_value());
+    CHECK(*report.mean_rms_spot_um > 0.0);
+  }
+  // The triplet's stop is on a curved surface: a flat stop is inserted before it, with a warning.
+  const ZmxImport cooke = read_zmx(test::source_dir() / "lenses" / "zmx" / "cooke_triplet_50.zmx");
+  CHECK(cooke.lens.surfaces.size() == 7);
+  CHECK(cooke.lens.stop_index() == 3);
+  CHECK(cooke.lens.specs.f_number == doctest::Approx(paraxial_efl_mm(cooke.lens) / 10.0));
+  bool stop_warning = false;
+  for (const std::string& w : cooke.warnings)
+    stop_warning = stop_warning || w.find("flat stop surface is inserted") != std::string::npos;
+  CHECK(stop_warning);
+}
+
+TEST_CASE("zmx: aspheres, coordinate breaks and unknown glasses are errors naming the line") {
+  {
+    const std::string text = small_zmx("", "  TYPE EVENASPH\n  CURV 0.02\n  DISZ 3\n");
+    const Error e = error_of(text);
+    CHECK(e.where().file == "bad.zmx");
+    CHECK(e.where().line == line_of(text, "TYPE EVENASPH"));
+    CHECK(std::string(e.what()).find("EVENASPH") != std::string::npos);
+  }
+  {
+    const std::string text = small_zmx("", "  TYPE COORDBRK\n  CURV 0\n  DISZ 0\n");
+    const Error e = error_of(text);
+    CHECK(e.where().line == line_of(text, "TYPE COORDBRK"));
+    CHECK(std::string(e.what()).find("COORDBRK") != std::string::npos);
+  }
+  {
+    const std::string text = small_zmx(
+        "", "  TYPE STANDARD\n  CURV 0.02\n  DISZ 3\n  CONI -1.5\n  GLAS ___BLANK 1 0 1.5 60\n");
+    const Error e = error_of(text);
+    CHECK(e.where().line == line_of(text, "CONI -1.5"));
+    CHECK(std::string(e.what()).find("conic") != std::string::npos);
+  }
+  {
+    const std::string text =
+        small_zmx("GCAT OHARA\n", "  TYPE STANDARD\n  CURV 0.02\n  DISZ 3\n  GLAS N-BK7 0 0\n");
+    const Error e = error_of(text);
+    const std::string message = e.what();
+    CHECK(e.where().line == line_of(text, "GLAS N-BK7"));
+    CHECK(e.where().column == 8);
+    CHECK(message.find("N-BK7") != std::string::npos);
+    CHECK(message.find("OHARA") != std::string::npos);
+    CHECK(message.find("closest") != std::string::npos);
+  }
+  {
+    // A catalog that does not exist is named too.
+    const std::string text =
+        small_zmx("GCAT NOSUCHVENDOR\n", "  TYPE STANDARD\n  CURV 0.02\n  DISZ 3\n  GLAS XYZ-1\n");
+    const std::string message = error_of(text).what();
+    CHECK(message.find("XYZ-1") != std::string::npos);
+    CHECK(message.find("NOSUCHVENDOR") != std::string::npos);
+  }
+  {
+    const std::string text = small_zmx("FTYP 1 0 2 2 0 0 0\n", "  TYPE STANDARD\n  CURV 0\n");
+    const Error e = error_of(text);
+    CHECK(e.where().line == line_of(text, "FTYP 1"));
+  }
+}
+
+TEST_CASE("zmx: catalog glasses resolve through GCAT; unknown lines are warnings with lines") {
+  const std::string text =
+      small_zmx("GCAT OHARA\nFOOB 1 2 3\nPFIL 0 0 0\n",
+                "  TYPE STANDARD\n  CURV 0.02\n  DISZ 3\n  GLAS S-BSL7 0 0 1.5 60\n  CLAP 0 5\n"
+                "  COMM front\n");
+  const ZmxImport imported = parse_zmx(text, "small.zmx");
+  const Lens& lens = imported.lens;
+  REQUIRE(lens.surfaces.size() == 3);
+  CHECK(lens.surfaces[1].material.kind == Material::Kind::kCatalog);
+  CHECK(lens.surfaces[1].material.glass_name == "S-BSL7");
+  CHECK(lens.catalog_name == "OHARA");
+  CHECK(lens.specs.f_number == 4.0);
+  CHECK(lens.specs.half_field_deg == 10.0);
+  CHECK(lens.specs.dispersion == DispersionModel::kCatalog);
+  CHECK(lens.specs.wavelength_channels == std::vector<int>{2, 0});
+  auto has = [&](const std::string& needle) {
+    for (const std::string& w : imported.warnings)
+      if (w.find(needle) != std::string::npos) return true;
+    return false;
+  };
+  CHECK(has(fmt::format("small.zmx:{}: unknown line 'FOOB 1 2 3'", line_of(text, "FOOB"))));
+  CHECK(has(fmt::format("small.zmx:{}:", line_of(text, "CLAP"))));
+  CHECK(has(fmt::format("PFIL (line {})", line_of(text, "PFIL"))));
+  CHECK(has("colour channels assigned by wavelength"));
+  // The imported lens writes as TOML that reads back (the catalog name loads).
+  const Lens toml = parse_lens_toml(format_lens_toml(lens), "small.toml");
+  CHECK(toml.surfaces[1].material.glass_name == "S-BSL7");
+}
+
+TEST_CASE("zmx: ENPD gives f/# = EFL / ENPD; units convert to mm") {
+  std::string text = small_zmx("",
+                               "  TYPE STANDARD\n  CURV 0.02\n  DISZ 3\n  GLAS ___BLANK 1 0 "
+                               "1.5 60\n");
+  text.replace(text.find("FNUM 4 0"), 8, "ENPD 12.5");
+  const Lens lens = parse_zmx(text, "enpd.zmx").lens;
+  CHECK(lens.specs.f_number == doctest::Approx(paraxial_efl_mm(lens) / 12.5).epsilon(1e-12));
+  std::string cm = text;
+  cm.replace(cm.find("UNIT MM"), 7, "UNIT CM");
+  const Lens in_cm = parse_zmx(cm, "cm.zmx").lens;
+  CHECK(in_cm.surfaces[1].thickness_mm == doctest::Approx(30.0));
+  CHECK(paraxial_efl_mm(in_cm) == doctest::Approx(10.0 * paraxial_efl_mm(lens)));
+  CHECK(in_cm.specs.f_number == doctest::Approx(lens.specs.f_number));
+}
+
+TEST_CASE("zmx: read_lens and write_lens dispatch on .zmx") {
+  const auto dir = std::filesystem::temp_directory_path() /
+                   ("lensopt_zmx_" + std::to_string(std::random_device{}()));
+  std::filesystem::create_directories(dir);
+  const Lens lens = read_lens(test::source_dir() / "lenses" / "cooke.toml");
+  write_lens(lens, dir / "cooke.zmx");
+  const Lens back = read_lens(dir / "cooke.zmx");
+  CHECK(back.source_path == (dir / "cooke.zmx").string());
+  check_same_lens(lens, back);
+  std::filesystem::remove_all(dir);
+}
