@@ -1,11 +1,192 @@
-// Placeholder registration until the `render` command lands; it says so when run.
+// lensopt render LENS INPUT... -o OUT: aberrated images for single files or whole dataset trees.
+#include <fmt/core.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <filesystem>
+#include <memory>
+#include <string>
+#include <vector>
+
 #include "commands.h"
 #include "lensopt/core/error.h"
+#include "lensopt/lens/lens_io.h"
+#include "lensopt/render/chart.h"
+#include "lensopt/render/dataset.h"
 
 namespace lensopt::cli {
-void setup_render(CLI::App& app) {
-  CLI::App* sub = app.add_subcommand("render", "render aberrated images (not built yet)");
-  sub->allow_extras();
-  sub->callback([] { throw Error("'render' is not implemented in this build yet"); });
+namespace {
+
+namespace fs = std::filesystem;
+using Clock = std::chrono::steady_clock;
+
+struct RenderCommand {
+  std::string lens_path;
+  std::vector<std::string> inputs;
+  std::string output_dir;
+  int res_factor = 1;
+  bool no_distortion = false;
+  bool no_ri = false;
+  int jobs = 0;
+  bool force = false;
+  bool quiet = false;
+};
+
+std::string clock_text(double seconds) {
+  const long s = static_cast<long>(seconds + 0.5);
+  return s >= 3600 ? fmt::format("{}:{:02d}:{:02d}", s / 3600, (s / 60) % 60, s % 60)
+                   : fmt::format("{:02d}:{:02d}", s / 60, s % 60);
 }
+
+// A progress bar with ETA on stderr: redrawn in place on a terminal, a line every few seconds
+// (and for every failure) otherwise.
+class Progress {
+ public:
+  explicit Progress(bool quiet) : quiet_(quiet), tty_(::isatty(2) == 1), start_(Clock::now()) {}
+
+  void update(const ImageRecord& r, int done, int total) {
+    if (r.status == ImageRecord::Status::kRendered) ++rendered_;
+    if (r.status == ImageRecord::Status::kFailed) {
+      clear_line();
+      fmt::print(stderr, "lensopt render: skipped {}: {}\n", r.input.string(), r.error);
+    }
+    if (quiet_) return;
+    const double elapsed = std::chrono::duration<double>(Clock::now() - start_).count();
+    // Remaining time from the rendering rate so far (skipped outputs cost nothing).
+    const int left = total - done;
+    const std::string eta =
+        rendered_ > 0 ? clock_text(elapsed / rendered_ * left) : std::string("--:--");
+    const std::string status =
+        fmt::format("{}/{} images  {} elapsed  ETA {}", done, total, clock_text(elapsed), eta);
+    if (tty_) {
+      constexpr int kWidth = 30;
+      const int filled = total > 0 ? kWidth * done / total : kWidth;
+      fmt::print(stderr, "\r[{}{}] {}  {}", std::string(filled, '#'),
+                 std::string(kWidth - filled, '.'), status, r.relative_path.substr(0, 40));
+      fmt::print(stderr, "\033[K");  // clear the rest of the line
+      drawn_ = true;
+      if (done == total) finish();
+    } else if (done == total || elapsed - last_line_ > 2.0) {
+      fmt::print(stderr, "lensopt render: {}\n", status);
+      last_line_ = elapsed;
+    }
+  }
+  void finish() {
+    if (tty_ && drawn_) fmt::print(stderr, "\n");
+    drawn_ = false;
+  }
+
+ private:
+  void clear_line() {
+    if (tty_ && drawn_) fmt::print(stderr, "\r\033[K");
+  }
+  bool quiet_;
+  bool tty_;
+  Clock::time_point start_;
+  int rendered_ = 0;
+  bool drawn_ = false;
+  double last_line_ = -1e9;
+};
+
+void run_render(const RenderCommand& cmd) {
+  RenderOptions options;
+  options.res_factor = cmd.res_factor;
+  options.distortion = !cmd.no_distortion;
+  options.relative_illumination = !cmd.no_ri;
+  options.threads = cmd.jobs;
+  options.validate();
+  DatasetOptions dataset;
+  dataset.output_dir = cmd.output_dir;
+  dataset.force = cmd.force;
+  dataset.jobs = cmd.jobs;
+  for (const std::string& in : cmd.inputs) dataset.inputs.emplace_back(in);
+
+  // No input: render the built-in test chart (written to a temporary folder first).
+  fs::path chart_dir;
+  struct RemoveDir {
+    fs::path* dir;
+    ~RemoveDir() {
+      std::error_code ec;
+      if (!dir->empty()) fs::remove_all(*dir, ec);
+    }
+  } remove_chart_dir{&chart_dir};
+  if (dataset.inputs.empty()) {
+    chart_dir = fs::temp_directory_path() / fmt::format("lensopt-chart-{}", ::getpid());
+    fs::create_directories(chart_dir);
+    const Chart chart = make_test_chart(ChartOptions{});
+    write_image(chart_dir / "chart.png", chart.image);
+    dataset.inputs.push_back(chart_dir / "chart.png");
+    if (!cmd.quiet)
+      fmt::print(stderr, "lensopt render: no input given: rendering the built-in test chart\n");
+  }
+  dataset.validate();
+  ensure_writable_directory(dataset.output_dir);
+
+  const Lens lens = read_lens(cmd.lens_path);
+  const auto t0 = Clock::now();
+  TraceOptions trace;
+  trace.threads = cmd.jobs;
+  const Renderer renderer(build_imaging_model(lens, trace), options);
+  if (!cmd.quiet) {
+    fmt::print(stderr,
+               "lensopt render: {}: PSFs of {} fields x {} wavelengths x {} rays sampled in {:.2f} "
+               "s\n",
+               lens.name, renderer.model().fields_deg.size(), lens.specs.wavelengths_nm.size(),
+               2 * trace.rings * trace.rings,
+               std::chrono::duration<double>(Clock::now() - t0).count());
+  }
+  Progress progress(cmd.quiet);
+  const DatasetSummary summary =
+      render_dataset(renderer, dataset, [&](const ImageRecord& r, int done, int total) {
+        progress.update(r, done, total);
+      });
+  progress.finish();
+  for (const std::string& note : summary.notes) fmt::print(stderr, "lensopt render: note: {}\n", note);
+  fmt::print("rendered {}, skipped {} (already there), failed {} in {:.2f} s\n", summary.rendered,
+             summary.skipped, summary.failed, summary.seconds);
+  if (summary.mean_psnr_db || summary.mean_ssim) {
+    fmt::print("mean PSNR {} dB, mean SSIM {} (input vs blurred, before illumination and "
+               "distortion)\n",
+               summary.mean_psnr_db ? fmt::format("{:.3f}", *summary.mean_psnr_db) : "n/a",
+               summary.mean_ssim ? fmt::format("{:.4f}", *summary.mean_ssim) : "n/a");
+  }
+  fmt::print("metrics: {} and {}\n", summary.csv_path.string(), summary.json_path.string());
+  if (summary.failed > 0) {
+    fmt::print(stderr, "lensopt render: {} input{} could not be rendered:\n", summary.failed,
+               summary.failed == 1 ? "" : "s");
+    for (const ImageRecord& r : summary.records)
+      if (r.status == ImageRecord::Status::kFailed)
+        fmt::print(stderr, "  {}: {}\n", r.input.string(), r.error);
+    throw ExitCode{1};
+  }
+}
+
+}  // namespace
+
+void setup_render(CLI::App& app) {
+  auto cmd = std::make_shared<RenderCommand>();
+  CLI::App* sub = app.add_subcommand(
+      "render",
+      "Aberrated images: spatially varying PSF blur, relative illumination and distortion of a "
+      "lens, for image files or whole folders (PNG, JPEG, TIFF, EXR)");
+  sub->add_option("LENS", cmd->lens_path, "lens file (.toml, or the paper's .yml)")->required();
+  sub->add_option("INPUT", cmd->inputs,
+                  "image files or folders (searched recursively); none: the built-in test chart");
+  sub->add_option("-o,--output", cmd->output_dir,
+                  "output folder: same relative paths, names, formats and bit depths, plus "
+                  "render_metrics.csv/.json")
+      ->required();
+  sub->add_option("--res-factor", cmd->res_factor,
+                  "simulated resolution factor: 1 (image diagonal = sensor diagonal) or 2 (the "
+                  "image is a quadrant of a sensor twice as large)")
+      ->check(CLI::IsMember({1, 2}));
+  sub->add_flag("--no-distortion", cmd->no_distortion, "do not apply the distortion warp");
+  sub->add_flag("--no-ri", cmd->no_ri, "do not apply relative illumination");
+  sub->add_option("--jobs,-j", cmd->jobs, "threads in all (0: all cores)")
+      ->check(CLI::Range(0, 1024));
+  sub->add_flag("--force", cmd->force, "render images whose output already exists");
+  sub->add_flag("--quiet,-q", cmd->quiet, "no progress bar");
+  sub->callback([cmd] { run_render(*cmd); });
+}
+
 }  // namespace lensopt::cli

@@ -147,12 +147,15 @@ void write_image(const std::filesystem::path& path, const FloatImage& image,
   });
 }
 
-void write_float_image(const std::filesystem::path& path, const FloatImage& image) {
+void write_float_image(const std::filesystem::path& path, const FloatImage& image,
+                       const std::vector<std::string>& channel_names) {
   const std::string format = image_format_name(path);
   if (format != "EXR" && format != "TIFF") {
     throw Error(SourceLocation{path.string()}, "float images are written as EXR or TIFF");
   }
   OIIO::ImageSpec spec(image.width, image.height, image.channels, OIIO::TypeDesc::FLOAT);
+  if (image.channels == 1) spec.channelnames = {"Y"};
+  if (static_cast<int>(channel_names.size()) == image.channels) spec.channelnames = channel_names;
   write_file_atomic_with(path, [&](const std::filesystem::path& temp) {
     write_with_oiio(path, temp, image, spec);
   });

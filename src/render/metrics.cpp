@@ -3,6 +3,7 @@
 #include <fmt/format.h>
 #include <omp.h>
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <vector>
@@ -71,44 +72,58 @@ double ssim(const FloatImage& x, const FloatImage& y, int channels, int threads)
   const std::vector<double> gy = gaussian_window(wy, kSigma);
   const int out_w = width - wx + 1;  // positions where the window lies inside the image
   const int out_h = height - wy + 1;
-  const int nthreads = thread_count(threads);
+  const int nthreads = std::min(thread_count(threads), out_h);
+  // Per output row, the horizontal pass of x, y, x^2, y^2, xy over the wy rows under the window,
+  // kept in a ring of wy rows (per thread), then the vertical pass. In double: the variances are
+  // differences of nearly equal second moments.
   double total = 0;
-  // Horizontal pass of x, y, x^2, y^2, xy into five height x out_w maps; vertical pass per row.
-  // In double: the variances are differences of nearly equal second moments.
-  std::vector<double> h[5];
-  for (auto& m : h) m.resize(static_cast<std::size_t>(height) * out_w);
   for (int c = 0; c < channels; ++c) {
-#pragma omp parallel for num_threads(nthreads) schedule(static)
-    for (int row = 0; row < height; ++row) {
-      for (int col = 0; col < out_w; ++col) {
-        double s[5] = {0, 0, 0, 0, 0};
-        for (int k = 0; k < wx; ++k) {
-          const double a = x.at(col + k, row, c);
-          const double b = y.at(col + k, row, c);
-          const double g = gx[k];
-          s[0] += g * a;
-          s[1] += g * b;
-          s[2] += g * a * a;
-          s[3] += g * b * b;
-          s[4] += g * a * b;
-        }
-        const std::size_t i = static_cast<std::size_t>(row) * out_w + col;
-        for (int m = 0; m < 5; ++m) h[m][i] = s[m];
-      }
-    }
     double channel_sum = 0;
-#pragma omp parallel for num_threads(nthreads) reduction(+ : channel_sum) schedule(static)
-    for (int row = 0; row < out_h; ++row) {
-      for (int col = 0; col < out_w; ++col) {
-        double s[5] = {0, 0, 0, 0, 0};
-        for (int k = 0; k < wy; ++k) {
-          const std::size_t i = static_cast<std::size_t>(row + k) * out_w + col;
-          for (int m = 0; m < 5; ++m) s[m] += gy[k] * h[m][i];
+#pragma omp parallel num_threads(nthreads) reduction(+ : channel_sum)
+    {
+      const int t = omp_get_thread_num(), nt = omp_get_num_threads();
+      const int r0 = static_cast<int>(static_cast<long>(out_h) * t / nt);
+      const int r1 = static_cast<int>(static_cast<long>(out_h) * (t + 1) / nt);
+      std::vector<double> ring(static_cast<std::size_t>(wy) * 5 * out_w);
+      auto horizontal = [&](int row) {  // into ring slot row % wy
+        double* slot = ring.data() + static_cast<std::size_t>(row % wy) * 5 * out_w;
+        const float* xr = x.pixels.data() + static_cast<std::size_t>(row) * width * x.channels + c;
+        const float* yr = y.pixels.data() + static_cast<std::size_t>(row) * width * y.channels + c;
+        for (int col = 0; col < out_w; ++col) {
+          double s0 = 0, s1 = 0, s2 = 0, s3 = 0, s4 = 0;
+          for (int k = 0; k < wx; ++k) {
+            const double a = xr[static_cast<std::size_t>(col + k) * x.channels];
+            const double b = yr[static_cast<std::size_t>(col + k) * y.channels];
+            const double g = gx[k];
+            s0 += g * a;
+            s1 += g * b;
+            s2 += g * a * a;
+            s3 += g * b * b;
+            s4 += g * a * b;
+          }
+          slot[col] = s0;
+          slot[out_w + col] = s1;
+          slot[2 * out_w + col] = s2;
+          slot[3 * out_w + col] = s3;
+          slot[4 * out_w + col] = s4;
         }
-        const double mx = s[0], my = s[1];
-        const double vx = s[2] - mx * mx, vy = s[3] - my * my, cxy = s[4] - mx * my;
-        channel_sum += ((2 * mx * my + kC1) * (2 * cxy + kC2)) /
-                       ((mx * mx + my * my + kC1) * (vx + vy + kC2));
+      };
+      if (r0 < r1)
+        for (int row = r0; row < r0 + wy - 1; ++row) horizontal(row);
+      for (int row = r0; row < r1; ++row) {
+        horizontal(row + wy - 1);
+        for (int col = 0; col < out_w; ++col) {
+          double m[5] = {0, 0, 0, 0, 0};
+          for (int k = 0; k < wy; ++k) {
+            const double* slot = ring.data() + static_cast<std::size_t>((row + k) % wy) * 5 * out_w;
+            const double g = gy[k];
+            for (int q = 0; q < 5; ++q) m[q] += g * slot[q * out_w + col];
+          }
+          const double mx = m[0], my = m[1];
+          const double vx = m[2] - mx * mx, vy = m[3] - my * my, cxy = m[4] - mx * my;
+          channel_sum += ((2 * mx * my + kC1) * (2 * cxy + kC2)) /
+                         ((mx * mx + my * my + kC1) * (vx + vy + kC2));
+        }
       }
     }
     total += channel_sum / (static_cast<double>(out_w) * out_h);

@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <type_traits>
 
 #include "lensopt/render/render.h"
 
@@ -61,36 +62,52 @@ FloatImage Renderer::apply_distortion(const FloatImage& image, int threads) cons
   // Radial scale r / r' near the axis (the first piece of the inverse map).
   const double axis_scale = nodes > 1 ? (yref[1] - yref[0]) / (ybar[1] - ybar[0]) : 1.0;
   FloatImage out(width, height, channels, 0.0f);
-  std::vector<double> acc(channels);
-#pragma omp parallel for num_threads(thread_count(threads > 0 ? threads : options_.threads)) \
-    schedule(static) firstprivate(acc)
-  for (int j = 0; j < height; ++j) {
-    for (int i = 0; i < width; ++i) {
-      const double dx = i + 0.5 - geo.axis_x, dy = j + 0.5 - geo.axis_y;
-      const double r_out = geo.pitch_mm * std::hypot(dx, dy);
-      const double scale =
-          r_out > 1e-12 ? inverse(r_out) / r_out : axis_scale;
-      const double sx = geo.axis_x + dx * scale, sy = geo.axis_y + dy * scale;
-      if (!(sx >= 0.0 && sx <= width && sy >= 0.0 && sy <= height)) continue;  // black
-      // Bicubic: pixel centres at k + 1/2, taps clamped to the image.
-      const double u = sx - 0.5, v = sy - 0.5;
-      const int x0 = static_cast<int>(std::floor(u)), y0 = static_cast<int>(std::floor(v));
-      double wx[4], wy[4];
-      keys_weights(u - x0, wx);
-      keys_weights(v - y0, wy);
-      int xs[4];
-      for (int k = 0; k < 4; ++k) xs[k] = std::clamp(x0 - 1 + k, 0, width - 1);
-      std::fill(acc.begin(), acc.end(), 0.0);
+  const float* src = image.pixels.data();
+  float* dst_pixels = out.pixels.data();
+  // One output pixel, with the channel count as a template constant where it is small.
+  auto sample = [&](auto channel_count, int i, int j) {
+    constexpr int kFixed = decltype(channel_count)::value;
+    const int nc = kFixed > 0 ? kFixed : channels;
+    const double dx = i + 0.5 - geo.axis_x, dy = j + 0.5 - geo.axis_y;
+    const double r_out = geo.pitch_mm * std::sqrt(dx * dx + dy * dy);
+    const double scale = r_out > 1e-12 ? inverse(r_out) / r_out : axis_scale;
+    const double sx = geo.axis_x + dx * scale, sy = geo.axis_y + dy * scale;
+    if (!(sx >= 0.0 && sx <= width && sy >= 0.0 && sy <= height)) return;  // black
+    // Bicubic: pixel centres at k + 1/2, taps clamped to the image.
+    const double u = sx - 0.5, v = sy - 0.5;
+    const int x0 = static_cast<int>(std::floor(u)), y0 = static_cast<int>(std::floor(v));
+    double wx[4], wy[4];
+    keys_weights(u - x0, wx);
+    keys_weights(v - y0, wy);
+    int xs[4];
+    for (int k = 0; k < 4; ++k) xs[k] = std::clamp(x0 - 1 + k, 0, width - 1) * nc;
+    double acc[kFixed > 0 ? kFixed : 16] = {};
+    for (int c0 = 0; c0 < nc; c0 += 16) {  // channels in blocks of 16 (only for many channels)
+      const int cn = std::min(16, nc - c0);
+      for (int c = 0; c < cn; ++c) acc[c] = 0.0;
       for (int m = 0; m < 4; ++m) {
         const int y = std::clamp(y0 - 1 + m, 0, height - 1);
-        const float* row = image.pixels.data() + static_cast<std::size_t>(y) * width * channels;
+        const float* row = src + static_cast<std::size_t>(y) * width * nc + c0;
         for (int k = 0; k < 4; ++k) {
           const double w = wy[m] * wx[k];
-          const float* p = row + static_cast<std::size_t>(xs[k]) * channels;
-          for (int c = 0; c < channels; ++c) acc[c] += w * p[c];
+          const float* p = row + xs[k];
+          for (int c = 0; c < cn; ++c) acc[c] += w * p[c];
         }
       }
-      for (int c = 0; c < channels; ++c) out.at(i, j, c) = static_cast<float>(acc[c]);
+      float* d = dst_pixels + (static_cast<std::size_t>(j) * width + i) * nc + c0;
+      for (int c = 0; c < cn; ++c) d[c] = static_cast<float>(acc[c]);
+    }
+  };
+#pragma omp parallel for num_threads(thread_count(threads > 0 ? threads : options_.threads)) \
+    schedule(static)
+  for (int j = 0; j < height; ++j) {
+    for (int i = 0; i < width; ++i) {
+      switch (channels) {
+        case 1: sample(std::integral_constant<int, 1>(), i, j); break;
+        case 3: sample(std::integral_constant<int, 3>(), i, j); break;
+        case 4: sample(std::integral_constant<int, 4>(), i, j); break;
+        default: sample(std::integral_constant<int, 0>(), i, j); break;
+      }
     }
   }
   return out;
