@@ -30,10 +30,10 @@ struct SpotResult {
 template <typename T>
 struct SpotAccumulator {
   bool has_reference = false;
-  T y0;
-  T sum_dy;
-  T sum_dy2;
-  T sum_x2;
+  T y0 = K<T>(0.0);
+  T sum_dy = K<T>(0.0);
+  T sum_dy2 = K<T>(0.0);
+  T sum_x2 = K<T>(0.0);
   int count = 0;
 
   void add(const RayBundle<T>& rays) {

@@ -31,9 +31,9 @@ namespace lensopt {
 // Per-ray status: 0 = traced; otherwise the failure kind (the first one wins).
 enum RayStatus : std::uint8_t {
   kRayOk = 0,
-  kRayMissedSurface = 1,         // zeta < 0: no intersection with the sphere
+  kRayMissedSurface = 1,            // zeta < 0: no intersection with the sphere
   kRayTotalInternalReflection = 2,  // zeta' < 0
-  kRayBackwards = 3,             // direction with n <= 0 (cannot reach the next surface)
+  kRayBackwards = 3,                // direction with n <= 0 (cannot reach the next surface)
 };
 
 // A batch of rays, structure of arrays. All arrays have size() entries.
@@ -42,7 +42,7 @@ struct RayBundle {
   std::vector<T> x, y, z;  // mm
   std::vector<T> l, m, n;  // direction cosines
   std::vector<std::uint8_t> status;
-  std::vector<std::int8_t> failed_surface;  // surface index of the failure, -1 if none
+  std::vector<std::int8_t> failed_surface;    // surface index of the failure, -1 if none
   std::vector<std::int32_t> failure_scratch;  // per-surface failure codes (kernel scratch)
 
   void resize(std::size_t count) {
@@ -77,10 +77,11 @@ namespace detail {
 // Steps 1-4 of the header for every ray at one surface. Branch-free in the ray loop (selects,
 // not jumps) so that the double instantiation vectorizes; kRecord adds the loss records.
 template <typename T, bool kRecord>
-inline __attribute__((always_inline)) void trace_surface(const T& c, const T& shift, const T& mu, int k, std::size_t count,
-                   T* __restrict x, T* __restrict y, T* __restrict z, T* __restrict l,
-                   T* __restrict m, T* __restrict n, std::int32_t* __restrict failure,
-                   T* __restrict travel, T* __restrict zeta_out, T* __restrict zeta_prime_out) {
+inline __attribute__((always_inline)) void trace_surface(
+    const T& c, const T& shift, const T& mu, std::size_t count, T* __restrict x, T* __restrict y,
+    T* __restrict z, T* __restrict l, T* __restrict m, T* __restrict n,
+    std::int32_t* __restrict failure, T* __restrict travel, T* __restrict zeta_out,
+    T* __restrict zeta_prime_out) {
   using std::sqrt;
   const T one = K<T>(1.0);
   const T zero = K<T>(0.0);
@@ -125,7 +126,7 @@ inline __attribute__((always_inline)) void trace_surface(const T& c, const T& sh
 // The double instantiation, compiled for several instruction sets (function multi-versioning,
 // src/trace/kernel_double.cpp) and picked at load time: AVX-512 / AVX2+FMA where the CPU has
 // them, plain x86-64 elsewhere.
-void trace_surface_double(double c, double shift, double mu, int k, std::size_t count, double* x,
+void trace_surface_double(double c, double shift, double mu, std::size_t count, double* x,
                           double* y, double* z, double* l, double* m, double* n,
                           std::int32_t* failure, double* travel, double* zeta_out,
                           double* zeta_prime_out, bool record);
@@ -169,17 +170,17 @@ void trace_bundle(const TraceLens<T>& lens, int w, int end, bool to_image, RayBu
     const T mu = lens.index(k - 1, w) / lens.index(k, w);
     if constexpr (std::is_same_v<T, double>) {
       detail::trace_surface_double(
-          c, shift, mu, k, count, x, y, z, l, m, n, failure,
+          c, shift, mu, count, x, y, z, l, m, n, failure,
           record && k > 0 ? record->axial_travel_mm[k - 1].data() : nullptr,
           record ? record->cos2_incidence[k].data() : nullptr,
           record ? record->cos2_refraction[k].data() : nullptr, record != nullptr);
     } else if (record) {
-      detail::trace_surface<T, true>(c, shift, mu, k, count, x, y, z, l, m, n, failure,
+      detail::trace_surface<T, true>(c, shift, mu, count, x, y, z, l, m, n, failure,
                                      k > 0 ? record->axial_travel_mm[k - 1].data() : nullptr,
                                      record->cos2_incidence[k].data(),
                                      record->cos2_refraction[k].data());
     } else {
-      detail::trace_surface<T, false>(c, shift, mu, k, count, x, y, z, l, m, n, failure, nullptr,
+      detail::trace_surface<T, false>(c, shift, mu, count, x, y, z, l, m, n, failure, nullptr,
                                       nullptr, nullptr);
     }
     // The first failure of a ray wins.
