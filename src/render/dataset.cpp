@@ -293,13 +293,7 @@ DatasetSummary render_dataset(const Renderer& renderer, const DatasetOptions& op
   }
 
   const PreviousMetrics previous = load_previous(summary.json_path);
-  if (!previous.by_path.empty() && previous.settings != settings_json(renderer)) {
-    summary.notes.push_back(fmt::format(
-        "existing outputs were rendered with other settings ({}); they are kept (use --force "
-        "to render them again)",
-        previous.settings.dump()));
-  }
-
+  bool kept_other_settings = false;
   // Decide what to do with each record.
   std::vector<int> todo;
   for (int i = 0; i < static_cast<int>(summary.records.size()); ++i) {
@@ -309,12 +303,21 @@ DatasetSummary render_dataset(const Renderer& renderer, const DatasetOptions& op
     if (!options.force && fs::exists(options.output_dir / r.relative_path, ec)) {
       r.status = ImageRecord::Status::kSkipped;
       auto it = previous.by_path.find(r.relative_path);
-      if (it != previous.by_path.end()) std::tie(r.psnr_db, r.ssim) = it->second;
+      if (it != previous.by_path.end()) {
+        std::tie(r.psnr_db, r.ssim) = it->second;
+        kept_other_settings |= previous.settings != settings_json(renderer);
+      }
       continue;
     }
     todo.push_back(i);
   }
 
+  if (kept_other_settings) {
+    summary.notes.push_back(fmt::format(
+        "some existing outputs were rendered with other settings ({}); they are kept (use "
+        "--force to render them again)",
+        previous.settings.dump()));
+  }
   const int total = static_cast<int>(summary.records.size());
   int done = 0;
   std::mutex mutex;

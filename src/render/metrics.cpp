@@ -85,45 +85,56 @@ double ssim(const FloatImage& x, const FloatImage& y, int channels, int threads)
       const int r0 = static_cast<int>(static_cast<long>(out_h) * t / nt);
       const int r1 = static_cast<int>(static_cast<long>(out_h) * (t + 1) / nt);
       std::vector<double> ring(static_cast<std::size_t>(wy) * 5 * out_w);
+      std::vector<double> planes(static_cast<std::size_t>(5) * width);  // x, y, x^2, y^2, xy
+      std::vector<double> m(static_cast<std::size_t>(5) * out_w);
+      // Contiguous loops (k outer, column inner) so the compiler vectorizes them.
       auto horizontal = [&](int row) {  // into ring slot row % wy
-        double* slot = ring.data() + static_cast<std::size_t>(row % wy) * 5 * out_w;
         const float* xr = x.pixels.data() + static_cast<std::size_t>(row) * width * x.channels + c;
         const float* yr = y.pixels.data() + static_cast<std::size_t>(row) * width * y.channels + c;
-        for (int col = 0; col < out_w; ++col) {
-          double s0 = 0, s1 = 0, s2 = 0, s3 = 0, s4 = 0;
+        double* p = planes.data();
+        for (int col = 0; col < width; ++col) {
+          const double a = xr[static_cast<std::size_t>(col) * x.channels];
+          const double b = yr[static_cast<std::size_t>(col) * y.channels];
+          p[col] = a;
+          p[width + col] = b;
+          p[2 * width + col] = a * a;
+          p[3 * width + col] = b * b;
+          p[4 * width + col] = a * b;
+        }
+        double* slot = ring.data() + static_cast<std::size_t>(row % wy) * 5 * out_w;
+        std::fill(slot, slot + 5 * out_w, 0.0);
+        for (int q = 0; q < 5; ++q) {
+          double* dst = slot + static_cast<std::size_t>(q) * out_w;
+          const double* src = p + static_cast<std::size_t>(q) * width;
           for (int k = 0; k < wx; ++k) {
-            const double a = xr[static_cast<std::size_t>(col + k) * x.channels];
-            const double b = yr[static_cast<std::size_t>(col + k) * y.channels];
             const double g = gx[k];
-            s0 += g * a;
-            s1 += g * b;
-            s2 += g * a * a;
-            s3 += g * b * b;
-            s4 += g * a * b;
+            for (int col = 0; col < out_w; ++col) dst[col] += g * src[col + k];
           }
-          slot[col] = s0;
-          slot[out_w + col] = s1;
-          slot[2 * out_w + col] = s2;
-          slot[3 * out_w + col] = s3;
-          slot[4 * out_w + col] = s4;
         }
       };
       if (r0 < r1)
         for (int row = r0; row < r0 + wy - 1; ++row) horizontal(row);
       for (int row = r0; row < r1; ++row) {
         horizontal(row + wy - 1);
-        for (int col = 0; col < out_w; ++col) {
-          double m[5] = {0, 0, 0, 0, 0};
-          for (int k = 0; k < wy; ++k) {
-            const double* slot = ring.data() + static_cast<std::size_t>((row + k) % wy) * 5 * out_w;
-            const double g = gy[k];
-            for (int q = 0; q < 5; ++q) m[q] += g * slot[q * out_w + col];
-          }
-          const double mx = m[0], my = m[1];
-          const double vx = m[2] - mx * mx, vy = m[3] - my * my, cxy = m[4] - mx * my;
-          channel_sum += ((2 * mx * my + kC1) * (2 * cxy + kC2)) /
-                         ((mx * mx + my * my + kC1) * (vx + vy + kC2));
+        std::fill(m.begin(), m.end(), 0.0);
+        for (int k = 0; k < wy; ++k) {
+          const double* slot = ring.data() + static_cast<std::size_t>((row + k) % wy) * 5 * out_w;
+          const double g = gy[k];
+          for (int i = 0; i < 5 * out_w; ++i) m[i] += g * slot[i];
         }
+        const double* mx = m.data();
+        const double* my = mx + out_w;
+        const double* mxx = my + out_w;
+        const double* myy = mxx + out_w;
+        const double* mxy = myy + out_w;
+        double row_sum = 0;
+        for (int col = 0; col < out_w; ++col) {
+          const double vx = mxx[col] - mx[col] * mx[col], vy = myy[col] - my[col] * my[col];
+          const double cxy = mxy[col] - mx[col] * my[col];
+          row_sum += ((2 * mx[col] * my[col] + kC1) * (2 * cxy + kC2)) /
+                     ((mx[col] * mx[col] + my[col] * my[col] + kC1) * (vx + vy + kC2));
+        }
+        channel_sum += row_sum;
       }
     }
     total += channel_sum / (static_cast<double>(out_w) * out_h);
