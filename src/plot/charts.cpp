@@ -116,7 +116,8 @@ void draw_spots(Canvas& canvas, Rect area, const std::vector<const SpotData*>& r
       const double by = ry + row_title + field_label;
       const Point c{bx + side / 2, by + side / 2};
       canvas.text({c.x, by - font_px * 0.45},
-                  fmt::format("{:.1f}\u00b0  (y {:.2f} mm)", f.field_deg, f.centroid_y_mm),
+                  fmt::format("{:.1f}\u00b0  (y {:.2f} mm)", f.field_deg,
+                              std::abs(f.centroid_y_mm) < 0.005 ? 0.0 : f.centroid_y_mm),
                   TextStyle{font_px * 0.9, Anchor::kMiddle, "#333333"});
       canvas.rect({bx, by}, side, side, Style{"#b5b5b5", 1.0, "#ffffff"});
       const Style cross{"#e4e4e4", 0.8};

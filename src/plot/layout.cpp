@@ -315,22 +315,65 @@ LayoutGeometry compute_layout(const PlotContext& ctx, const LayoutOptions& optio
   return g;
 }
 
+namespace {
+
+// A ray's points, extended back along its first segment to start at `start_z` (drawing
+// coordinates, i.e. after `shift`).
+std::vector<Point> ray_points_from(const RayDrawing& r, double shift, double start_z) {
+  std::vector<Point> pts = r.points;
+  if (pts.size() >= 2 && pts[0].x + shift > start_z + 1e-9) {
+    const double slope = (pts[1].y - pts[0].y) / (pts[1].x - pts[0].x);
+    const double z = start_z - shift;
+    pts.insert(pts.begin(), Point{z, pts[0].y + slope * (z - pts[0].x)});
+  }
+  return pts;
+}
+
+}  // namespace
+
+LayoutExtent layout_extent(const LayoutGeometry& g, const LayoutGeometry* cmp) {
+  LayoutExtent e;
+  e.compare_shift_mm = cmp ? g.image_z_mm - cmp->image_z_mm : 0.0;
+  e.ray_start_z_mm =
+      cmp ? std::min(g.start_z_mm, cmp->start_z_mm + e.compare_shift_mm) : g.start_z_mm;
+  e.z_lo = g.z_lo;
+  e.z_hi = g.z_hi;
+  e.y_lo = g.y_lo;
+  e.y_hi = g.y_hi;
+  auto take = [&](const LayoutGeometry& l, double shift) {
+    e.z_lo = std::min(e.z_lo, l.z_lo + shift);
+    e.z_hi = std::max(e.z_hi, l.z_hi + shift);
+    e.y_lo = std::min(e.y_lo, l.y_lo);
+    e.y_hi = std::max(e.y_hi, l.y_hi);
+    for (const RayDrawing& r : l.rays)
+      for (const Point& p : ray_points_from(r, shift, e.ray_start_z_mm)) {
+        e.y_lo = std::min(e.y_lo, p.y);
+        e.y_hi = std::max(e.y_hi, p.y);
+      }
+  };
+  take(g, 0.0);
+  if (cmp) take(*cmp, e.compare_shift_mm);
+  const double y = std::max(-e.y_lo, e.y_hi);  // keep the axis in the middle
+  e.y_lo = -y;
+  e.y_hi = y;
+  return e;
+}
+
 void draw_layout(Canvas& canvas, Rect area, const LayoutGeometry& g, const LayoutGeometry* cmp,
                  double font_px) {
-  const double dz = cmp ? g.image_z_mm - cmp->image_z_mm : 0.0;
-  double z_lo = g.z_lo, z_hi = g.z_hi, y_lo = g.y_lo, y_hi = g.y_hi;
-  if (cmp) {
-    z_lo = std::min(z_lo, cmp->z_lo + dz);
-    z_hi = std::max(z_hi, cmp->z_hi + dz);
-    y_lo = std::min(y_lo, cmp->y_lo);
-    y_hi = std::max(y_hi, cmp->y_hi);
-  }
+  const LayoutExtent extent = layout_extent(g, cmp);
+  const double dz = extent.compare_shift_mm;
+  const double z_lo = extent.z_lo, z_hi = extent.z_hi;
   const double pad_z = 0.04 * (z_hi - z_lo);
   const double legend_band = font_px * 2.6;
   const double label_band = font_px * 4.2;
   const Rect frame = area.inset(8, legend_band, 8, label_band);
-  const Axes ax = Axes::equal_aspect(frame, z_lo - pad_z, z_hi + pad_z, y_lo, y_hi);
+  const Axes ax = Axes::equal_aspect(frame, z_lo - pad_z, z_hi + pad_z, extent.y_lo, extent.y_hi);
   auto px = [&](Point p, double shift = 0.0) { return ax.to_px(p.x + shift, p.y); };
+  // Every ray starts at the common left edge (a compared lens may start further left).
+  auto ray_points = [&](const RayDrawing& r, double shift) {
+    return ray_points_from(r, shift, extent.ray_start_z_mm);
+  };
   auto px_all = [&](const std::vector<Point>& pts, double shift = 0.0) {
     std::vector<Point> out;
     out.reserve(pts.size());
@@ -348,14 +391,14 @@ void draw_layout(Canvas& canvas, Rect area, const LayoutGeometry& g, const Layou
     canvas.polygon(px_all(e.outline), Style{"none", 0, kGlassFill});
   const int nf = static_cast<int>(g.field_deg.size());
   for (const RayDrawing& r : g.rays)
-    canvas.polyline(px_all(r.points), Style{field_colour(r.field, nf), 1.0});
+    canvas.polyline(px_all(ray_points(r, 0.0)), Style{field_colour(r.field, nf), 1.0});
   const Style outline{kLensStroke, 1.4};
   for (const ElementDrawing& e : g.elements) canvas.polygon(px_all(e.outline), outline);
   for (const SurfaceDrawing& s : g.surfaces)
     if (!s.in_element && !s.is_stop) canvas.polyline(px_all(s.curve), outline);
 
   auto draw_stop_and_image = [&](const LayoutGeometry& l, double shift, const std::string& dash) {
-    Style stop{"#111111", 3.0};
+    Style stop{dash.empty() ? "#111111" : kCompareStroke, 3.0};
     stop.dash = dash;
     for (double side : {1.0, -1.0})
       canvas.line(px({l.stop_z_mm, side * l.stop_clear_mm}, shift),
@@ -380,7 +423,7 @@ void draw_layout(Canvas& canvas, Rect area, const LayoutGeometry& g, const Layou
     for (const RayDrawing& r : cmp->rays) {
       Style s{field_colour(r.field, nc), 0.8, "none", 0.75};
       s.dash = "5 4";
-      canvas.polyline(px_all(r.points, dz), s);
+      canvas.polyline(px_all(ray_points(r, dz), dz), s);
     }
     for (const ElementDrawing& e : cmp->elements) canvas.polygon(px_all(e.outline, dz), dashed);
     for (const SurfaceDrawing& s : cmp->surfaces)

@@ -97,13 +97,8 @@ double default_width(PlotKind kind) {
 
 // Height (px) a layout needs at a width, from its aspect ratio.
 double layout_height(const LayoutGeometry& g, const LayoutGeometry* cmp, double width) {
-  double z = g.z_hi - g.z_lo, y = g.y_hi - g.y_lo;
-  if (cmp) {
-    const double dz = g.image_z_mm - cmp->image_z_mm;
-    z = std::max(g.z_hi, cmp->z_hi + dz) - std::min(g.z_lo, cmp->z_lo + dz);
-    y = std::max(y, cmp->y_hi - cmp->y_lo);
-  }
-  const double h = (width - 16) / (1.08 * z) * y + kFont * 6.8;
+  const LayoutExtent e = layout_extent(g, cmp);
+  const double h = (width - 16) / (1.08 * (e.z_hi - e.z_lo)) * (e.y_hi - e.y_lo) + kFont * 6.8;
   return std::clamp(h, 300.0, 1.2 * width);
 }
 

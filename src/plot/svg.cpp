@@ -114,7 +114,7 @@ void SvgDocument::text(Point at, const std::string& content, double size_px,
         fmt::format(R"svg( transform="rotate({:.3g} {:.2f} {:.2f})")svg", rotate_deg, at.x, at.y);
   body_ += fmt::format(
       R"(<text x="{:.2f}" y="{:.2f}" font-family="DejaVu Sans, Helvetica, Arial, sans-serif" )"
-      R"(font-size="{:.3g}" text-anchor="{}" fill="{}"{}{}>{}</text>)",
+      R"(font-size="{:.3g}" text-anchor="{}" fill="{}" xml:space="preserve"{}{}>{}</text>)",
       at.x, at.y, size_px, anchor, colour, bold ? R"( font-weight="bold")" : "", transform,
       xml_escape(content));
   body_ += '\n';

@@ -102,6 +102,15 @@ struct LayoutGeometry {
 
 LayoutGeometry compute_layout(const PlotContext& ctx, const LayoutOptions& options = {});
 
+// What a drawing of a layout (and a compared one) spans, in mm: the compared lens is shifted by
+// compare_shift_mm along z so the image planes coincide; every ray starts at ray_start_z_mm.
+struct LayoutExtent {
+  double z_lo = 0, z_hi = 0, y_lo = 0, y_hi = 0;
+  double compare_shift_mm = 0;
+  double ray_start_z_mm = 0;
+};
+LayoutExtent layout_extent(const LayoutGeometry& geometry, const LayoutGeometry* compare);
+
 // Draws the layout (and a second lens dashed, image planes aligned) into `area`.
 void draw_layout(Canvas& canvas, Rect area, const LayoutGeometry& geometry,
                  const LayoutGeometry* compare = nullptr, double font_px = 12);
