@@ -104,7 +104,8 @@ int residual_count(const LensParameterization& param, const TraceOptions& sampli
   const int rays = static_cast<int>(paper_pupil_samples(sampling.rings).size());
   int glasses = 0;
   for (const LensVariable& v : param.variables()) glasses += v.kind == LensVariable::Kind::kGlass0;
-  return design_residual_count(fields, static_cast<int>(specs.wavelengths_nm.size()), rays,
+  return design_residual_count(fields, constraint_field_count(fields, kConstraintFields),
+                               static_cast<int>(specs.wavelengths_nm.size()), rays,
                                static_cast<int>(param.structure().surfaces.size()), glasses);
 }
 
@@ -363,7 +364,7 @@ OptimizeResult optimize_lens(const Lens& start, const OptimizeOptions& options) 
     if (interrupted()) break;
     DesignLossOptions stage = continued_bounds(target_loss, start_extremes, start, t);
     run_phase(param, x, GlassMode::kFixed, fixed, frozen_all, options, stage,
-              fmt::format("constraints {:.0f}%", 100 * t), 1, iterations, counters);
+              fmt::format("constraints {:.0f}%", 100 * t), 1, std::min(iterations, 20), counters);
     loss.weight_ray_path = std::max(loss.weight_ray_path, stage.weight_ray_path);
     loss.weight_ray_angle = std::max(loss.weight_ray_angle, stage.weight_ray_angle);
   }

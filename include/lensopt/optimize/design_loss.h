@@ -40,6 +40,7 @@
 namespace lensopt {
 
 inline constexpr int kEdgeRays = 9;
+inline constexpr int kConstraintFields = 21;
 
 // Weights and bounds of the design loss (paper values by default).
 struct DesignLossOptions {
@@ -77,10 +78,18 @@ struct DesignExtremes {
   double min_cos2_angle = 1.0;
 };
 
-// Number of residuals of the least-squares form for a system of F fields, W wavelengths,
-// P pupil rays, K surfaces and M glasses.
-inline int design_residual_count(int fields, int wavelengths, int rays, int surfaces, int glasses) {
-  return fields * wavelengths * rays * 2 + fields * surfaces + fields * surfaces * 2 + glasses * 2;
+// Number of residuals of the least-squares form for F spot fields, F_c constraint fields,
+// W wavelengths, P pupil rays, K surfaces and M glasses.
+inline int design_residual_count(int fields, int constraint_fields, int wavelengths, int rays,
+                                 int surfaces, int glasses) {
+  return fields * wavelengths * rays * 2 + constraint_fields * surfaces * 3 + glasses * 2;
+}
+
+// The constraint field count used with `fields` spot fields (see evaluate_design).
+inline int constraint_field_count(int fields, int paper_fields) {
+  if (fields <= 1) return fields;
+  const int c = std::max(fields, paper_fields);
+  return (c - 1) % (fields - 1) == 0 ? c : fields;
 }
 
 namespace detail {
@@ -114,8 +123,15 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
   TraceOptions topt = trace_options;
   topt.scale_to_spec = false;  // the forward map gives the spec focal length exactly
   const Specs& specs = param.structure().specs;
-  const TraceSystem<T> sys = prepare_system(lens, specs, topt);
-  const int field_count = static_cast<int>(sys.fields_deg.size());
+  // Constraint rays run at every one of the paper's fields (at least 21); spot rays at the
+  // sampling's fields, which must be a subset (F - 1 dividing the constraint field count - 1)
+  // or get their own system.
+  TraceOptions constraint_options = topt;
+  constraint_options.fields = constraint_field_count(topt.fields, kConstraintFields);
+  const TraceSystem<T> sys = prepare_system(lens, specs, constraint_options);
+  const int all_fields = static_cast<int>(sys.fields_deg.size());
+  const int field_stride = topt.fields > 1 ? (all_fields - 1) / (topt.fields - 1) : 1;
+  const int field_count = topt.fields > 1 ? topt.fields : 1;
   const int wl = sys.wavelength_count;
   const int rays = static_cast<int>(sys.pupil.size());
   const int k_count = lens.surface_count();
@@ -138,17 +154,17 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
   }
 
   std::vector<T> field_rms(field_count, K<T>(0.0));
-  std::vector<T> path_linear(field_count, K<T>(0.0)), angle_linear(field_count, K<T>(0.0));
-  std::vector<int> failed(field_count, 0);
-  std::vector<DesignExtremes> field_extremes(field_count);
+  std::vector<T> path_linear(all_fields, K<T>(0.0)), angle_linear(all_fields, K<T>(0.0));
+  std::vector<int> failed(all_fields, 0);
+  std::vector<DesignExtremes> field_extremes(all_fields);
   for (DesignExtremes& e : field_extremes) {
     e.min_travel_mm.assign(k_count, std::numeric_limits<double>::infinity());
     e.max_travel_mm.assign(k_count, -std::numeric_limits<double>::infinity());
   }
   const int spot_block = wl * rays * 2;
   const int path_offset = field_count * spot_block;
-  const int angle_offset = path_offset + field_count * k_count;
-  const int glass_offset = angle_offset + field_count * k_count * 2;
+  const int angle_offset = path_offset + all_fields * k_count;
+  const int glass_offset = angle_offset + all_fields * k_count * 2;
 
   const int nthreads = trace_options.threads > 0 ? trace_options.threads : omp_get_max_threads();
 #pragma omp parallel num_threads(nthreads)
@@ -159,7 +175,10 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
     std::vector<char> ok;
     std::vector<T> path_sq(k_count), angle_sq(k_count * 2);
 #pragma omp for schedule(dynamic, 1)
-    for (int h = 0; h < field_count; ++h) {
+    for (int hf = 0; hf < all_fields; ++hf) {
+      // hf: constraint field; every field_stride-th one is also spot field h.
+      const bool spot_field = hf % field_stride == 0;
+      const int h = hf / field_stride;
       ys.assign(static_cast<std::size_t>(wl) * rays, K<T>(0.0));
       xs.assign(static_cast<std::size_t>(wl) * rays, K<T>(0.0));
       ok.assign(static_cast<std::size_t>(wl) * rays, 0);
@@ -175,7 +194,7 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
             // Ray path: the space after surface k (only up to a failure).
             if (traced || k < last_valid) {
               const T dz = rec.axial_travel_mm[k][p];
-              DesignExtremes& e = field_extremes[h];
+              DesignExtremes& e = field_extremes[hf];
               e.min_travel_mm[k] = std::min(e.min_travel_mm[k], value_of(dz));
               e.max_travel_mm[k] = std::max(e.max_travel_mm[k], value_of(dz));
               T v = detail::hinge(K<T>(lower[k]) - dz);
@@ -183,8 +202,8 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
               path_sq[k] = path_sq[k] + v * v;
               path_sum = path_sum + v;
             }
-            field_extremes[h].min_cos2_angle =
-                std::min({field_extremes[h].min_cos2_angle, value_of(rec.cos2_incidence[k][p]),
+            field_extremes[hf].min_cos2_angle =
+                std::min({field_extremes[hf].min_cos2_angle, value_of(rec.cos2_incidence[k][p]),
                           value_of(rec.cos2_refraction[k][p])});
             const T va = detail::hinge(K<T>(cos2_max) - rec.cos2_incidence[k][p]);
             const T vb = detail::hinge(K<T>(cos2_max) - rec.cos2_refraction[k][p]);
@@ -195,27 +214,42 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
         }
       };
       for (int w = 0; w < wl; ++w) {
-        start_rays(sys, h, w, bundle);
-        record.resize(k_count, bundle.size());
-        trace_bundle(sys.lens, w, k_count, true, bundle, &record);
-        for (int p = 0; p < rays; ++p) {
-          const std::size_t i = static_cast<std::size_t>(w) * rays + p;
-          const bool traced = bundle.status[p] == kRayOk;
-          ok[i] = traced;
-          if (traced) {
-            ys[i] = bundle.y[p];
-            xs[i] = bundle.x[p];
-          } else {
-            ++failed[h];
+        if (spot_field) {
+          start_rays(sys, hf, w, bundle);
+          record.resize(k_count, bundle.size());
+          trace_bundle(sys.lens, w, k_count, true, bundle, &record);
+          for (int p = 0; p < rays; ++p) {
+            const std::size_t i = static_cast<std::size_t>(w) * rays + p;
+            const bool traced = bundle.status[p] == kRayOk;
+            ok[i] = traced;
+            if (traced) {
+              ys[i] = bundle.y[p];
+              xs[i] = bundle.x[p];
+            } else {
+              ++failed[hf];
+            }
           }
+          add_constraints(bundle, record);
         }
-        add_constraints(bundle, record);
-        start_rays(sys, h, w, edge_bundle, &edge);
+        start_rays(sys, hf, w, edge_bundle, &edge);
         edge_record.resize(k_count, edge_bundle.size());
         trace_bundle(sys.lens, w, k_count, true, edge_bundle, &edge_record);
-        for (std::size_t p = 0; p < edge_bundle.size(); ++p) failed[h] += edge_bundle.status[p] != kRayOk;
+        for (std::size_t p = 0; p < edge_bundle.size(); ++p)
+          failed[hf] += edge_bundle.status[p] != kRayOk;
         add_constraints(edge_bundle, edge_record);
       }
+      path_linear[hf] = path_sum;
+      angle_linear[hf] = angle_sum;
+      if (residuals) {
+        for (int k = 0; k < k_count; ++k) {
+          residuals[path_offset + hf * k_count + k] =
+              detail::safe_norm(K<T>(options.weight_ray_path) * path_sq[k]);
+          for (int j = 0; j < 2; ++j)
+            residuals[angle_offset + (hf * k_count + k) * 2 + j] =
+                detail::safe_norm(K<T>(options.weight_ray_angle) * angle_sq[2 * k + j]);
+        }
+      }
+      if (!spot_field) continue;
       // Spot of field h about its polychromatic centroid.
       int count = 0;
       T y_sum = K<T>(0.0);
@@ -232,8 +266,6 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
           s2 = s2 + dy * dy + xs[i] * xs[i];
         }
       field_rms[h] = count > 0 ? detail::safe_norm(s2 / K<T>(count)) : K<T>(0.0);
-      path_linear[h] = path_sum;
-      angle_linear[h] = angle_sum;
       if (residuals) {
         const double a_h = field_weights ? (*field_weights)[h] : 1.0 / field_count;
         const T scale = K<T>(std::sqrt(options.weight_spot * a_h / (static_cast<double>(wl) * rays)));
@@ -241,13 +273,6 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
         for (std::size_t i = 0; i < ys.size(); ++i) {
           r[2 * i] = ok[i] ? scale * (ys[i] - y_mean) : K<T>(0.0);
           r[2 * i + 1] = ok[i] ? scale * xs[i] : K<T>(0.0);
-        }
-        for (int k = 0; k < k_count; ++k) {
-          residuals[path_offset + h * k_count + k] =
-              detail::safe_norm(K<T>(options.weight_ray_path) * path_sq[k]);
-          for (int j = 0; j < 2; ++j)
-            residuals[angle_offset + (h * k_count + k) * 2 + j] =
-                detail::safe_norm(K<T>(options.weight_ray_angle) * angle_sq[2 * k + j]);
         }
       }
     }
@@ -273,18 +298,18 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
 
   T spot = K<T>(0.0), path = K<T>(0.0), angle = K<T>(0.0);
   int failed_total = 0;
-  for (int h = 0; h < field_count; ++h) {
-    spot = spot + field_rms[h];
-    path = path + path_linear[h];
-    angle = angle + angle_linear[h];
-    failed_total += failed[h];
+  for (int h = 0; h < field_count; ++h) spot = spot + field_rms[h];
+  for (int hf = 0; hf < all_fields; ++hf) {
+    path = path + path_linear[hf];
+    angle = angle + angle_linear[hf];
+    failed_total += failed[hf];
   }
   spot = spot / K<T>(field_count);
   path = path / K<T>(n_r);
   angle = angle / K<T>(n_r);
   if (extremes) {
     *extremes = field_extremes[0];
-    for (int h = 1; h < field_count; ++h) {
+    for (int h = 1; h < all_fields; ++h) {
       for (int k = 0; k < k_count; ++k) {
         extremes->min_travel_mm[k] = std::min(extremes->min_travel_mm[k], field_extremes[h].min_travel_mm[k]);
         extremes->max_travel_mm[k] = std::max(extremes->max_travel_mm[k], field_extremes[h].max_travel_mm[k]);
