@@ -2,9 +2,8 @@
 //
 // Exact numbers. Curvatures, thicknesses, semi-diameters, the F/# and the field are written with
 // fmt "{}", the shortest decimal that reads back to the same double, and read with from_chars
-// (correctly rounded). Wavelengths go in micrometres: the writer picks, among the doubles within
-// a few ulps of w / 1000, one u with fl(u * 1000) == w (the shortest), so the reader's
-// fl(u * 1000) is w again; a NOTE line carries the nm values as well.
+// (correctly rounded). Wavelengths go in micrometres as the nm decimal with its point moved three
+// places ("584.1" nm -> "0.5841"), and are read back by moving it again, so they are exact too.
 #include "lensopt/formats/zmx.h"
 
 #include <fmt/format.h>
@@ -35,8 +34,6 @@ constexpr std::array<char, 3> kChannelLetters = {'R', 'G', 'B'};
 // Channel boundaries for wavelengths without a lensopt note: < 490 nm B, < 580 nm G, else R.
 constexpr double kBlueBelowNm = 490.0;
 constexpr double kGreenBelowNm = 580.0;
-// Ulps searched either side of w / 1000 for an exact micrometre value.
-constexpr int kMicrometreSearchUlps = 8;
 // Relative agreement a lensopt note must have with the Zemax value it refines.
 constexpr double kNoteTolerance = 1e-9;
 // Line numbers listed per ignored keyword before "and N more".
@@ -120,9 +117,27 @@ struct RawSurface {
 
 struct Wavelength {
   double um = 0.0;
+  double nm = 0.0;  // the file's decimal read in nm (micrometres_to_nm)
   double weight = 1.0;
   int line = 0;
 };
+
+// A wavelength written in micrometres, in nm: the decimal with its point moved three places right
+// ("0.5875618" -> 587.5618), read correctly rounded, so the nm value is the double nearest the
+// file's decimal (fl(um * 1000) can be an ulp off); exponent forms use um * 1000.
+double micrometres_to_nm(std::string_view text, double um) {
+  if (!text.empty() && text.front() == '+') text.remove_prefix(1);
+  if (text.empty() || text.find_first_not_of("0123456789.") != std::string_view::npos)
+    return um * 1000.0;
+  const std::size_t point = text.find('.');
+  std::string integer(text.substr(0, point));
+  std::string fraction = point == std::string_view::npos ? "" : std::string(text.substr(point + 1));
+  while (fraction.size() < 3) fraction += '0';
+  const std::string shifted = integer + fraction.substr(0, 3) + "." + fraction.substr(3) + "0";
+  double nm = 0.0;
+  const auto [end, ec] = std::from_chars(shifted.data(), shifted.data() + shifted.size(), nm);
+  return ec == std::errc() ? nm : um * 1000.0;
+}
 
 // A catalog the file's GCAT (or lensopt note) names, as loaded.
 struct CatalogEntry {
@@ -208,6 +223,8 @@ class ZmxParser {
   std::vector<double> yfln_;
   int yfln_line_ = 0;
   std::vector<std::pair<std::string, int>> gcat_;  // name, line
+  int pwav_ = 0;
+  int pwav_line_ = 0;
   std::vector<RawSurface> surfaces_;
 
   // lensopt notes.
@@ -225,11 +242,11 @@ class ZmxParser {
 // tolerances, coatings, drawing). They are reported together, by keyword and line.
 bool is_setting_keyword(const std::string& key) {
   static const std::set<std::string> kSettings = {
-      "VERS", "PFIL", "LANG", "GFAC", "RAIM", "PUSH", "SDMA", "ROPD", "PICB", "POLS", "GLRS",
-      "GSTD", "NSCD", "COFN", "SUMM", "DMFS", "BLNK", "RWRE", "TOL",  "MNUM", "MOFF", "OPDX",
-      "SCOL", "SQFN", "FWGT", "FWGN", "WWGT", "PWAV", "VDXN", "VDYN", "VCXN", "VCYN", "VANN",
-      "HIDE", "MIRR", "SLAB", "POPS", "FLAP", "MEMA", "COAT", "TCE",  "ENVD", "EFFL", "ZVDX",
-      "ZVDY", "ZVCX", "ZVCY", "ZVAN", "WAVN", "XFLD", "YFLD", "FIMP", "BLAN", "CONF", "DESC"};
+      "PFIL", "LANG", "GFAC", "RAIM", "PUSH", "SDMA", "ROPD", "PICB", "POLS", "GLRS",
+      "GSTD", "NSCD", "COFN", "SUMM", "DMFS", "BLNK", "RWRE", "TOL",  "MNUM", "MOFF",
+      "OPDX", "SCOL", "SQFN", "VDXN", "VDYN", "VCXN", "VCYN", "VANN", "HIDE", "MIRR",
+      "SLAB", "POPS", "FLAP", "MEMA", "COAT", "TCE",  "ENVD", "EFFL", "ZVDX", "ZVDY",
+      "ZVCX", "ZVCY", "ZVAN", "WAVN", "XFLD", "YFLD", "FIMP", "BLAN", "CONF", "DESC"};
   return kSettings.count(key) > 0;
 }
 
@@ -423,13 +440,16 @@ void ZmxParser::system_line(const Line& line, const std::string& key) {
     const int index = integer(line, 1, "the wavelength number");
     Wavelength w;
     w.um = number(line, 2, "the wavelength (um)");
+    w.nm = micrometres_to_nm(line.fields[2], w.um);
     if (line.fields.size() > 3) w.weight = number(line, 3, "the wavelength weight");
     w.line = line.number;
     wavm_[index] = w;
     if (wavelength_line_ == 0) wavelength_line_ = line.number;
   } else if (key == "WAVL") {
-    for (std::size_t i = 1; i < line.fields.size(); ++i)
-      wavl_.push_back({number(line, i, "a wavelength (um)"), 1.0, line.number});
+    for (std::size_t i = 1; i < line.fields.size(); ++i) {
+      const double um = number(line, i, "a wavelength (um)");
+      wavl_.push_back({um, micrometres_to_nm(line.fields[i], um), 1.0, line.number});
+    }
     if (wavelength_line_ == 0) wavelength_line_ = line.number;
   } else if (key == "FTYP") {
     has_ftyp_ = true;
@@ -451,6 +471,19 @@ void ZmxParser::system_line(const Line& line, const std::string& key) {
     for (std::size_t i = 1; i < line.fields.size(); ++i)
       values.push_back(number(line, i, "a field value"));
     if (key == "YFLN") yfln_line_ = line.number;
+  } else if (key == "VERS") {
+    // The version stamp of the program that wrote the file: nothing to keep.
+  } else if (key == "PWAV") {
+    pwav_ = integer(line, 1, "the primary wavelength number");
+    pwav_line_ = line.number;
+  } else if (key == "FWGN" || key == "FWGT" || key == "WWGT") {
+    // Weights: lensopt weighs fields and wavelengths equally; unequal ones are reported.
+    bool equal = true;
+    for (std::size_t i = 2; i < line.fields.size(); ++i)
+      equal = equal && line.fields[i] == line.fields[1];
+    if (!equal)
+      warn(line.number,
+           fmt::format("weights ignored (lensopt weighs them equally): '{}'", line.text));
   } else if (key == "GCAT") {
     for (std::size_t i = 1; i < line.fields.size(); ++i)
       gcat_.emplace_back(std::string(line.fields[i]), line.number);
@@ -712,7 +745,7 @@ ZmxImport ZmxParser::parse(std::string_view bytes) {
   std::vector<double> wavelengths_nm;
   bool equal_weights = true;
   for (const Wavelength& w : waves) {
-    const double nm = w.um * 1000.0;
+    const double nm = w.nm;
     if (!(nm > 200.0 && nm < 20000.0))
       fail_at(w.line, 1, fmt::format("wavelength {} um is out of range", w.um));
     wavelengths_nm.push_back(nm);
@@ -730,6 +763,17 @@ ZmxImport ZmxParser::parse(std::string_view bytes) {
     } else {
       warn(note_line_, "the lensopt wavelengths note disagrees with the WAVM lines; ignored");
     }
+  }
+  if (pwav_ > 0) {
+    std::size_t closest = 0;
+    for (std::size_t i = 0; i < wavelengths_nm.size(); ++i)
+      if (std::abs(wavelengths_nm[i] - kWavelengthD_nm) <
+          std::abs(wavelengths_nm[closest] - kWavelengthD_nm))
+        closest = i;
+    if (static_cast<std::size_t>(pwav_) != closest + 1)
+      warn(pwav_line_, fmt::format("primary wavelength {} ignored: lensopt's paraxial reference "
+                                   "is {} nm",
+                                   pwav_, kWavelengthD_nm));
   }
   lens.specs.wavelengths_nm = wavelengths_nm;
   if (note_channels_ && note_channels_->size() == wavelengths_nm.size()) {
@@ -807,23 +851,20 @@ std::string number_text(double x) {
   return fmt::format("{}", x);
 }
 
-// A micrometre value u with fl(u * 1000) == nm, the shortest near nm / 1000.
+// The micrometre text of a wavelength: the shortest decimal of nm with its point moved three
+// places left ("584.1" -> "0.5841"), so micrometres_to_nm reads nm back exactly.
 std::string micrometre_text(double nm) {
-  const double inf = std::numeric_limits<double>::infinity();
-  const double nearest = nm / 1000.0;
-  std::optional<double> best;
-  std::size_t best_length = 0;
-  double u = nearest;
-  for (int i = 0; i < kMicrometreSearchUlps; ++i) u = std::nextafter(u, -inf);
-  for (int i = 0; i <= 2 * kMicrometreSearchUlps; ++i, u = std::nextafter(u, inf)) {
-    if (u * 1000.0 != nm) continue;
-    const std::size_t length = fmt::formatted_size("{}", u);
-    if (!best || length < best_length) {
-      best = u;
-      best_length = length;
-    }
-  }
-  return number_text(best ? *best : nearest);
+  const std::string text = number_text(nm);
+  if (text.find_first_of("eEn") != std::string::npos || text.front() == '-')
+    return number_text(nm / 1000.0);
+  const std::size_t point = text.find('.');
+  std::string integer = text.substr(0, point);
+  const std::string fraction = point == std::string::npos ? "" : text.substr(point + 1);
+  if (integer.size() < 4) integer = std::string(4 - integer.size(), '0') + integer;
+  std::string out = integer.substr(0, integer.size() - 3);
+  std::string decimals = integer.substr(integer.size() - 3) + fraction;
+  while (!decimals.empty() && decimals.back() == '0') decimals.pop_back();
+  return decimals.empty() ? out : out + "." + decimals;
 }
 
 }  // namespace

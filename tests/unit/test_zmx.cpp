@@ -199,7 +199,8 @@ TEST_CASE("zmx: textbook designs import and analyse to their stated focal length
     const ZmxImport imported = read_zmx(test::source_dir() / "lenses" / "zmx" / c.file);
     const Lens& lens = imported.lens;
     const double efl_mm = paraxial_efl_mm(lens);
-    MESSAGE(c.file << ": paraxial EFL " << efl_mm << " mm (stated " << c.stated_efl_mm << ")");
+    MESSAGE(std::string(c.file) << ": paraxial EFL " << efl_mm << " mm (stated " << c.stated_efl_mm
+                                << ")");
     CHECK(std::abs(efl_mm - c.stated_efl_mm) <= c.precision_mm);
     CHECK(lens.stop_index() >= 0);
     CHECK(lens.specs.wavelengths_nm.size() == 3);
