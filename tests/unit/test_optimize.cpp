@@ -1,0 +1,235 @@
+// The optimizer's pieces: the lens <-> variables mapping, quantized glass variables with the
+// straight-through gradient, the design loss's least-squares form against the paper's loss and
+// against finite differences, and a short optimization that must not worsen the start.
+#include <ceres/jet.h>
+#include <doctest/doctest.h>
+
+#include <cmath>
+
+#include "lensopt/lens/lens_io.h"
+#include "lensopt/optimize/optimizer.h"
+#include "test_support.h"
+
+using namespace lensopt;
+
+namespace {
+
+Lens baseline(const char* name) {
+  return read_lens(test::source_dir() / "lenses" / (std::string(name) + ".toml"));
+}
+
+LensParameterization parameterization(const Lens& lens) {
+  return LensParameterization(lens, GlassSpace(*load_catalog("ohara")));
+}
+
+TraceOptions small_sampling() {
+  TraceOptions t;
+  t.rings = 6;
+  t.fields = 5;
+  return t;
+}
+
+}  // namespace
+
+TEST_CASE("optimize: whitening makes the catalog's (nd, vd) zero-mean with unit covariance") {
+  const GlassSpace space(*load_catalog("ohara"));
+  REQUIRE(space.size() == 65);
+  Eigen::Vector2d mean = Eigen::Vector2d::Zero();
+  Eigen::Matrix2d cov = Eigen::Matrix2d::Zero();
+  for (int i = 0; i < space.size(); ++i) mean += space.glass_point(i);
+  mean /= space.size();
+  for (int i = 0; i < space.size(); ++i) {
+    const Eigen::Vector2d d = space.glass_point(i) - mean;
+    cov += d * d.transpose();
+  }
+  cov /= space.size();
+  CHECK(mean.norm() < 1e-12);
+  CHECK((cov - Eigen::Matrix2d::Identity()).norm() < 1e-12);
+  // Unwhitening inverts whitening.
+  double nd = 0, vd = 0;
+  const Eigen::Vector2d g = space.whiten(1.7, 45.0);
+  space.unwhiten(g[0], g[1], nd, vd);
+  CHECK(nd == doctest::Approx(1.7).epsilon(1e-14));
+  CHECK(vd == doctest::Approx(45.0).epsilon(1e-14));
+}
+
+TEST_CASE("optimize: lens -> variables -> lens reproduces the baselines") {
+  for (const char* name : {"doublet", "cooke", "tessar"}) {
+    const Lens lens = baseline(name);
+    const LensParameterization param = parameterization(lens);
+    const std::vector<double> x = param.from_lens(lens);
+    const Lens back = param.to_lens(x.data(), GlassMode::kQuantized);
+    // The forward map solves the last curvature for f exactly; the baselines are at f to ~1e-4.
+    TraceOptions scale_only;
+    scale_only.rings = 1;
+    scale_only.fields = 1;
+    scale_only.ray_aiming = false;
+    const double scale = prepare_system(make_trace_lens(lens), lens.specs, scale_only).scale;
+    const Lens expected = scaled(lens, scale);
+    for (std::size_t k = 0; k + 1 < lens.surfaces.size(); ++k) {
+      INFO(name, " surface ", k + 1);
+      CHECK(back.surfaces[k].curvature_per_mm ==
+            doctest::Approx(expected.surfaces[k].curvature_per_mm).epsilon(1e-12));
+      CHECK(back.surfaces[k].thickness_mm ==
+            doctest::Approx(expected.surfaces[k].thickness_mm).epsilon(1e-12));
+      CHECK(back.surfaces[k].material.label() == lens.surfaces[k].material.label());
+    }
+    CHECK(back.surfaces.back().curvature_per_mm ==
+          doctest::Approx(expected.surfaces.back().curvature_per_mm).epsilon(1e-3));
+    CHECK(back.surfaces.back().thickness_mm ==
+          doctest::Approx(expected.surfaces.back().thickness_mm).epsilon(1e-3));
+    // And its focal length is the spec's exactly.
+    const ParaxialData<double> p = paraxial_data(make_trace_lens(back), kWavelengthD_nm);
+    CHECK(p.efl_mm == doctest::Approx(lens.specs.focal_length_mm()).epsilon(1e-13));
+  }
+}
+
+TEST_CASE("optimize: quantized glass variables use the catalog glass, gradient straight through") {
+  const Lens lens = baseline("cooke");
+  const LensParameterization param = parameterization(lens);
+  std::vector<double> x = param.from_lens(lens);
+  int g = -1;
+  for (int i = 0; i < param.size(); ++i)
+    if (param.variables()[i].kind == LensVariable::Kind::kGlass0) {
+      g = i;
+      break;
+    }
+  REQUIRE(g >= 0);
+  // Move the glass variable a little: the quantized forward pass keeps the catalog glass.
+  x[g] += 0.05;
+  using J = ceres::Jet<double, 1>;
+  std::vector<J> xj(x.begin(), x.end());
+  xj[g] = J(x[g], 0);
+  const TraceLens<J> quantized = param.to_trace_lens(xj.data(), GlassMode::kQuantized);
+  const int surface = param.variables()[g].surface;
+  const std::vector<int> nearest = param.nearest_glasses(x.data());
+  CHECK(quantized.nd[surface].a == doctest::Approx(param.glass_space().nd(nearest[0])).epsilon(1e-14));
+  // Straight-through: the derivative is that of the continuous map.
+  const TraceLens<J> continuous = param.to_trace_lens(xj.data(), GlassMode::kContinuous);
+  CHECK(quantized.nd[surface].v[0] == doctest::Approx(continuous.nd[surface].v[0]).epsilon(1e-14));
+  CHECK(std::abs(quantized.nd[surface].v[0]) > 0.0);
+  // Glass-variable loss: the squared whitened distance to the nearest catalog glass.
+  const Eigen::Vector2d p = param.glass_space().glass_point(nearest[0]);
+  const double expected = std::pow(x[g] - p[0], 2) + std::pow(x[g + 1] - p[1], 2);
+  std::vector<int> glass_pairs;
+  double loss = 0;
+  for (int i = 0; i < param.size(); ++i) {
+    if (param.variables()[i].kind != LensVariable::Kind::kGlass0) continue;
+    const Eigen::Vector2d q = param.glass_space().glass_point(
+        param.glass_space().nearest(Eigen::Vector2d(x[i], x[i + 1])));
+    loss += std::pow(x[i] - q[0], 2) + std::pow(x[i + 1] - q[1], 2);
+  }
+  CHECK(param.glass_variable_loss(x.data()) == doctest::Approx(loss).epsilon(1e-14));
+  CHECK(loss >= expected);
+}
+
+TEST_CASE("optimize: the reweighted least squares equals the paper's spot loss and its gradient") {
+  const Lens lens = baseline("tessar");
+  const LensParameterization param = parameterization(lens);
+  const std::vector<double> x = param.from_lens(lens);
+  const std::vector<int> glasses = param.nearest_glasses(x.data());
+  const TraceOptions sampling = small_sampling();
+  DesignLossOptions options;
+  options.weight_ray_path = 0;  // spot terms only
+  options.weight_ray_angle = 0;
+  options.weight_glass = 0;
+  DesignLoss<double> loss;
+  evaluate_design<double>(param, x.data(), GlassMode::kFixed, glasses, sampling, options, nullptr,
+                          nullptr, &loss);
+  const int fields = static_cast<int>(loss.field_rms_mm.size());
+  std::vector<double> weights(fields);
+  for (int h = 0; h < fields; ++h) weights[h] = 1.0 / (fields * loss.field_rms_mm[h]);
+  const int rays = static_cast<int>(paper_pupil_samples(sampling.rings).size());
+  const int count = design_residual_count(
+      fields, constraint_field_count(fields, kConstraintFields),
+      static_cast<int>(lens.specs.wavelengths_nm.size()), rays,
+      static_cast<int>(lens.surfaces.size()), lens.element_count());
+  // Value: sum r^2 = l_S at the reweighting point.
+  std::vector<double> r(count);
+  evaluate_design<double>(param, x.data(), GlassMode::kFixed, glasses, sampling, options, &weights,
+                          r.data(), nullptr);
+  double sum = 0;
+  for (double v : r) sum += v * v;
+  CHECK(sum == doctest::Approx(loss.spot_mm).epsilon(1e-12));
+  // Gradient: d(sum r^2)/dx = 2 d(l_S)/dx there (Jets on both sides).
+  using J = ceres::Jet<double, 24>;
+  REQUIRE(param.size() <= 24);
+  std::vector<J> xj(param.size());
+  for (int i = 0; i < param.size(); ++i) xj[i] = J(x[i], i);
+  std::vector<J> rj(count);
+  DesignLoss<J> lj;
+  evaluate_design<J>(param, xj.data(), GlassMode::kFixed, glasses, sampling, options, &weights,
+                     rj.data(), &lj);
+  J sum_j = J(0.0);
+  for (const J& v : rj) sum_j += v * v;
+  for (int i = 0; i < param.size(); ++i) {
+    if (param.variables()[i].group == "glasses") continue;
+    INFO("variable ", param.variables()[i].name);
+    CHECK(sum_j.v[i] == doctest::Approx(2 * lj.spot_mm.v[i]).epsilon(1e-9));
+  }
+}
+
+TEST_CASE("optimize: design-loss Jacobian matches finite differences") {
+  const Lens lens = baseline("cooke");
+  const LensParameterization param = parameterization(lens);
+  const std::vector<double> x = param.from_lens(lens);
+  const std::vector<int> glasses = param.nearest_glasses(x.data());
+  const TraceOptions sampling = small_sampling();
+  const DesignLossOptions options;  // penalties active: the Cooke slightly violates its bounds
+  auto total = [&](const std::vector<double>& xs) {
+    DesignLoss<double> l;
+    evaluate_design<double>(param, xs.data(), GlassMode::kContinuous, glasses, sampling, options,
+                            nullptr, nullptr, &l);
+    return l.total;
+  };
+  using J = ceres::Jet<double, 24>;
+  std::vector<J> xj(param.size());
+  for (int i = 0; i < param.size(); ++i) xj[i] = J(x[i], i);
+  DesignLoss<J> lj;
+  evaluate_design<J>(param, xj.data(), GlassMode::kContinuous, glasses, sampling, options, nullptr,
+                     nullptr, &lj);
+  CHECK(lj.total.a == doctest::Approx(total(x)).epsilon(1e-13));
+  for (int i = 0; i < param.size(); ++i) {
+    const double h = 1e-6;
+    std::vector<double> plus = x, minus = x;
+    plus[i] += h;
+    minus[i] -= h;
+    const double fd = (total(plus) - total(minus)) / (2 * h);
+    INFO("variable ", param.variables()[i].name, " jet ", lj.total.v[i], " fd ", fd);
+    CHECK(std::abs(lj.total.v[i] - fd) <= 1e-5 * std::max(std::abs(fd), 1e-3));
+  }
+}
+
+TEST_CASE("optimize: a short run from the Doublet never worsens its spot and keeps catalog glasses") {
+  const Lens lens = baseline("doublet");
+  OptimizeOptions options;
+  options.sampling = small_sampling();
+  options.glass_search = GlassSearch::kNone;
+  options.max_iterations = 8;
+  options.max_rounds = 1;
+  options.verbose = false;
+  const OptimizeResult result = optimize_lens(lens, options);
+  MESSAGE("doublet: ", result.start_spot_um, " -> ", result.final_spot_um, " um in ",
+          result.loss_evaluations, " evaluations");
+  CHECK(result.final_spot_um <= result.start_spot_um);
+  for (const Surface& s : result.lens.surfaces) {
+    if (s.material.is_air()) continue;
+    CHECK(s.material.kind == Material::Kind::kCatalog);
+    CHECK(load_catalog("ohara")->find(s.material.glass_name) != nullptr);
+  }
+  CHECK(result.final_constraints.all_pass());
+  CHECK(std::isfinite(result.final_spot_um));
+}
+
+TEST_CASE("optimize: bad options are rejected with the option named") {
+  OptimizeOptions options;
+  options.loss.max_ray_angle_deg = 95;
+  CHECK_THROWS_WITH_AS(options.validate(), doctest::Contains("max_ray_angle_deg"), Error);
+  options = OptimizeOptions{};
+  options.loss.min_glass_mm = 4;
+  CHECK_THROWS_WITH_AS(options.validate(), doctest::Contains("min_glass_mm"), Error);
+  const Lens lens = baseline("tessar");
+  const LensParameterization param = parameterization(lens);
+  CHECK_THROWS_WITH_AS(param.select({"c99"}), doctest::Contains("unknown variable 'c99'"), Error);
+  CHECK(param.select({"curvatures"}).size() == 6);
+}
