@@ -210,6 +210,20 @@ void run_optimize(const OptimizeCommand& cmd) {
     for (const std::string& l : result.log) fmt::print("  {}\n", l);
   }
 
+  if (!result.final_constraints.all_pass()) {
+    std::string failing;
+    for (const ConstraintReport::Row& r : result.final_constraints.rows)
+      if (!r.pass)
+        failing += fmt::format("{}{} = {:.4f} ({} {})", failing.empty() ? "" : "; ", r.name, r.value,
+                               r.is_lower ? ">=" : "<=", r.bound);
+    if (result.final_constraints.ray_failures > 0)
+      failing += fmt::format("{}{} failing rays", failing.empty() ? "" : "; ",
+                             result.final_constraints.ray_failures);
+    fmt::print(stderr,
+               "lensopt optimize: warning: the result does not meet its constraints: {}. The "
+               "specs (f/{}, {} deg) may be out of reach for this lens.\n",
+               failing, lens.specs.f_number, lens.specs.half_field_deg);
+  }
   if (cmd.compare_adam) {
     // Same loss, sampling and code path: LM (glasses fixed) vs a plain Adam loop.
     OptimizeOptions fixed = options;

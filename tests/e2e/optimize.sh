@@ -1,0 +1,62 @@
+#!/usr/bin/env bash
+# End-to-end tests of `lensopt optimize`: a short run writes a valid lens atomically and never over
+# its input; the report's JSON; SIGINT writes the best lens so far; an impossible spec ends with a
+# clear message and no NaN; the [optimize] table's unknown keys are named.
+set -euo pipefail
+lensopt="$1"
+tmp=$(mktemp -d)
+trap 'rm -rf "$tmp"' EXIT
+fail() { echo "FAIL: $*" >&2; exit 1; }
+quick=(--rings 6 --fields 5 --max-iterations 5 --glass-search none -q)
+
+"$lensopt" optimize lenses/doublet.toml -o "$tmp/out.toml" --json "${quick[@]}" > "$tmp/report.json"
+python3 - "$tmp/report.json" <<'PY' || fail "optimize JSON"
+import json, sys
+def no_nan(x): raise ValueError("NaN in JSON")
+r = json.load(open(sys.argv[1]), parse_constant=no_nan)
+assert r["final_mean_rms_spot_um"] <= r["start_mean_rms_spot_um"] + 1e-9, r
+for key in ["start_constraints", "final_constraints", "glasses", "iterations", "loss_evaluations",
+            "seconds", "termination"]:
+    assert key in r, key
+PY
+"$lensopt" analyze "$tmp/out.toml" --json > /dev/null || fail "the optimized lens does not read back"
+ls -a "$tmp" | grep -q '\.tmp' && fail "a temporary file was left behind"
+
+# Never over the input without --in-place.
+cp lenses/doublet.toml "$tmp/in.toml"
+if "$lensopt" optimize "$tmp/in.toml" -o "$tmp/in.toml" "${quick[@]}" 2> "$tmp/err.txt"; then
+  fail "optimize overwrote its input without --in-place"
+fi
+grep -q "in-place" "$tmp/err.txt" || fail "message should mention --in-place"
+cmp -s lenses/doublet.toml "$tmp/in.toml" || fail "input changed"
+
+# Unknown key in [optimize].
+cp lenses/doublet.toml "$tmp/opt.toml"
+printf '\n[optimize]\nweight_rayangle = 10\n' >> "$tmp/opt.toml"
+if "$lensopt" optimize "$tmp/opt.toml" -o "$tmp/x.toml" "${quick[@]}" 2> "$tmp/err.txt"; then
+  fail "unknown [optimize] key accepted"
+fi
+grep -q "opt.toml:.*weight_rayangle" "$tmp/err.txt" || fail "unknown key message: $(cat "$tmp/err.txt")"
+
+# SIGINT: the best lens so far is written, exit status 130.
+"$lensopt" optimize lenses/cooke.toml -o "$tmp/interrupted.toml" -q &
+pid=$!
+sleep 4
+kill -INT "$pid"
+status=0
+wait "$pid" || status=$?
+[ "$status" -eq 130 ] || fail "SIGINT exit status $status"
+"$lensopt" analyze "$tmp/interrupted.toml" --json > /dev/null || fail "interrupted lens unreadable"
+
+# An impossible spec (f/0.5 for a doublet) ends with a report, not a hang or NaN.
+sed 's/^f_number = .*/f_number = 0.5/' lenses/doublet.toml > "$tmp/f05.toml"
+timeout 300 "$lensopt" optimize "$tmp/f05.toml" -o "$tmp/f05-out.toml" --json "${quick[@]}" \
+  > "$tmp/f05.json" 2> "$tmp/f05.err" || true
+python3 - "$tmp/f05.json" <<'PY' || fail "impossible spec: $(cat "$tmp/f05.err")"
+import json, sys
+def no_nan(x): raise ValueError("NaN in JSON")
+r = json.load(open(sys.argv[1]), parse_constant=no_nan)
+assert r["final_constraints"]["all_pass"] is False, "f/0.5 doublet reported feasible"
+PY
+grep -q "does not meet" "$tmp/f05.err" || fail "impossible spec without a message: $(cat "$tmp/f05.err")"
+echo "optimize e2e: all checks passed"
