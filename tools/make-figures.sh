@@ -2,7 +2,7 @@
 # Generates every `lensopt plot` kind for the three baseline lenses (lenses/doublet.toml,
 # cooke.toml, tessar.toml), plus Tessar-vs-Doublet comparisons, into OUTDIR.
 #   OUTDIR/<lens>_<kind>.png   kind = layout, spot, fan, field, psf, report
-#   OUTDIR/<lens>_report.svg   the report page as SVG
+#   OUTDIR/<lens>_report.svg, OUTDIR/<lens>_layout.svg   the same as SVG
 #   OUTDIR/compare_layout.png  Tessar (solid) over Doublet (dashed), image planes aligned
 #   OUTDIR/compare_spot.png    Tessar and Doublet spot diagrams on one scale
 # Spot diagrams and reports share one box size (SPOT_BOX_UM, default 600 um) so the baselines
@@ -26,6 +26,7 @@ for lens in doublet cooke tessar; do
     plot "$file" --kind "$kind" --spot-box-um "$box" -o "$outdir/${lens}_${kind}.png"
   done
   plot "$file" --kind report --spot-box-um "$box" -o "$outdir/${lens}_report.svg"
+  plot "$file" --kind layout -o "$outdir/${lens}_layout.svg"
 done
 plot "$root/lenses/tessar.toml" --kind layout --compare "$root/lenses/doublet.toml" \
   -o "$outdir/compare_layout.png"

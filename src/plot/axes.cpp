@@ -131,44 +131,59 @@ void Axes::draw_frame(Canvas& canvas, const AxesLabels& labels) const {
   }
 }
 
-Point legend_size(const std::vector<LegendEntry>& entries, double font_px, bool horizontal) {
-  const double sample = 22, gap = 6, pad = 6, row = font_px + 6;
-  double w = 0, h = 0;
+namespace {
+
+constexpr double kSample = 22, kGap = 6, kPad = 6, kSpacing = 14;
+
+// Top-left corners of the entries (relative to the legend's corner) and the legend's size.
+// Horizontal legends wrap to a new row before `max_width` (<= 0: no limit).
+Point legend_positions(const std::vector<LegendEntry>& entries, double font_px, bool horizontal,
+                       double max_width, std::vector<Point>* at) {
+  const double row = font_px + 6;
+  double x = kPad, y = kPad, w = 0;
   for (const LegendEntry& e : entries) {
-    const double ew = sample + gap + text_width_px(e.label, font_px);
-    if (horizontal) {
-      w += ew + 14;
-      h = row;
-    } else {
-      w = std::max(w, ew);
-      h += row;
+    const double ew = kSample + kGap + text_width_px(e.label, font_px);
+    if (horizontal && max_width > 0 && x > kPad && x + ew + kPad > max_width) {
+      x = kPad;
+      y += row;
     }
+    if (at) at->push_back({x, y});
+    w = std::max(w, x + ew);
+    if (horizontal)
+      x += ew + kSpacing;
+    else
+      y += row;
   }
-  if (horizontal && !entries.empty()) w -= 14;
-  return {w + 2 * pad, h + 2 * pad};
+  const double h = entries.empty() ? 0 : (horizontal ? y + row : y);
+  return {w + kPad, h + kPad};
+}
+
+}  // namespace
+
+Point legend_size(const std::vector<LegendEntry>& entries, double font_px, bool horizontal,
+                  double max_width) {
+  return legend_positions(entries, font_px, horizontal, max_width, nullptr);
 }
 
 Point draw_legend(Canvas& canvas, Point at, const std::vector<LegendEntry>& entries, double font_px,
-                  bool horizontal) {
-  const double sample = 22, gap = 6, pad = 6, row = font_px + 6;
-  const Point size = legend_size(entries, font_px, horizontal);
+                  bool horizontal, double max_width) {
+  const double row = font_px + 6;
+  std::vector<Point> where;
+  const Point size = legend_positions(entries, font_px, horizontal, max_width, &where);
   canvas.rect(at, size.x, size.y, Style{"#c8c8c8", 0.8, "#ffffff"});
-  double x = at.x + pad, y = at.y + pad;
-  for (const LegendEntry& e : entries) {
-    const double mid = y + row / 2;
+  for (std::size_t i = 0; i < entries.size(); ++i) {
+    const LegendEntry& e = entries[i];
+    const double x = at.x + where[i].x;
+    const double mid = at.y + where[i].y + row / 2;
     if (e.marker) {
-      canvas.rect({x + sample / 2 - 4, mid - 4}, 8, 8, Style{e.colour, 1.0, e.colour});
+      canvas.rect({x + kSample / 2 - 4, mid - 4}, 8, 8, Style{e.colour, 1.0, e.colour});
     } else {
-      Style s{e.colour, 2.0};
-      s.dash = e.dash;
-      canvas.line({x, mid}, {x + sample, mid}, s);
+      Style st{e.colour, 2.0};
+      st.dash = e.dash;
+      canvas.line({x, mid}, {x + kSample, mid}, st);
     }
-    canvas.text({x + sample + gap, mid + font_px * 0.35}, e.label,
+    canvas.text({x + kSample + kGap, mid + font_px * 0.35}, e.label,
                 TextStyle{font_px, Anchor::kStart, "#222222"});
-    if (horizontal)
-      x += sample + gap + text_width_px(e.label, font_px) + 14;
-    else
-      y += row;
   }
   return size;
 }

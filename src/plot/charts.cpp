@@ -175,9 +175,12 @@ void draw_fans(Canvas& canvas, Rect area, const FanData& fans, const FanData* cm
     legend.push_back({fans.lens_name + " (solid)", "#444444"});
     legend.push_back({cmp->lens_name + " (dashed)", "#444444", "5 3"});
   }
-  draw_legend(canvas, {area.x + font_px * 4.5, area.y + 2}, legend, font_px * 0.9, true);
+  const double legend_h = draw_legend(canvas, {area.x + font_px * 4.5, area.y + 2}, legend,
+                                      font_px * 0.9, true, area.width - font_px * 4.5)
+                              .y;
 
-  const double left = font_px * 4.8, right = 6, top = font_px * 4.2, bottom = font_px * 3.2;
+  const double left = font_px * 4.8, right = 6, bottom = font_px * 3.2;
+  const double top = legend_h + font_px * 2.2;
   const double col_gap = font_px * 1.6, row_gap = font_px * 4.0;
   const double pw = (area.width - left - right - col_gap * (nf - 1)) / nf;
   const double ph = (area.height - top - bottom - row_gap) / 2;
@@ -238,9 +241,12 @@ void draw_field_curves(Canvas& canvas, Rect area, const FieldCurveData& data,
   legend.push_back({"tangential", "#444444"});
   legend.push_back({"sagittal", "#444444", "6 4"});
   if (cmp) legend.push_back({cmp->lens_name + " (faint)", "#aaaaaa"});
-  draw_legend(canvas, {area.x + font_px * 4.5, area.y + 2}, legend, font_px * 0.9, true);
+  const double legend_h = draw_legend(canvas, {area.x + font_px * 4.5, area.y + 2}, legend,
+                                      font_px * 0.9, true, area.width - font_px * 4.5)
+                              .y;
 
-  const double left = font_px * 4.8, top = font_px * 4.2, bottom = font_px * 3.4, gap = font_px * 5;
+  const double left = font_px * 4.8, bottom = font_px * 3.4, gap = font_px * 5;
+  const double top = legend_h + font_px * 2.2;
   const double pw = (area.width - left - gap - 8) / 2;
   const double ph = area.height - top - bottom;
   const Rect f1{area.x + left, area.y + top, pw, ph};

@@ -365,7 +365,16 @@ void draw_layout(Canvas& canvas, Rect area, const LayoutGeometry& g, const Layou
   const double dz = extent.compare_shift_mm;
   const double z_lo = extent.z_lo, z_hi = extent.z_hi;
   const double pad_z = 0.04 * (z_hi - z_lo);
-  const double legend_band = font_px * 2.6;
+  std::vector<LegendEntry> entries;
+  const int nf = static_cast<int>(g.field_deg.size());
+  for (int j = 0; j < nf; ++j)
+    entries.push_back({fmt::format("field {:.1f}\u00b0", g.field_deg[j]), field_colour(j, nf)});
+  if (cmp) {
+    entries.push_back({g.lens_name + " (solid)", kLensStroke});
+    entries.push_back({cmp->lens_name + " (dashed)", kCompareStroke, "6 4"});
+  }
+  const double legend_w = area.width - 16;
+  const double legend_band = legend_size(entries, font_px * 0.9, true, legend_w).y + font_px;
   const double label_band = font_px * 4.2;
   const Rect frame = area.inset(8, legend_band, 8, label_band);
   const Axes ax = Axes::equal_aspect(frame, z_lo - pad_z, z_hi + pad_z, extent.y_lo, extent.y_hi);
@@ -389,7 +398,6 @@ void draw_layout(Canvas& canvas, Rect area, const LayoutGeometry& g, const Layou
   // Glass, then rays, then outlines on top.
   for (const ElementDrawing& e : g.elements)
     canvas.polygon(px_all(e.outline), Style{"none", 0, kGlassFill});
-  const int nf = static_cast<int>(g.field_deg.size());
   for (const RayDrawing& r : g.rays)
     canvas.polyline(px_all(ray_points(r, 0.0)), Style{field_colour(r.field, nf), 1.0});
   const Style outline{kLensStroke, 1.4};
@@ -451,14 +459,7 @@ void draw_layout(Canvas& canvas, Rect area, const LayoutGeometry& g, const Layou
   }
 
   // Legend (fields; the compared lens) and a scale bar.
-  std::vector<LegendEntry> entries;
-  for (int j = 0; j < nf; ++j)
-    entries.push_back({fmt::format("{:.1f}\u00b0", g.field_deg[j]), field_colour(j, nf)});
-  if (cmp) {
-    entries.push_back({g.lens_name + " (solid)", kLensStroke});
-    entries.push_back({cmp->lens_name + " (dashed)", kCompareStroke, "6 4"});
-  }
-  draw_legend(canvas, {area.x + 8, area.y + 2}, entries, font_px * 0.9, true);
+  draw_legend(canvas, {area.x + 8, area.y + 2}, entries, font_px * 0.9, true, legend_w);
   const double bar_mm = nice_ceil((z_hi - z_lo) / 8.0);
   const double bar_px = bar_mm * ax.px_per_x();
   const Point b0{frame.x + 6, area.bottom() - 8};

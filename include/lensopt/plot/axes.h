@@ -90,9 +90,11 @@ struct LegendEntry {
 };
 
 // A legend box with its top-left corner at `at`; returns its size (width, height) in px.
+// A horizontal legend wraps into rows to stay within `max_width` (<= 0: one row).
 Point draw_legend(Canvas& canvas, Point at, const std::vector<LegendEntry>& entries,
-                  double font_px = 11, bool horizontal = false);
+                  double font_px = 11, bool horizontal = false, double max_width = 0);
 // The size a legend would take.
-Point legend_size(const std::vector<LegendEntry>& entries, double font_px, bool horizontal);
+Point legend_size(const std::vector<LegendEntry>& entries, double font_px, bool horizontal,
+                  double max_width = 0);
 
 }  // namespace lensopt::plot
