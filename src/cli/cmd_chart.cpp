@@ -27,7 +27,8 @@ void run_chart(const ChartCommand& cmd) {
   options.text = !cmd.no_text;
   const Chart chart = make_test_chart(options);
   write_image(cmd.output, chart.image);
-  if (!chart.text_drawn && !cmd.no_text) fmt::print(stderr, "lensopt chart: note: {}\n", chart.note);
+  if (!chart.text_drawn && !cmd.no_text)
+    fmt::print(stderr, "lensopt chart: note: {}\n", chart.note);
   fmt::print("wrote {} ({}x{})\n", cmd.output, options.width, options.height);
 }
 

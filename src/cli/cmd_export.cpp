@@ -26,7 +26,8 @@ void run_export(const ExportCommand& cmd) {
   options.res_factor = cmd.res_factor;
   if (std::sscanf(cmd.image_size.c_str(), "%dx%d", &options.width, &options.height) != 2 ||
       cmd.image_size.find_first_not_of("0123456789x") != std::string::npos) {
-    throw Error(fmt::format("--image-size '{}' must be WIDTHxHEIGHT, e.g. 1280x720", cmd.image_size));
+    throw Error(
+        fmt::format("--image-size '{}' must be WIDTHxHEIGHT, e.g. 1280x720", cmd.image_size));
   }
   options.validate();
   const Lens lens = read_lens(cmd.lens_path);

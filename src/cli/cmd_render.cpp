@@ -136,19 +136,20 @@ void run_render(const RenderCommand& cmd) {
                std::chrono::duration<double>(Clock::now() - t0).count());
   }
   Progress progress(cmd.quiet);
-  const DatasetSummary summary =
-      render_dataset(renderer, dataset, [&](const ImageRecord& r, int done, int total) {
-        progress.update(r, done, total);
-      });
+  const DatasetSummary summary = render_dataset(
+      renderer, dataset,
+      [&](const ImageRecord& r, int done, int total) { progress.update(r, done, total); });
   progress.finish();
-  for (const std::string& note : summary.notes) fmt::print(stderr, "lensopt render: note: {}\n", note);
+  for (const std::string& note : summary.notes)
+    fmt::print(stderr, "lensopt render: note: {}\n", note);
   fmt::print("rendered {}, skipped {} (already there), failed {} in {:.2f} s\n", summary.rendered,
              summary.skipped, summary.failed, summary.seconds);
   if (summary.mean_psnr_db || summary.mean_ssim) {
-    fmt::print("mean PSNR {} dB, mean SSIM {} (input vs blurred, before illumination and "
-               "distortion)\n",
-               summary.mean_psnr_db ? fmt::format("{:.3f}", *summary.mean_psnr_db) : "n/a",
-               summary.mean_ssim ? fmt::format("{:.4f}", *summary.mean_ssim) : "n/a");
+    fmt::print(
+        "mean PSNR {} dB, mean SSIM {} (input vs blurred, before illumination and "
+        "distortion)\n",
+        summary.mean_psnr_db ? fmt::format("{:.3f}", *summary.mean_psnr_db) : "n/a",
+        summary.mean_ssim ? fmt::format("{:.4f}", *summary.mean_ssim) : "n/a");
   }
   fmt::print("metrics: {} and {}\n", summary.csv_path.string(), summary.json_path.string());
   if (summary.failed > 0) {

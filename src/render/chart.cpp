@@ -92,8 +92,8 @@ Scene make_scene(int width, int height) {
 
 void ChartOptions::validate() const {
   if (width < 32 || width > 16384 || height < 32 || height > 16384)
-    throw Error(fmt::format("chart size {}x{} must be within 32..16384 in each direction", width,
-                            height));
+    throw Error(
+        fmt::format("chart size {}x{} must be within 32..16384 in each direction", width, height));
 }
 
 Chart make_test_chart(const ChartOptions& options) {

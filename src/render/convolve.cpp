@@ -19,7 +19,9 @@
 namespace lensopt {
 namespace {
 
-int thread_count(int threads) { return threads > 0 ? threads : omp_get_max_threads(); }
+int thread_count(int threads) {
+  return threads > 0 ? threads : omp_get_max_threads();
+}
 
 // The smallest n >= m whose prime factors are 2, 3, 5 and 7.
 int fft_size(int m) {
@@ -126,11 +128,7 @@ Renderer::~Renderer() = default;
 
 std::shared_ptr<Renderer::GridEntry> Renderer::entry(int width, int height) const {
   std::lock_guard<std::mutex> lock(mutex_);
-  auto it = grids_.find({width, height});
-  if (it != grids_.end()) {
-    it->second.second = ++use_counter_;
-    return it->second.first;
-  }
+  if (auto found = grids_.find(width, height)) return found;
 
   auto e = std::make_shared<GridEntry>();
   auto grid = std::make_shared<PsfGrid>(make_psf_grid(model_, width, height, options_.res_factor));
@@ -184,13 +182,7 @@ std::shared_ptr<Renderer::GridEntry> Renderer::entry(int width, int height) cons
         out[i] = std::complex<double>(spectrum.data[i][0], spectrum.data[i][1]) * scale;
     }
   }
-  if (grids_.size() >= kCachedSizes) {  // forget the least recently used size
-    auto oldest = grids_.begin();
-    for (auto i = grids_.begin(); i != grids_.end(); ++i)
-      if (i->second.second < oldest->second.second) oldest = i;
-    grids_.erase(oldest);
-  }
-  grids_.emplace(std::make_pair(width, height), std::make_pair(e, ++use_counter_));
+  grids_.insert(width, height, e);
   return e;
 }
 
@@ -233,7 +225,8 @@ FloatImage Renderer::blur(const FloatImage& input, int threads) const {
       std::memset(real.data, 0, sizeof(double) * static_cast<std::size_t>(ny) * nx);
       for (int j = 0; j < wy + 2 * pad; ++j) {
         const int sy = e->reflect_y[lo_y + j];  // image row lo_y - pad + j
-        const float* src = input.pixels.data() + static_cast<std::size_t>(sy) * width * input.channels;
+        const float* src =
+            input.pixels.data() + static_cast<std::size_t>(sy) * width * input.channels;
         double* row = real.data + static_cast<std::size_t>(j) * nx;
         for (int i = 0; i < wx + 2 * pad; ++i)
           row[i] = src[static_cast<std::size_t>(e->reflect_x[lo_x + i]) * input.channels + c];

@@ -123,7 +123,8 @@ PreviousMetrics load_previous(const fs::path& json_path) {
     prev.settings = j.value("settings", nlohmann::json::object());
     for (const auto& img : j.at("images")) {
       std::optional<double> psnr, ssim;
-      if (img.contains("psnr_db") && img["psnr_db"].is_number()) psnr = img["psnr_db"].get<double>();
+      if (img.contains("psnr_db") && img["psnr_db"].is_number())
+        psnr = img["psnr_db"].get<double>();
       if (img.contains("psnr_identical") && img["psnr_identical"].get<bool>())
         psnr = std::numeric_limits<double>::infinity();
       if (img.contains("ssim") && img["ssim"].is_number()) ssim = img["ssim"].get<double>();
@@ -149,9 +150,15 @@ void summarize(DatasetSummary& s) {
   int psnr_count = 0, ssim_count = 0;
   for (const ImageRecord& r : s.records) {
     switch (r.status) {
-      case ImageRecord::Status::kRendered: ++s.rendered; break;
-      case ImageRecord::Status::kSkipped: ++s.skipped; break;
-      case ImageRecord::Status::kFailed: ++s.failed; break;
+      case ImageRecord::Status::kRendered:
+        ++s.rendered;
+        break;
+      case ImageRecord::Status::kSkipped:
+        ++s.skipped;
+        break;
+      case ImageRecord::Status::kFailed:
+        ++s.failed;
+        break;
     }
     if (r.status == ImageRecord::Status::kFailed) continue;
     if (r.psnr_db && std::isfinite(*r.psnr_db)) {
@@ -202,9 +209,10 @@ void write_metrics(const Renderer& renderer, DatasetSummary s) {
                       {"failed_inputs", failed},
                       {"mean_psnr_db", number_or_null(s.mean_psnr_db)},
                       {"mean_ssim", number_or_null(s.mean_ssim)},
-                      {"metrics", "PSNR (dB, peak 1) and SSIM (11x11 Gaussian window, sigma 1.5) "
-                                  "between each input and its blurred image, before relative "
-                                  "illumination and distortion"}};
+                      {"metrics",
+                       "PSNR (dB, peak 1) and SSIM (11x11 Gaussian window, sigma 1.5) "
+                       "between each input and its blurred image, before relative "
+                       "illumination and distortion"}};
   write_file_atomic(s.csv_path, csv);
   write_file_atomic(s.json_path, j.dump(2) + "\n");
 }
@@ -213,9 +221,12 @@ void write_metrics(const Renderer& renderer, DatasetSummary s) {
 
 const char* status_name(ImageRecord::Status status) {
   switch (status) {
-    case ImageRecord::Status::kRendered: return "rendered";
-    case ImageRecord::Status::kSkipped: return "skipped";
-    case ImageRecord::Status::kFailed: return "failed";
+    case ImageRecord::Status::kRendered:
+      return "rendered";
+    case ImageRecord::Status::kSkipped:
+      return "skipped";
+    case ImageRecord::Status::kFailed:
+      return "failed";
   }
   return "?";
 }
@@ -244,8 +255,7 @@ void ensure_writable_directory(const fs::path& dir) {
 
 RenderResult render_file(const Renderer& renderer, const fs::path& input, const fs::path& output,
                          int threads) {
-  if (!image_format_name(input).empty() &&
-      image_format_name(input) != image_format_name(output)) {
+  if (!image_format_name(input).empty() && image_format_name(input) != image_format_name(output)) {
     throw Error(SourceLocation{output.string()}, "the output must have the input's format");
   }
   const LoadedImage loaded = read_image(input);
@@ -283,10 +293,10 @@ DatasetSummary render_dataset(const Renderer& renderer, const DatasetOptions& op
     if (r.relative_path.empty()) continue;
     auto [it, fresh] = seen.emplace(r.relative_path, r.input);
     if (!fresh) {
-      throw Error(fmt::format("inputs {} and {} would both be written to {}: render them in "
-                              "separate runs or from their common folder",
-                              it->second.string(), r.input.string(),
-                              (options.output_dir / r.relative_path).string()));
+      throw Error(fmt::format(
+          "inputs {} and {} would both be written to {}: render them in "
+          "separate runs or from their common folder",
+          it->second.string(), r.input.string(), (options.output_dir / r.relative_path).string()));
     }
     if (r.relative_path == kCsvName || r.relative_path == kJsonName)
       throw Error(fmt::format("input {} would overwrite the metrics file", r.input.string()));

@@ -36,8 +36,8 @@ bool label(FloatImage& img, int x, int y, const std::string& text, int size) {
 void ExportOptions::validate() const {
   if (output_dir.empty()) throw Error("export: no output directory given (-o DIR)");
   if (width < 18 || height < 18 || width > 65536 || height > 65536)
-    throw Error(fmt::format("image size {}x{} must be within 18..65536 in each direction", width,
-                            height));
+    throw Error(
+        fmt::format("image size {}x{} must be within 18..65536 in each direction", width, height));
   if (res_factor != 1 && res_factor != 2)
     throw Error(fmt::format("resolution factor {} must be 1 or 2", res_factor));
 }
@@ -61,8 +61,8 @@ ExportSummary export_imaging_model(const ImagingModel& model, const ExportOption
   constexpr int kScale = 3, kColumns = 7, kMargin = 8, kLabel = 22;
   const int tile = g * kScale;
   const int rows = (field_count + kColumns - 1) / kColumns;
-  FloatImage sheet(kMargin + kColumns * (tile + kMargin), kMargin + rows * (tile + kLabel + kMargin),
-                   3, 0.0f);
+  FloatImage sheet(kMargin + kColumns * (tile + kMargin),
+                   kMargin + rows * (tile + kLabel + kMargin), 3, 0.0f);
   summary.labels_drawn = true;
   for (int h = 0; h < field_count; ++h) {
     const FieldPsf<double>& f = model.psfs.fields[h];
@@ -159,46 +159,51 @@ ExportSummary export_imaging_model(const ImagingModel& model, const ExportOption
   json fields = json::array();
   for (int h = 0; h < field_count; ++h) {
     const FieldPsf<double>& f = model.psfs.fields[h];
-    fields.push_back({{"field_deg", model.fields_deg[h]},
-                      {"reference_y_mm", model.reference_y_mm[h]},
-                      {"centroid_y_mm", model.centroid_y_mm[h]},
-                      {"distortion_shift", model.distortion[h]},
-                      {"distortion_percent", 100.0 * model.distortion[h]},
-                      {"relative_illumination", model.relative_illumination[h]},
-                      {"energy_share_rgb", {f.energy_share[0], f.energy_share[1], f.energy_share[2]}},
-                      {"traced_rays_rgb", {f.traced_rays[0], f.traced_rays[1], f.traced_rays[2]}},
-                      {"failed_rays", f.failed_rays},
-                      {"psf", fmt::format("psf/field_{:02d}.exr", h)}});
+    fields.push_back(
+        {{"field_deg", model.fields_deg[h]},
+         {"reference_y_mm", model.reference_y_mm[h]},
+         {"centroid_y_mm", model.centroid_y_mm[h]},
+         {"distortion_shift", model.distortion[h]},
+         {"distortion_percent", 100.0 * model.distortion[h]},
+         {"relative_illumination", model.relative_illumination[h]},
+         {"energy_share_rgb", {f.energy_share[0], f.energy_share[1], f.energy_share[2]}},
+         {"traced_rays_rgb", {f.traced_rays[0], f.traced_rays[1], f.traced_rays[2]}},
+         {"failed_rays", f.failed_rays},
+         {"psf", fmt::format("psf/field_{:02d}.exr", h)}});
   }
   json patches = json::array();
   for (int q = 0; q < n * n; ++q) {
     json weights = json::object();
     for (int h = 0; h < field_count; ++h)
       if (grid.field_weights[q][h] > 0) weights[fmt::format("{}", h)] = grid.field_weights[q][h];
-    patches.push_back({{"column", q % n},
-                       {"row", q / n},
-                       {"x", {grid.bounds_x[q % n], grid.bounds_x[q % n + 1]}},
-                       {"y", {grid.bounds_y[q / n], grid.bounds_y[q / n + 1]}},
-                       {"azimuth_deg", grid.azimuth_rad[q] * 180.0 / kPi},
-                       {"field_weights", weights},
-                       {"kernel_radius_rgb",
-                        {grid.kernels[q][0].radius, grid.kernels[q][1].radius,
-                         grid.kernels[q][2].radius}}});
+    patches.push_back(
+        {{"column", q % n},
+         {"row", q / n},
+         {"x", {grid.bounds_x[q % n], grid.bounds_x[q % n + 1]}},
+         {"y", {grid.bounds_y[q / n], grid.bounds_y[q / n + 1]}},
+         {"azimuth_deg", grid.azimuth_rad[q] * 180.0 / kPi},
+         {"field_weights", weights},
+         {"kernel_radius_rgb",
+          {grid.kernels[q][0].radius, grid.kernels[q][1].radius, grid.kernels[q][2].radius}}});
   }
-  const json j = {
-      {"lens", model.lens_name},
-      {"sensor_diagonal_mm", model.sensor_diagonal_mm},
-      {"psf", {{"grid_size", g}, {"bin_um", popt.bin_um}, {"sigma_um", popt.sigma_um()},
-               {"rings", model.trace.rings}, {"rays_per_field_wavelength", 2 * model.trace.rings * model.trace.rings}}},
-      {"fields", fields},
-      {"image", {{"width", options.width},
-                 {"height", options.height},
-                 {"res_factor", options.res_factor},
-                 {"pitch_um", summary.pitch_um},
-                 {"axis_px", {geo.axis_x, geo.axis_y}},
-                 {"psf_grid_tile_px", k},
-                 {"distortion_invertible", invertible}}},
-      {"patches", patches}};
+  const json j = {{"lens", model.lens_name},
+                  {"sensor_diagonal_mm", model.sensor_diagonal_mm},
+                  {"psf",
+                   {{"grid_size", g},
+                    {"bin_um", popt.bin_um},
+                    {"sigma_um", popt.sigma_um()},
+                    {"rings", model.trace.rings},
+                    {"rays_per_field_wavelength", 2 * model.trace.rings * model.trace.rings}}},
+                  {"fields", fields},
+                  {"image",
+                   {{"width", options.width},
+                    {"height", options.height},
+                    {"res_factor", options.res_factor},
+                    {"pitch_um", summary.pitch_um},
+                    {"axis_px", {geo.axis_x, geo.axis_y}},
+                    {"psf_grid_tile_px", k},
+                    {"distortion_invertible", invertible}}},
+                  {"patches", patches}};
   write_file_atomic(dir / "fields.json", j.dump(2) + "\n");
   wrote(dir / "fields.json");
   return summary;

@@ -59,8 +59,8 @@ void write_with_oiio(const std::filesystem::path& target, const std::filesystem:
 }  // namespace
 
 const std::vector<std::string>& supported_image_extensions() {
-  static const std::vector<std::string> kExtensions = {".png", ".jpg", ".jpeg", ".tif",
-                                                       ".tiff", ".exr"};
+  static const std::vector<std::string> kExtensions = {".png", ".jpg",  ".jpeg",
+                                                       ".tif", ".tiff", ".exr"};
   return kExtensions;
 }
 
@@ -80,8 +80,7 @@ std::string image_format_name(const std::filesystem::path& path) {
 LoadedImage read_image(const std::filesystem::path& path) {
   const SourceLocation where{path.string()};
   std::error_code ec;
-  if (!std::filesystem::exists(path, ec))
-    throw Error(where, "cannot read image: no such file");
+  if (!std::filesystem::exists(path, ec)) throw Error(where, "cannot read image: no such file");
   if (std::filesystem::is_directory(path, ec))
     throw Error(where, "cannot read image: it is a directory");
   if (!is_supported_image(path)) {
@@ -132,8 +131,8 @@ void write_image(const std::filesystem::path& path, const FloatImage& image,
   }
   OIIO::ImageSpec spec = like;
   const bool has_like = like.width > 0;
-  if (!has_like) spec = OIIO::ImageSpec(image.width, image.height, image.channels,
-                                        default_pixel_type(format));
+  if (!has_like)
+    spec = OIIO::ImageSpec(image.width, image.height, image.channels, default_pixel_type(format));
   spec.width = spec.full_width = image.width;
   spec.height = spec.full_height = image.height;
   spec.x = spec.y = spec.full_x = spec.full_y = 0;
@@ -142,9 +141,8 @@ void write_image(const std::filesystem::path& path, const FloatImage& image,
     spec.default_channel_names();
     spec.channelformats.clear();
   }
-  write_file_atomic_with(path, [&](const std::filesystem::path& temp) {
-    write_with_oiio(path, temp, image, spec);
-  });
+  write_file_atomic_with(
+      path, [&](const std::filesystem::path& temp) { write_with_oiio(path, temp, image, spec); });
 }
 
 void write_float_image(const std::filesystem::path& path, const FloatImage& image,
@@ -156,9 +154,8 @@ void write_float_image(const std::filesystem::path& path, const FloatImage& imag
   OIIO::ImageSpec spec(image.width, image.height, image.channels, OIIO::TypeDesc::FLOAT);
   if (image.channels == 1) spec.channelnames = {"Y"};
   if (static_cast<int>(channel_names.size()) == image.channels) spec.channelnames = channel_names;
-  write_file_atomic_with(path, [&](const std::filesystem::path& temp) {
-    write_with_oiio(path, temp, image, spec);
-  });
+  write_file_atomic_with(
+      path, [&](const std::filesystem::path& temp) { write_with_oiio(path, temp, image, spec); });
 }
 
 }  // namespace lensopt

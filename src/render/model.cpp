@@ -40,7 +40,9 @@ void RenderOptions::validate() const {
     throw Error(fmt::format("threads = {} must be in [0, 1024]", threads));
 }
 
-int colour_channel_count(int channels) { return channels >= 3 ? 3 : 1; }
+int colour_channel_count(int channels) {
+  return channels >= 3 ? 3 : 1;
+}
 
 ImagingModel build_imaging_model(const Lens& lens, const TraceOptions& trace,
                                  const PsfOptions& psf) {
@@ -64,9 +66,9 @@ ImagingModel build_imaging_model(const Lens& lens, const TraceOptions& trace,
   for (std::size_t h = 0; h < report.fields.size(); ++h) {
     const FieldReport& f = report.fields[h];
     if (f.traced_rays == 0) {
-      throw Error(SourceLocation{where},
-                  fmt::format("cannot render: no ray of field {:.2f} deg reaches the image",
-                              f.field_deg));
+      throw Error(
+          SourceLocation{where},
+          fmt::format("cannot render: no ray of field {:.2f} deg reaches the image", f.field_deg));
     }
     model.fields_deg.push_back(f.field_deg);
     model.reference_y_mm.push_back(f.reference_y_mm);
@@ -112,10 +114,11 @@ double undistorted_radius_mm(const ImagingModel& model, double distorted_radius_
   const std::vector<double>& ybar = model.centroid_y_mm;
   for (std::size_t h = 1; h < ybar.size(); ++h) {
     if (!(ybar[h] > ybar[h - 1])) {
-      throw Error(fmt::format("cannot apply distortion: the image heights of fields {:.2f} and "
-                              "{:.2f} deg do not increase ({:.6f}, {:.6f} mm); render with "
-                              "--no-distortion",
-                              model.fields_deg[h - 1], model.fields_deg[h], ybar[h - 1], ybar[h]));
+      throw Error(
+          fmt::format("cannot apply distortion: the image heights of fields {:.2f} and "
+                      "{:.2f} deg do not increase ({:.6f}, {:.6f} mm); render with "
+                      "--no-distortion",
+                      model.fields_deg[h - 1], model.fields_deg[h], ybar[h - 1], ybar[h]));
     }
   }
   return interpolate(ybar, model.reference_y_mm, distorted_radius_mm, true);

@@ -22,9 +22,10 @@ void PsfOptions::validate() const {
 
 void validate_wavelength_channels(const std::vector<int>& channels, int wavelength_count) {
   if (static_cast<int>(channels.size()) != wavelength_count)
-    throw Error(fmt::format("{} wavelength channels for {} wavelengths: give one channel (R, G or "
-                            "B) per wavelength",
-                            channels.size(), wavelength_count));
+    throw Error(
+        fmt::format("{} wavelength channels for {} wavelengths: give one channel (R, G or "
+                    "B) per wavelength",
+                    channels.size(), wavelength_count));
   std::array<int, kColourChannels> used{};
   for (std::size_t w = 0; w < channels.size(); ++w) {
     if (channels[w] < 0 || channels[w] >= kColourChannels)
@@ -35,9 +36,10 @@ void validate_wavelength_channels(const std::vector<int>& channels, int waveleng
   static const char* kNames[] = {"R", "G", "B"};
   for (int k = 0; k < kColourChannels; ++k)
     if (used[k] == 0)
-      throw Error(fmt::format("no wavelength is assigned to colour channel {}: an RGB render "
-                              "needs at least one wavelength per channel",
-                              kNames[k]));
+      throw Error(
+          fmt::format("no wavelength is assigned to colour channel {}: an RGB render "
+                      "needs at least one wavelength per channel",
+                      kNames[k]));
 }
 
 }  // namespace lensopt

@@ -70,7 +70,8 @@ PixelKernel resample_psf(const std::vector<double>& grid, const PsfOptions& opti
   }
   kernel.values.resize(acc.size());
   if (total > 0) {
-    for (std::size_t i = 0; i < acc.size(); ++i) kernel.values[i] = static_cast<float>(acc[i] / total);
+    for (std::size_t i = 0; i < acc.size(); ++i)
+      kernel.values[i] = static_cast<float>(acc[i] / total);
   } else {  // no energy at all: leave the image unblurred rather than black
     kernel.radius = 0;
     kernel.values.assign(1, 1.0f);
@@ -128,9 +129,10 @@ std::vector<std::vector<double>> overlap_windows(const std::vector<int>& bounds,
 PsfGrid make_psf_grid(const ImagingModel& model, int width, int height, int res_factor) {
   constexpr int n = PsfGrid::kPatches;
   if (width < 2 * n || height < 2 * n) {
-    throw Error(fmt::format("image {}x{} is too small: the renderer needs at least {} pixels in "
-                            "each direction (2 per patch)",
-                            width, height, 2 * n));
+    throw Error(
+        fmt::format("image {}x{} is too small: the renderer needs at least {} pixels in "
+                    "each direction (2 per patch)",
+                    width, height, 2 * n));
   }
   PsfGrid grid;
   grid.geometry = SensorGeometry::make(width, height, res_factor, model.sensor_diagonal_mm);
@@ -155,7 +157,8 @@ PsfGrid make_psf_grid(const ImagingModel& model, int width, int height, int res_
       const int x0 = grid.bounds_x[px], x1 = grid.bounds_x[px + 1];
       const int y0 = grid.bounds_y[py], y1 = grid.bounds_y[py + 1];
       for (int j = y0; j < y1; ++j)
-        for (int i = x0; i < x1; ++i) a[nearest_field(model.reference_y_mm, geo.radius_mm(i, j))] += 1;
+        for (int i = x0; i < x1; ++i)
+          a[nearest_field(model.reference_y_mm, geo.radius_mm(i, j))] += 1;
       const double count = static_cast<double>(x1 - x0) * (y1 - y0);
       for (double& v : a) v /= count;
       // Azimuth of the patch centre (the axis patch keeps +y pointing up).
@@ -176,9 +179,10 @@ PsfGrid make_psf_grid(const ImagingModel& model, int width, int height, int res_
   }
   const int psf_size = 2 * grid.max_radius + 1;
   if (width < psf_size || height < psf_size) {
-    throw Error(fmt::format("image {}x{} is smaller than the lens's PSF ({}x{} pixels at a pitch "
-                            "of {:.2f} um): use a larger image",
-                            width, height, psf_size, psf_size, pitch_um));
+    throw Error(
+        fmt::format("image {}x{} is smaller than the lens's PSF ({}x{} pixels at a pitch "
+                    "of {:.2f} um): use a larger image",
+                    width, height, psf_size, psf_size, pitch_um));
   }
   return grid;
 }

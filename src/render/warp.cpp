@@ -1,13 +1,16 @@
 // Relative illumination and the distortion warp.
 //
-// The warp samples by hand with the Keys cubic (a = -1/2, "bicubic"), the same kernel as
-// OpenImageIO's "catmull-rom" filter: ImageBufAlgo::st_warp gives the same values (the unit test
-// compares them) but takes 0.8 s per 1280 x 720 RGB image on one core, most of the 1 s budget of
-// a whole render; this loop takes a few milliseconds.
+// Both depend on a pixel's radius only; their per-pixel maps (the factor, the warp's source
+// offset) are made once per image size and cached. The warp samples by hand with the Keys cubic
+// (a = -1/2, "bicubic"), the same kernel as OpenImageIO's "catmull-rom" filter:
+// ImageBufAlgo::st_warp gives the same values (the unit test compares them) but takes 0.8 s per
+// 1280 x 720 RGB image on one core, most of the 1 s budget of a whole render; this loop takes a
+// few milliseconds.
 #include <omp.h>
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <type_traits>
 
 #include "lensopt/render/render.h"
@@ -15,7 +18,9 @@
 namespace lensopt {
 namespace {
 
-int thread_count(int threads) { return threads > 0 ? threads : omp_get_max_threads(); }
+int thread_count(int threads) {
+  return threads > 0 ? threads : omp_get_max_threads();
+}
 
 // Keys cubic convolution weights (a = -1/2) of the taps at -1, 0, 1, 2 for a fraction t.
 inline void keys_weights(double t, double w[4]) {
@@ -26,24 +31,67 @@ inline void keys_weights(double t, double w[4]) {
   w[3] = 0.5 * t3 - 0.5 * t2;
 }
 
-}  // namespace
-
-void Renderer::apply_relative_illumination(FloatImage& image, int threads) const {
-  const SensorGeometry geo = SensorGeometry::make(image.width, image.height, options_.res_factor,
-                                                  model_.sensor_diagonal_mm);
-  const int colours = colour_channel_count(image.channels);
-#pragma omp parallel for num_threads(thread_count(threads > 0 ? threads : options_.threads)) \
-    schedule(static)
-  for (int j = 0; j < image.height; ++j) {
-    for (int i = 0; i < image.width; ++i) {
-      const float ri = static_cast<float>(relative_illumination_at(model_, geo.radius_mm(i, j)));
-      for (int c = 0; c < colours; ++c) image.at(i, j, c) *= ri;
+// One output row of the warp: pixel i samples the input at (i + 1/2 + offset_x, j + 1/2 +
+// offset_y) bicubically (taps clamped to the image); NaN offsets give black. The channel count
+// is a template constant where it is small (NC = 0: any, from `channels`).
+template <int NC>
+__attribute__((target_clones("arch=x86-64-v3", "default"))) void warp_row(const float* src,
+                                                                          int width, int height,
+                                                                          int channels,
+                                                                          const float* offsets,
+                                                                          int j, float* dst) {
+  const int nc = NC > 0 ? NC : channels;
+  for (int i = 0; i < width; ++i) {
+    const float ox = offsets[2 * i], oy = offsets[2 * i + 1];
+    float* d = dst + static_cast<std::size_t>(i) * nc;
+    if (std::isnan(ox)) {
+      for (int c = 0; c < nc; ++c) d[c] = 0.0f;
+      continue;
+    }
+    const double u = i + static_cast<double>(ox), v = j + static_cast<double>(oy);
+    const int x0 = static_cast<int>(std::floor(u)), y0 = static_cast<int>(std::floor(v));
+    double wx[4], wy[4];
+    keys_weights(u - x0, wx);
+    keys_weights(v - y0, wy);
+    int xs[4];
+    for (int k = 0; k < 4; ++k) xs[k] = std::clamp(x0 - 1 + k, 0, width - 1) * nc;
+    for (int c0 = 0; c0 < nc; c0 += 16) {  // channels in blocks of 16 (only for many channels)
+      const int cn = std::min(16, nc - c0);
+      double acc[NC > 0 ? NC : 16] = {};
+      for (int m = 0; m < 4; ++m) {
+        const int y = std::clamp(y0 - 1 + m, 0, height - 1);
+        const float* row = src + static_cast<std::size_t>(y) * width * nc + c0;
+        for (int k = 0; k < 4; ++k) {
+          const double w = wy[m] * wx[k];
+          const float* p = row + xs[k];
+          for (int c = 0; c < cn; ++c) acc[c] += w * p[c];
+        }
+      }
+      for (int c = 0; c < cn; ++c) d[c0 + c] = static_cast<float>(acc[c]);
     }
   }
 }
 
-FloatImage Renderer::apply_distortion(const FloatImage& image, int threads) const {
-  const int width = image.width, height = image.height, channels = image.channels;
+}  // namespace
+
+std::shared_ptr<const std::vector<float>> Renderer::illumination_map(int width, int height) const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (auto found = illumination_maps_.find(width, height)) return found;
+  const SensorGeometry geo =
+      SensorGeometry::make(width, height, options_.res_factor, model_.sensor_diagonal_mm);
+  auto map = std::make_shared<std::vector<float>>(static_cast<std::size_t>(width) * height);
+#pragma omp parallel for num_threads(thread_count(options_.threads)) schedule(static)
+  for (int j = 0; j < height; ++j)
+    for (int i = 0; i < width; ++i)
+      (*map)[static_cast<std::size_t>(j) * width + i] =
+          static_cast<float>(relative_illumination_at(model_, geo.radius_mm(i, j)));
+  illumination_maps_.insert(width, height, map);
+  return map;
+}
+
+std::shared_ptr<const std::vector<float>> Renderer::warp_map(int width, int height) const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (auto found = warp_maps_.find(width, height)) return found;
   const SensorGeometry geo =
       SensorGeometry::make(width, height, options_.res_factor, model_.sensor_diagonal_mm);
   // The inverse map r(r') through (ybar_h, y_ref,h); undistorted_radius_mm throws (here, outside
@@ -61,53 +109,65 @@ FloatImage Renderer::apply_distortion(const FloatImage& image, int threads) cons
   };
   // Radial scale r / r' near the axis (the first piece of the inverse map).
   const double axis_scale = nodes > 1 ? (yref[1] - yref[0]) / (ybar[1] - ybar[0]) : 1.0;
-  FloatImage out(width, height, channels, 0.0f);
-  const float* src = image.pixels.data();
-  float* dst_pixels = out.pixels.data();
-  // One output pixel, with the channel count as a template constant where it is small.
-  auto sample = [&](auto channel_count, int i, int j) {
-    constexpr int kFixed = decltype(channel_count)::value;
-    const int nc = kFixed > 0 ? kFixed : channels;
-    const double dx = i + 0.5 - geo.axis_x, dy = j + 0.5 - geo.axis_y;
-    const double r_out = geo.pitch_mm * std::sqrt(dx * dx + dy * dy);
-    const double scale = r_out > 1e-12 ? inverse(r_out) / r_out : axis_scale;
-    const double sx = geo.axis_x + dx * scale, sy = geo.axis_y + dy * scale;
-    if (!(sx >= 0.0 && sx <= width && sy >= 0.0 && sy <= height)) return;  // black
-    // Bicubic: pixel centres at k + 1/2, taps clamped to the image.
-    const double u = sx - 0.5, v = sy - 0.5;
-    const int x0 = static_cast<int>(std::floor(u)), y0 = static_cast<int>(std::floor(v));
-    double wx[4], wy[4];
-    keys_weights(u - x0, wx);
-    keys_weights(v - y0, wy);
-    int xs[4];
-    for (int k = 0; k < 4; ++k) xs[k] = std::clamp(x0 - 1 + k, 0, width - 1) * nc;
-    double acc[kFixed > 0 ? kFixed : 16] = {};
-    for (int c0 = 0; c0 < nc; c0 += 16) {  // channels in blocks of 16 (only for many channels)
-      const int cn = std::min(16, nc - c0);
-      for (int c = 0; c < cn; ++c) acc[c] = 0.0;
-      for (int m = 0; m < 4; ++m) {
-        const int y = std::clamp(y0 - 1 + m, 0, height - 1);
-        const float* row = src + static_cast<std::size_t>(y) * width * nc + c0;
-        for (int k = 0; k < 4; ++k) {
-          const double w = wy[m] * wx[k];
-          const float* p = row + xs[k];
-          for (int c = 0; c < cn; ++c) acc[c] += w * p[c];
-        }
+  auto map = std::make_shared<std::vector<float>>(static_cast<std::size_t>(width) * height * 2);
+  constexpr float kOutside = std::numeric_limits<float>::quiet_NaN();
+#pragma omp parallel for num_threads(thread_count(options_.threads)) schedule(static)
+  for (int j = 0; j < height; ++j) {
+    for (int i = 0; i < width; ++i) {
+      const double dx = i + 0.5 - geo.axis_x, dy = j + 0.5 - geo.axis_y;
+      const double r_out = geo.pitch_mm * std::sqrt(dx * dx + dy * dy);
+      const double scale = r_out > 1e-12 ? inverse(r_out) / r_out : axis_scale;
+      const double sx = geo.axis_x + dx * scale, sy = geo.axis_y + dy * scale;
+      float* o = map->data() + (static_cast<std::size_t>(j) * width + i) * 2;
+      if (sx >= 0.0 && sx <= width && sy >= 0.0 && sy <= height) {
+        // Stored as the sample position minus the pixel's corner (i, j), minus 1/2 (so the taps
+        // are at floor(i + offset) - 1 ...): small numbers, exact in float to 1e-5 pixel.
+        o[0] = static_cast<float>(sx - 0.5 - i);
+        o[1] = static_cast<float>(sy - 0.5 - j);
+      } else {
+        o[0] = o[1] = kOutside;  // black: the scene there was not captured
       }
-      float* d = dst_pixels + (static_cast<std::size_t>(j) * width + i) * nc + c0;
-      for (int c = 0; c < cn; ++c) d[c] = static_cast<float>(acc[c]);
     }
-  };
+  }
+  warp_maps_.insert(width, height, map);
+  return map;
+}
+
+void Renderer::apply_relative_illumination(FloatImage& image, int threads) const {
+  const std::shared_ptr<const std::vector<float>> map = illumination_map(image.width, image.height);
+  const int colours = colour_channel_count(image.channels);
+  const std::size_t pixels = static_cast<std::size_t>(image.width) * image.height;
+#pragma omp parallel for num_threads(thread_count(threads > 0 ? threads : options_.threads)) \
+    schedule(static)
+  for (std::size_t p = 0; p < pixels; ++p) {
+    const float ri = (*map)[p];
+    for (int c = 0; c < colours; ++c) image.pixels[p * image.channels + c] *= ri;
+  }
+}
+
+FloatImage Renderer::apply_distortion(const FloatImage& image, int threads) const {
+  const int width = image.width, height = image.height, channels = image.channels;
+  const std::shared_ptr<const std::vector<float>> map = warp_map(width, height);
+  FloatImage out(width, height, channels, 0.0f);
 #pragma omp parallel for num_threads(thread_count(threads > 0 ? threads : options_.threads)) \
     schedule(static)
   for (int j = 0; j < height; ++j) {
-    for (int i = 0; i < width; ++i) {
-      switch (channels) {
-        case 1: sample(std::integral_constant<int, 1>(), i, j); break;
-        case 3: sample(std::integral_constant<int, 3>(), i, j); break;
-        case 4: sample(std::integral_constant<int, 4>(), i, j); break;
-        default: sample(std::integral_constant<int, 0>(), i, j); break;
-      }
+    const float* offsets = map->data() + static_cast<std::size_t>(j) * width * 2;
+    float* dst = out.pixels.data() + static_cast<std::size_t>(j) * width * channels;
+    const float* src = image.pixels.data();
+    switch (channels) {
+      case 1:
+        warp_row<1>(src, width, height, channels, offsets, j, dst);
+        break;
+      case 3:
+        warp_row<3>(src, width, height, channels, offsets, j, dst);
+        break;
+      case 4:
+        warp_row<4>(src, width, height, channels, offsets, j, dst);
+        break;
+      default:
+        warp_row<0>(src, width, height, channels, offsets, j, dst);
+        break;
     }
   }
   return out;

@@ -8,8 +8,8 @@
 //                          kernel size, in image orientation: the axis is where the image's is)
 //   psf_grid.png           the same, each tile divided by its peak, gamma 1/2.2
 //   distortion.exr         per output pixel: channels dx, dy = where the warp samples the input,
-//                          relative to the pixel (pixels), and D = D(r) at the sampled (undistorted)
-//                          radius (fraction of y_ref,last)
+//                          relative to the pixel (pixels), and D = D(r) at the sampled
+//                          (undistorted) radius (fraction of y_ref,last)
 //   relative_illumination.exr   per pixel, the factor R(r) (channel Y)
 //   fields.json            per field: angle, y_ref, centroid, D_h, R_h, energy share per channel,
 //                          traced and failed rays; the grid's pitch, patches, weights, azimuths

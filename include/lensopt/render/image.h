@@ -24,8 +24,7 @@ struct FloatImage {
 
   FloatImage() = default;
   FloatImage(int w, int h, int c, float value = 0.0f)
-      : width(w), height(h), channels(c),
-        pixels(static_cast<std::size_t>(w) * h * c, value) {}
+      : width(w), height(h), channels(c), pixels(static_cast<std::size_t>(w) * h * c, value) {}
   std::size_t index(int x, int y, int c) const {
     return (static_cast<std::size_t>(y) * width + x) * channels + c;
   }

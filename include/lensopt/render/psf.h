@@ -39,10 +39,10 @@ inline constexpr int kColourChannels = 3;  // R, G, B
 
 // PSF grid and kernel parameters (validated by validate()).
 struct PsfOptions {
-  int grid_size = 65;         // G, odd
-  double bin_um = 4.0;        // D
-  double sigma_bins = 0.5;    // s / D
-  int support_bins = 2;       // S: bins either side of the nearest one that get a ray's energy
+  int grid_size = 65;       // G, odd
+  double bin_um = 4.0;      // D
+  double sigma_bins = 0.5;  // s / D
+  int support_bins = 2;     // S: bins either side of the nearest one that get a ray's energy
 
   // Throws Error for out-of-range values.
   void validate() const;
@@ -77,7 +77,8 @@ namespace detail {
 // Adds one ray's kernel (unit energy, truncated to the grid) at grid offsets (u, v) in bins
 // (u = 0, v = 0 at the grid centre; v up) into `grid` (G x G, row-major).
 template <typename T>
-void kde_deposit(const T& u_bins, const T& v_bins, const PsfOptions& options, std::vector<T>& grid) {
+void kde_deposit(const T& u_bins, const T& v_bins, const PsfOptions& options,
+                 std::vector<T>& grid) {
   using std::exp;
   constexpr int kMaxTaps = 2 * 8 + 1;
   const int g = options.grid_size;

@@ -38,7 +38,9 @@
 // two-channel (grey) image uses their mean. Further channels (alpha) are not blurred and not
 // dimmed; they are only distorted.
 // Relative illumination: each colour channel is multiplied by R(r), R_h linearly interpolated in
-// r between the fields' reference heights (Rimmer, at 587.6 nm; analysis/analyze.h).
+// r between the fields' reference heights (Rimmer, at 587.6 nm; analysis/analyze.h), R_last
+// beyond the last one (the sensor's corner may lie a little beyond y_ref,last).
+// Both maps depend on r only; they are computed once per image size and cached.
 // Distortion: a scene point at radial height r is imaged at r' = r + D(r) y_ref,last, D(r) the
 // linear interpolation of D_h = (ybar_h - y_ref,h) / y_ref,last, so r'(y_ref,h) = ybar_h exactly.
 // The output pixel at r' samples the input at the inverse r = r'^-1(r') (piecewise linear through
@@ -66,10 +68,10 @@ namespace lensopt {
 
 // How to render (validated by validate()).
 struct RenderOptions {
-  int res_factor = 1;                   // simulated resolution factor: 1 or 2
-  bool distortion = true;               // apply the distortion warp
-  bool relative_illumination = true;    // apply the relative-illumination map
-  int threads = 0;                      // threads inside one image; 0: all cores
+  int res_factor = 1;                 // simulated resolution factor: 1 or 2
+  bool distortion = true;             // apply the distortion warp
+  bool relative_illumination = true;  // apply the relative-illumination map
+  int threads = 0;                    // threads inside one image; 0: all cores
 
   // Throws Error for out-of-range values.
   void validate() const;
@@ -130,8 +132,8 @@ struct PsfGrid {
   std::vector<double> azimuth_rad;                 // [patch] direction of +y, from image +x
                                                    // towards image +y (rows down)
   std::vector<std::array<PixelKernel, kColourChannels>> kernels;  // [patch]
-  std::vector<PixelKernel> grey_kernels;           // [patch] mean of the three channels
-  int max_radius = 0;                              // largest kernel radius (px)
+  std::vector<PixelKernel> grey_kernels;  // [patch] mean of the three channels
+  int max_radius = 0;                     // largest kernel radius (px)
 
   int patch_index(int px, int py) const { return py * kPatches + px; }
 };
@@ -188,14 +190,40 @@ class Renderer {
  private:
   struct GridEntry;
   std::shared_ptr<GridEntry> entry(int width, int height) const;
+  // Per pixel of a W x H image: the relative-illumination factor; the warp's source offset
+  // (x, y interleaved, pixels; NaN where the source is outside the image).
+  std::shared_ptr<const std::vector<float>> illumination_map(int width, int height) const;
+  std::shared_ptr<const std::vector<float>> warp_map(int width, int height) const;
+
+  // The most recently used image sizes (a dataset of many sizes does not keep them all).
+  template <typename V>
+  struct SizeCache {
+    static constexpr std::size_t kSizes = 4;
+    std::map<std::pair<int, int>, std::pair<std::shared_ptr<V>, long>> items;
+    long counter = 0;
+    std::shared_ptr<V> find(int width, int height) {
+      auto it = items.find({width, height});
+      if (it == items.end()) return nullptr;
+      it->second.second = ++counter;
+      return it->second.first;
+    }
+    void insert(int width, int height, std::shared_ptr<V> value) {
+      if (items.size() >= kSizes) {
+        auto oldest = items.begin();
+        for (auto i = items.begin(); i != items.end(); ++i)
+          if (i->second.second < oldest->second.second) oldest = i;
+        items.erase(oldest);
+      }
+      items[{width, height}] = {std::move(value), ++counter};
+    }
+  };
 
   ImagingModel model_;
   RenderOptions options_;
-  mutable std::mutex mutex_;
-  // The most recently used image sizes (a dataset of many sizes does not keep them all).
-  static constexpr std::size_t kCachedSizes = 4;
-  mutable std::map<std::pair<int, int>, std::pair<std::shared_ptr<GridEntry>, long>> grids_;
-  mutable long use_counter_ = 0;
+  mutable std::mutex mutex_;  // guards the caches (and is held while an entry is built)
+  mutable SizeCache<GridEntry> grids_;
+  mutable SizeCache<const std::vector<float>> illumination_maps_;
+  mutable SizeCache<const std::vector<float>> warp_maps_;
 };
 
 // Number of colour channels of an image with `channels` channels (3 for RGB/RGBA, 1 for grey).
