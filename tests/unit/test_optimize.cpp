@@ -6,6 +6,7 @@
 
 #include <cmath>
 
+#include "lensopt/core/error.h"
 #include "lensopt/lens/lens_io.h"
 #include "lensopt/optimize/optimizer.h"
 #include "test_support.h"
