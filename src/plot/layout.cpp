@@ -92,7 +92,7 @@ LayoutGeometry compute_layout(const PlotContext& ctx, const LayoutOptions& optio
       rays = start;
       trace_bundle(lens, w, k + 1, false, rays, static_cast<RayRecord<double>*>(nullptr));
       for (std::size_t i = 0; i < rays.size(); ++i)
-        if (rays.status[i] == kRayOk)
+        if (ray_ok(rays, i))
           max_height[k] = std::max(max_height[k], std::hypot(rays.x[i], rays.y[i]));
     }
   }
@@ -271,6 +271,7 @@ LayoutGeometry compute_layout(const PlotContext& ctx, const LayoutOptions& optio
     const double theta = sys.fields_deg[h] * kPi / 180.0;
     start.resize(n);
     std::vector<RayDrawing> drawn(n);
+    std::vector<char> alive(n, 1);
     for (int i = 0; i < n; ++i) {
       const double py = n == 1 ? 0.0 : -1.0 + 2.0 * i / (n - 1);
       start.x[i] = 0.0;
@@ -281,24 +282,32 @@ LayoutGeometry compute_layout(const PlotContext& ctx, const LayoutOptions& optio
       start.n[i] = std::cos(theta);
       drawn[i].field = static_cast<int>(j);
       drawn[i].pupil_y = py;
-      drawn[i].points.push_back(
-          {g.start_z_mm, start.y[i] + std::tan(theta) * (g.start_z_mm - start.z[i])});
+      const Point first{g.start_z_mm, start.y[i] + std::tan(theta) * (g.start_z_mm - start.z[i])};
+      alive[i] = std::isfinite(first.y);
+      if (alive[i]) drawn[i].points.push_back(first);
     }
     for (int k = 0; k < k_count; ++k) {
       rays = start;
       trace_bundle(lens, ref, k + 1, false, rays, static_cast<RayRecord<double>*>(nullptr));
-      for (int i = 0; i < n; ++i)
-        if (rays.status[i] == kRayOk) drawn[i].points.push_back({vertex[k] + rays.z[i], rays.y[i]});
+      for (int i = 0; i < n; ++i) {
+        alive[i] = alive[i] && ray_ok(rays, i);
+        if (alive[i]) drawn[i].points.push_back({vertex[k] + rays.z[i], rays.y[i]});
+      }
     }
     rays = start;
     trace_bundle(lens, ref, k_count, true, rays, static_cast<RayRecord<double>*>(nullptr));
+    int failed = 0;
     for (int i = 0; i < n; ++i) {
-      drawn[i].complete = rays.status[i] == kRayOk;
+      drawn[i].complete = alive[i] && ray_ok(rays, i);
+      failed += drawn[i].complete ? 0 : 1;
       if (drawn[i].complete) {
         drawn[i].points.push_back({g.image_z_mm, rays.y[i]});
         g.image_half_height_mm = std::max(g.image_half_height_mm, std::abs(rays.y[i]));
       }
     }
+    if (failed > 0)
+      g.warnings.push_back(fmt::format("{} of the {} drawn rays of field {:.2f} deg fail", failed,
+                                       n, sys.fields_deg[h]));
     for (RayDrawing& r : drawn) g.rays.push_back(std::move(r));
   }
   double widest = 0;
@@ -353,6 +362,16 @@ LayoutExtent layout_extent(const LayoutGeometry& g, const LayoutGeometry* cmp) {
   };
   take(g, 0.0);
   if (cmp) take(*cmp, e.compare_shift_mm);
+  // Rays of a broken design can fly far off: they are clipped, not fitted.
+  double lens_y = 0;
+  for (const LayoutGeometry* l : {&g, cmp})
+    if (l) {
+      lens_y = std::max(lens_y, l->image_half_height_mm);
+      for (const SurfaceDrawing& s : l->surfaces)
+        lens_y = std::max(lens_y, s.edge_semi_diameter_mm);
+    }
+  e.y_lo = std::max(e.y_lo, -2.5 * lens_y);
+  e.y_hi = std::min(e.y_hi, 2.5 * lens_y);
   const double y = std::max(-e.y_lo, e.y_hi);  // keep the axis in the middle
   e.y_lo = -y;
   e.y_hi = y;
@@ -398,8 +417,11 @@ void draw_layout(Canvas& canvas, Rect area, const LayoutGeometry& g, const Layou
   // Glass, then rays, then outlines on top.
   for (const ElementDrawing& e : g.elements)
     canvas.polygon(px_all(e.outline), Style{"none", 0, kGlassFill});
+  canvas.set_clip(frame.x, frame.y - legend_band * 0.3, frame.width,
+                  frame.height + legend_band * 0.3);
   for (const RayDrawing& r : g.rays)
     canvas.polyline(px_all(ray_points(r, 0.0)), Style{field_colour(r.field, nf), 1.0});
+  canvas.clear_clip();
   const Style outline{kLensStroke, 1.4};
   for (const ElementDrawing& e : g.elements) canvas.polygon(px_all(e.outline), outline);
   for (const SurfaceDrawing& s : g.surfaces)
@@ -428,11 +450,14 @@ void draw_layout(Canvas& canvas, Rect area, const LayoutGeometry& g, const Layou
     Style dashed{kCompareStroke, 1.3};
     dashed.dash = "6 4";
     const int nc = static_cast<int>(cmp->field_deg.size());
+    canvas.set_clip(frame.x, frame.y - legend_band * 0.3, frame.width,
+                    frame.height + legend_band * 0.3);
     for (const RayDrawing& r : cmp->rays) {
       Style s{field_colour(r.field, nc), 0.8, "none", 0.75};
       s.dash = "5 4";
       canvas.polyline(px_all(ray_points(r, dz), dz), s);
     }
+    canvas.clear_clip();
     for (const ElementDrawing& e : cmp->elements) canvas.polygon(px_all(e.outline, dz), dashed);
     for (const SurfaceDrawing& s : cmp->surfaces)
       if (!s.in_element && !s.is_stop) canvas.polyline(px_all(s.curve, dz), dashed);
@@ -456,6 +481,14 @@ void draw_layout(Canvas& canvas, Rect area, const LayoutGeometry& g, const Layou
                 Style{"#b0b0b0", 0.6});
     canvas.text({at.x, y}, e.glass, glass_text);
     last_right = at.x + w / 2;
+  }
+
+  // Problems of the design itself (surfaces crossing, failing rays), on the page.
+  if (!g.warnings.empty()) {
+    const std::string more =
+        g.warnings.size() > 1 ? fmt::format(" (and {} more)", g.warnings.size() - 1) : "";
+    canvas.text({area.right() - 8, area.bottom() - 8}, "warning: " + g.warnings[0] + more,
+                TextStyle{font_px * 0.85, Anchor::kEnd, "#b03a2e"});
   }
 
   // Legend (fields; the compared lens) and a scale bar.

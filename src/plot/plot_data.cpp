@@ -122,7 +122,7 @@ SpotData compute_spots(const PlotContext& ctx, const SpotOptions& options) {
       start_rays(sys, h, w, rays);
       trace_to_image(sys, w, rays);
       for (std::size_t i = 0; i < rays.size(); ++i) {
-        if (rays.status[i] != kRayOk) {
+        if (!ray_ok(rays, i)) {
           ++f.failed_rays;
           continue;
         }
@@ -163,7 +163,7 @@ FanData compute_fans(const PlotContext& ctx, const FanOptions& options) {
     rays.resize(1);
     set_pupil_ray(sys, h, 0.0, sys.pupil_map(h, ref).offset_y, rays, 0);
     trace_to_image(sys, ref, rays);
-    const bool chief_ok = rays.status[0] == kRayOk;
+    const bool chief_ok = ray_ok(rays, 0);
     const double y_chief = rays.y[0];
     for (int c = 0; c < 3; ++c) {
       const int w = ctx.channel_wavelength[c];
@@ -184,7 +184,7 @@ FanData compute_fans(const PlotContext& ctx, const FanOptions& options) {
         }
         trace_to_image(sys, w, rays);
         for (int i = 0; i < n; ++i) {
-          const bool ok = chief_ok && rays.status[i] == kRayOk;
+          const bool ok = chief_ok && ray_ok(rays, i);
           const double e = ok ? 1000.0 * (sagittal ? rays.x[i] : rays.y[i] - y_chief) : 0.0;
           curve.error_um.push_back(e);
           curve.valid.push_back(ok);
@@ -230,8 +230,7 @@ FieldCurveData compute_field_curves(const PlotContext& ctx, double delta, int fi
       set_pupil_ray(sys, h, 0.0, map.offset_y - delta * map.scale_y, rays, 1);
       set_pupil_ray(sys, h, delta * map.scale_x, map.offset_y, rays, 2);
       trace_to_image(sys, w, rays);
-      const bool ok = rays.status[0] == kRayOk && rays.status[1] == kRayOk &&
-                      rays.status[2] == kRayOk && rays.l[2] != 0.0;
+      const bool ok = ray_ok(rays, 0) && ray_ok(rays, 1) && ray_ok(rays, 2) && rays.l[2] != 0.0;
       const double slope_diff = rays.m[0] / rays.n[0] - rays.m[1] / rays.n[1];
       const double dz_t = ok && slope_diff != 0.0 ? -(rays.y[0] - rays.y[1]) / slope_diff : 0.0;
       const double dz_s = ok ? -rays.x[2] * rays.n[2] / rays.l[2] : 0.0;

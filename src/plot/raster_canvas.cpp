@@ -363,15 +363,11 @@ RasterCanvas::RasterCanvas(double width, double height, int supersample)
 
 RasterCanvas::~RasterCanvas() = default;
 
-void RasterCanvas::line(Point a, Point b, const Style& style) {
-  impl_->stroke({a, b}, style, false);
-}
-
-void RasterCanvas::polyline(const std::vector<Point>& points, const Style& style) {
+void RasterCanvas::draw_polyline(const std::vector<Point>& points, const Style& style) {
   impl_->stroke(points, style, false);
 }
 
-void RasterCanvas::polygon(const std::vector<Point>& points, const Style& style) {
+void RasterCanvas::draw_polygon(const std::vector<Point>& points, const Style& style) {
   float rgba[4];
   if (points.size() >= 3 && premultiplied(style.fill, style.opacity, rgba)) {
     std::vector<Point> pts;
@@ -382,7 +378,7 @@ void RasterCanvas::polygon(const std::vector<Point>& points, const Style& style)
   impl_->stroke(points, style, true);
 }
 
-void RasterCanvas::circle(Point centre, double radius, const Style& style) {
+void RasterCanvas::draw_circle(Point centre, double radius, const Style& style) {
   const int n = std::clamp(static_cast<int>(impl_->s(radius)), 24, 360);
   std::vector<Point> pts(n);
   for (int i = 0; i < n; ++i) {
@@ -392,7 +388,7 @@ void RasterCanvas::circle(Point centre, double radius, const Style& style) {
   polygon(pts, style);
 }
 
-void RasterCanvas::rect(Point corner, double width, double height, const Style& style) {
+void RasterCanvas::draw_rect(Point corner, double width, double height, const Style& style) {
   polygon({corner,
            {corner.x + width, corner.y},
            {corner.x + width, corner.y + height},
@@ -400,8 +396,8 @@ void RasterCanvas::rect(Point corner, double width, double height, const Style& 
           style);
 }
 
-void RasterCanvas::dots(const std::vector<Point>& centres, double radius, const std::string& colour,
-                        double opacity) {
+void RasterCanvas::draw_dots(const std::vector<Point>& centres, double radius,
+                             const std::string& colour, double opacity) {
   float rgba[4];
   if (!premultiplied(colour, opacity, rgba)) return;
   const int d = std::max(1, static_cast<int>(std::lround(2.0 * impl_->s(radius))));
@@ -413,12 +409,12 @@ void RasterCanvas::dots(const std::vector<Point>& centres, double radius, const 
   }
 }
 
-void RasterCanvas::text(Point at, const std::string& content, const TextStyle& style) {
+void RasterCanvas::draw_text(Point at, const std::string& content, const TextStyle& style) {
   impl_->draw_text(at, content, style);
 }
 
-void RasterCanvas::image(Point corner, double width, double height, const RgbImage& image,
-                         bool pixelated) {
+void RasterCanvas::draw_image(Point corner, double width, double height, const RgbImage& image,
+                              bool pixelated) {
   if (image.width <= 0 || image.height <= 0) return;
   OIIO::ImageBuf src(OIIO::ImageSpec(image.width, image.height, 3, OIIO::TypeDesc::FLOAT),
                      const_cast<float*>(image.pixels.data()));

@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <limits>
 #include <map>
 #include <optional>
 #include <string>
@@ -452,4 +453,45 @@ TEST_CASE("plot: bad kinds and extensions are clear errors") {
   PlotOptions bad;
   bad.spot_box_um = -1;
   CHECK_THROWS_AS(bad.validate(), Error);
+}
+
+TEST_CASE("plot: a lens whose rays fail is drawn with warnings and without NaN") {
+  Lens lens = baseline("tessar");
+  lens.specs.half_field_deg = 42;  // far beyond the design: rays miss, aiming breaks down
+  const PlotContext ctx = make_plot_context(lens);
+  const LayoutGeometry g = compute_layout(ctx);
+  CHECK(!g.warnings.empty());
+  for (const RayDrawing& r : g.rays)
+    for (const Point& p : r.points) CHECK((std::isfinite(p.x) && std::isfinite(p.y)));
+  PlotOptions options;
+  options.kind = PlotKind::kReport;
+  PlotSummary summary;
+  const auto canvas = draw_plot(
+      ctx, nullptr, options, [](double w, double h) { return std::make_unique<SvgCanvas>(w, h); },
+      &summary);
+  const std::string svg = dynamic_cast<SvgCanvas&>(*canvas).str();
+  CHECK(xml_problem(svg) == "");
+  CHECK(svg.find("nan") == std::string::npos);
+  CHECK(svg.find("inf") == std::string::npos);
+  CHECK(!summary.warnings.empty());
+}
+
+TEST_CASE("plot: canvases leave out non-finite points and clip lines") {
+  SvgCanvas canvas(100, 100);
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  canvas.polyline({{10, 10}, {20, 20}, {nan, 5}, {30, 30}, {40, 40}}, Style{});
+  canvas.line({50, 50}, {1e30, 50}, Style{});
+  canvas.dots({{nan, nan}, {5, 5}}, 1.0, "#000000");
+  canvas.text({nan, 1}, "x", TextStyle{});
+  const std::string svg = canvas.str();
+  CHECK(svg.find("nan") == std::string::npos);
+  CHECK(svg.find("e+") == std::string::npos);
+  // Two runs survive the NaN; the long line is clipped to the page's margin (x <= 200).
+  std::size_t lines = 0;
+  for (std::size_t i = 0; (i = svg.find("<line", i)) != std::string::npos; ++i) ++lines;
+  CHECK(lines == 3);
+  CHECK(svg.find("x2=\"200.00\"") != std::string::npos);
+  canvas.set_clip(0, 0, 60, 100);
+  canvas.line({0, 70}, {100, 70}, Style{});
+  CHECK(canvas.str().find("x2=\"60.00\"") != std::string::npos);
 }

@@ -54,6 +54,9 @@ struct RgbImage {
 // An approximate width (px) of `text` in DejaVu Sans at `size_px`, for placing labels.
 double text_width_px(const std::string& text, double size_px);
 
+// The drawing calls check their input once for both backends: coordinates that are not finite
+// are left out (a polyline is split there), and lines are clipped to a margin around the page,
+// so no NaN reaches a file and no huge number reaches a pixel cast.
 class Canvas {
  public:
   Canvas(double width, double height) : width_(width), height_(height) {}
@@ -64,44 +67,62 @@ class Canvas {
   double width() const { return width_; }
   double height() const { return height_; }
 
-  virtual void line(Point a, Point b, const Style& style) = 0;
-  virtual void polyline(const std::vector<Point>& points, const Style& style) = 0;
+  void line(Point a, Point b, const Style& style);
+  void polyline(const std::vector<Point>& points, const Style& style);
   // A closed polygon, filled with style.fill (unless "none") and stroked with style.stroke.
-  virtual void polygon(const std::vector<Point>& points, const Style& style) = 0;
-  virtual void circle(Point centre, double radius, const Style& style) = 0;
-  virtual void rect(Point corner, double width, double height, const Style& style) = 0;
+  void polygon(const std::vector<Point>& points, const Style& style);
+  void circle(Point centre, double radius, const Style& style);
+  void rect(Point corner, double width, double height, const Style& style);
   // Small filled dots of radius `radius` px (spot diagrams).
-  virtual void dots(const std::vector<Point>& centres, double radius, const std::string& colour,
-                    double opacity = 1.0) = 0;
+  void dots(const std::vector<Point>& centres, double radius, const std::string& colour,
+            double opacity = 1.0);
   // Text with its baseline at `at` (anchored per style.anchor).
-  virtual void text(Point at, const std::string& content, const TextStyle& style) = 0;
+  void text(Point at, const std::string& content, const TextStyle& style);
   // An RGB image stretched over the rectangle; `pixelated` keeps its pixels sharp (no smoothing).
-  virtual void image(Point corner, double width, double height, const RgbImage& image,
-                     bool pixelated) = 0;
+  void image(Point corner, double width, double height, const RgbImage& image, bool pixelated);
+
+  // Lines and polylines drawn after this are clipped to the rectangle (x, y, width, height) until
+  // clear_clip(), so a panel's rays stay in the panel.
+  void set_clip(double x, double y, double width, double height);
+  void clear_clip();
 
   // Writes the page to `path` atomically in the backend's format.
   virtual void save(const std::filesystem::path& path) const = 0;
   // Problems met while drawing that did not stop it (e.g. no font found: text left out).
   virtual std::vector<std::string> warnings() const { return {}; }
 
+ protected:
+  // The backends' drawing, called with finite coordinates near the page only.
+  virtual void draw_polyline(const std::vector<Point>& points, const Style& style) = 0;
+  virtual void draw_polygon(const std::vector<Point>& points, const Style& style) = 0;
+  virtual void draw_circle(Point centre, double radius, const Style& style) = 0;
+  virtual void draw_rect(Point corner, double width, double height, const Style& style) = 0;
+  virtual void draw_dots(const std::vector<Point>& centres, double radius,
+                         const std::string& colour, double opacity) = 0;
+  virtual void draw_text(Point at, const std::string& content, const TextStyle& style) = 0;
+  virtual void draw_image(Point corner, double width, double height, const RgbImage& image,
+                          bool pixelated) = 0;
+
  private:
+  bool near_page(Point p) const;
   double width_;
   double height_;
+  bool clip_ = false;
+  double clip_x0_ = 0, clip_y0_ = 0, clip_x1_ = 0, clip_y1_ = 0;
 };
 
 class SvgCanvas : public Canvas {
  public:
   SvgCanvas(double width, double height);
-  void line(Point a, Point b, const Style& style) override;
-  void polyline(const std::vector<Point>& points, const Style& style) override;
-  void polygon(const std::vector<Point>& points, const Style& style) override;
-  void circle(Point centre, double radius, const Style& style) override;
-  void rect(Point corner, double width, double height, const Style& style) override;
-  void dots(const std::vector<Point>& centres, double radius, const std::string& colour,
-            double opacity) override;
-  void text(Point at, const std::string& content, const TextStyle& style) override;
-  void image(Point corner, double width, double height, const RgbImage& image,
-             bool pixelated) override;
+  void draw_polyline(const std::vector<Point>& points, const Style& style) override;
+  void draw_polygon(const std::vector<Point>& points, const Style& style) override;
+  void draw_circle(Point centre, double radius, const Style& style) override;
+  void draw_rect(Point corner, double width, double height, const Style& style) override;
+  void draw_dots(const std::vector<Point>& centres, double radius, const std::string& colour,
+                 double opacity) override;
+  void draw_text(Point at, const std::string& content, const TextStyle& style) override;
+  void draw_image(Point corner, double width, double height, const RgbImage& image,
+                  bool pixelated) override;
   void save(const std::filesystem::path& path) const override;
 
   std::string str() const { return doc_.str(); }
@@ -115,16 +136,15 @@ class RasterCanvas : public Canvas {
   // A white page of width x height px (rounded to whole pixels).
   RasterCanvas(double width, double height, int supersample = 2);
   ~RasterCanvas() override;
-  void line(Point a, Point b, const Style& style) override;
-  void polyline(const std::vector<Point>& points, const Style& style) override;
-  void polygon(const std::vector<Point>& points, const Style& style) override;
-  void circle(Point centre, double radius, const Style& style) override;
-  void rect(Point corner, double width, double height, const Style& style) override;
-  void dots(const std::vector<Point>& centres, double radius, const std::string& colour,
-            double opacity) override;
-  void text(Point at, const std::string& content, const TextStyle& style) override;
-  void image(Point corner, double width, double height, const RgbImage& image,
-             bool pixelated) override;
+  void draw_polyline(const std::vector<Point>& points, const Style& style) override;
+  void draw_polygon(const std::vector<Point>& points, const Style& style) override;
+  void draw_circle(Point centre, double radius, const Style& style) override;
+  void draw_rect(Point corner, double width, double height, const Style& style) override;
+  void draw_dots(const std::vector<Point>& centres, double radius, const std::string& colour,
+                 double opacity) override;
+  void draw_text(Point at, const std::string& content, const TextStyle& style) override;
+  void draw_image(Point corner, double width, double height, const RgbImage& image,
+                  bool pixelated) override;
   void save(const std::filesystem::path& path) const override;
   std::vector<std::string> warnings() const override;
 

@@ -20,11 +20,13 @@
 #pragma once
 
 #include <array>
+#include <cmath>
 #include <string>
 #include <vector>
 
 #include "lensopt/analysis/analyze.h"
 #include "lensopt/lens/lens.h"
+#include "lensopt/trace/kernel.h"
 #include "lensopt/trace/system.h"
 
 namespace lensopt::plot {
@@ -40,6 +42,14 @@ struct PlotContext {
   // The spec wavelengths' channel (0 R, 1 G, 2 B), one per wavelength.
   std::vector<int> wavelength_channel;
 };
+
+// A ray that reached where it was traced to with finite numbers (a broken ray-aiming map can
+// start rays at NaN without a failure flag).
+inline bool ray_ok(const RayBundle<double>& rays, std::size_t i) {
+  return rays.status[i] == kRayOk && std::isfinite(rays.x[i]) && std::isfinite(rays.y[i]) &&
+         std::isfinite(rays.z[i]) && std::isfinite(rays.l[i]) && std::isfinite(rays.m[i]) &&
+         std::isfinite(rays.n[i]);
+}
 
 // Traces the lens at `trace` (analysis defaults) and analyzes it.
 PlotContext make_plot_context(const Lens& lens, const TraceOptions& trace = {});
