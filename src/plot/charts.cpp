@@ -175,9 +175,13 @@ void draw_fans(Canvas& canvas, Rect area, const FanData& fans, const FanData* cm
     legend.push_back({fans.lens_name + " (solid)", "#444444"});
     legend.push_back({cmp->lens_name + " (dashed)", "#444444", "5 3"});
   }
-  const double legend_h = draw_legend(canvas, {area.x + font_px * 4.5, area.y + 2}, legend,
-                                      font_px * 0.9, true, area.width - font_px * 4.5)
-                              .y;
+  const std::string note = "errors from the 587.6 nm chief ray";
+  const double note_w = text_width_px(note, font_px * 0.9) + 24;
+  const Point lsize = draw_legend(canvas, {area.x + font_px * 4.5, area.y + 2}, legend,
+                                  font_px * 0.9, true, area.width - font_px * 4.5 - note_w);
+  const double legend_h = lsize.y;
+  canvas.text({area.x + font_px * 4.5 + lsize.x + 14, area.y + 2 + lsize.y / 2 + font_px * 0.3},
+              note, TextStyle{font_px * 0.9, Anchor::kStart, "#444444"});
 
   const double left = font_px * 4.8, right = 6, bottom = font_px * 3.2;
   const double top = legend_h + font_px * 2.2;

@@ -90,9 +90,9 @@ void draw_psf_strips(Canvas& canvas, Rect area, const std::vector<const PsfStrip
       canvas.image({bx, by}, side, side, t.image, true);
       canvas.rect({bx, by}, side, side, Style{"#777777", 1.0});
       canvas.text({bx + side / 2, by + side + font_px * 1.15},
-                  fmt::format("peak {:.3f}{}", t.peak,
+                  fmt::format("brightest bin {:.1f}%{}", 100 * t.peak,
                               t.energy_share < 0.995
-                                  ? fmt::format(", {:.0f}% in tile", 100 * t.energy_share)
+                                  ? fmt::format(", {:.0f}% in the tile", 100 * t.energy_share)
                                   : std::string()),
                   TextStyle{font_px * 0.8, Anchor::kMiddle, "#555555"});
     }
