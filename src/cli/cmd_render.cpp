@@ -1,5 +1,6 @@
 // lensopt render LENS INPUT... -o OUT: aberrated images for single files or whole dataset trees.
 #include <fmt/core.h>
+#include <malloc.h>
 #include <unistd.h>
 
 #include <chrono>
@@ -89,6 +90,11 @@ class Progress {
 };
 
 void run_render(const RenderCommand& cmd) {
+  // Every image allocates and frees buffers of tens of megabytes; by default glibc maps each
+  // with mmap and unmaps it when freed, so every image faults its pages in again (about a tenth
+  // of the CPU time of a dataset run). Keep freed memory in the heap for reuse instead.
+  mallopt(M_MMAP_THRESHOLD, 512 << 20);
+  mallopt(M_TRIM_THRESHOLD, 1024 << 20);
   RenderOptions options;
   options.res_factor = cmd.res_factor;
   options.distortion = !cmd.no_distortion;

@@ -37,47 +37,42 @@ std::vector<double> gaussian_window(int size, double sigma) {
   return w;
 }
 
-// The hot loops, compiled for AVX2/FMA as well as the baseline (picked at run time), written
-// with contiguous inner loops so they vectorize.
-// Horizontal pass of one row: planes (5 x width scratch) <- x, y, x^2, y^2, xy; slot (5 x out_w)
-// <- their Gaussian-weighted sums over `taps` columns.
-__attribute__((target_clones("arch=x86-64-v3", "default"))) void ssim_horizontal(
-    const float* xr, int x_stride, const float* yr, int y_stride, int width, const double* g,
-    int taps, double* planes, double* slot, int out_w) {
-  for (int col = 0; col < width; ++col) {
-    const double a = xr[static_cast<std::size_t>(col) * x_stride];
-    const double b = yr[static_cast<std::size_t>(col) * y_stride];
-    planes[col] = a;
-    planes[width + col] = b;
-    planes[2 * width + col] = a * a;
-    planes[3 * width + col] = b * b;
-    planes[4 * width + col] = a * b;
-  }
-  for (int q = 0; q < 5; ++q) {
-    double* dst = slot + static_cast<std::size_t>(q) * out_w;
-    const double* src = planes + static_cast<std::size_t>(q) * width;
-    for (int col = 0; col < out_w; ++col) dst[col] = 0.0;
-    for (int k = 0; k < taps; ++k) {
-      const double w = g[k];
-      for (int col = 0; col < out_w; ++col) dst[col] += w * src[col + k];
-    }
+// The hot loop, compiled for AVX2/FMA as well as the baseline (picked at run time), written with
+// contiguous inner loops so it vectorizes. One output row of SSIM: `xs`, `ys` point to the wy
+// rows under the window (each `width` doubles, one channel); vertical Gaussian sums of x, y, x^2,
+// y^2, xy into v (5 x width scratch), horizontal sums into m (5 x out_w scratch), and the sum of
+// SSIM over the row. In double: the variances are differences of nearly equal second moments.
+// v0..v4 += g (a, b, a^2, b^2, a b), elementwise.
+inline __attribute__((always_inline)) void add_moments(
+    const double* __restrict a, const double* __restrict b, double g, int n, double* __restrict v0,
+    double* __restrict v1, double* __restrict v2, double* __restrict v3, double* __restrict v4) {
+  for (int i = 0; i < n; ++i) {
+    const double ga = g * a[i], gb = g * b[i];
+    v0[i] += ga;
+    v1[i] += gb;
+    v2[i] += ga * a[i];
+    v3[i] += gb * b[i];
+    v4[i] += ga * b[i];
   }
 }
 
-// Vertical pass of output row `row` over the ring of horizontal sums, and the sum of SSIM over
-// the row. m is 5 x out_w scratch.
-__attribute__((target_clones("arch=x86-64-v3", "default"))) double ssim_row(const double* ring,
-                                                                            int row, int taps,
-                                                                            const double* g,
-                                                                            int out_w, double* m) {
+__attribute__((target_clones("arch=x86-64-v3", "default"))) double ssim_row(
+    const double* const* xs, const double* const* ys, int width, const double* gy, int wy,
+    const double* gx, int wx, double* v, double* m, int out_w) {
   constexpr double kC1 = 0.01 * 0.01;
   constexpr double kC2 = 0.03 * 0.03;
-  const int n = 5 * out_w;
-  for (int i = 0; i < n; ++i) m[i] = 0.0;
-  for (int k = 0; k < taps; ++k) {
-    const double* slot = ring + static_cast<std::size_t>((row + k) % taps) * n;
-    const double w = g[k];
-    for (int i = 0; i < n; ++i) m[i] += w * slot[i];
+  for (int i = 0; i < 5 * width; ++i) v[i] = 0.0;
+  for (int k = 0; k < wy; ++k)
+    add_moments(xs[k], ys[k], gy[k], width, v, v + width, v + 2 * width, v + 3 * width,
+                v + 4 * width);
+  for (int i = 0; i < 5 * out_w; ++i) m[i] = 0.0;
+  for (int q = 0; q < 5; ++q) {
+    double* __restrict dst = m + static_cast<std::size_t>(q) * out_w;
+    const double* __restrict src = v + static_cast<std::size_t>(q) * width;
+    for (int k = 0; k < wx; ++k) {
+      const double g = gx[k];
+      for (int col = 0; col < out_w; ++col) dst[col] += g * src[col + k];
+    }
   }
   const double* mx = m;
   const double* my = mx + out_w;
@@ -130,9 +125,8 @@ double ssim(const FloatImage& x, const FloatImage& y, int channels, int threads)
   const int out_w = width - wx + 1;  // positions where the window lies inside the image
   const int out_h = height - wy + 1;
   const int nthreads = std::min(thread_count(threads), out_h);
-  // Per output row, the horizontal pass of x, y, x^2, y^2, xy over the wy rows under the window,
-  // kept in a ring of wy rows (per thread), then the vertical pass. In double: the variances are
-  // differences of nearly equal second moments.
+  // Per thread, a ring of the wy input rows under the window (channel c, as double); per output
+  // row one new row enters the ring and ssim_row does the rest.
   double total = 0;
   for (int c = 0; c < channels; ++c) {
     double channel_sum = 0;
@@ -141,21 +135,30 @@ double ssim(const FloatImage& x, const FloatImage& y, int channels, int threads)
       const int t = omp_get_thread_num(), nt = omp_get_num_threads();
       const int r0 = static_cast<int>(static_cast<long>(out_h) * t / nt);
       const int r1 = static_cast<int>(static_cast<long>(out_h) * (t + 1) / nt);
-      std::vector<double> ring(static_cast<std::size_t>(wy) * 5 * out_w);
-      std::vector<double> planes(static_cast<std::size_t>(5) * width);
+      std::vector<double> ring(static_cast<std::size_t>(wy) * 2 * width);
+      std::vector<double> v(static_cast<std::size_t>(5) * width);
       std::vector<double> m(static_cast<std::size_t>(5) * out_w);
-      auto horizontal = [&](int row) {
-        const std::size_t offset = static_cast<std::size_t>(row) * width;
-        ssim_horizontal(x.pixels.data() + offset * x.channels + c, x.channels,
-                        y.pixels.data() + offset * y.channels + c, y.channels, width, gx.data(), wx,
-                        planes.data(), ring.data() + static_cast<std::size_t>(row % wy) * 5 * out_w,
-                        out_w);
+      std::vector<const double*> xs(wy), ys(wy);
+      auto load = [&](int row) {  // image row `row` into ring slot row % wy
+        double* a = ring.data() + static_cast<std::size_t>(row % wy) * 2 * width;
+        double* b = a + width;
+        const float* xr = x.pixels.data() + static_cast<std::size_t>(row) * width * x.channels + c;
+        const float* yr = y.pixels.data() + static_cast<std::size_t>(row) * width * y.channels + c;
+        for (int col = 0; col < width; ++col) {
+          a[col] = xr[static_cast<std::size_t>(col) * x.channels];
+          b[col] = yr[static_cast<std::size_t>(col) * y.channels];
+        }
       };
       if (r0 < r1)
-        for (int row = r0; row < r0 + wy - 1; ++row) horizontal(row);
+        for (int row = r0; row < r0 + wy - 1; ++row) load(row);
       for (int row = r0; row < r1; ++row) {
-        horizontal(row + wy - 1);
-        channel_sum += ssim_row(ring.data(), row, wy, gy.data(), out_w, m.data());
+        load(row + wy - 1);
+        for (int k = 0; k < wy; ++k) {
+          xs[k] = ring.data() + static_cast<std::size_t>((row + k) % wy) * 2 * width;
+          ys[k] = xs[k] + width;
+        }
+        channel_sum += ssim_row(xs.data(), ys.data(), width, gy.data(), wy, gx.data(), wx,
+                                v.data(), m.data(), out_w);
       }
     }
     total += channel_sum / (static_cast<double>(out_w) * out_h);
