@@ -185,7 +185,7 @@ void draw_fans(Canvas& canvas, Rect area, const FanData& fans, const FanData* cm
 
   const double left = font_px * 4.8, right = 6, bottom = font_px * 3.2;
   const double top = legend_h + font_px * 2.2;
-  const double col_gap = font_px * 1.6, row_gap = font_px * 4.0;
+  const double col_gap = font_px * 1.6, row_gap = font_px * 5.0;
   const double pw = (area.width - left - right - col_gap * (nf - 1)) / nf;
   const double ph = (area.height - top - bottom - row_gap) / 2;
   for (int row = 0; row < 2; ++row) {

@@ -15,7 +15,7 @@
 namespace lensopt::plot {
 namespace {
 
-constexpr double kFont = 13;
+constexpr double kBaseFont = 13;  // px at a kind's default page width
 
 std::string kind_title(PlotKind kind) {
   switch (kind) {
@@ -57,24 +57,24 @@ std::string spot_line(const PlotContext& ctx) {
 
 // The page header: title, first-order numbers; returns its height.
 double draw_header(Canvas& canvas, const PlotContext& ctx, const PlotContext* cmp, PlotKind kind,
-                   double width) {
-  TextStyle title{kFont * 1.6, Anchor::kStart, "#111111"};
+                   double width, double font_px) {
+  TextStyle title{font_px * 1.6, Anchor::kStart, "#111111"};
   title.bold = true;
   const std::string name = ctx.lens.name.empty() ? std::string("lens") : ctx.lens.name;
-  canvas.text({16, kFont * 2.0},
+  canvas.text({16, font_px * 2.0},
               fmt::format("{}{}: {}", name, cmp ? " vs " + cmp->lens.name : "", kind_title(kind)),
               title);
-  const TextStyle line{kFont, Anchor::kStart, "#333333"};
-  double y = kFont * 3.6;
+  const TextStyle line{font_px, Anchor::kStart, "#333333"};
+  double y = font_px * 3.6;
   canvas.text({16, y}, fmt::format("{}   {}", first_order_line(ctx), spot_line(ctx)), line);
   if (cmp) {
-    y += kFont * 1.45;
+    y += font_px * 1.45;
     canvas.text({16, y},
                 fmt::format("{}: {}   {}", cmp->lens.name, first_order_line(*cmp), spot_line(*cmp)),
                 line);
   }
-  canvas.line({16, y + kFont * 0.9}, {width - 16, y + kFont * 0.9}, Style{"#cccccc", 1.0});
-  return y + kFont * 1.4;
+  canvas.line({16, y + font_px * 0.9}, {width - 16, y + font_px * 0.9}, Style{"#cccccc", 1.0});
+  return y + font_px * 1.4;
 }
 
 double default_width(PlotKind kind) {
@@ -96,9 +96,10 @@ double default_width(PlotKind kind) {
 }
 
 // Height (px) a layout needs at a width, from its aspect ratio.
-double layout_height(const LayoutGeometry& g, const LayoutGeometry* cmp, double width) {
+double layout_height(const LayoutGeometry& g, const LayoutGeometry* cmp, double width,
+                     double font_px) {
   const LayoutExtent e = layout_extent(g, cmp);
-  const double h = (width - 16) / (1.08 * (e.z_hi - e.z_lo)) * (e.y_hi - e.y_lo) + kFont * 6.8;
+  const double h = (width - 16) / (1.08 * (e.z_hi - e.z_lo)) * (e.y_hi - e.y_lo) + font_px * 6.8;
   return std::clamp(h, 300.0, 1.2 * width);
 }
 
@@ -136,7 +137,9 @@ std::unique_ptr<Canvas> draw_plot(const PlotContext& ctx, const PlotContext* cmp
   const PlotKind kind = options.kind;
   const double width = options.width_px > 0 ? options.width_px : default_width(kind);
   const bool report = kind == PlotKind::kReport;
-  const double header_h = kFont * (cmp ? 6.2 : 4.8);
+  // Text scales with the page below the default width (down to 70%), not above it.
+  const double font_px = kBaseFont * std::clamp(width / default_width(kind), 0.7, 1.0);
+  const double header_h = font_px * (cmp ? 6.2 : 4.8);
 
   // Data first (only what the page shows).
   std::optional<LayoutGeometry> layout, layout_cmp;
@@ -177,13 +180,13 @@ std::unique_ptr<Canvas> draw_plot(const PlotContext& ctx, const PlotContext* cmp
 
   // Page size.
   double height = 0;
-  const double spot_h_per_row = std::min(260.0, (width - 60) / 5.0) + kFont * 5;
-  const double spot_h = kFont * 5 + rows * spot_h_per_row;
-  const double psf_h_per_row = std::min(210.0, (width - 60) / 5.0) + kFont * 5;
-  const double psf_h = kFont * 5 + rows * psf_h_per_row;
+  const double spot_h_per_row = std::min(260.0, (width - 60) / 5.0) + font_px * 5;
+  const double spot_h = font_px * 5 + rows * spot_h_per_row;
+  const double psf_h_per_row = std::min(210.0, (width - 60) / 5.0) + font_px * 5;
+  const double psf_h = font_px * 5 + rows * psf_h_per_row;
   switch (kind) {
     case PlotKind::kLayout:
-      height = header_h + layout_height(*layout, lc, width);
+      height = header_h + layout_height(*layout, lc, width, font_px);
       break;
     case PlotKind::kSpot:
       height = header_h + spot_h;
@@ -202,57 +205,58 @@ std::unique_ptr<Canvas> draw_plot(const PlotContext& ctx, const PlotContext* cmp
   }
   double layout_h = 0, top_row_h = 0, fan_h = 0;
   if (report) {
-    layout_h = layout_height(*layout, lc, 0.58 * width);
+    layout_h = layout_height(*layout, lc, 0.58 * width, font_px);
     top_row_h = std::max(layout_h, 0.30 * width);
     fan_h = 0.36 * width;
     height = header_h + top_row_h + spot_h + fan_h + psf_h + 10;
   }
   std::unique_ptr<Canvas> canvas = make(width, std::round(height));
   Canvas& c = *canvas;
-  const double top = draw_header(c, ctx, cmp, kind, width);
+  const double top = draw_header(c, ctx, cmp, kind, width, font_px);
   const Rect body{0, top, width, c.height() - top};
   switch (kind) {
     case PlotKind::kLayout:
-      draw_layout(c, body.inset(8, 4, 8, 4), *layout, lc, kFont);
+      draw_layout(c, body.inset(8, 4, 8, 4), *layout, lc, font_px);
       break;
     case PlotKind::kSpot:
-      draw_spots(c, body.inset(10, 4, 10, 4), spot_rows, box_um, kFont);
+      draw_spots(c, body.inset(10, 4, 10, 4), spot_rows, box_um, font_px);
       break;
     case PlotKind::kFan:
-      draw_fans(c, body.inset(10, 4, 14, 4), *fans, fans_cmp ? &*fans_cmp : nullptr, kFont);
+      draw_fans(c, body.inset(10, 4, 14, 4), *fans, fans_cmp ? &*fans_cmp : nullptr, font_px);
       break;
     case PlotKind::kField:
       draw_field_curves(c, body.inset(10, 4, 14, 4), *field, field_cmp ? &*field_cmp : nullptr,
-                        kFont);
+                        font_px);
       break;
     case PlotKind::kPsf:
-      draw_psf_strips(c, body.inset(10, 4, 10, 4), psf_rows, kFont);
+      draw_psf_strips(c, body.inset(10, 4, 10, 4), psf_rows, font_px);
       break;
     case PlotKind::kReport: {
       double y = top;
       const Rect layout_area{0, y, 0.58 * width, top_row_h};
-      draw_layout(c, layout_area.inset(8, 4, 4, 4), *layout, lc, kFont);
+      draw_layout(c, layout_area.inset(8, 4, 4, 4), *layout, lc, font_px);
       const Rect field_area{0.58 * width, y, 0.42 * width, std::min(top_row_h, 0.36 * width)};
       draw_field_curves(c, field_area.inset(6, 4, 14, 4), *field, field_cmp ? &*field_cmp : nullptr,
-                        kFont);
+                        font_px);
       y += top_row_h;
       auto section = [&](const std::string& name, double at) {
-        TextStyle t{kFont * 1.15, Anchor::kStart, "#111111"};
+        TextStyle t{font_px * 1.15, Anchor::kStart, "#111111"};
         t.bold = true;
         c.line({16, at + 2}, {width - 16, at + 2}, Style{"#dddddd", 1.0});
-        c.text({16, at + kFont * 1.5}, name, t);
-        return at + kFont * 2.0;
+        c.text({16, at + font_px * 1.5}, name, t);
+        return at + font_px * 2.0;
       };
       double s0 = section("spot diagrams", y);
       draw_spots(c, Rect{0, s0, width, spot_h - (s0 - y)}.inset(10, 0, 10, 0), spot_rows, box_um,
-                 kFont);
+                 font_px);
       y += spot_h;
       s0 = section("transverse ray fans", y);
       draw_fans(c, Rect{0, s0, width, fan_h - (s0 - y)}.inset(10, 0, 14, 0), *fans,
-                fans_cmp ? &*fans_cmp : nullptr, kFont);
+                fans_cmp ? &*fans_cmp : nullptr, font_px);
       y += fan_h;
       s0 = section("sampled PSFs", y);
-      draw_psf_strips(c, Rect{0, s0, width, psf_h - (s0 - y)}.inset(10, 0, 10, 0), psf_rows, kFont);
+      draw_psf_strips(c, Rect{0, s0, width, psf_h - (s0 - y)}.inset(10, 0, 10, 0), psf_rows,
+                      font_px);
       break;
     }
   }
