@@ -6,7 +6,9 @@
 //   z(y) = z_k + sag_k(y),   sag(y) = c y^2 / (1 + sqrt(1 - c^2 y^2)).
 // Clear semi-diameter of surface k: the largest ray height sqrt(x^2 + y^2) at the surface over
 // every field (21), wavelength and aimed pupil-edge ray (azimuths -90..90 deg on the aimed pupil
-// ellipse), times (1 + margin_fraction) plus margin_mm (and below 1/|c|).
+// ellipse), times (1 + margin_fraction) plus margin_mm (and below 1/|c|). Where two surfaces
+// across an air space (or a surface and the stop plane) would meet inside that margin, both are
+// drawn only up to where they meet (never below their own ray heights): the elements touch there.
 // Elements: a glass space between surfaces k and k+1; consecutive glass spaces (a cemented group)
 // share an edge radius E = the largest clear semi-diameter of the group's surfaces. A surface
 // drawn to a smaller radius d < E ends in a flat annulus at z_k + sag_k(d) from d to E (a cemented
