@@ -222,15 +222,19 @@ FloatImage Renderer::blur(const FloatImage& input, int threads) const {
       // The patch's input: its window's extent plus the PSF reach on each side, from the
       // reflected image.
       const int pad = e->pad;
-      std::memset(real.data, 0, sizeof(double) * static_cast<std::size_t>(ny) * nx);
-      for (int j = 0; j < wy + 2 * pad; ++j) {
+      // (zero padding up to the FFT size, where the block does not reach)
+      const int rows = wy + 2 * pad, cols = wx + 2 * pad;
+      for (int j = 0; j < rows; ++j) {
         const int sy = e->reflect_y[lo_y + j];  // image row lo_y - pad + j
         const float* src =
             input.pixels.data() + static_cast<std::size_t>(sy) * width * input.channels;
         double* row = real.data + static_cast<std::size_t>(j) * nx;
-        for (int i = 0; i < wx + 2 * pad; ++i)
+        for (int i = 0; i < cols; ++i)
           row[i] = src[static_cast<std::size_t>(e->reflect_x[lo_x + i]) * input.channels + c];
+        std::fill(row + cols, row + nx, 0.0);
       }
+      std::fill(real.data + static_cast<std::size_t>(rows) * nx,
+                real.data + static_cast<std::size_t>(ny) * nx, 0.0);
       fftw_execute_dft_r2c(e->plans.forward, real.data, spectrum.data);
       // Multiply by the kernel's spectrum (grey images: the mean kernel's, made here).
       const std::complex<double>* k;

@@ -43,9 +43,11 @@ std::vector<double> gaussian_window(int size, double sigma) {
 // y^2, xy into v (5 x width scratch), horizontal sums into m (5 x out_w scratch), and the sum of
 // SSIM over the row. In double: the variances are differences of nearly equal second moments.
 // v0..v4 += g (a, b, a^2, b^2, a b), elementwise.
-inline __attribute__((always_inline)) void add_moments(
-    const double* __restrict a, const double* __restrict b, double g, int n, double* __restrict v0,
-    double* __restrict v1, double* __restrict v2, double* __restrict v3, double* __restrict v4) {
+inline __attribute__((always_inline)) void add_moments(const double* __restrict a,
+                                                       const double* __restrict b, double g, int n,
+                                                       double* __restrict v0, double* __restrict v1,
+                                                       double* __restrict v2, double* __restrict v3,
+                                                       double* __restrict v4) {
   for (int i = 0; i < n; ++i) {
     const double ga = g * a[i], gb = g * b[i];
     v0[i] += ga;
@@ -157,8 +159,8 @@ double ssim(const FloatImage& x, const FloatImage& y, int channels, int threads)
           xs[k] = ring.data() + static_cast<std::size_t>((row + k) % wy) * 2 * width;
           ys[k] = xs[k] + width;
         }
-        channel_sum += ssim_row(xs.data(), ys.data(), width, gy.data(), wy, gx.data(), wx,
-                                v.data(), m.data(), out_w);
+        channel_sum += ssim_row(xs.data(), ys.data(), width, gy.data(), wy, gx.data(), wx, v.data(),
+                                m.data(), out_w);
       }
     }
     total += channel_sum / (static_cast<double>(out_w) * out_h);
