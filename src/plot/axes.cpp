@@ -131,6 +131,16 @@ void Axes::draw_frame(Canvas& canvas, const AxesLabels& labels) const {
   }
 }
 
+void draw_scale_bar(Canvas& canvas, Point left, double length_px, const std::string& label,
+                    double font_px) {
+  const Style bar{"#222222", 1.6};
+  canvas.line(left, {left.x + length_px, left.y}, bar);
+  canvas.line({left.x, left.y - 4}, {left.x, left.y + 4}, bar);
+  canvas.line({left.x + length_px, left.y - 4}, {left.x + length_px, left.y + 4}, bar);
+  canvas.text({left.x + length_px + 6, left.y + font_px * 0.35}, label,
+              TextStyle{font_px, Anchor::kStart, "#222222"});
+}
+
 namespace {
 
 constexpr double kSample = 22, kGap = 6, kPad = 6, kSpacing = 14;

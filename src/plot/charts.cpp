@@ -46,16 +46,6 @@ std::vector<std::vector<Point>> valid_runs(const Axes& ax, const std::vector<dou
   return runs;
 }
 
-void draw_scale_bar(Canvas& canvas, Point left, double length_px, const std::string& label,
-                    double font_px) {
-  const Style bar{"#222222", 1.6};
-  canvas.line(left, {left.x + length_px, left.y}, bar);
-  canvas.line({left.x, left.y - 4}, {left.x, left.y + 4}, bar);
-  canvas.line({left.x + length_px, left.y - 4}, {left.x + length_px, left.y + 4}, bar);
-  canvas.text({left.x + length_px + 6, left.y + font_px * 0.35}, label,
-              TextStyle{font_px, Anchor::kStart, kTextColour});
-}
-
 }  // namespace
 
 double auto_spot_box_um(const std::vector<const SpotData*>& rows) {

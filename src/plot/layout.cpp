@@ -76,16 +76,11 @@ LayoutGeometry compute_layout(const PlotContext& ctx, const LayoutOptions& optio
     start.resize(static_cast<std::size_t>(field_count) * az);
     for (int h = 0; h < field_count; ++h) {
       const PupilMap<double>& map = sys.pupil_map(h, w);
-      const double theta = sys.fields_deg[h] * kPi / 180.0;
       for (int a = 0; a < az; ++a) {
         const double phi = kPi * (-0.5 + static_cast<double>(a) / (az - 1));
-        const std::size_t i = static_cast<std::size_t>(h) * az + a;
-        start.x[i] = sys.epd_mm / 2 * map.scale_x * std::cos(phi);
-        start.y[i] = sys.epd_mm / 2 * (map.offset_y + map.scale_y * std::sin(phi));
-        start.z[i] = sys.entrance_pupil_z_mm;
-        start.l[i] = 0.0;
-        start.m[i] = std::sin(theta);
-        start.n[i] = std::cos(theta);
+        set_pupil_ray(sys, h, map.scale_x * std::cos(phi),
+                      map.offset_y + map.scale_y * std::sin(phi), start,
+                      static_cast<std::size_t>(h) * az + a);
       }
     }
     for (int k = 0; k < k_count; ++k) {
@@ -274,12 +269,7 @@ LayoutGeometry compute_layout(const PlotContext& ctx, const LayoutOptions& optio
     std::vector<char> alive(n, 1);
     for (int i = 0; i < n; ++i) {
       const double py = n == 1 ? 0.0 : -1.0 + 2.0 * i / (n - 1);
-      start.x[i] = 0.0;
-      start.y[i] = sys.epd_mm / 2 * (map.offset_y + map.scale_y * py);
-      start.z[i] = sys.entrance_pupil_z_mm;
-      start.l[i] = 0.0;
-      start.m[i] = std::sin(theta);
-      start.n[i] = std::cos(theta);
+      set_pupil_ray(sys, h, 0.0, map.offset_y + map.scale_y * py, start, i);
       drawn[i].field = static_cast<int>(j);
       drawn[i].pupil_y = py;
       const Point first{g.start_z_mm, start.y[i] + std::tan(theta) * (g.start_z_mm - start.z[i])};
@@ -494,14 +484,8 @@ void draw_layout(Canvas& canvas, Rect area, const LayoutGeometry& g, const Layou
   // Legend (fields; the compared lens) and a scale bar.
   draw_legend(canvas, {area.x + 8, area.y + 2}, entries, font_px * 0.9, true, legend_w);
   const double bar_mm = nice_ceil((z_hi - z_lo) / 8.0);
-  const double bar_px = bar_mm * ax.px_per_x();
-  const Point b0{frame.x + 6, area.bottom() - 8};
-  const Style bar{"#222222", 1.5};
-  canvas.line(b0, {b0.x + bar_px, b0.y}, bar);
-  canvas.line({b0.x, b0.y - 4}, {b0.x, b0.y + 1}, bar);
-  canvas.line({b0.x + bar_px, b0.y - 4}, {b0.x + bar_px, b0.y + 1}, bar);
-  canvas.text({b0.x + bar_px + 6, b0.y + font_px * 0.3}, format_tick(bar_mm, bar_mm) + " mm",
-              TextStyle{font_px * 0.85, Anchor::kStart, "#222222"});
+  draw_scale_bar(canvas, {frame.x + 6, area.bottom() - 8}, bar_mm * ax.px_per_x(),
+                 format_tick(bar_mm, bar_mm) + " mm", font_px * 0.85);
 }
 
 }  // namespace lensopt::plot

@@ -11,19 +11,6 @@
 namespace lensopt::plot {
 namespace {
 
-// A ray of field h starting on the entrance pupil at normalized (already aimed) coordinates.
-void set_pupil_ray(const TraceSystem<double>& sys, int h, double x_norm, double y_norm,
-                   RayBundle<double>& rays, std::size_t i) {
-  const double theta = sys.fields_deg[h] * kPi / 180.0;
-  const double r_ep = sys.epd_mm / 2.0;
-  rays.x[i] = r_ep * x_norm;
-  rays.y[i] = r_ep * y_norm;
-  rays.z[i] = sys.entrance_pupil_z_mm;
-  rays.l[i] = 0.0;
-  rays.m[i] = std::sin(theta);
-  rays.n[i] = std::cos(theta);
-}
-
 void trace_to_image(const TraceSystem<double>& sys, int w, RayBundle<double>& rays) {
   trace_bundle(sys.lens, w, sys.lens.surface_count(), true, rays,
                static_cast<RayRecord<double>*>(nullptr));

@@ -100,15 +100,9 @@ void draw_psf_strips(Canvas& canvas, Rect area, const std::vector<const PsfStrip
   // Scale bar: 50 um (or a nice fraction of the tile).
   const double bar_um = nice_step(0, tile_um, 5);
   const double px_per_um = side / tile_um;
-  const Point left{x0, area.y + top + nr * (side + per_row_text) + bottom * 0.4};
-  const Style bar{"#222222", 1.6};
-  canvas.line(left, {left.x + bar_um * px_per_um, left.y}, bar);
-  canvas.line({left.x, left.y - 4}, {left.x, left.y + 4}, bar);
-  canvas.line({left.x + bar_um * px_per_um, left.y - 4}, {left.x + bar_um * px_per_um, left.y + 4},
-              bar);
-  canvas.text({left.x + bar_um * px_per_um + 6, left.y + font_px * 0.3},
-              fmt::format("{} \u00b5m", format_tick(bar_um, bar_um)),
-              TextStyle{font_px * 0.9, Anchor::kStart, kTextColour});
+  draw_scale_bar(canvas, {x0, area.y + top + nr * (side + per_row_text) + bottom * 0.4},
+                 bar_um * px_per_um, fmt::format("{} \u00b5m", format_tick(bar_um, bar_um)),
+                 font_px * 0.9);
 }
 
 }  // namespace lensopt::plot

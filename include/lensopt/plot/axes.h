@@ -75,6 +75,11 @@ class Axes {
   double x_lo_, x_hi_, y_lo_, y_hi_;
 };
 
+// A scale bar from `left` (its left end, px) `length_px` long with end ticks, labelled on its
+// right ("5 mm", "50 um").
+void draw_scale_bar(Canvas& canvas, Point left, double length_px, const std::string& label,
+                    double font_px);
+
 struct LegendEntry {
   std::string label;
   std::string colour;
