@@ -49,7 +49,7 @@ void run_bench(const BenchCommand& cmd) {
   });
   SpotGradient gradient;
   const double grad_ms = median_ms(std::max(1, cmd.repeats / 10), [&] {
-    gradient = mean_spot_gradient<12>(trace_lens, lens.specs, variables, options);
+    gradient = mean_spot_gradient_auto(trace_lens, lens.specs, variables, options);
   });
   const TraceSystem<double> sys = prepare_system(trace_lens, lens.specs, options);
   const double rays = static_cast<double>(sys.fields_deg.size()) * sys.wavelength_count *

@@ -40,3 +40,17 @@ SpotGradient mean_spot_gradient(const TraceLens<double>& lens, const Specs& spec
 }
 
 }  // namespace lensopt
+
+namespace lensopt {
+
+// The gradient with the Jet width that covers the variables in the fewest passes (one pass up
+// to 24 variables: every lens of the paper).
+inline SpotGradient mean_spot_gradient_auto(const TraceLens<double>& lens, const Specs& specs,
+                                            const std::vector<PrescriptionVariable>& variables,
+                                            const TraceOptions& options) {
+  if (variables.size() <= 8) return mean_spot_gradient<8>(lens, specs, variables, options);
+  if (variables.size() <= 16) return mean_spot_gradient<16>(lens, specs, variables, options);
+  return mean_spot_gradient<24>(lens, specs, variables, options);
+}
+
+}  // namespace lensopt
