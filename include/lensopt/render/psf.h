@@ -86,6 +86,9 @@ void kde_deposit(const T& u_bins, const T& v_bins, const PsfOptions& options,
   const int s = options.support_bins;
   const int taps = 2 * s + 1;
   const double inv_two_sigma2 = 1.0 / (2.0 * options.sigma_bins * options.sigma_bins);
+  // A ray whose kernel cannot reach the grid (or a non-finite one) deposits nothing.
+  const double reach = c + s + 1.0;
+  if (!(std::abs(value_of(u_bins)) < reach && std::abs(value_of(v_bins)) < reach)) return;
   // Nearest bin (the integer choice carries no derivative; the weights do).
   const int iu = static_cast<int>(std::lround(value_of(u_bins)));
   const int iv = static_cast<int>(std::lround(value_of(v_bins)));
