@@ -17,50 +17,20 @@
 #include "lensopt/core/error.h"
 #include "lensopt/glass/glass.h"
 #include "lensopt/lens/lens_io.h"
+#include "lens_checks.h"
 #include "test_support.h"
 
 using namespace lensopt;
+using lensopt::test::bits;
 
 namespace {
 
-std::uint64_t bits(double x) {
-  return std::bit_cast<std::uint64_t>(x);
-}
-
-// Every field of two lenses equal, doubles bit for bit.
-void check_identical(const Lens& a, const Lens& b) {
-  CHECK(a.name == b.name);
-  CHECK(a.catalog_name == b.catalog_name);
-  CHECK(a.extra_toml == b.extra_toml);
-  CHECK(bits(a.specs.f_number) == bits(b.specs.f_number));
-  CHECK(bits(a.specs.half_field_deg) == bits(b.specs.half_field_deg));
-  CHECK(bits(a.specs.sensor_diagonal_mm) == bits(b.specs.sensor_diagonal_mm));
-  REQUIRE(a.specs.wavelengths_nm.size() == b.specs.wavelengths_nm.size());
-  for (std::size_t i = 0; i < a.specs.wavelengths_nm.size(); ++i)
-    CHECK(bits(a.specs.wavelengths_nm[i]) == bits(b.specs.wavelengths_nm[i]));
-  CHECK(a.specs.wavelength_channels == b.specs.wavelength_channels);
-  CHECK(a.specs.dispersion == b.specs.dispersion);
-  REQUIRE(a.surfaces.size() == b.surfaces.size());
-  for (std::size_t i = 0; i < a.surfaces.size(); ++i) {
-    CAPTURE(i);
-    const Surface& s = a.surfaces[i];
-    const Surface& t = b.surfaces[i];
-    CHECK(bits(s.curvature_per_mm) == bits(t.curvature_per_mm));
-    CHECK(bits(s.thickness_mm) == bits(t.thickness_mm));
-    CHECK(bits(s.semi_diameter_mm) == bits(t.semi_diameter_mm));
-    CHECK(s.is_stop == t.is_stop);
-    CHECK(s.material.kind == t.material.kind);
-    CHECK(s.material.glass_name == t.material.glass_name);
-    CHECK(bits(s.material.nd) == bits(t.material.nd));
-    CHECK(bits(s.material.vd) == bits(t.material.vd));
-  }
-}
 
 // format -> parse gives the same lens, and format(parse(format(l))) == format(l).
 void check_round_trip(const Lens& lens, const std::string& source_name) {
   const std::string text = format_lens_toml(lens);
   const Lens again = parse_lens_toml(text, source_name);
-  check_identical(lens, again);
+  test::check_identical_lenses(lens, again);
   CHECK(format_lens_toml(again) == text);
 }
 
@@ -128,7 +98,7 @@ TEST_CASE("lens io: every lenses/*.toml round-trips exactly through format_lens_
     check_round_trip(lens, path.string());
     // The file's own doubles come back too: parsing the file twice is deterministic and the
     // formatted text parses to the same lens as the file.
-    check_identical(lens, parse_lens_toml(format_lens_toml(lens), path.string()));
+    test::check_identical_lenses(lens, parse_lens_toml(format_lens_toml(lens), path.string()));
   }
 }
 

@@ -21,44 +21,14 @@
 #include "lensopt/lens/lens_io.h"
 #include "lensopt/paraxial/paraxial.h"
 #include "lensopt/trace/trace_lens.h"
+#include "lens_checks.h"
 #include "test_support.h"
 
 using namespace lensopt;
+using lensopt::test::bits;
 
 namespace {
 
-std::uint64_t bits(double x) {
-  return std::bit_cast<std::uint64_t>(x);
-}
-
-// Every field of two lenses equal, doubles bit for bit (stronger than 1e-9 relative).
-void check_same_lens(const Lens& a, const Lens& b) {
-  CHECK(a.name == b.name);
-  CHECK(a.catalog_name == b.catalog_name);
-  CHECK(a.extra_toml == b.extra_toml);
-  CHECK(bits(a.specs.f_number) == bits(b.specs.f_number));
-  CHECK(bits(a.specs.half_field_deg) == bits(b.specs.half_field_deg));
-  CHECK(bits(a.specs.sensor_diagonal_mm) == bits(b.specs.sensor_diagonal_mm));
-  REQUIRE(a.specs.wavelengths_nm.size() == b.specs.wavelengths_nm.size());
-  for (std::size_t i = 0; i < a.specs.wavelengths_nm.size(); ++i)
-    CHECK(bits(a.specs.wavelengths_nm[i]) == bits(b.specs.wavelengths_nm[i]));
-  CHECK(a.specs.wavelength_channels == b.specs.wavelength_channels);
-  CHECK(a.specs.dispersion == b.specs.dispersion);
-  REQUIRE(a.surfaces.size() == b.surfaces.size());
-  for (std::size_t i = 0; i < a.surfaces.size(); ++i) {
-    CAPTURE(i);
-    const Surface& s = a.surfaces[i];
-    const Surface& t = b.surfaces[i];
-    CHECK(bits(s.curvature_per_mm) == bits(t.curvature_per_mm));
-    CHECK(bits(s.thickness_mm) == bits(t.thickness_mm));
-    CHECK(bits(s.semi_diameter_mm) == bits(t.semi_diameter_mm));
-    CHECK(s.is_stop == t.is_stop);
-    CHECK(s.material.kind == t.material.kind);
-    CHECK(s.material.glass_name == t.material.glass_name);
-    CHECK(bits(s.material.nd) == bits(t.material.nd));
-    CHECK(bits(s.material.vd) == bits(t.material.vd));
-  }
-}
 
 std::string to_lf(const std::string& text) {
   std::string out;
@@ -146,12 +116,12 @@ TEST_CASE("zmx: TOML -> ZMX -> TOML is exact for the baselines") {
     CHECK(zmx.find("GCAT OHARA") != std::string::npos);
     CHECK(zmx.find("FNUM 2 0") != std::string::npos);
     const ZmxImport imported = parse_zmx(zmx, std::string(name) + ".zmx");
-    check_same_lens(lens, imported.lens);
+    test::check_identical_lenses(lens, imported.lens);
     CHECK(imported.lens.source_path == std::string(name) + ".zmx");
     // And on to TOML: the same text as the original lens gives.
     CHECK(format_lens_toml(imported.lens) == format_lens_toml(lens));
     const Lens again = parse_lens_toml(format_lens_toml(imported.lens), "again.toml");
-    check_same_lens(lens, again);
+    test::check_identical_lenses(lens, again);
     // ZMX is a fixed point as well.
     CHECK(format_zmx(imported.lens) == zmx);
   }
@@ -169,7 +139,7 @@ TEST_CASE("zmx: model glasses, semi-diameters and extra tables survive") {
   CHECK(zmx.find("GLAS ___BLANK 1 0 1.7234567890123 41.123456789") != std::string::npos);
   CHECK(zmx.find("DIAM 5.123456789") != std::string::npos);
   const ZmxImport imported = parse_zmx(zmx, "model.zmx");
-  check_same_lens(lens, imported.lens);
+  test::check_identical_lenses(lens, imported.lens);
 }
 
 TEST_CASE("zmx: UTF-16 LE and ASCII, CRLF and LF read the same") {
@@ -179,7 +149,7 @@ TEST_CASE("zmx: UTF-16 LE and ASCII, CRLF and LF read the same") {
   const std::string lf = to_lf(crlf);
   for (const std::string& bytes : {crlf, lf, to_utf16le(crlf), to_utf16le(lf)}) {
     const ZmxImport imported = parse_zmx(bytes, "tessar.zmx");
-    check_same_lens(lens, imported.lens);
+    test::check_identical_lenses(lens, imported.lens);
   }
   CHECK(decode_text(to_utf16le("GLAS")) == "GLAS");
 }
@@ -327,6 +297,6 @@ TEST_CASE("zmx: read_lens and write_lens dispatch on .zmx") {
   write_lens(lens, dir / "cooke.zmx");
   const Lens back = read_lens(dir / "cooke.zmx");
   CHECK(back.source_path == (dir / "cooke.zmx").string());
-  check_same_lens(lens, back);
+  test::check_identical_lenses(lens, back);
   std::filesystem::remove_all(dir);
 }
