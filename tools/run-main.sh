@@ -10,7 +10,8 @@ mkdir -p out
 has() { "$lensopt" "$1" --help >/dev/null 2>&1 && ! "$lensopt" "$1" --help 2>&1 | grep -q "not built yet"; }
 
 echo "== glass catalog"
-"$lensopt" catalog ohara --wavelengths-nm 486.1327,587.5618,656.2725 | head -8
+"$lensopt" catalog ohara --wavelengths-nm 486.1327,587.5618,656.2725 > out/catalog.txt
+head -8 out/catalog.txt
 echo "== analysis of the paper's baselines"
 for lens in lenses/doublet.toml lenses/cooke.toml lenses/tessar.toml; do
   "$lensopt" analyze "$lens" --json > "out/$(basename "$lens" .toml)-analysis.json"
@@ -22,7 +23,8 @@ echo "== optimization (Doublet, Levenberg-Marquardt)"
 "$lensopt" optimize lenses/doublet.toml -o out/doublet-optimized.toml -q
 echo "== tolerancing (Tessar, 2000 trials)"
 "$lensopt" tolerance lenses/tessar.toml --trials 2000 --seed 1 --csv out/tessar-trials.csv \
-  --histogram out/tessar-histogram.svg | head -20
+  --histogram out/tessar-histogram.svg > out/tessar-tolerance.txt
+head -20 out/tessar-tolerance.txt
 if has chart && has render; then
   echo "== image simulation of the generated chart"
   "$lensopt" chart -o out/chart.png --size 1280x720
