@@ -1,17 +1,20 @@
 // Baseline spot-size optimization with Ceres Levenberg-Marquardt (and a plain Adam loop on the
 // same loss for comparison).
 //
-// Phases (glass handling; Levenberg-Marquardt needs a smooth loss, and quantized glasses are not):
-//   1. continuous: curvatures, spacings and continuous glass variables g, with l_GV pulling each
-//      g towards its nearest catalog glass;
-//   2. snap: every glass set to its nearest catalog glass and frozen; the rest re-optimized;
-//   3. neighbours: per element, the k catalog glasses nearest in whitened (nd, vd) space are
-//      tried, each with a short re-optimization; an improvement that meets every constraint is
-//      kept; repeated until a pass finds none.
-// `--glass-search none` keeps the start's (snapped) glasses and skips 1 and 3; `snap` runs 1-2.
+// Phases (Levenberg-Marquardt needs a smooth loss, and quantized glasses are not):
+//   A. fixed glasses: the start's glasses snapped to the catalog and held; curvatures and
+//      spacings optimized, with constraint continuation: each bound the start violates is moved
+//      in stages from the start's own extreme to its target, so the design walks into the
+//      feasible set instead of being thrown out of its basin;
+//   B. continuous glasses (unless --glass-search none): g free with the glass-variable loss, its
+//      weight growing tenfold per round (annealed onto catalog glasses), then snapped and
+//      re-optimized; kept only if it beats A with every constraint met;
+//   C. neighbours (--glass-search neighbours, the default): per element, the k catalog glasses
+//      nearest in whitened (nd, vd) space are tried, each with a short re-optimization; an
+//      improvement that meets every constraint is kept; repeated until a pass finds none.
 // Each phase runs rounds of LM; between rounds the per-field weights of design_loss.h are
 // recomputed (iteratively reweighted least squares on the paper's mean RMS) and the weight of a
-// still-violated constraint is multiplied by 10.
+// still-violated constraint is multiplied by 10. Bounds carry a small design margin.
 #pragma once
 
 #include <atomic>
