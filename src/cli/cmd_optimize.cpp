@@ -28,6 +28,7 @@ struct OptimizeCommand {
   bool quiet = false;
   bool compare_adam = false;
   std::string glass_search;
+  std::string constraints;
   std::vector<std::string> freeze;
   // Command-line overrides (NaN / -1: not given).
   int rings = -1, fields = -1, max_iterations = -1, neighbours = -1, threads = -1;
@@ -83,6 +84,12 @@ void apply_optimize_table(const Lens& lens, OptimizeOptions& options) {
     else if (k == "fields") options.sampling.fields = integer();
     else if (k == "max_iterations") options.max_iterations = integer();
     else if (k == "glass_neighbours") options.glass_neighbours = integer();
+    else if (k == "constraints") {
+      const auto v = node.value<std::string>();
+      if (!v || (*v != "strict" && *v != "paper"))
+        throw Error(where, "[optimize] constraints must be \"strict\" or \"paper\"");
+      options.loss.paper_penalties = *v == "paper";
+    }
     else if (k == "glass_search") {
       const auto v = node.value<std::string>();
       if (!v) throw Error(where, "[optimize] glass_search must be a string");
@@ -100,7 +107,7 @@ void apply_optimize_table(const Lens& lens, OptimizeOptions& options) {
                   fmt::format("unknown key '{}' in [optimize]; known: weight_ray_path, "
                               "weight_ray_angle, weight_glass, min_air_mm, min_glass_mm, "
                               "max_glass_mm, min_image_clearance_mm, max_ray_angle_deg, rings, "
-                              "fields, max_iterations, glass_search, glass_neighbours, freeze",
+                              "fields, max_iterations, glass_search, glass_neighbours, freeze, constraints",
                               k));
     }
   }
@@ -129,6 +136,7 @@ void run_optimize(const OptimizeCommand& cmd) {
   const Lens lens = read_lens(cmd.lens_path);
   OptimizeOptions options;
   apply_optimize_table(lens, options);
+  if (!cmd.constraints.empty()) options.loss.paper_penalties = cmd.constraints == "paper";
   if (!cmd.glass_search.empty())
     options.glass_search = parse_glass_search(cmd.glass_search, SourceLocation{"--glass-search"});
   for (const std::string& f : cmd.freeze) options.freeze.push_back(f);
@@ -262,6 +270,9 @@ void setup_optimize(CLI::App& app) {
   sub->add_option("--glass-search", cmd->glass_search, "none | snap | neighbours (default)")
       ->check(CLI::IsMember({"none", "snap", "neighbours", "neighbors"}));
   sub->add_option("--neighbours", cmd->neighbours, "catalog glasses tried per element");
+  sub->add_option("--constraints", cmd->constraints,
+                  "strict (default: every bound held) or paper (the paper's soft penalties)")
+      ->check(CLI::IsMember({"strict", "paper"}));
   sub->add_option("--freeze", cmd->freeze, "variables or groups to hold (c3, s2, defocus, g1, curvatures, spacings, glasses)")
       ->delimiter(',');
   sub->add_option("--rings", cmd->rings, "pupil rings during optimization (default 8)");

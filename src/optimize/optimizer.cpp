@@ -154,13 +154,13 @@ DesignLoss<double> run_phase(const LensParameterization& param, std::vector<doub
     if (!summary.iterations.empty())
       radius = std::max(summary.iterations.back().trust_region_radius, 1e-2);
     const DesignLoss<double> next = evaluate_double(param, x, mode, fixed, options.sampling, loss);
-    // Raise the weight of a constraint still violated.
+    // Raise the weight of a constraint still violated (strict penalties only).
     bool violated = false;
-    if (next.ray_path_mm > 0 && loss.weight_ray_path < 1e8) {
+    if (!loss.paper_penalties && next.ray_path_mm > 0 && loss.weight_ray_path < 1e8) {
       loss.weight_ray_path *= 10;
       violated = true;
     }
-    if (next.ray_angle > 0 && loss.weight_ray_angle < 1e8) {
+    if (!loss.paper_penalties && next.ray_angle > 0 && loss.weight_ray_angle < 1e8) {
       loss.weight_ray_angle *= 10;
       violated = true;
     }
@@ -339,7 +339,14 @@ OptimizeResult optimize_lens(const Lens& start, const OptimizeOptions& options) 
         return std::find(frozen_user.begin(), frozen_user.end(), i) != frozen_user.end();
       });
 
-  DesignLossOptions loss = with_margin(options.loss);
+  DesignLossOptions loss = options.loss.paper_penalties ? options.loss : with_margin(options.loss);
+  // With the paper's soft penalties a candidate is judged by l_lens; strictly, by the spot among
+  // designs that meet every constraint.
+  const bool soft = options.loss.paper_penalties;
+  auto feasible = [&](const DesignLoss<double>& l) { return soft || constraints_met(l); };
+  auto better = [&](const DesignLoss<double>& a, const DesignLoss<double>& b) {
+    return soft ? a.total < b.total * (1 - 1e-4) : a.spot_mm < b.spot_mm * (1 - 1e-3);
+  };
   const auto interrupted = [&] { return options.interrupt && options.interrupt->load(); };
   const std::vector<int> frozen_all = merged(frozen_user, glass_indices);
   // Puts the whitened points of catalog glasses `glasses` into the glass variables of x.
@@ -361,7 +368,7 @@ OptimizeResult optimize_lens(const Lens& start, const OptimizeOptions& options) 
   evaluate_double(param, x, GlassMode::kFixed, fixed, options.sampling, loss, &start_extremes);
   const DesignLossOptions target_loss = loss;
   for (double t : {0.25, 0.5, 0.75}) {
-    if (interrupted()) break;
+    if (interrupted() || soft) break;
     DesignLossOptions stage = continued_bounds(target_loss, start_extremes, start, t);
     run_phase(param, x, GlassMode::kFixed, fixed, frozen_all, options, stage,
               fmt::format("constraints {:.0f}%", 100 * t), 1, std::min(iterations, 20), counters);
@@ -388,7 +395,7 @@ OptimizeResult optimize_lens(const Lens& start, const OptimizeOptions& options) 
                                            options, snapped_loss, "snapped", rounds, iterations,
                                            counters);
     result.log.push_back(fmt::format("continuous then snapped: {:.4f} um", b.spot_mm * 1000));
-    if (constraints_met(b) && (!constraints_met(best) || b.spot_mm < best.spot_mm)) {
+    if (feasible(b) && (!feasible(best) || better(b, best))) {
       x = xc;
       fixed = snapped;
       best = b;
@@ -418,7 +425,7 @@ OptimizeResult optimize_lens(const Lens& start, const OptimizeOptions& options) 
               param, trial_x, GlassMode::kFixed, trial_fixed, frozen_all, options, trial_loss,
               fmt::format("element {} as {}", m + 1, param.glass_space().name(candidate)), 2,
               std::max(10, iterations / 3), counters);
-          if (constraints_met(trial) && trial.spot_mm < best.spot_mm * (1 - 1e-3)) {
+          if (feasible(trial) && better(trial, best)) {
             result.log.push_back(fmt::format("element {}: {} -> {} ({:.4f} um)", m + 1,
                                              param.glass_space().name(fixed[m]),
                                              param.glass_space().name(candidate),

@@ -247,3 +247,37 @@ TEST_CASE("optimize: bad options are rejected with the option named") {
   CHECK_THROWS_WITH_AS(param.select({"c99"}), doctest::Contains("unknown variable 'c99'"), Error);
   CHECK(param.select({"curvatures"}).size() == 6);
 }
+
+TEST_CASE("optimize: with the paper's penalties the least squares equals lambda l_RP + lambda l_RA") {
+  const Lens lens = baseline("cooke");  // violates its ray-path and ray-angle bounds
+  const LensParameterization param = parameterization(lens);
+  const std::vector<double> x = param.from_lens(lens);
+  const std::vector<int> glasses = param.nearest_glasses(x.data());
+  const TraceOptions sampling = small_sampling();
+  DesignLossOptions options;
+  options.paper_penalties = true;
+  options.weight_spot = 0;
+  options.weight_glass = 0;
+  DesignLoss<double> loss;
+  evaluate_design<double>(param, x.data(), GlassMode::kFixed, glasses, sampling, options, nullptr,
+                          nullptr, &loss);
+  REQUIRE(loss.ray_path_mm > 0.0);
+  REQUIRE(loss.ray_angle > 0.0);
+  const int fields = static_cast<int>(loss.field_rms_mm.size());
+  const int count = design_residual_count(
+      fields, constraint_field_count(fields, kConstraintFields),
+      static_cast<int>(lens.specs.wavelengths_nm.size()),
+      static_cast<int>(paper_pupil_samples(sampling.rings).size()),
+      static_cast<int>(lens.surfaces.size()), lens.element_count());
+  std::vector<double> r(count);
+  evaluate_design<double>(param, x.data(), GlassMode::kFixed, glasses, sampling, options, nullptr,
+                          r.data(), nullptr);
+  double sum = 0;
+  for (double v : r) sum += v * v;
+  const double paper = options.weight_ray_path * loss.ray_path_mm +
+                       options.weight_ray_angle * loss.ray_angle;
+  MESSAGE("cooke: sum of squares ", sum, ", 100 l_RP + 100 l_RA ", paper);
+  // Equal but for the hinge's rounding within 1e-4 of each bound (at most 5e-5 per active ray).
+  CHECK(sum == doctest::Approx(paper).epsilon(0.02));
+  CHECK(sum <= paper);
+}

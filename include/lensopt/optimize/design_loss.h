@@ -53,6 +53,11 @@ struct DesignLossOptions {
   double max_glass_mm = 3.0;
   double min_image_clearance_mm = 12.0;
   double max_ray_angle_deg = 60.0;
+  // false (strict): squared hinges summed over rays, weights raised while violated (see above).
+  // true (paper): the paper's soft penalties, linear hinges averaged over rays (smoothed within
+  // kPaperHingeSmoothing of the bound so LM has a derivative), fixed weights; a design may then
+  // cross a bound where the trade-off pays, as the paper's own baselines do.
+  bool paper_penalties = false;
 
   void validate() const;  // throws Error naming the bad value
 };
@@ -105,6 +110,15 @@ T safe_norm(const T& sum_of_squares) {
 template <typename T>
 T hinge(const T& v) {
   return v > K<T>(0.0) ? v : K<T>(0.0);
+}
+
+// The linear hinge for v = hinge(...) >= 0, rounded within kPaperHingeSmoothing of the bound:
+// v^2 / (2 d) below d, v - d / 2 above (continuous value and slope).
+inline constexpr double kPaperHingeSmoothing = 1e-4;
+template <typename T>
+T smooth_hinge(const T& v) {
+  const double d = kPaperHingeSmoothing;
+  return v < K<T>(d) ? v * v * K<T>(0.5 / d) : v - K<T>(0.5 * d);
 }
 
 }  // namespace detail
@@ -174,6 +188,7 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
     std::vector<T> ys, xs;
     std::vector<char> ok;
     std::vector<T> path_sq(k_count), angle_sq(k_count * 2);
+    std::vector<T> path_soft(k_count), angle_soft(k_count * 2);
 #pragma omp for schedule(dynamic, 1)
     for (int hf = 0; hf < all_fields; ++hf) {
       // hf: constraint field; every field_stride-th one is also spot field h.
@@ -184,6 +199,8 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
       ok.assign(static_cast<std::size_t>(wl) * rays, 0);
       for (auto& v : path_sq) v = K<T>(0.0);
       for (auto& v : angle_sq) v = K<T>(0.0);
+      for (auto& v : path_soft) v = K<T>(0.0);
+      for (auto& v : angle_soft) v = K<T>(0.0);
       T path_sum = K<T>(0.0), angle_sum = K<T>(0.0);
       // Adds the path and angle penalties of the traced rays of `b` (records in `rec`).
       auto add_constraints = [&](const RayBundle<T>& b, const RayRecord<T>& rec) {
@@ -200,6 +217,7 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
               T v = detail::hinge(K<T>(lower[k]) - dz);
               if (std::isfinite(upper[k])) v = v + detail::hinge(dz - K<T>(upper[k]));
               path_sq[k] = path_sq[k] + v * v;
+              path_soft[k] = path_soft[k] + detail::smooth_hinge(v);
               path_sum = path_sum + v;
             }
             field_extremes[hf].min_cos2_angle =
@@ -209,6 +227,8 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
             const T vb = detail::hinge(K<T>(cos2_max) - rec.cos2_refraction[k][p]);
             angle_sq[2 * k] = angle_sq[2 * k] + va * va;
             angle_sq[2 * k + 1] = angle_sq[2 * k + 1] + vb * vb;
+            angle_soft[2 * k] = angle_soft[2 * k] + detail::smooth_hinge(va);
+            angle_soft[2 * k + 1] = angle_soft[2 * k + 1] + detail::smooth_hinge(vb);
             angle_sum = angle_sum + va + vb;
           }
         }
@@ -243,10 +263,14 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
       if (residuals) {
         for (int k = 0; k < k_count; ++k) {
           residuals[path_offset + hf * k_count + k] =
-              detail::safe_norm(K<T>(options.weight_ray_path) * path_sq[k]);
+              options.paper_penalties
+                  ? detail::safe_norm(K<T>(options.weight_ray_path / n_r) * path_soft[k])
+                  : detail::safe_norm(K<T>(options.weight_ray_path) * path_sq[k]);
           for (int j = 0; j < 2; ++j)
             residuals[angle_offset + (hf * k_count + k) * 2 + j] =
-                detail::safe_norm(K<T>(options.weight_ray_angle) * angle_sq[2 * k + j]);
+                options.paper_penalties
+                    ? detail::safe_norm(K<T>(options.weight_ray_angle / n_r) * angle_soft[2 * k + j])
+                    : detail::safe_norm(K<T>(options.weight_ray_angle) * angle_sq[2 * k + j]);
         }
       }
       if (!spot_field) continue;
