@@ -1,0 +1,82 @@
+// Differentiable image formation for the joint optimization (paper "Joint Optimization").
+//
+// The rendered crop R depends on the lens variables x only through the sampled optics:
+//   x -> (field PSFs P_h, relative illumination R_h, distortion D_h)  [Jets through the tracer]
+//     -> patch kernels K_q = resample(rotate(sum_h a_qh P_h))        [Jets, small arrays]
+//     -> R = warp_D( RI_R . sum_q w_q (K_q * S) )                     [doubles/floats only]
+// (S the sharp scene, * convolution, w_q the overlap-add windows; render/render.h states each
+// step). No Jet ever sits on a pixel. The backward pass takes G = dL/dR and returns
+//   dL/dx_j = sum_q <dL/dK_q, dK_q/dx_j> + sum_h dL/dR_h dR_h/dx_j + sum_h dL/dD_h dD_h/dx_j,
+// where dL/dK_q is the correlation of (w_q . dL/d(blurred)) with S over the kernel's support (the
+// convolution is linear in K_q), dL/d(blurred) comes from G through the adjoint of the warp and
+// the RI multiplication, and the derivative parts of the Jets give dK_q/dx_j, dR_h/dx_j, dD_h/dx_j.
+#pragma once
+
+#include <vector>
+
+#include "lensopt/optimize/variables.h"
+#include "lensopt/render/image.h"
+#include "lensopt/render/psf.h"
+#include "lensopt/trace/system.h"
+
+namespace lensopt {
+
+// A crop of the full scene image (pixels). The full image's size fixes the sensor geometry
+// (render/render.h: its diagonal spans the sensor diagonal), so a crop sees the PSFs of where it
+// lies on the sensor.
+struct CropWindow {
+  int x0 = 0;
+  int y0 = 0;
+  int width = 0;
+  int height = 0;
+};
+
+struct DifferentiableImagingOptions {
+  TraceOptions sampling;              // PSF ray sampling (fields: the PSF fields)
+  PsfOptions psf;                     // PSF grid and kernel
+  int res_factor = 1;                 // 1 or 2, as RenderOptions
+  bool relative_illumination = true;  // apply (and differentiate) the RI map
+  bool distortion = true;             // apply (and differentiate) the distortion warp
+  int threads = 0;                    // 0: all cores
+
+  void validate() const;  // throws Error naming the bad value
+};
+
+// Wall time of the last prepare() / render() / backward() calls, seconds.
+struct ImagingTimings {
+  double trace_s = 0;    // ray tracing with Jets (incl. RI and distortion)
+  double psf_s = 0;      // KDE PSFs and patch kernels with Jets
+  double render_s = 0;   // forward rendering
+  double adjoint_s = 0;  // backward pass
+};
+
+class DifferentiableImaging {
+ public:
+  // `param` must outlive this object. `fixed_glasses` is used with GlassMode::kFixed.
+  DifferentiableImaging(const LensParameterization& param, GlassMode mode,
+                        std::vector<int> fixed_glasses, DifferentiableImagingOptions options);
+  ~DifferentiableImaging();
+  DifferentiableImaging(const DifferentiableImaging&) = delete;
+  DifferentiableImaging& operator=(const DifferentiableImaging&) = delete;
+
+  // Samples the optics of variables x (size param.size()) with derivatives w.r.t. every
+  // variable. Must be called before render()/backward(); again whenever x changes.
+  void prepare(const std::vector<double>& x);
+
+  // The crop of the rendered full image (blur, then RI and distortion as enabled). For the same
+  // lens it equals Renderer::render of the full scene, restricted to the crop.
+  FloatImage render(const FloatImage& scene, const CropWindow& crop) const;
+
+  // Adds dL/dx to grad_x (resized to param.size() if empty) for dL/d(rendered crop) = grad_image
+  // (same shape as render's output).
+  void backward(const FloatImage& scene, const CropWindow& crop, const FloatImage& grad_image,
+                std::vector<double>& grad_x) const;
+
+  const ImagingTimings& timings() const;
+
+ private:
+  struct State;
+  State* state_;
+};
+
+}  // namespace lensopt
