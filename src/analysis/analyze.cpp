@@ -6,37 +6,12 @@
 #include <cmath>
 #include <nlohmann/json.hpp>
 
+#include "lensopt/analysis/field_maps.h"
 #include "lensopt/analysis/spot.h"
 #include "lensopt/paraxial/paraxial.h"
 
 namespace lensopt {
 namespace {
-
-// Image-space direction cosines of the aimed upper, lower and sagittal rays of field h at the
-// reference wavelength: returns (M_top, M_bottom, L_side), or nullopt if one fails.
-std::optional<std::array<double, 3>> pupil_edge_directions(const TraceSystem<double>& sys, int h) {
-  const int w = sys.wavelength_count;  // reference wavelength
-  const PupilMap<double>& map = sys.pupil_map(h, w);
-  const double theta = sys.fields_deg[h] * kPi / 180.0;
-  const double r_ep = sys.epd_mm / 2.0;
-  RayBundle<double> rays;
-  rays.resize(3);
-  const double px[3] = {0.0, 0.0, map.scale_x};
-  const double py[3] = {map.offset_y + map.scale_y, map.offset_y - map.scale_y, map.offset_y};
-  for (int i = 0; i < 3; ++i) {
-    rays.x[i] = r_ep * px[i];
-    rays.y[i] = r_ep * py[i];
-    rays.z[i] = sys.entrance_pupil_z_mm;
-    rays.l[i] = 0.0;
-    rays.m[i] = std::sin(theta);
-    rays.n[i] = std::cos(theta);
-  }
-  trace_bundle(sys.lens, w, sys.lens.surface_count(), true, rays,
-               static_cast<RayRecord<double>*>(nullptr));
-  for (int i = 0; i < 3; ++i)
-    if (rays.status[i] != kRayOk) return std::nullopt;
-  return std::array<double, 3>{rays.m[0], rays.m[1], rays.l[2]};
-}
 
 std::string dispersion_name(DispersionModel m) {
   return m == DispersionModel::kAbbe ? "abbe" : "catalog";
@@ -73,17 +48,9 @@ AnalysisReport analyze_lens(const Lens& lens_in, const AnalyzeOptions& options) 
   r.failures_by_surface = spots.failed_by_surface;
 
   const int field_count = static_cast<int>(sys.fields_deg.size());
-  const double reference_nm = kWavelengthD_nm;
-  std::vector<double> y_ref(field_count);
-  for (int h = 0; h < field_count; ++h) {
-    y_ref[h] = paraxial_image_height(sys.lens, sys.entrance_pupil_z_mm,
-                                     std::tan(sys.fields_deg[h] * kPi / 180.0), reference_nm);
-  }
+  const std::vector<double> y_ref = reference_heights(sys);
   const double y_ref_last = y_ref.back();
-  const auto axis_directions = pupil_edge_directions(sys, 0);
-  const double axis_area =
-      axis_directions ? 0.5 * ((*axis_directions)[0] - (*axis_directions)[1]) * (*axis_directions)[2]
-                      : 0.0;
+  const std::vector<double> ri = relative_illuminations(sys);
 
   double spot_sum = 0;
   bool all_fields_traced = true;
@@ -101,13 +68,8 @@ AnalysisReport analyze_lens(const Lens& lens_in, const AnalyzeOptions& options) 
     f.centroid_y_mm = spots.centroid_y_mm[h];
     f.reference_y_mm = y_ref[h];
     f.distortion_percent =
-        (f.traced_rays > 0 && y_ref_last != 0.0) ? 100.0 * (f.centroid_y_mm - y_ref[h]) / y_ref_last
-                                                 : 0.0;
-    const auto directions = pupil_edge_directions(sys, h);
-    if (directions && axis_area > 0) {
-      const double area = 0.5 * ((*directions)[0] - (*directions)[1]) * (*directions)[2];
-      f.relative_illumination = area / axis_area;
-    }
+        f.traced_rays > 0 ? 100.0 * field_distortion(f.centroid_y_mm, y_ref[h], y_ref_last) : 0.0;
+    f.relative_illumination = ri[h];
     // Ray-aiming error over all wavelengths (and the reference one).
     double worst = 0;
     for (int w = 0; w <= sys.wavelength_count; ++w) {
@@ -137,10 +99,11 @@ std::string format_report_text(const AnalysisReport& r) {
                    r.epd_mm, r.entrance_pupil_z_mm));
   line(fmt::format("  stop radius (real ray)   {:10.4f} mm", r.stop_radius_mm));
   line(fmt::format("  total track              {:10.4f} mm", r.total_track_mm));
-  line(fmt::format("  sampling: {} fields x {} wavelengths x {} half-pupil rays ({} rings), "
-                   "ray aiming {}, dispersion {}",
-                   r.fields.size(), r.wavelength_count, r.rays_per_field_wavelength, r.rings,
-                   r.ray_aiming ? "on" : "off", r.dispersion));
+  line(
+      fmt::format("  sampling: {} fields x {} wavelengths x {} half-pupil rays ({} rings), "
+                  "ray aiming {}, dispersion {}",
+                  r.fields.size(), r.wavelength_count, r.rays_per_field_wavelength, r.rings,
+                  r.ray_aiming ? "on" : "off", r.dispersion));
   line("");
   line("  field (deg)  RMS spot (um)  distortion (%)  rel. illum.  aiming err (%)  failed rays");
   for (const FieldReport& f : r.fields) {
@@ -150,9 +113,9 @@ std::string format_report_text(const AnalysisReport& r) {
                      f.failed_rays));
   }
   line("");
-  line(fmt::format("  mean RMS spot: {}",
-                   r.mean_rms_spot_um ? fmt::format("{:.3f} um", *r.mean_rms_spot_um)
-                                      : std::string("n/a (a field has no traced ray)")));
+  line(fmt::format("  mean RMS spot: {}", r.mean_rms_spot_um
+                                              ? fmt::format("{:.3f} um", *r.mean_rms_spot_um)
+                                              : std::string("n/a (a field has no traced ray)")));
   if (r.ray_failures == 0) {
     line("  ray failures: none");
   } else {
@@ -193,8 +156,7 @@ std::string format_report_json(const AnalysisReport& r) {
   j["ray_aiming"] = r.ray_aiming;
   j["dispersion"] = r.dispersion;
   json fields = json::array(), spots = json::array(), distortion = json::array(),
-       ri = json::array(), failed = json::array(), centroid = json::array(),
-       aiming = json::array();
+       ri = json::array(), failed = json::array(), centroid = json::array(), aiming = json::array();
   for (const FieldReport& f : r.fields) {
     fields.push_back(f.field_deg);
     spots.push_back(f.rms_spot_um ? finite_or_null(*f.rms_spot_um) : json(nullptr));

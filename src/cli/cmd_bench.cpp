@@ -1,16 +1,18 @@
 // lensopt bench: the foundation's performance figures on the Tessar at full paper sampling.
 #include <fmt/core.h>
+#include <omp.h>
 
 #include <algorithm>
 #include <chrono>
 #include <memory>
 #include <nlohmann/json.hpp>
-#include <omp.h>
 
 #include "commands.h"
 #include "lensopt/analysis/gradient.h"
 #include "lensopt/analysis/spot.h"
+#include "lensopt/joint/imaging.h"
 #include "lensopt/lens/lens_io.h"
+#include "lensopt/render/chart.h"
 
 namespace lensopt::cli {
 namespace {
@@ -20,6 +22,8 @@ struct BenchCommand {
   bool json = false;
   int repeats = 20;
   int threads = 0;
+  bool joint_imaging = false;  // the joint optimization's differentiable imaging instead
+  int rings = 8;               // its PSF sampling
 };
 
 template <typename F>
@@ -69,15 +73,96 @@ void run_bench(const BenchCommand& cmd) {
     j["ray_surfaces_per_s"] = ray_surfaces_per_s;
     fmt::print("{}\n", j.dump(2));
   } else {
-    fmt::print("lensopt bench: {} ({} surfaces), {} fields x {} wavelengths x {} rays, ray aiming "
-               "on, {} threads\n",
-               lens.name, lens.surfaces.size(), sys.fields_deg.size(), sys.wavelength_count,
-               sys.pupil.size(), threads);
+    fmt::print(
+        "lensopt bench: {} ({} surfaces), {} fields x {} wavelengths x {} rays, ray aiming "
+        "on, {} threads\n",
+        lens.name, lens.surfaces.size(), sys.fields_deg.size(), sys.wavelength_count,
+        sys.pupil.size(), threads);
     fmt::print("  mean RMS spot                     {:10.3f} um\n", mean_spot_um);
     fmt::print("  spot evaluation (double)          {:10.2f} ms   (median of {})\n", eval_ms,
                cmd.repeats);
     fmt::print("  gradient, {} variables (Jets)     {:10.2f} ms\n", variables.size(), grad_ms);
     fmt::print("  ray-surface intersections         {:10.3g} per s\n", ray_surfaces_per_s);
+  }
+}
+
+// Joint imaging (issue 7): prepare() at 21 fields with `rings`, then render + backward of a batch
+// of four 256 x 256 crops of a 1280 x 720 chart (quantized glasses, RI and distortion on).
+void run_joint_imaging_bench(const BenchCommand& cmd) {
+  const Lens lens = read_lens(cmd.lens_path);
+  const LensParameterization param(lens, GlassSpace(*load_catalog("ohara")));
+  const std::vector<double> x = param.from_lens(lens);
+  DifferentiableImagingOptions options;
+  options.sampling.rings = cmd.rings;
+  options.sampling.fields = 21;
+  options.sampling.threads = cmd.threads;
+  options.threads = cmd.threads;
+  DifferentiableImaging imaging(param, GlassMode::kQuantized, {}, options);
+  ChartOptions chart;
+  chart.text = false;
+  const FloatImage scene = make_test_chart(chart).image;
+  const CropWindow crops[4] = {
+      {0, 0, 256, 256}, {512, 232, 256, 256}, {1024, 464, 256, 256}, {300, 380, 256, 256}};
+  std::vector<FloatImage> grads;
+  for (const CropWindow& c : crops) {
+    FloatImage g(c.width, c.height, scene.channels);
+    for (std::size_t i = 0; i < g.pixels.size(); ++i)
+      g.pixels[i] = static_cast<float>(std::sin(0.37 * static_cast<double>(i))) * 1e-3f;
+    grads.push_back(std::move(g));
+  }
+  std::vector<double> trace_ms, psf_ms, render_ms, backward_ms, prepare_ms, step_ms;
+  imaging.prepare(x);  // warm-up (FFTW plans, allocations)
+  for (int r = 0; r < cmd.repeats; ++r) {
+    const auto t0 = std::chrono::steady_clock::now();
+    imaging.prepare(x);
+    const auto t1 = std::chrono::steady_clock::now();
+    trace_ms.push_back(imaging.timings().trace_s * 1000.0);
+    psf_ms.push_back(imaging.timings().psf_s * 1000.0);
+    std::vector<double> grad_x;
+    double render_total = 0, backward_total = 0;
+    for (int i = 0; i < 4; ++i) {
+      const FloatImage out = imaging.render(scene, crops[i]);
+      render_total += imaging.timings().render_s;
+      imaging.backward(scene, crops[i], grads[i], grad_x);
+      backward_total += imaging.timings().adjoint_s;
+    }
+    const auto t2 = std::chrono::steady_clock::now();
+    prepare_ms.push_back(std::chrono::duration<double, std::milli>(t1 - t0).count());
+    render_ms.push_back(render_total * 1000.0);
+    backward_ms.push_back(backward_total * 1000.0);
+    step_ms.push_back(std::chrono::duration<double, std::milli>(t2 - t0).count());
+  }
+  auto median = [](std::vector<double> v) {
+    std::sort(v.begin(), v.end());
+    return v[v.size() / 2];
+  };
+  const int threads = cmd.threads > 0 ? cmd.threads : omp_get_max_threads();
+  if (cmd.json) {
+    nlohmann::json j;
+    j["lens"] = lens.name;
+    j["variables"] = param.size();
+    j["rings"] = cmd.rings;
+    j["fields"] = 21;
+    j["threads"] = threads;
+    j["prepare_ms"] = median(prepare_ms);
+    j["trace_ms"] = median(trace_ms);
+    j["psf_ms"] = median(psf_ms);
+    j["render_4_crops_ms"] = median(render_ms);
+    j["backward_4_crops_ms"] = median(backward_ms);
+    j["step_ms"] = median(step_ms);
+    fmt::print("{}\n", j.dump(2));
+  } else {
+    fmt::print(
+        "lensopt bench --joint-imaging: {} ({} variables), 21 fields x {} rings ({} rays "
+        "per field and wavelength), {} threads, median of {}\n",
+        lens.name, param.size(), cmd.rings, cmd.rings * cmd.rings, threads, cmd.repeats);
+    fmt::print(
+        "  prepare (Jets)                    {:10.1f} ms  (trace + RI {:.1f}, PSFs + "
+        "kernels {:.1f})\n",
+        median(prepare_ms), median(trace_ms), median(psf_ms));
+    fmt::print("  render, 4 crops 256x256 of 1280x720 {:8.1f} ms\n", median(render_ms));
+    fmt::print("  backward, 4 crops                 {:10.1f} ms\n", median(backward_ms));
+    fmt::print("  whole imaging step                {:10.1f} ms\n", median(step_ms));
   }
 }
 
@@ -91,7 +176,17 @@ void setup_bench(CLI::App& app) {
   sub->add_option("--repeats", cmd->repeats, "repetitions (median reported)")
       ->check(CLI::Range(1, 10000));
   sub->add_option("--threads", cmd->threads, "threads (0: all cores)")->check(CLI::Range(0, 1024));
-  sub->callback([cmd] { run_bench(*cmd); });
+  sub->add_flag("--joint-imaging", cmd->joint_imaging,
+                "benchmark the joint optimization's differentiable imaging instead (issue 7)");
+  sub->add_option("--rings", cmd->rings, "PSF rings for --joint-imaging (default 8)")
+      ->check(CLI::Range(1, 64));
+  sub->callback([cmd] {
+    if (cmd->joint_imaging) {
+      run_joint_imaging_bench(*cmd);
+    } else {
+      run_bench(*cmd);
+    }
+  });
 }
 
 }  // namespace lensopt::cli

@@ -1,8 +1,4 @@
-// The spatially varying overlap-add convolution, by FFT, and the Renderer.
-//
-// FFTW rather than a hand-written FFT: patch buffers have arbitrary sizes (we pick products of
-// 2, 3, 5, 7), FFTW is fast for all of them, and its plans, made once per size, may be executed
-// concurrently from many threads on different arrays (fftw_execute_dft_r2c / _c2r).
+// The spatially varying overlap-add convolution, by FFT (render/fft.h), and the Renderer.
 #include <fftw3.h>
 #include <fmt/format.h>
 #include <omp.h>
@@ -13,6 +9,7 @@
 #include <cstring>
 
 #include "lensopt/core/error.h"
+#include "lensopt/render/fft.h"
 #include "lensopt/render/metrics.h"
 #include "lensopt/render/render.h"
 
@@ -21,70 +18,6 @@ namespace {
 
 int thread_count(int threads) {
   return threads > 0 ? threads : omp_get_max_threads();
-}
-
-// The smallest n >= m whose prime factors are 2, 3, 5 and 7.
-int fft_size(int m) {
-  for (int n = std::max(m, 1);; ++n) {
-    int r = n;
-    for (int p : {2, 3, 5, 7})
-      while (r % p == 0) r /= p;
-    if (r == 1) return n;
-  }
-}
-
-// fftw_malloc'ed arrays (the alignment FFTW's plans expect).
-struct RealBuffer {
-  double* data = nullptr;
-  explicit RealBuffer(std::size_t n) : data(fftw_alloc_real(n)) {
-    if (!data) throw std::bad_alloc();
-  }
-  ~RealBuffer() { fftw_free(data); }
-  RealBuffer(const RealBuffer&) = delete;
-  RealBuffer& operator=(const RealBuffer&) = delete;
-};
-struct ComplexBuffer {
-  fftw_complex* data = nullptr;
-  explicit ComplexBuffer(std::size_t n) : data(fftw_alloc_complex(n)) {
-    if (!data) throw std::bad_alloc();
-  }
-  ~ComplexBuffer() { fftw_free(data); }
-  ComplexBuffer(const ComplexBuffer&) = delete;
-  ComplexBuffer& operator=(const ComplexBuffer&) = delete;
-};
-
-// Forward (r2c) and backward (c2r) plans of one ny x nx size, made once per process. The FFTW
-// planner is not thread-safe: every planner call holds planner_mutex().
-struct FftPlans {
-  fftw_plan forward = nullptr;
-  fftw_plan backward = nullptr;
-};
-std::mutex& planner_mutex() {
-  static std::mutex m;
-  return m;
-}
-FftPlans fft_plans(int ny, int nx) {
-  static std::map<std::pair<int, int>, FftPlans> cache;
-  std::lock_guard<std::mutex> lock(planner_mutex());
-  auto it = cache.find({ny, nx});
-  if (it != cache.end()) return it->second;
-  RealBuffer real(static_cast<std::size_t>(ny) * nx);
-  ComplexBuffer spectrum(static_cast<std::size_t>(ny) * (nx / 2 + 1));
-  FftPlans plans;
-  // FFTW_ESTIMATE: planning costs microseconds and does not touch the arrays.
-  plans.forward = fftw_plan_dft_r2c_2d(ny, nx, real.data, spectrum.data, FFTW_ESTIMATE);
-  plans.backward = fftw_plan_dft_c2r_2d(ny, nx, spectrum.data, real.data, FFTW_ESTIMATE);
-  if (!plans.forward || !plans.backward) throw Error(fmt::format("FFTW cannot plan {}x{}", ny, nx));
-  cache.emplace(std::make_pair(ny, nx), plans);
-  return plans;
-}
-
-// Symmetric reflection of index i into [0, n): ..., 1, 0 | 0, 1, ..., n-1 | n-1, ...
-int reflect(int i, int n) {
-  const int period = 2 * n;
-  int m = i % period;
-  if (m < 0) m += period;
-  return m < n ? m : period - 1 - m;
 }
 
 }  // namespace
@@ -104,21 +37,6 @@ struct Renderer::GridEntry {
   std::size_t spectrum_size() const { return static_cast<std::size_t>(ny) * (nx / 2 + 1); }
 };
 
-namespace {
-
-// Places a kernel centred at the origin (wrapped) into a zeroed ny x nx buffer.
-void place_kernel(const PixelKernel& k, int ny, int nx, double* buffer) {
-  std::memset(buffer, 0, sizeof(double) * static_cast<std::size_t>(ny) * nx);
-  for (int dy = -k.radius; dy <= k.radius; ++dy) {
-    const int row = (dy + ny) % ny;
-    for (int dx = -k.radius; dx <= k.radius; ++dx) {
-      buffer[static_cast<std::size_t>(row) * nx + (dx + nx) % nx] = k.at(dx, dy);
-    }
-  }
-}
-
-}  // namespace
-
 Renderer::Renderer(ImagingModel model, RenderOptions options)
     : model_(std::move(model)), options_(options) {
   options_.validate();
@@ -137,31 +55,13 @@ std::shared_ptr<Renderer::GridEntry> Renderer::entry(int width, int height) cons
   std::vector<double> sum_x, sum_y;
   e->window_x = overlap_windows(grid->bounds_x, width, 0, &sum_x);
   e->window_y = overlap_windows(grid->bounds_y, height, 0, &sum_y);
-  // Extents: where each patch's window is non-zero inside the image.
-  auto extents = [&](const std::vector<std::vector<double>>& w, std::vector<int>& lo,
-                     std::vector<int>& hi) {
-    int widest = 0;
-    for (const auto& wk : w) {
-      int first = -1, last = -1;
-      for (int i = 0; i < static_cast<int>(wk.size()); ++i) {
-        if (wk[i] > 0) {
-          if (first < 0) first = i;
-          last = i;
-        }
-      }
-      lo.push_back(first);
-      hi.push_back(last + 1);
-      widest = std::max(widest, last + 1 - first);
-    }
-    return widest;
-  };
-  const int widest_x = extents(e->window_x, e->lo_x, e->hi_x);
-  const int widest_y = extents(e->window_y, e->lo_y, e->hi_y);
+  const int widest_x = overlap_window_extents(e->window_x, e->lo_x, e->hi_x);
+  const int widest_y = overlap_window_extents(e->window_y, e->lo_y, e->hi_y);
   e->nx = fft_size(widest_x + 2 * e->pad);
   e->ny = fft_size(widest_y + 2 * e->pad);
   e->plans = fft_plans(e->ny, e->nx);
-  for (int i = -e->pad; i < width + e->pad; ++i) e->reflect_x.push_back(reflect(i, width));
-  for (int j = -e->pad; j < height + e->pad; ++j) e->reflect_y.push_back(reflect(j, height));
+  for (int i = -e->pad; i < width + e->pad; ++i) e->reflect_x.push_back(reflect_index(i, width));
+  for (int j = -e->pad; j < height + e->pad; ++j) e->reflect_y.push_back(reflect_index(j, height));
 
   // Kernel spectra, once per image size.
   const int tasks = PsfGrid::kPatches * PsfGrid::kPatches * kColourChannels;
@@ -173,8 +73,8 @@ std::shared_ptr<Renderer::GridEntry> Renderer::entry(int width, int height) cons
     ComplexBuffer spectrum(e->spectrum_size());
 #pragma omp for schedule(dynamic, 1)
     for (int t = 0; t < tasks; ++t) {
-      place_kernel(grid->kernels[t / kColourChannels][t % kColourChannels], e->ny, e->nx,
-                   real.data);
+      const PixelKernel& k = grid->kernels[t / kColourChannels][t % kColourChannels];
+      place_kernel(k.values.data(), k.radius, e->ny, e->nx, real.data);
       fftw_execute_dft_r2c(e->plans.forward, real.data, spectrum.data);
       auto& out = e->spectra[t];
       out.resize(e->spectrum_size());
@@ -244,7 +144,8 @@ FloatImage Renderer::blur(const FloatImage& input, int threads) const {
         grey_spectrum.resize(spectrum_size);
         RealBuffer kreal(static_cast<std::size_t>(ny) * nx);
         ComplexBuffer kspec(spectrum_size);
-        place_kernel(grid.grey_kernels[q], ny, nx, kreal.data);
+        place_kernel(grid.grey_kernels[q].values.data(), grid.grey_kernels[q].radius, ny, nx,
+                     kreal.data);
         fftw_execute_dft_r2c(e->plans.forward, kreal.data, kspec.data);
         const double scale = 1.0 / (static_cast<double>(nx) * ny);
         for (std::size_t i = 0; i < spectrum_size; ++i)

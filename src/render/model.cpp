@@ -6,32 +6,10 @@
 
 #include "lensopt/analysis/analyze.h"
 #include "lensopt/core/error.h"
+#include "lensopt/core/interpolate.h"
 #include "lensopt/render/render.h"
 
 namespace lensopt {
-namespace {
-
-// Piecewise-linear interpolation of (xs, ys) at x, xs increasing; clamped to the end values
-// (extrapolate = false) or extended with the first/last piece (extrapolate = true).
-double interpolate(const std::vector<double>& xs, const std::vector<double>& ys, double x,
-                   bool extrapolate) {
-  const std::size_t n = xs.size();
-  if (n == 1) return ys[0];
-  std::size_t k;
-  if (x <= xs.front()) {
-    if (!extrapolate) return ys.front();
-    k = 0;
-  } else if (x >= xs.back()) {
-    if (!extrapolate) return ys.back();
-    k = n - 2;
-  } else {
-    k = static_cast<std::size_t>(std::upper_bound(xs.begin(), xs.end(), x) - xs.begin()) - 1;
-  }
-  const double t = (x - xs[k]) / (xs[k + 1] - xs[k]);
-  return ys[k] + t * (ys[k + 1] - ys[k]);
-}
-
-}  // namespace
 
 void RenderOptions::validate() const {
   if (res_factor != 1 && res_factor != 2)
@@ -103,11 +81,11 @@ double SensorGeometry::radius_mm(int i, int j) const {
 }
 
 double relative_illumination_at(const ImagingModel& model, double radius_mm) {
-  return interpolate(model.reference_y_mm, model.relative_illumination, radius_mm, false);
+  return interpolate_linear(model.reference_y_mm, model.relative_illumination, radius_mm, false);
 }
 
 double distortion_at(const ImagingModel& model, double radius_mm) {
-  return interpolate(model.reference_y_mm, model.distortion, radius_mm, true);
+  return interpolate_linear(model.reference_y_mm, model.distortion, radius_mm, true);
 }
 
 double undistorted_radius_mm(const ImagingModel& model, double distorted_radius_mm) {
@@ -121,7 +99,7 @@ double undistorted_radius_mm(const ImagingModel& model, double distorted_radius_
                       model.fields_deg[h - 1], model.fields_deg[h], ybar[h - 1], ybar[h]));
     }
   }
-  return interpolate(ybar, model.reference_y_mm, distorted_radius_mm, true);
+  return interpolate_linear(ybar, model.reference_y_mm, distorted_radius_mm, true);
 }
 
 }  // namespace lensopt

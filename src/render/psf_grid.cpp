@@ -5,6 +5,7 @@
 #include <cmath>
 
 #include "lensopt/core/error.h"
+#include "lensopt/render/psf_resample.h"
 #include "lensopt/render/render.h"
 
 namespace lensopt {
@@ -19,63 +20,15 @@ int nearest_field(const std::vector<double>& heights, double r) {
   return (r - heights[hi - 1] <= heights[hi] - r) ? hi - 1 : hi;
 }
 
-// A G x G field-averaged PSF (one channel) resampled to the pixel grid: each bin's energy goes
-// bilinearly to the four pixels around its rotated position.
-PixelKernel resample_psf(const std::vector<double>& grid, const PsfOptions& options,
-                         double azimuth_rad, double pitch_um) {
-  const int g = options.grid_size;
-  const int c = options.centre();
-  // +y of the PSF along e_r = (cos a, sin a) (image coordinates, rows down); x along e_t.
-  const double erx = std::cos(azimuth_rad), ery = std::sin(azimuth_rad);
-  const double etx = -ery, ety = erx;
-  const double scale = options.bin_um / pitch_um;
-  // Offset (pixels) of bin (row, col).
-  auto offset = [&](int row, int col, double& dx, double& dy) {
-    const double u = (col - c) * scale;
-    const double v = (c - row) * scale;
-    dx = u * etx + v * erx;
-    dy = u * ety + v * ery;
-  };
-  double reach = 0;
-  for (int row = 0; row < g; ++row) {
-    for (int col = 0; col < g; ++col) {
-      if (grid[static_cast<std::size_t>(row) * g + col] <= 0.0) continue;
-      double dx, dy;
-      offset(row, col, dx, dy);
-      reach = std::max({reach, std::abs(dx), std::abs(dy)});
-    }
-  }
+// A G x G field-averaged PSF (one channel) resampled to the pixel grid (psf_resample.h).
+PixelKernel resample_to_pixels(const std::vector<double>& grid, const PsfOptions& options,
+                               double azimuth_rad, double pitch_um) {
+  const PsfResampling r = PsfResampling::make(
+      options, azimuth_rad, pitch_um, psf_kernel_radius(grid, options, azimuth_rad, pitch_um));
+  std::vector<double> values;
   PixelKernel kernel;
-  kernel.radius = static_cast<int>(std::floor(reach)) + 1;
-  const int size = kernel.size();
-  std::vector<double> acc(static_cast<std::size_t>(size) * size, 0.0);
-  double total = 0;
-  for (int row = 0; row < g; ++row) {
-    for (int col = 0; col < g; ++col) {
-      const double m = grid[static_cast<std::size_t>(row) * g + col];
-      if (m <= 0.0) continue;
-      double dx, dy;
-      offset(row, col, dx, dy);
-      const double px = dx + kernel.radius, py = dy + kernel.radius;
-      const int x0 = static_cast<int>(std::floor(px)), y0 = static_cast<int>(std::floor(py));
-      const double fx = px - x0, fy = py - y0;
-      double* r0 = acc.data() + static_cast<std::size_t>(y0) * size + x0;
-      double* r1 = r0 + size;
-      r0[0] += m * (1 - fx) * (1 - fy);
-      r0[1] += m * fx * (1 - fy);
-      r1[0] += m * (1 - fx) * fy;
-      r1[1] += m * fx * fy;
-      total += m;
-    }
-  }
-  kernel.values.resize(acc.size());
-  if (total > 0) {
-    for (std::size_t i = 0; i < acc.size(); ++i)
-      kernel.values[i] = static_cast<float>(acc[i] / total);
-  } else {  // no energy at all: leave the image unblurred rather than black
-    kernel.radius = 0;
-    kernel.values.assign(1, 1.0f);
-  }
+  kernel.radius = resample_psf(r, grid.data(), values) ? r.radius : 0;
+  kernel.values.assign(values.begin(), values.end());
   return kernel;
 }
 
@@ -126,7 +79,8 @@ std::vector<std::vector<double>> overlap_windows(const std::vector<int>& bounds,
   return w;
 }
 
-PsfGrid make_psf_grid(const ImagingModel& model, int width, int height, int res_factor) {
+PsfGrid make_psf_grid_layout(const std::vector<double>& reference_y_mm, double sensor_diagonal_mm,
+                             int width, int height, int res_factor) {
   constexpr int n = PsfGrid::kPatches;
   if (width < 2 * n || height < 2 * n) {
     throw Error(
@@ -135,20 +89,15 @@ PsfGrid make_psf_grid(const ImagingModel& model, int width, int height, int res_
                     width, height, 2 * n));
   }
   PsfGrid grid;
-  grid.geometry = SensorGeometry::make(width, height, res_factor, model.sensor_diagonal_mm);
+  grid.geometry = SensorGeometry::make(width, height, res_factor, sensor_diagonal_mm);
   const SensorGeometry& geo = grid.geometry;
   for (int k = 0; k <= n; ++k) {
     grid.bounds_x.push_back(static_cast<int>(std::lround(static_cast<double>(k) * width / n)));
     grid.bounds_y.push_back(static_cast<int>(std::lround(static_cast<double>(k) * height / n)));
   }
-  const int field_count = static_cast<int>(model.fields_deg.size());
-  const PsfOptions& popt = model.psfs.options;
-  const std::size_t cells = static_cast<std::size_t>(popt.grid_size) * popt.grid_size;
-  const double pitch_um = geo.pitch_mm * 1000.0;
+  const int field_count = static_cast<int>(reference_y_mm.size());
   grid.field_weights.assign(n * n, std::vector<double>(field_count, 0.0));
   grid.azimuth_rad.assign(n * n, 0.0);
-  grid.kernels.resize(n * n);
-  grid.grey_kernels.resize(n * n);
   for (int py = 0; py < n; ++py) {
     for (int px = 0; px < n; ++px) {
       const int q = grid.patch_index(px, py);
@@ -157,34 +106,71 @@ PsfGrid make_psf_grid(const ImagingModel& model, int width, int height, int res_
       const int x0 = grid.bounds_x[px], x1 = grid.bounds_x[px + 1];
       const int y0 = grid.bounds_y[py], y1 = grid.bounds_y[py + 1];
       for (int j = y0; j < y1; ++j)
-        for (int i = x0; i < x1; ++i)
-          a[nearest_field(model.reference_y_mm, geo.radius_mm(i, j))] += 1;
+        for (int i = x0; i < x1; ++i) a[nearest_field(reference_y_mm, geo.radius_mm(i, j))] += 1;
       const double count = static_cast<double>(x1 - x0) * (y1 - y0);
       for (double& v : a) v /= count;
       // Azimuth of the patch centre (the axis patch keeps +y pointing up).
       const double cx = 0.5 * (x0 + x1) - geo.axis_x, cy = 0.5 * (y0 + y1) - geo.axis_y;
       grid.azimuth_rad[q] = (std::hypot(cx, cy) < 1e-9) ? -0.5 * kPi : std::atan2(cy, cx);
-      for (int ch = 0; ch < kColourChannels; ++ch) {
-        std::vector<double> mixed(cells, 0.0);
-        for (int h = 0; h < field_count; ++h) {
-          if (a[h] == 0.0) continue;
-          const std::vector<double>& psf = model.psfs.fields[h].psf[ch];
-          for (std::size_t i = 0; i < cells; ++i) mixed[i] += a[h] * psf[i];
-        }
-        grid.kernels[q][ch] = resample_psf(mixed, popt, grid.azimuth_rad[q], pitch_um);
-        grid.max_radius = std::max(grid.max_radius, grid.kernels[q][ch].radius);
-      }
-      grid.grey_kernels[q] = mean_kernel(grid.kernels[q]);
     }
   }
-  const int psf_size = 2 * grid.max_radius + 1;
+  return grid;
+}
+
+PsfGrid make_psf_grid(const ImagingModel& model, int width, int height, int res_factor) {
+  constexpr int n = PsfGrid::kPatches;
+  PsfGrid grid = make_psf_grid_layout(model.reference_y_mm, model.sensor_diagonal_mm, width, height,
+                                      res_factor);
+  const int field_count = static_cast<int>(model.fields_deg.size());
+  const PsfOptions& popt = model.psfs.options;
+  const std::size_t cells = static_cast<std::size_t>(popt.grid_size) * popt.grid_size;
+  const double pitch_um = grid.geometry.pitch_mm * 1000.0;
+  grid.kernels.resize(n * n);
+  grid.grey_kernels.resize(n * n);
+  for (int q = 0; q < n * n; ++q) {
+    const std::vector<double>& a = grid.field_weights[q];
+    for (int ch = 0; ch < kColourChannels; ++ch) {
+      std::vector<double> mixed(cells, 0.0);
+      for (int h = 0; h < field_count; ++h) {
+        if (a[h] == 0.0) continue;
+        const std::vector<double>& psf = model.psfs.fields[h].psf[ch];
+        for (std::size_t i = 0; i < cells; ++i) mixed[i] += a[h] * psf[i];
+      }
+      grid.kernels[q][ch] = resample_to_pixels(mixed, popt, grid.azimuth_rad[q], pitch_um);
+      grid.max_radius = std::max(grid.max_radius, grid.kernels[q][ch].radius);
+    }
+    grid.grey_kernels[q] = mean_kernel(grid.kernels[q]);
+  }
+  check_image_holds_psf(width, height, grid.max_radius, grid.geometry.pitch_mm * 1000.0);
+  return grid;
+}
+
+void check_image_holds_psf(int width, int height, int max_radius, double pitch_um) {
+  const int psf_size = 2 * max_radius + 1;
   if (width < psf_size || height < psf_size) {
     throw Error(
         fmt::format("image {}x{} is smaller than the lens's PSF ({}x{} pixels at a pitch "
                     "of {:.2f} um): use a larger image",
                     width, height, psf_size, psf_size, pitch_um));
   }
-  return grid;
+}
+
+int overlap_window_extents(const std::vector<std::vector<double>>& windows, std::vector<int>& lo,
+                           std::vector<int>& hi) {
+  int widest = 0;
+  for (const auto& wk : windows) {
+    int first = -1, last = -1;
+    for (int i = 0; i < static_cast<int>(wk.size()); ++i) {
+      if (wk[i] > 0) {
+        if (first < 0) first = i;
+        last = i;
+      }
+    }
+    lo.push_back(first);
+    hi.push_back(last + 1);
+    widest = std::max(widest, last + 1 - first);
+  }
+  return widest;
 }
 
 }  // namespace lensopt

@@ -13,6 +13,7 @@
 #include <limits>
 #include <type_traits>
 
+#include "lensopt/core/interpolate.h"
 #include "lensopt/render/render.h"
 
 namespace lensopt {
@@ -20,15 +21,6 @@ namespace {
 
 int thread_count(int threads) {
   return threads > 0 ? threads : omp_get_max_threads();
-}
-
-// Keys cubic convolution weights (a = -1/2) of the taps at -1, 0, 1, 2 for a fraction t.
-inline void keys_weights(double t, double w[4]) {
-  const double t2 = t * t, t3 = t2 * t;
-  w[0] = -0.5 * t3 + t2 - 0.5 * t;
-  w[1] = 1.5 * t3 - 2.5 * t2 + 1.0;
-  w[2] = -1.5 * t3 + 2.0 * t2 + 0.5 * t;
-  w[3] = 0.5 * t3 - 0.5 * t2;
 }
 
 // One output row of the warp: pixel i samples the input at (i + 1/2 + offset_x, j + 1/2 +
@@ -100,13 +92,7 @@ std::shared_ptr<const std::vector<float>> Renderer::warp_map(int width, int heig
   const std::vector<double>& yref = model_.reference_y_mm;
   const int nodes = static_cast<int>(ybar.size());
   undistorted_radius_mm(model_, 0.0);
-  auto inverse = [&](double r_out) {
-    if (nodes == 1) return r_out;
-    const int k = std::clamp(
-        static_cast<int>(std::upper_bound(ybar.begin(), ybar.end(), r_out) - ybar.begin()) - 1, 0,
-        nodes - 2);
-    return yref[k] + (r_out - ybar[k]) * (yref[k + 1] - yref[k]) / (ybar[k + 1] - ybar[k]);
-  };
+  auto inverse = [&](double r_out) { return interpolate_linear(ybar, yref, r_out, true); };
   // Radial scale r / r' near the axis (the first piece of the inverse map).
   const double axis_scale = nodes > 1 ? (yref[1] - yref[0]) / (ybar[1] - ybar[0]) : 1.0;
   auto map = std::make_shared<std::vector<float>>(static_cast<std::size_t>(width) * height * 2);

@@ -1,15 +1,24 @@
 // Differentiable image formation for the joint optimization (paper "Joint Optimization").
 //
 // The rendered crop R depends on the lens variables x only through the sampled optics:
-//   x -> (field PSFs P_h, relative illumination R_h, distortion D_h)  [Jets through the tracer]
-//     -> patch kernels K_q = resample(rotate(sum_h a_qh P_h))        [Jets, small arrays]
-//     -> R = warp_D( RI_R . sum_q w_q (K_q * S) )                     [doubles/floats only]
-// (S the sharp scene, * convolution, w_q the overlap-add windows; render/render.h states each
-// step). No Jet ever sits on a pixel. The backward pass takes G = dL/dR and returns
-//   dL/dx_j = sum_q <dL/dK_q, dK_q/dx_j> + sum_h dL/dR_h dR_h/dx_j + sum_h dL/dD_h dD_h/dx_j,
-// where dL/dK_q is the correlation of (w_q . dL/d(blurred)) with S over the kernel's support (the
-// convolution is linear in K_q), dL/d(blurred) comes from G through the adjoint of the warp and
-// the RI multiplication, and the derivative parts of the Jets give dK_q/dx_j, dR_h/dx_j, dD_h/dx_j.
+//   x -> (field PSFs P_h, relative illumination R_h, heights y_ref,h, ybar_h)  [Jets, tracer]
+//     -> patch kernels K_q = L_q(sum_h a_qh P_h) / T                 [linear, fixed weights]
+//     -> R = warp_(ybar, y_ref)( RI_(y_ref, R) . sum_q w_q (K_q * S) )  [doubles only]
+// (S the sharp scene, * convolution, w_q the overlap-add windows, L_q the rotation and bilinear
+// resampling to the pixel grid, render/psf_resample.h; render/render.h states each step). The
+// distortion D_h = (ybar_h - y_ref,h) / y_ref,last enters the warp as its nodes (ybar_h, y_ref,h).
+// The field weights a_qh (nearest field), kernel radii and every integer choice are fixed per
+// prepare(). No Jet ever sits on a pixel or a kernel. The backward pass takes G = dL/dR and
+// returns
+//   dL/dx_j = sum_h,c <dL/dP_h[c], dP_h[c]/dx_j> + sum_h dL/dR_h dR_h/dx_j
+//             + sum_h (dL/dy_ref,h dy_ref,h/dx_j + dL/dybar_h dybar_h/dx_j),
+// where dL/dP_h[c] = sum_q a_qh L_q^T-adjoint(dL/dK_q[c]) (with the normalization by T),
+// dL/dK_q[c] is the correlation of (w_q . dL/d(blurred)) with S over the kernel's support (the
+// convolution is linear in K_q), dL/d(blurred) comes from G through the adjoint of the warp (the
+// transpose of the bicubic sampling) and the RI multiplication, dL/dR_h and dL/dy_ref,h from the
+// RI interpolation, dL/dybar_h and dL/dy_ref,h from the bicubic derivative at the warp's source
+// positions, and the derivative parts of the Jets give dP_h/dx_j, dR_h/dx_j, dy_ref,h/dx_j,
+// dybar_h/dx_j. src/joint/imaging.cpp states the adjoint of each step.
 #pragma once
 
 #include <vector>
@@ -45,7 +54,9 @@ struct DifferentiableImagingOptions {
 // Wall time of the last prepare() / render() / backward() calls, seconds.
 struct ImagingTimings {
   double trace_s = 0;    // ray tracing with Jets (incl. RI and distortion)
-  double psf_s = 0;      // KDE PSFs and patch kernels with Jets
+  double psf_s = 0;      // KDE PSFs with Jets (tracing their rays included)
+  double kernels_s = 0;  // patch kernels of the last new image size (made by the first render
+                         // or backward of that size after prepare(); included in its time)
   double render_s = 0;   // forward rendering
   double adjoint_s = 0;  // backward pass
 };
@@ -66,6 +77,9 @@ class DifferentiableImaging {
   // The crop of the rendered full image (blur, then RI and distortion as enabled). For the same
   // lens it equals Renderer::render of the full scene, restricted to the crop.
   FloatImage render(const FloatImage& scene, const CropWindow& crop) const;
+  // The same crop in double (interleaved channels, FloatImage's layout): what render() rounds
+  // to float. For finite-difference checks, where float's 6e-8 per pixel is too coarse.
+  std::vector<double> render_values(const FloatImage& scene, const CropWindow& crop) const;
 
   // Adds dL/dx to grad_x (resized to param.size() if empty) for dL/d(rendered crop) = grad_image
   // (same shape as render's output).

@@ -138,6 +138,12 @@ struct PsfGrid {
   int patch_index(int px, int py) const { return py * kPatches + px; }
 };
 
+// The PSF grid's layout alone (geometry, bounds, field weights, azimuths; no kernels) for fields
+// at paraxial heights `reference_y_mm`. Throws Error if the image is smaller than 2 pixels per
+// patch.
+PsfGrid make_psf_grid_layout(const std::vector<double>& reference_y_mm, double sensor_diagonal_mm,
+                             int width, int height, int res_factor);
+
 // Builds the PSF grid of a W x H image. Throws Error if the image is smaller than a PSF (or than
 // 2 pixels per patch).
 PsfGrid make_psf_grid(const ImagingModel& model, int width, int height, int res_factor);
@@ -148,6 +154,14 @@ PsfGrid make_psf_grid(const ImagingModel& model, int width, int height, int res_
 // normalization.
 std::vector<std::vector<double>> overlap_windows(const std::vector<int>& bounds, int extent,
                                                  int pad, std::vector<double>* raw_sum = nullptr);
+
+// Where each patch's window (from overlap_windows with pad 0) is non-zero: [lo[k], hi[k]).
+// Returns the widest extent.
+int overlap_window_extents(const std::vector<std::vector<double>>& windows, std::vector<int>& lo,
+                           std::vector<int>& hi);
+
+// Throws Error if a W x H image is smaller than a PSF of `max_radius` pixels.
+void check_image_holds_psf(int width, int height, int max_radius, double pitch_um);
 
 // Relative illumination and distortion at a radial height (mm), by the interpolation above.
 double relative_illumination_at(const ImagingModel& model, double radius_mm);
