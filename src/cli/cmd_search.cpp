@@ -66,34 +66,38 @@ void print_leaderboard(const SearchSummary& s, int rows) {
 void run_search_command(const SearchCommand& cmd) {
   SearchOptions options;
   std::string first_stem;
+  StartGroup cli_group;  // lenses and --generate of the command line
   for (const std::string& input : cmd.inputs) {
     const std::filesystem::path p(input);
     if (first_stem.empty()) first_stem = p.stem().string();
     if (p.extension() == ".toml" && std::filesystem::exists(p) && is_search_description(p))
       read_search_description(p, options);
     else
-      options.lens_files.push_back(input);
+      cli_group.lens_files.push_back(input);
   }
-  for (int n : cmd.generate) options.generate.push_back(n);
-  if (first_stem.empty() && !options.generate.empty())
-    first_stem = fmt::format("gen{}", options.generate[0]);
-  if (cmd.vary_stop) options.vary_stop = true;
-  if (cmd.vary_cement) options.vary_cement = true;
-  if (!cmd.stops.empty()) {
-    options.stops = StopPlaces{false, false, false};
-    for (const std::string& s : cmd.stops) {
-      if (s == "front")
-        options.stops.front = true;
-      else if (s == "between")
-        options.stops.between = true;
-      else if (s == "rear")
-        options.stops.rear = true;
-      else
-        throw Error(SourceLocation{"--stops"},
-                    fmt::format("'{}' must be front, between or rear", s));
-    }
+  cli_group.generate = cmd.generate;
+  if (first_stem.empty() && !cmd.generate.empty())
+    first_stem = fmt::format("gen{}", cmd.generate[0]);
+  if (!cli_group.lens_files.empty() || !cli_group.generate.empty())
+    options.starts.push_back(cli_group);
+  // The variation flags apply to every group (the description's too) when given.
+  StopPlaces stops{false, false, false};
+  for (const std::string& s : cmd.stops) {
+    if (s == "front")
+      stops.front = true;
+    else if (s == "between")
+      stops.between = true;
+    else if (s == "rear")
+      stops.rear = true;
+    else
+      throw Error(SourceLocation{"--stops"}, fmt::format("'{}' must be front, between or rear", s));
   }
-  if (cmd.glass_seeds > 0) options.glass_seeds = cmd.glass_seeds;
+  for (StartGroup& g : options.starts) {
+    if (cmd.vary_stop) g.vary_stop = true;
+    if (cmd.vary_cement) g.vary_cement = true;
+    if (!cmd.stops.empty()) g.stops = stops;
+    if (cmd.glass_seeds > 0) g.glass_seeds = cmd.glass_seeds;
+  }
   if (cmd.top >= 0) options.top_k = cmd.top;
   if (cmd.jobs >= 0) options.jobs = cmd.jobs;
   if (cmd.threads >= 0) options.optimizer_threads = cmd.threads;

@@ -89,15 +89,19 @@ SearchOptions::SearchOptions() {
 }
 
 void SearchOptions::validate() const {
-  if (lens_files.empty() && generate.empty())
+  if (starts.empty())
     throw Error("the search has no starting lens: give lens files or generated element counts");
-  for (int n : generate)
-    if (n < 1 || n > 4)
-      throw Error(fmt::format("generate = {}: generated starts have 1 to 4 elements", n));
-  if (glass_seeds < 1 || glass_seeds > 1000)
-    throw Error(fmt::format("glass_seeds = {} must be in [1, 1000]", glass_seeds));
-  if (!stops.front && !stops.between && !stops.rear)
-    throw Error("stops: give at least one stop position");
+  for (const StartGroup& g : starts) {
+    if (g.lens_files.empty() && g.generate.empty())
+      throw Error("a start group has neither lens files nor generated element counts");
+    for (int n : g.generate)
+      if (n < 1 || n > 4)
+        throw Error(fmt::format("generate = {}: generated starts have 1 to 4 elements", n));
+    if (g.glass_seeds < 1 || g.glass_seeds > 1000)
+      throw Error(fmt::format("glass_seeds = {} must be in [1, 1000]", g.glass_seeds));
+    if (!g.stops.front && !g.stops.between && !g.stops.rear)
+      throw Error("stops: give at least one stop position");
+  }
   if (!(f_number > 0.0) || !std::isfinite(f_number))
     throw Error(fmt::format("f_number = {} must be > 0", f_number));
   if (!(half_field_deg > 0.0 && half_field_deg < 90.0))
@@ -163,46 +167,81 @@ void read_search_description(const std::filesystem::path& path, SearchOptions& o
     return out;
   };
 
-  for_each("search", [&](const std::string& k, const toml::node& n, const SourceLocation& w) {
+  // Start keys, in [search] (the defaults, and a group of their own when they name lenses) and in
+  // each [[search.starts]] table (a group inheriting the defaults' variations).
+  auto group_key = [&](StartGroup& g, const std::string& k, const toml::node& n,
+                       const SourceLocation& w) {
     if (k == "lenses") {
       for (const std::string& s : strings(k, n, w)) {
         const std::filesystem::path p(s);
-        options.lens_files.push_back(p.is_absolute() ? s : (base / p).lexically_normal().string());
+        g.lens_files.push_back(p.is_absolute() ? s : (base / p).lexically_normal().string());
       }
     } else if (k == "generate") {
       const toml::array* arr = n.as_array();
       if (!arr) throw Error(w, "generate must be an array of element counts, e.g. [2, 3]");
-      for (const auto& item : *arr)
-        options.generate.push_back(integer(k, item, where_of(path, item)));
+      for (const auto& item : *arr) g.generate.push_back(integer(k, item, where_of(path, item)));
     } else if (k == "vary_stop") {
-      options.vary_stop = boolean(k, n, w);
+      g.vary_stop = boolean(k, n, w);
     } else if (k == "vary_cement") {
-      options.vary_cement = boolean(k, n, w);
+      g.vary_cement = boolean(k, n, w);
     } else if (k == "stops") {
-      options.stops = StopPlaces{false, false, false};
+      g.stops = StopPlaces{false, false, false};
       for (const std::string& s : strings(k, n, w)) {
         if (s == "front")
-          options.stops.front = true;
+          g.stops.front = true;
         else if (s == "between")
-          options.stops.between = true;
+          g.stops.between = true;
         else if (s == "rear")
-          options.stops.rear = true;
+          g.stops.rear = true;
         else
           throw Error(w, fmt::format("stops: '{}' must be front, between or rear", s));
       }
     } else if (k == "glass_seeds") {
-      options.glass_seeds = integer(k, n, w);
-    } else if (k == "catalog") {
+      g.glass_seeds = integer(k, n, w);
+    } else {
+      return false;
+    }
+    return true;
+  };
+  StartGroup defaults;
+  const toml::array* start_tables = nullptr;
+  for_each("search", [&](const std::string& k, const toml::node& n, const SourceLocation& w) {
+    if (group_key(defaults, k, n, w)) return;
+    if (k == "catalog") {
       options.catalog = string(k, n, w);
     } else if (k == "top") {
       options.top_k = integer(k, n, w);
+    } else if (k == "starts") {
+      start_tables = n.as_array();
+      if (!start_tables || !start_tables->is_array_of_tables())
+        throw Error(w, "starts must be an array of tables: [[search.starts]]");
     } else {
       throw Error(w,
                   fmt::format("unknown key '{}' in [search]; known: lenses, generate, vary_stop, "
-                              "vary_cement, stops, glass_seeds, catalog, top",
+                              "vary_cement, stops, glass_seeds, catalog, top, starts",
                               k));
     }
   });
+  if (!defaults.lens_files.empty() || !defaults.generate.empty())
+    options.starts.push_back(defaults);
+  if (start_tables) {
+    for (const auto& item : *start_tables) {
+      StartGroup g = defaults;
+      g.lens_files.clear();
+      g.generate.clear();
+      for (const auto& [key, node] : *item.as_table()) {
+        const std::string k(key.str());
+        if (!group_key(g, k, node, where_of(path, node)))
+          throw Error(where_of(path, node),
+                      fmt::format("unknown key '{}' in [[search.starts]]; known: lenses, generate, "
+                                  "vary_stop, vary_cement, stops, glass_seeds",
+                                  k));
+      }
+      if (g.lens_files.empty() && g.generate.empty())
+        throw Error(where_of(path, item), "[[search.starts]] needs lenses or generate");
+      options.starts.push_back(g);
+    }
+  }
   for_each("specs", [&](const std::string& k, const toml::node& n, const SourceLocation& w) {
     if (k == "f_number")
       options.f_number = number(k, n, w);
@@ -301,66 +340,66 @@ std::vector<SearchCandidate> make_candidates(const SearchOptions& options) {
     out.push_back(std::move(c));
   };
 
-  for (const std::string& pattern : options.lens_files) {
-    for (const std::filesystem::path& path : expand_lens_path(pattern)) {
-      const Lens lens = read_lens(path);  // an unreadable file is bad input: it throws
-      const std::string label = unique_label(path.stem().string());
-      std::optional<LensForm> form;
-      std::string form_error;
-      try {
-        form = decompose_lens(lens);
-      } catch (const Error& e) {
-        form_error = e.message();
-      }
-      if (!form) {
-        // Only the lens as given; seeds and layouts need its elements.
-        for (int seed = 0; seed < options.glass_seeds; ++seed) {
-          push(label, "as-given", seed, [&]() -> Lens {
-            if (seed == 0) return lens;
-            throw Error("glass seeds need a lens of elements and one stop in air: " + form_error);
-          });
+  for (const StartGroup& g : options.starts) {
+    for (const std::string& pattern : g.lens_files) {
+      for (const std::filesystem::path& path : expand_lens_path(pattern)) {
+        const Lens lens = read_lens(path);  // an unreadable file is bad input: it throws
+        const std::string label = unique_label(path.stem().string());
+        std::optional<LensForm> form;
+        std::string form_error;
+        try {
+          form = decompose_lens(lens);
+        } catch (const Error& e) {
+          form_error = e.message();
         }
-        continue;
-      }
-      const std::string catalog_name =
-          lens.catalog_name.empty() ? options.catalog : lens.catalog_name;
-      const double defocus_mm = detail::lens_defocus_mm(lens);
-      for (const LensLayout& layout :
-           layout_variants(form->layout, options.vary_stop, options.vary_cement, options.stops)) {
-        for (int seed = 0; seed < options.glass_seeds; ++seed) {
-          push(label, layout.code(), seed, [&]() -> Lens {
-            if (seed == 0 && layout == form->layout) return lens;
-            LensForm f = with_layout(*form, layout);
-            seed_glasses(f, seed, *load_catalog(catalog_name));
-            Lens l = compose_lens(f, lens);
-            if (l.catalog_name.empty() && seed > 0) l.catalog_name = catalog_name;
-            l.surfaces.back().thickness_mm = detail::rebuilt_image_mm(l, defocus_mm);
-            return l;
-          });
+        if (!form) {
+          // Only the lens as given; seeds and layouts need its elements.
+          for (int seed = 0; seed < g.glass_seeds; ++seed) {
+            push(label, "as-given", seed, [&]() -> Lens {
+              if (seed == 0) return lens;
+              throw Error("glass seeds need a lens of elements and one stop in air: " + form_error);
+            });
+          }
+          continue;
+        }
+        const std::string catalog_name =
+            lens.catalog_name.empty() ? options.catalog : lens.catalog_name;
+        const double defocus_mm = detail::lens_defocus_mm(lens);
+        for (const LensLayout& layout :
+             layout_variants(form->layout, g.vary_stop, g.vary_cement, g.stops)) {
+          for (int seed = 0; seed < g.glass_seeds; ++seed) {
+            push(label, layout.code(), seed, [&]() -> Lens {
+              if (seed == 0 && layout == form->layout) return lens;
+              LensForm f = with_layout(*form, layout);
+              seed_glasses(f, seed, *load_catalog(catalog_name));
+              Lens l = compose_lens(f, lens);
+              if (l.catalog_name.empty() && seed > 0) l.catalog_name = catalog_name;
+              l.surfaces.back().thickness_mm = detail::rebuilt_image_mm(l, defocus_mm);
+              return l;
+            });
+          }
         }
       }
     }
-  }
-  for (int n : options.generate) {
-    const std::string label = fmt::format("gen{}", n);
-    if (labels.count(label)) continue;  // a repeated count adds nothing
-    labels.insert(label);
-    Lens like;
-    like.catalog_name = options.catalog;
-    like.source_path = label;
-    apply_specs(like, options);
-    const double f = like.specs.focal_length_mm();
-    for (const LensLayout& layout : layout_variants(default_layout(n), options.vary_stop,
-                                                    options.vary_cement, options.stops)) {
-      for (int seed = 0; seed < options.glass_seeds; ++seed) {
-        push(label, layout.code(), seed, [&]() -> Lens {
-          const std::shared_ptr<const Catalog> catalog = load_catalog(options.catalog);
-          LensForm form = generated_form(layout, *catalog, f);
-          seed_glasses(form, seed, *catalog);
-          Lens l = compose_lens(form, like);
-          l.surfaces.back().thickness_mm = detail::rebuilt_image_mm(l, 0.0);
-          return l;
-        });
+    for (int n : g.generate) {
+      const std::string label = unique_label(fmt::format("gen{}", n));
+      Lens like;
+      like.catalog_name = options.catalog;
+      like.source_path = label;
+      apply_specs(like, options);
+      const double f = like.specs.focal_length_mm();
+      for (const LensLayout& layout :
+           layout_variants(default_layout(n), g.vary_stop, g.vary_cement, g.stops)) {
+        for (int seed = 0; seed < g.glass_seeds; ++seed) {
+          push(label, layout.code(), seed, [&]() -> Lens {
+            const std::shared_ptr<const Catalog> catalog = load_catalog(options.catalog);
+            LensForm form = generated_form(layout, *catalog, f);
+            seed_glasses(form, seed, *catalog);
+            Lens l = compose_lens(form, like);
+            l.surfaces.back().thickness_mm = detail::rebuilt_image_mm(l, 0.0);
+            return l;
+          });
+        }
       }
     }
   }

@@ -65,9 +65,10 @@ CandidateResult fake(int index, bool ok, bool met, double final_um) {
 // rejects a rear stop: an error row), two glass seeds, coarse sampling, few iterations.
 SearchOptions tiny_search() {
   SearchOptions o;
-  o.lens_files = {lens_path("doublet")};
-  o.vary_stop = true;
-  o.glass_seeds = 2;
+  o.starts.push_back(StartGroup{});
+  o.starts[0].lens_files = {lens_path("doublet")};
+  o.starts[0].vary_stop = true;
+  o.starts[0].glass_seeds = 2;
   o.optimize.sampling.rings = 3;
   o.optimize.sampling.fields = 3;
   o.optimize.max_iterations = 3;
@@ -183,11 +184,13 @@ TEST_CASE(
     "search: the candidate list is deterministic; seed 0 is the file, seeds draw crowns and "
     "flints") {
   SearchOptions o;
-  o.lens_files = {lens_path("cooke")};
-  o.generate = {2, 3, 4};
-  o.vary_stop = true;
-  o.vary_cement = true;
-  o.glass_seeds = 3;
+  StartGroup g;
+  g.lens_files = {lens_path("cooke")};
+  g.generate = {2, 3, 4};
+  g.vary_stop = true;
+  g.vary_cement = true;
+  g.glass_seeds = 3;
+  o.starts = {g};
   const auto a = make_candidates(o);
   const auto b = make_candidates(o);
   REQUIRE(a.size() == b.size());
@@ -242,10 +245,12 @@ TEST_CASE(
 TEST_CASE("search: generated starts have the asked layout and a traceable first order") {
   for (int n = 1; n <= 4; ++n) {
     SearchOptions o;
-    o.generate = {n};
-    o.vary_stop = true;
-    o.vary_cement = true;
-    o.stops = StopPlaces{true, true, false};
+    StartGroup g;
+    g.generate = {n};
+    g.vary_stop = true;
+    g.vary_cement = true;
+    g.stops = StopPlaces{true, true, false};
+    o.starts = {g};
     for (const SearchCandidate& c : make_candidates(o)) {
       CAPTURE(c.id);
       REQUIRE(c.error.empty());
@@ -370,12 +375,62 @@ TEST_CASE("search: one run, a resumed run and merged shards give the same leader
   different.optimize.max_iterations = 4;
   CHECK_THROWS_AS(run_search(different, one), Error);
   const fs::path other = fresh_dir("other");
-  different.lens_files = {lens_path("singlet")};
-  different.vary_stop = false;
-  different.glass_seeds = 1;
+  different.starts = {StartGroup{}};
+  different.starts[0].lens_files = {lens_path("singlet")};
   run_search(different, other);
   CHECK_THROWS_AS(merge_searches({one, other}, fresh_dir("bad-merge"), 1), Error);
   for (const char* d :
        {"one", "resumed", "shard1", "shard2", "shard3", "merged", "other", "bad-merge"})
     fs::remove_all(fs::temp_directory_path() / (std::string("lensopt-test-search-") + d));
+}
+
+TEST_CASE(
+    "search: a description's start groups, specs and optimizer settings; bad keys name file:line") {
+  const fs::path dir = fresh_dir("description");
+  fs::create_directories(dir);
+  const std::string lenses = (test::source_dir() / "lenses").string();
+  write_file_atomic(
+      dir / "s.toml",
+      "[search]\nvary_stop = true\nstops = [\"front\", \"between\"]\ntop = 3\n"
+      "[[search.starts]]\nlenses = [\"" +
+          lenses +
+          "/cooke.toml\"]\n"
+          "vary_cement = true\n"
+          "[[search.starts]]\ngenerate = [2]\nvary_stop = false\nglass_seeds = 2\n"
+          "[specs]\nfocal_length_mm = 20.0\n"
+          "[optimize]\nglass_search = \"snap\"\nconstraints = \"paper\"\nrings = 6\n");
+  CHECK(is_search_description(dir / "s.toml"));
+  CHECK_FALSE(is_search_description(test::source_dir() / "lenses" / "cooke.toml"));
+  SearchOptions o;
+  read_search_description(dir / "s.toml", o);
+  REQUIRE(o.starts.size() == 2);
+  CHECK(o.starts[0].lens_files.size() == 1);
+  CHECK(o.starts[0].vary_stop);  // inherited from [search]
+  CHECK(o.starts[0].vary_cement);
+  CHECK_FALSE(o.starts[0].stops.rear);
+  CHECK(o.starts[1].generate == std::vector<int>{2});
+  CHECK_FALSE(o.starts[1].vary_stop);
+  CHECK(o.starts[1].glass_seeds == 2);
+  CHECK(o.top_k == 3);
+  CHECK(o.sensor_diagonal_mm == doctest::Approx(2.0 * 20.0 * std::tan(25.0 * M_PI / 180.0)));
+  CHECK(o.optimize.glass_search == GlassSearch::kSnap);
+  CHECK(o.optimize.loss.paper_penalties);
+  CHECK(o.optimize.sampling.rings == 6);
+  o.validate();
+  // Cooke: stops front, between (2 gaps), cementing: 4 patterns -> 1 + ... ; generated: 1 layout
+  // x 2.
+  const auto candidates = make_candidates(o);
+  CHECK(candidates.back().id == "gen2:E-S-E:g1");
+  CHECK(candidates.front().start.specs.focal_length_mm() == doctest::Approx(20.0));
+
+  write_file_atomic(dir / "bad.toml", "[search]\nlenses = []\nvary_stops = true\n");
+  SearchOptions bad;
+  try {
+    read_search_description(dir / "bad.toml", bad);
+    FAIL("unknown key accepted");
+  } catch (const Error& e) {
+    CHECK(std::string(e.what()).find("bad.toml:3:") != std::string::npos);
+    CHECK(std::string(e.what()).find("vary_stops") != std::string::npos);
+  }
+  fs::remove_all(dir);
 }

@@ -124,16 +124,21 @@ void seed_glasses(LensForm& form, int seed, const Catalog& catalog);
 // SplitMix64: the glass seeds' generator (the same sequence everywhere).
 uint64_t splitmix64(uint64_t x);
 
-// What a search runs: sources, variations, specs, optimizer settings, output.
-struct SearchOptions {
+// A group of starting lenses and how each is varied.
+struct StartGroup {
   std::vector<std::string> lens_files;  // starting lens files (TOML, the paper's YAML, .zmx)
   std::vector<int> generate;            // generated starts: element counts (1..4)
   bool vary_stop = false;
   bool vary_cement = false;
   StopPlaces stops;
-  int glass_seeds = 1;            // seeds 0..N-1 per (source, layout)
-  std::string catalog = "ohara";  // for generated starts and glass seeds
-  double f_number = 2.0;          // specs of every candidate (default: the paper's)
+  int glass_seeds = 1;  // seeds 0..N-1 per (source, layout)
+};
+
+// What a search runs: sources, variations, specs, optimizer settings, output.
+struct SearchOptions {
+  std::vector<StartGroup> starts;  // in order; a source named twice gets a suffix ("cooke-2")
+  std::string catalog = "ohara";   // for generated starts and glass seeds
+  double f_number = 2.0;           // specs of every candidate (default: the paper's)
   double half_field_deg = 25.0;
   double sensor_diagonal_mm = 16.0;  // f = d / (2 tan hfov) = 17.156 mm
   OptimizeOptions optimize;          // each candidate's optimizer settings
@@ -148,7 +153,8 @@ struct SearchOptions {
   void validate() const;
 };
 
-// Reads a search description (TOML, see docs/search.md) into `options`; lens paths are resolved
+// Reads a search description (TOML, see docs/search.md) into `options`: the [search] table's own
+// start keys make one group, each [[search.starts]] table another; lens paths are resolved
 // relative to the description's folder. Throws Error with file:line:column.
 void read_search_description(const std::filesystem::path& path, SearchOptions& options);
 
