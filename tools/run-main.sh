@@ -25,6 +25,8 @@ echo "== tolerancing (Tessar, 2000 trials)"
 "$lensopt" tolerance lenses/tessar.toml --trials 2000 --seed 1 --csv out/tessar-trials.csv \
   --histogram out/tessar-histogram.svg > out/tessar-tolerance.txt
 head -20 out/tessar-tolerance.txt
+echo "== baseline search (Doublet: stop in front, between, behind; two glass seeds)"
+"$lensopt" search lenses/doublet.toml --vary-stop --glass-seeds 2 -o out/search-doublet -q
 if has chart && has render; then
   echo "== image simulation of the generated chart"
   "$lensopt" chart -o out/chart.png --size 1280x720
