@@ -117,7 +117,9 @@ std::vector<double> LensParameterization::from_lens(const Lens& lens_in) const {
     switch (v.kind) {
       case LensVariable::Kind::kCurvature: x[i] = s.curvature_per_mm * f; break;
       case LensVariable::Kind::kSpacing: x[i] = s.thickness_mm / f; break;
-      case LensVariable::Kind::kDefocus: x[i] = (s.thickness_mm - sys.bfl_mm) / f; break;
+      case LensVariable::Kind::kDefocus:
+        x[i] = paraxial_image_solve_ ? (s.thickness_mm - sys.bfl_mm) / f : s.thickness_mm / f;
+        break;
       case LensVariable::Kind::kGlass0: {
         const Eigen::Vector2d g = glasses_.whiten(s.material.nd, s.material.vd);
         x[i] = g[0];

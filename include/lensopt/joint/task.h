@@ -4,6 +4,19 @@
 //
 // Images cross the interface as FloatImage (interleaved channels, values ~[0, 1]); a task turns a
 // batch into a B x C x H x W tensor and returns the gradient in the same FloatImage layout.
+//
+// Built-in task "restoration": a residual CNN  y = x + N(x),  N = conv3x3(C -> F), ReLU,
+// (conv3x3(F -> F), ReLU) x (layers - 2), conv3x3(F -> C), with the last layer initialized to 0
+// so the untrained network is the identity (the "network fixed" setting restores nothing). Loss:
+// MSE(y, sharp) averaged over every pixel, channel and image; trained by Adam. Metric: mean over
+// the batch of PSNR(y clamped to [0, 1], sharp) = 10 log10(1 / MSE_i), dB.
+// User task "torchscript:MODEL.pt": a TorchScript module whose forward(images, targets) returns
+// the scalar loss (mean over the batch); its parameters are trained by Adam. targets is a B x N
+// float tensor of the batch's targets files (every image of the batch must have one, all with N
+// numbers; see joint/data.h for the format), or the B x C x H x W sharp crops when no image has a
+// targets file. Metric: -loss.
+// Gradient: dL/d(rendered) by torch autograd through the network, the loss being the mean over
+// the batch (so the gradients of one image carry the 1/B).
 #pragma once
 
 #include <filesystem>
@@ -27,10 +40,14 @@ struct TaskOutput {
 };
 
 struct TaskOptions {
-  double learning_rate = 1e-3;  // the task's own Adam
-  int channels = 3;             // image channels
-  unsigned seed = 1;            // weight initialization
-  void validate() const;
+  double learning_rate = 1e-3;    // the task's own Adam
+  int channels = 3;               // image channels
+  unsigned seed = 1;              // weight initialization
+  int features = 32;              // restoration: feature channels F
+  int layers = 4;                 // restoration: convolution layers (>= 2)
+  bool double_precision = false;  // run the network in float64 (gradient checks)
+  int threads = 2;                // torch intra-op threads (deterministic for a fixed count)
+  void validate() const;          // throws Error naming the bad value
 };
 
 class Task {
@@ -45,9 +62,15 @@ class Task {
   virtual double metric(const TaskBatch& batch) = 0;
   virtual std::string metric_name() const = 0;
   virtual void set_learning_rate(double learning_rate) = 0;
+  // The task's output images for a batch (restoration: the restored crops, clamped to [0, 1]);
+  // empty for tasks whose output is not an image.
+  virtual std::vector<FloatImage> predict(const TaskBatch& batch) = 0;
   // Weights and optimizer state, written atomically; load restores both exactly.
   virtual void save(const std::filesystem::path& path) const = 0;
   virtual void load(const std::filesystem::path& path) = 0;
+  // The trained network alone (restoration: a libtorch archive of the weights; TorchScript: the
+  // module itself, loadable by torch.jit.load), written atomically.
+  virtual void save_network(const std::filesystem::path& path) const = 0;
 };
 
 // Whether lensopt was built with libtorch (CMake option LENSOPT_WITH_TORCH).

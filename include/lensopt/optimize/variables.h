@@ -12,7 +12,7 @@
 //      whitened space, with the straight-through gradient g_q = g + stopgrad(g* - g);
 //   2. the normalized lens (f = 1): curvatures c', spacings s', the last curvature solved so the
 //      paraxial focal length at 587.6 nm is exactly 1 (paraxial.h: solve_last_curvature);
-//   3. the paraxial image solve: s_{K-1} = BFL' + s'_{K-1};
+//   3. the paraxial image solve: s_{K-1} = BFL' + s'_{K-1} (or, without it, s_{K-1} = s'_{K-1});
 //   4. scale: c = c' / f, t = s' f.
 #pragma once
 
@@ -158,8 +158,12 @@ class LensParameterization {
     // Fixed (frozen by structure) values: the stop is flat; frozen variables are still variables.
     const int last = k_count - 1;
     lens.curvature_per_mm[last] = solve_last_curvature(lens, K<T>(1.0), kWavelengthD_nm);
-    const ParaxialData<T> par = paraxial_data(lens, kWavelengthD_nm);
-    lens.thickness_mm[last] = par.bfl_mm + x[defocus_index_];
+    if (paraxial_image_solve_) {
+      const ParaxialData<T> par = paraxial_data(lens, kWavelengthD_nm);
+      lens.thickness_mm[last] = par.bfl_mm + x[defocus_index_];
+    } else {
+      lens.thickness_mm[last] = x[defocus_index_];  // ablation: s_{K-1} = s'_{K-1} f
+    }
     const T f = K<T>(focal_length_mm_);
     for (int k = 0; k < k_count; ++k) {
       lens.curvature_per_mm[k] = lens.curvature_per_mm[k] / f;
@@ -183,6 +187,12 @@ class LensParameterization {
     return sum;
   }
 
+  // The paraxial image solve (step 3; on by default). Off (the paper's ablation "no paraxial
+  // image solve"): the last spacing is a plain variable, s'_{K-1} = t_{K-1} / f, still named
+  // "defocus". Set it before from_lens/to_lens: it changes what the variable means.
+  void set_paraxial_image_solve(bool on) { paraxial_image_solve_ = on; }
+  bool paraxial_image_solve() const { return paraxial_image_solve_; }
+
   // Indices of the variables whose name or group is in `names` ("curvatures", "c3", "g2", ...).
   // Throws Error naming an unknown entry.
   std::vector<int> select(const std::vector<std::string>& names) const;
@@ -193,6 +203,7 @@ class LensParameterization {
   std::vector<LensVariable> variables_;
   double focal_length_mm_ = 1.0;
   int defocus_index_ = -1;
+  bool paraxial_image_solve_ = true;
 };
 
 }  // namespace lensopt

@@ -1,0 +1,354 @@
+// The libtorch tasks of joint/task.h: the built-in restoration CNN and TorchScript user tasks.
+// This is the one file that includes libtorch's headers (they compile slowly).
+#include <fmt/format.h>
+#include <torch/script.h>
+#include <torch/torch.h>
+
+#include <cmath>
+#include <map>
+
+#include "lensopt/core/atomic_file.h"
+#include "lensopt/core/error.h"
+#include "lensopt/joint/data.h"
+#include "lensopt/joint/task.h"
+
+namespace lensopt {
+namespace {
+
+torch::Dtype dtype_of(const TaskOptions& options) {
+  return options.double_precision ? torch::kFloat64 : torch::kFloat32;
+}
+
+// B x C x H x W tensor (a copy) of a batch of interleaved images.
+torch::Tensor to_tensor(const std::vector<FloatImage>& images, int channels, torch::Dtype dtype) {
+  if (images.empty()) throw Error("a task batch must hold at least one image");
+  std::vector<torch::Tensor> list;
+  for (const FloatImage& im : images) {
+    if (im.channels != channels || im.width != images[0].width || im.height != images[0].height)
+      throw Error(
+          fmt::format("task batch: a {}x{}x{} image among {}x{}x{} ones (the task has {} "
+                      "channels)",
+                      im.width, im.height, im.channels, images[0].width, images[0].height,
+                      images[0].channels, channels));
+    list.push_back(torch::from_blob(const_cast<float*>(im.pixels.data()),
+                                    {im.height, im.width, im.channels}, torch::kFloat32)
+                       .permute({2, 0, 1}));
+  }
+  return torch::stack(list).to(dtype).contiguous();
+}
+
+std::vector<FloatImage> from_tensor(const torch::Tensor& t) {
+  const torch::Tensor hwc = t.detach().to(torch::kFloat32).permute({0, 2, 3, 1}).contiguous();
+  const int b = static_cast<int>(hwc.size(0)), h = static_cast<int>(hwc.size(1)),
+            w = static_cast<int>(hwc.size(2)), c = static_cast<int>(hwc.size(3));
+  std::vector<FloatImage> out;
+  const float* data = hwc.data_ptr<float>();
+  for (int i = 0; i < b; ++i) {
+    FloatImage im(w, h, c);
+    std::copy_n(data + static_cast<std::size_t>(i) * w * h * c, im.pixels.size(),
+                im.pixels.begin());
+    out.push_back(std::move(im));
+  }
+  return out;
+}
+
+// Runs a libtorch call, turning its exceptions into lensopt::Error with a context.
+template <typename F>
+auto guarded(const std::string& context, F&& f) {
+  try {
+    return f();
+  } catch (const c10::Error& e) {
+    throw Error(fmt::format("{}: {}", context, e.what_without_backtrace()));
+  }
+}
+
+void set_adam_learning_rate(torch::optim::Adam& adam, double learning_rate) {
+  for (auto& group : adam.param_groups())
+    static_cast<torch::optim::AdamOptions&>(group.options()).lr(learning_rate);
+}
+
+// The restoration network y = x + N(x) (task.h).
+struct RestorationNetImpl : torch::nn::Module {
+  RestorationNetImpl(int channels, int features, int layers) {
+    for (int l = 0; l < layers; ++l) {
+      const int in = l == 0 ? channels : features;
+      const int out = l == layers - 1 ? channels : features;
+      convs.push_back(register_module(
+          fmt::format("conv{}", l),
+          torch::nn::Conv2d(
+              torch::nn::Conv2dOptions(in, out, 3).padding(1).padding_mode(torch::kReflect))));
+    }
+    // The last layer starts at 0: the untrained network is the identity.
+    torch::NoGradGuard no_grad;
+    convs.back()->weight.zero_();
+    convs.back()->bias.zero_();
+  }
+  torch::Tensor forward(const torch::Tensor& x) {
+    torch::Tensor h = x;
+    for (std::size_t l = 0; l < convs.size(); ++l) {
+      h = convs[l]->forward(h);
+      if (l + 1 < convs.size()) h = torch::relu(h);
+    }
+    return x + h;
+  }
+  std::vector<torch::nn::Conv2d> convs;
+};
+TORCH_MODULE(RestorationNet);
+
+class RestorationTask : public Task {
+ public:
+  explicit RestorationTask(const TaskOptions& options) : options_(options) {
+    torch::set_num_threads(options.threads);
+    torch::manual_seed(options.seed);
+    net_ = RestorationNet(options.channels, options.features, options.layers);
+    net_->to(dtype_of(options));
+    adam_ = std::make_unique<torch::optim::Adam>(net_->parameters(),
+                                                 torch::optim::AdamOptions(options.learning_rate));
+  }
+  std::string name() const override { return "restoration"; }
+  std::string metric_name() const override { return "PSNR (dB)"; }
+
+  TaskOutput step(const TaskBatch& batch, bool train, bool want_grad) override {
+    return guarded("restoration task", [&] {
+      TaskOutput out;
+      torch::Tensor x = to_tensor(batch.rendered, options_.channels, dtype_of(options_));
+      const torch::Tensor y = to_tensor(batch.sharp, options_.channels, dtype_of(options_));
+      if (!train && !want_grad) {
+        torch::NoGradGuard no_grad;
+        out.loss = torch::mse_loss(net_->forward(x), y).item<double>();
+        return out;
+      }
+      if (want_grad) x.set_requires_grad(true);
+      adam_->zero_grad();
+      const torch::Tensor loss = torch::mse_loss(net_->forward(x), y);
+      loss.backward();
+      out.loss = loss.item<double>();
+      if (want_grad) out.grad_rendered = from_tensor(x.grad());
+      if (train) adam_->step();
+      return out;
+    });
+  }
+
+  std::vector<FloatImage> predict(const TaskBatch& batch) override {
+    return guarded("restoration task", [&] {
+      torch::NoGradGuard no_grad;
+      const torch::Tensor x = to_tensor(batch.rendered, options_.channels, dtype_of(options_));
+      return from_tensor(net_->forward(x).clamp(0.0, 1.0));
+    });
+  }
+
+  double metric(const TaskBatch& batch) override {
+    return guarded("restoration task", [&] {
+      torch::NoGradGuard no_grad;
+      const torch::Tensor x = to_tensor(batch.rendered, options_.channels, dtype_of(options_));
+      const torch::Tensor y = to_tensor(batch.sharp, options_.channels, dtype_of(options_));
+      const torch::Tensor restored = net_->forward(x).clamp(0.0, 1.0);
+      const torch::Tensor mse = (restored - y).pow(2).mean({1, 2, 3}).to(torch::kFloat64);
+      // PSNR with peak 1: 10 log10(1 / MSE) per image (MSE floored at 1e-12: 120 dB).
+      return (-10.0 * torch::log10(mse.clamp_min(1e-12))).mean().item<double>();
+    });
+  }
+
+  void set_learning_rate(double learning_rate) override {
+    set_adam_learning_rate(*adam_, learning_rate);
+  }
+
+  void save(const std::filesystem::path& path) const override {
+    guarded(fmt::format("saving {}", path.string()), [&] {
+      torch::serialize::OutputArchive archive, optimizer;
+      net_->save(archive);
+      adam_->save(optimizer);
+      archive.write("optimizer", optimizer);
+      write_file_atomic_with(
+          path, [&](const std::filesystem::path& tmp) { archive.save_to(tmp.string()); });
+      return 0;
+    });
+  }
+
+  void load(const std::filesystem::path& path) override {
+    guarded(fmt::format("loading {}", path.string()), [&] {
+      torch::serialize::InputArchive archive, optimizer;
+      archive.load_from(path.string());
+      net_->load(archive);
+      net_->to(dtype_of(options_));
+      archive.read("optimizer", optimizer);
+      adam_->load(optimizer);
+      return 0;
+    });
+  }
+
+  void save_network(const std::filesystem::path& path) const override {
+    guarded(fmt::format("saving {}", path.string()), [&] {
+      torch::serialize::OutputArchive archive;
+      net_->save(archive);
+      write_file_atomic_with(
+          path, [&](const std::filesystem::path& tmp) { archive.save_to(tmp.string()); });
+      return 0;
+    });
+  }
+
+ private:
+  TaskOptions options_;
+  RestorationNet net_{nullptr};
+  std::unique_ptr<torch::optim::Adam> adam_;
+};
+
+class TorchScriptTask : public Task {
+ public:
+  TorchScriptTask(const std::filesystem::path& model_path, const TaskOptions& options)
+      : options_(options), path_(model_path) {
+    torch::set_num_threads(options.threads);
+    torch::manual_seed(options.seed);
+    if (!std::filesystem::is_regular_file(model_path))
+      throw Error(SourceLocation{model_path.string()}, "TorchScript model file not found");
+    try {
+      module_ = torch::jit::load(model_path.string());
+    } catch (const c10::Error& e) {
+      throw Error(
+          SourceLocation{model_path.string()},
+          fmt::format("cannot load the TorchScript module: {}", e.what_without_backtrace()));
+    }
+    if (!module_.find_method("forward"))
+      throw Error(SourceLocation{model_path.string()},
+                  "the TorchScript module has no forward(images, targets)");
+    module_.to(dtype_of(options));
+    module_.train();
+    // The parameters that require a gradient (PyTorch's nn.Parameter default); a module saved
+    // with none flagged (e.g. defined in C++) trains all of them.
+    for (const torch::Tensor& p : module_.parameters())
+      if (p.requires_grad()) parameters_.push_back(p);
+    if (parameters_.empty())
+      for (torch::Tensor p : module_.parameters()) parameters_.push_back(p.requires_grad_(true));
+    if (parameters_.empty())
+      throw Error(SourceLocation{model_path.string()},
+                  "the TorchScript module has no trainable parameters");
+    adam_ = std::make_unique<torch::optim::Adam>(parameters_,
+                                                 torch::optim::AdamOptions(options.learning_rate));
+  }
+  std::string name() const override { return "torchscript:" + path_.string(); }
+  std::string metric_name() const override { return "-loss"; }
+
+  TaskOutput step(const TaskBatch& batch, bool train, bool want_grad) override {
+    return guarded(name(), [&] {
+      TaskOutput out;
+      torch::Tensor x = to_tensor(batch.rendered, options_.channels, dtype_of(options_));
+      const torch::Tensor targets = targets_of(batch);
+      if (!train && !want_grad) {
+        torch::NoGradGuard no_grad;
+        out.loss = loss_of(x, targets).item<double>();
+        return out;
+      }
+      if (want_grad) x.set_requires_grad(true);
+      adam_->zero_grad();
+      const torch::Tensor loss = loss_of(x, targets);
+      loss.backward();
+      out.loss = loss.item<double>();
+      if (want_grad) out.grad_rendered = from_tensor(x.grad());
+      if (train) adam_->step();
+      return out;
+    });
+  }
+
+  std::vector<FloatImage> predict(const TaskBatch&) override { return {}; }
+
+  double metric(const TaskBatch& batch) override { return -step(batch, false, false).loss; }
+
+  void set_learning_rate(double learning_rate) override {
+    set_adam_learning_rate(*adam_, learning_rate);
+  }
+
+  void save(const std::filesystem::path& path) const override {
+    guarded(fmt::format("saving {}", path.string()), [&] {
+      torch::serialize::OutputArchive archive, optimizer;
+      for (std::size_t i = 0; i < parameters_.size(); ++i)
+        archive.write(fmt::format("p{}", i), parameters_[i]);
+      adam_->save(optimizer);
+      archive.write("optimizer", optimizer);
+      write_file_atomic_with(
+          path, [&](const std::filesystem::path& tmp) { archive.save_to(tmp.string()); });
+      return 0;
+    });
+  }
+
+  void load(const std::filesystem::path& path) override {
+    guarded(fmt::format("loading {}", path.string()), [&] {
+      torch::serialize::InputArchive archive, optimizer;
+      archive.load_from(path.string());
+      torch::NoGradGuard no_grad;
+      for (std::size_t i = 0; i < parameters_.size(); ++i) {
+        torch::Tensor value;
+        archive.read(fmt::format("p{}", i), value);
+        parameters_[i].copy_(value);
+      }
+      archive.read("optimizer", optimizer);
+      adam_->load(optimizer);
+      return 0;
+    });
+  }
+
+  // The trained module itself, loadable by torch.jit.load.
+  void save_network(const std::filesystem::path& path) const override {
+    guarded(fmt::format("saving {}", path.string()), [&] {
+      write_file_atomic_with(path,
+                             [&](const std::filesystem::path& tmp) { module_.save(tmp.string()); });
+      return 0;
+    });
+  }
+
+ private:
+  torch::Tensor loss_of(const torch::Tensor& x, const torch::Tensor& targets) {
+    const torch::Tensor loss = module_.forward({x, targets}).toTensor();
+    if (loss.numel() != 1)
+      throw Error(fmt::format("{}: forward returned {} values; it must return the scalar loss",
+                              name(), loss.numel()));
+    return loss.reshape({});
+  }
+
+  // B x N targets from the batch's files, or the sharp crops when there are none.
+  torch::Tensor targets_of(const TaskBatch& batch) {
+    std::size_t with = 0;
+    for (const auto& t : batch.targets) with += !t.empty();
+    if (with == 0) return to_tensor(batch.sharp, options_.channels, dtype_of(options_));
+    if (with != batch.rendered.size())
+      throw Error(
+          fmt::format("{}: {} of {} images of the batch have a targets file; all or none "
+                      "must",
+                      name(), with, batch.rendered.size()));
+    std::vector<torch::Tensor> rows;
+    for (const auto& path : batch.targets) {
+      auto it = targets_.find(path.string());
+      if (it == targets_.end()) it = targets_.emplace(path.string(), read_targets_file(path)).first;
+      const std::vector<double>& v = it->second;
+      if (!rows.empty() && static_cast<int64_t>(v.size()) != rows[0].size(0))
+        throw Error(SourceLocation{path.string()},
+                    fmt::format("{} targets where the batch's first image has {}", v.size(),
+                                rows[0].size(0)));
+      rows.push_back(torch::tensor(v, torch::kFloat64));
+    }
+    return torch::stack(rows).to(dtype_of(options_));
+  }
+
+  TaskOptions options_;
+  std::filesystem::path path_;
+  mutable torch::jit::Module module_;
+  std::vector<torch::Tensor> parameters_;
+  std::unique_ptr<torch::optim::Adam> adam_;
+  std::map<std::string, std::vector<double>> targets_;
+};
+
+}  // namespace
+
+bool torch_available() {
+  return true;
+}
+
+std::unique_ptr<Task> make_task(const std::string& spec, const TaskOptions& options) {
+  options.validate();
+  if (spec == "restoration") return std::make_unique<RestorationTask>(options);
+  const std::string prefix = "torchscript:";
+  if (spec.rfind(prefix, 0) == 0 && spec.size() > prefix.size())
+    return std::make_unique<TorchScriptTask>(spec.substr(prefix.size()), options);
+  throw Error(fmt::format("unknown task '{}'; known: restoration, torchscript:MODEL.pt", spec));
+}
+
+}  // namespace lensopt
