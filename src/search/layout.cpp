@@ -180,6 +180,8 @@ LensForm decompose_lens(const Lens& lens) {
   }
   if (!stop_seen) throw form_error(lens, "the stop is not between elements");
   form.layout.elements = static_cast<int>(form.elements.size());
+  const double efl = paraxial_data(make_trace_lens(lens), kWavelengthD_nm).efl_mm;
+  form.focal_length_mm = std::isfinite(efl) && efl > 0 ? efl : lens.specs.focal_length_mm();
   return form;
 }
 
@@ -253,8 +255,7 @@ LensForm with_layout(const LensForm& form, const LensLayout& layout) {
       out.gap_mm[i] = kSplitAirMm;
     }
   }
-  // Front and rear stop distances scale with the focal length (about 17 mm for the paper's specs).
-  const double f = 17.156;
+  const double f = form.focal_length_mm;
   if (layout.stop_gap == 0 && form.layout.stop_gap != 0) out.front_stop_mm = kFrontStopFraction * f;
   if (layout.stop_gap == n && form.layout.stop_gap != n) out.rear_stop_mm = kRearStopFraction * f;
   out.layout = layout;
@@ -335,6 +336,7 @@ LensForm generated_form(const LensLayout& layout, const Catalog& catalog, double
   form.front_stop_mm = kFrontStopFraction * f;
   form.rear_stop_mm = kRearStopFraction * f;
   form.image_mm = f;  // replaced by the paraxial focus when the lens is built
+  form.focal_length_mm = f;
   return with_layout(form, layout);
 }
 

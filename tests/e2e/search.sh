@@ -88,7 +88,26 @@ done
 same_leaderboard "$tmp/one" "$tmp/merged"
 cmp -s "$tmp/one/search.json" "$tmp/merged/search.json" || fail "search.json differs after merge"
 
-# 4. A folder of another search is refused; so is an unknown key in a description.
+# 4. SIGINT stops the search: exit 130, the finished candidates kept, a partial leaderboard.
+"$lensopt" search "${search[@]}" -o "$tmp/int" --jobs 1 > /dev/null 2> "$tmp/int.txt" &
+pid=$!
+for _ in $(seq 1 600); do
+  [ "$(find "$tmp/int/results" -name '*.json' 2>/dev/null | wc -l)" -ge 1 ] && break
+  sleep 0.05
+done
+kill -INT "$pid" 2>/dev/null || true
+rc=0
+wait "$pid" || rc=$?
+pid=""
+if [ "$rc" -eq 130 ]; then
+  grep -q "run the same command again to resume" "$tmp/int.txt" || fail "SIGINT message: $(cat "$tmp/int.txt")"
+  [ -f "$tmp/int/leaderboard.csv" ] || fail "no partial leaderboard after SIGINT"
+else
+  [ "$rc" -eq 0 ] || fail "SIGINT: exit code $rc"
+  echo "note: the search finished before SIGINT arrived"
+fi
+
+# 5. A folder of another search is refused; so is an unknown key in a description.
 if "$lensopt" search "${search[@]}" --constraints paper -o "$tmp/one" > /dev/null 2> "$tmp/err.txt"; then
   fail "resumed into another search's folder"
 fi

@@ -12,7 +12,8 @@
 //           'E' per element, '-' air or '=' cemented between neighbours, 'S' the stop, e.g.
 //           Cooke "E-E-S-E", Tessar "E-E-S-E=E", a front stop "S-E-E", a rear stop "E-E-S".
 //           Moving the stop out of a gap joins that gap's two parts; into a gap splits it in
-//           halves; in front it sits 0.1 f before the first vertex, behind 0.06 f after the last.
+//           halves; in front it sits 0.1 f before the first vertex, behind 0.06 f after the last
+//           (f the lens's paraxial EFL).
 //           Cementing two air-spaced neighbours gives the joint surface the mean of the two
 //           curvatures; splitting a cemented pair puts 0.2 mm of air between equal curvatures;
 //   seed    0 keeps the start's glasses (a generated start: the catalog glasses nearest to
@@ -87,6 +88,7 @@ struct LensForm {
   double front_stop_mm = 0;    // stop to first vertex (stop in front)
   double rear_stop_mm = 0;     // last vertex to stop (stop behind)
   double image_mm = 0;         // last surface (element or stop) to the image plane
+  double focal_length_mm = 17.156;  // paraxial EFL (587.6 nm); places a moved front or rear stop
 };
 
 // Takes a lens apart. Throws Error (naming the lens's file) if it is not a sequence of glass
