@@ -80,10 +80,13 @@ constexpr int kJetWidths[] = {8, 12, 16, 24, 32};
 struct Optics {
   int variables = 0;
   std::vector<double> fields_deg;
-  std::vector<double> reference_y_mm, centroid_y_mm, illumination;      // [h]
-  std::vector<double> d_reference, d_centroid, d_illumination;          // [h * variables + j]
-  std::vector<std::array<std::vector<double>, kColourChannels>> psf;    // [h][c] G x G
-  std::vector<std::array<std::vector<double>, kColourChannels>> d_psf;  // [h][c] [bin*n + j]
+  std::vector<double> reference_y_mm, centroid_y_mm, illumination;    // [h]
+  std::vector<double> d_reference, d_centroid, d_illumination;        // [h * variables + j]
+  std::vector<std::array<std::vector<double>, kColourChannels>> psf;  // [h][c] G x G
+  // [h][c]: the derivatives of the bins inside the PSF's support box (FieldPsf::support), row by
+  // row, [(r - r0) (c1 - c0) + (i - c0)] * n + j; every bin outside is 0 with derivative 0.
+  std::vector<std::array<std::vector<double>, kColourChannels>> d_psf;
+  std::vector<std::array<std::array<int, 4>, kColourChannels>> support;  // [h][c]
   int ray_failures = 0;
 };
 
@@ -122,19 +125,27 @@ Optics sample_optics(const LensParameterization& param, GlassMode mode,
   }
   o.psf.resize(fields);
   o.d_psf.resize(fields);
+  o.support.resize(fields);
+  for (int h = 0; h < fields; ++h) o.support[h] = psfs.fields[h].support;
+  const int g = options.psf.grid_size;
   const std::size_t cells = static_cast<std::size_t>(options.psf.grid_size) * options.psf.grid_size;
 #pragma omp parallel for collapse(2) \
     num_threads(options.threads > 0 ? options.threads : omp_get_max_threads())
   for (int h = 0; h < fields; ++h) {
     for (int c = 0; c < kColourChannels; ++c) {
       const std::vector<J>& grid = psfs.fields[h].psf[c];
+      const std::array<int, 4>& box = o.support[h][c];
       std::vector<double>& values = o.psf[h][c];
       std::vector<double>& derivatives = o.d_psf[h][c];
-      values.resize(cells);
-      derivatives.resize(cells * n);
-      for (std::size_t b = 0; b < cells; ++b) {
-        values[b] = grid[b].a;
-        for (int j = 0; j < n; ++j) derivatives[b * n + j] = grid[b].v[j];
+      values.assign(cells, 0.0);
+      derivatives.resize(static_cast<std::size_t>(box[1] - box[0]) * (box[3] - box[2]) * n);
+      double* d = derivatives.data();
+      for (int r = box[0]; r < box[1]; ++r) {
+        for (int i = box[2]; i < box[3]; ++i, d += n) {
+          const J& v = grid[static_cast<std::size_t>(r) * g + i];
+          values[static_cast<std::size_t>(r) * g + i] = v.a;
+          for (int j = 0; j < n; ++j) d[j] = v.v[j];
+        }
       }
     }
   }
@@ -792,12 +803,14 @@ void DifferentiableImaging::backward(const FloatImage& scene, const CropWindow& 
     for (int c = 0; c < kColourChannels; ++c) {
       const std::vector<double>& gp = g_psf[h][c];
       if (gp.empty()) continue;
-      const std::vector<double>& d = o.d_psf[h][c];
-      for (std::size_t i = 0; i < cells; ++i) {
-        const double v = gp[i];
-        if (v == 0.0) continue;
-        const double* row = d.data() + i * n;
-        for (int j = 0; j < n; ++j) gx[j] += v * row[j];
+      const std::array<int, 4>& box = o.support[h][c];
+      const double* d = o.d_psf[h][c].data();
+      for (int r = box[0]; r < box[1]; ++r) {
+        for (int i = box[2]; i < box[3]; ++i, d += n) {
+          const double v = gp[static_cast<std::size_t>(r) * s.options.psf.grid_size + i];
+          if (v == 0.0) continue;
+          for (int j = 0; j < n; ++j) gx[j] += v * d[j];
+        }
       }
     }
     for (int j = 0; j < n; ++j) {

@@ -51,13 +51,23 @@ inline PsfOptions joint_psf_options() {
   return o;
 }
 
+// The ray sampling of the joint optimization: 8 pupil rings (64 rays per field and wavelength
+// on the half pupil, 128 with the mirror) and the paper's 21 fields, ray aiming on. A PSF then
+// has 640 rays per colour channel (5 wavelengths each) instead of 10240 at 32 rings; its Jet
+// trace costs 1/16. tools/bench-joint-imaging.sh measures it.
+inline TraceOptions joint_trace_options() {
+  TraceOptions o;
+  o.rings = 8;
+  return o;
+}
+
 struct DifferentiableImagingOptions {
-  TraceOptions sampling;                 // PSF ray sampling (fields: the PSF fields)
-  PsfOptions psf = joint_psf_options();  // PSF grid and kernel
-  int res_factor = 1;                    // 1 or 2, as RenderOptions
-  bool relative_illumination = true;     // apply (and differentiate) the RI map
-  bool distortion = true;                // apply (and differentiate) the distortion warp
-  int threads = 0;                       // 0: all cores
+  TraceOptions sampling = joint_trace_options();  // PSF ray sampling (fields: the PSF fields)
+  PsfOptions psf = joint_psf_options();           // PSF grid and kernel
+  int res_factor = 1;                             // 1 or 2, as RenderOptions
+  bool relative_illumination = true;              // apply (and differentiate) the RI map
+  bool distortion = true;                         // apply (and differentiate) the distortion warp
+  int threads = 0;                                // 0: all cores
 
   void validate() const;  // throws Error naming the bad value
 };
