@@ -41,6 +41,7 @@
 #include <chrono>
 #include <cmath>
 #include <complex>
+#include <cstdint>
 #include <cstring>
 #include <limits>
 #include <map>
@@ -276,6 +277,7 @@ struct DifferentiableImaging::State {
   DifferentiableImagingOptions options;
   double sensor_diagonal_mm = 0;
   bool prepared = false;
+  std::uint64_t generation = 0;  // counts prepare() calls (keys the forward cache)
   Optics optics;
   mutable ImagingTimings timings;
   mutable std::mutex mutex;
@@ -297,12 +299,28 @@ struct DifferentiableImaging::State {
     return g;
   }
 
+  // The blurred regions B of the last few crops render() made, so backward() of the same
+  // scene, crop and prepare() needs only the scene's spectra (not the kernels' spectra, their
+  // products and the inverse transforms). Keyed by a hash of every scene pixel the blur reads.
+  struct ForwardEntry {
+    std::uint64_t generation = 0, scene_hash = 0;
+    int width = 0, height = 0, channels = 0;
+    CropWindow crop;
+    std::shared_ptr<const std::vector<double>> blurred;
+  };
+  static constexpr std::size_t kForwardEntries = 8;  // a batch of crops, ~1.6 MB each at 256^2
+  mutable std::mutex forward_mutex;
+  mutable std::vector<ForwardEntry> forward_cache;
+
   CropPlan plan(const FloatImage& scene, const CropWindow& crop, const Geometry& g) const;
-  // B' (region, colour channels then the rest, planar [c][pixel]) and, if `spectra`, each
-  // task's scene spectrum. `blurred` gets B (before RI).
+  // B of the plan's region (channels planar, [c][pixel]; the colour channels blurred, further
+  // ones copied) into `blurred` if given, and each task's scene spectrum into `spectra` if given.
   void blur_region(const FloatImage& scene, const CropPlan& p, const Geometry& g,
-                   std::vector<double>& blurred,
+                   std::vector<double>* blurred,
                    std::vector<std::vector<std::complex<double>>>* spectra) const;
+  // FNV-1a of the scene pixels the blur of plan `p` reads (its region plus the largest kernel
+  // radius, clamped to the image: reflected indices fall inside).
+  std::uint64_t scene_hash(const FloatImage& scene, const CropPlan& p, const Geometry& g) const;
 };
 
 namespace {
@@ -437,18 +455,39 @@ const std::vector<double>& task_kernel(const Geometry& g, const CropPlan& p, con
 
 }  // namespace
 
+std::uint64_t DifferentiableImaging::State::scene_hash(const FloatImage& scene, const CropPlan& p,
+                                                       const Geometry& g) const {
+  const int x0 = std::max(0, p.rx0 - g.max_radius),
+            x1 = std::min(scene.width, p.rx0 + p.rw + g.max_radius);
+  const int y0 = std::max(0, p.ry0 - g.max_radius),
+            y1 = std::min(scene.height, p.ry0 + p.rh + g.max_radius);
+  std::uint64_t h = 1469598103934665603ull;
+  for (int j = y0; j < y1; ++j) {
+    const float* row = scene.pixels.data() + scene.index(x0, j, 0);
+    const std::size_t count = static_cast<std::size_t>(x1 - x0) * scene.channels;
+    for (std::size_t i = 0; i < count; ++i) {
+      std::uint32_t bits;
+      std::memcpy(&bits, row + i, sizeof bits);
+      h = (h ^ bits) * 1099511628211ull;
+    }
+  }
+  return h;
+}
+
 void DifferentiableImaging::State::blur_region(
-    const FloatImage& scene, const CropPlan& p, const Geometry& g, std::vector<double>& blurred,
+    const FloatImage& scene, const CropPlan& p, const Geometry& g, std::vector<double>* blurred,
     std::vector<std::vector<std::complex<double>>>* spectra) const {
   const std::size_t plane = static_cast<std::size_t>(p.rw) * p.rh;
   const int channels = scene.channels;
-  blurred.assign(plane * channels, 0.0);
-  // Channels that are not blurred (alpha): copied.
-  for (int c = p.colours; c < channels; ++c)
-    for (int j = 0; j < p.rh; ++j)
-      for (int i = 0; i < p.rw; ++i)
-        blurred[plane * c + static_cast<std::size_t>(j) * p.rw + i] =
-            scene.at(p.rx0 + i, p.ry0 + j, c);
+  if (blurred) {
+    blurred->assign(plane * channels, 0.0);
+    // Channels that are not blurred (alpha): copied.
+    for (int c = p.colours; c < channels; ++c)
+      for (int j = 0; j < p.rh; ++j)
+        for (int i = 0; i < p.rw; ++i)
+          (*blurred)[plane * c + static_cast<std::size_t>(j) * p.rw + i] =
+              scene.at(p.rx0 + i, p.ry0 + j, c);
+  }
   const int tasks = static_cast<int>(p.tasks.size());
   if (spectra) spectra->assign(tasks, {});
   const int nthreads = thread_count(options.threads);
@@ -456,7 +495,7 @@ void DifferentiableImaging::State::blur_region(
 #pragma omp parallel num_threads(nthreads)
   {
     std::vector<double>& acc = accumulators[omp_get_thread_num()];
-    acc.assign(plane * p.colours, 0.0);
+    if (blurred) acc.assign(plane * p.colours, 0.0);
 #pragma omp for schedule(dynamic, 1)
     for (int ti = 0; ti < tasks; ++ti) {
       const BlurTask& t = p.tasks[ti];
@@ -481,6 +520,7 @@ void DifferentiableImaging::State::blur_region(
         for (std::size_t i = 0; i < spectrum_size; ++i)
           s[i] = std::complex<double>(spectrum.data[i][0], spectrum.data[i][1]);
       }
+      if (!blurred) continue;
       place_kernel(task_kernel(g, p, t).data(), r, ny, nx, real.data);
       fftw_execute_dft_r2c(plans.forward, real.data, kspec.data);
       const double scale = 1.0 / (static_cast<double>(nx) * ny);
@@ -504,8 +544,9 @@ void DifferentiableImaging::State::blur_region(
       }
     }
   }
+  if (!blurred) return;
   for (const auto& acc : accumulators)
-    for (std::size_t i = 0; i < plane * p.colours; ++i) blurred[i] += acc[i];
+    for (std::size_t i = 0; i < plane * p.colours; ++i) (*blurred)[i] += acc[i];
 }
 
 DifferentiableImaging::DifferentiableImaging(const LensParameterization& param, GlassMode mode,
@@ -544,6 +585,9 @@ void DifferentiableImaging::prepare(const std::vector<double>& x) {
   s.optics = std::move(optics);
   s.geometries.clear();
   s.prepared = true;
+  ++s.generation;
+  std::lock_guard<std::mutex> forward_lock(s.forward_mutex);
+  s.forward_cache.clear();
 }
 
 FloatImage DifferentiableImaging::render(const FloatImage& scene, const CropWindow& crop) const {
@@ -561,7 +605,21 @@ std::vector<double> DifferentiableImaging::render_values(const FloatImage& scene
   const std::shared_ptr<Geometry> g = s.geometry(scene.width, scene.height);
   const CropPlan p = s.plan(scene, crop, *g);
   std::vector<double> b;
-  s.blur_region(scene, p, *g, b, nullptr);
+  s.blur_region(scene, p, *g, &b, nullptr);
+  {
+    State::ForwardEntry e;
+    e.generation = s.generation;
+    e.scene_hash = s.scene_hash(scene, p, *g);
+    e.width = scene.width;
+    e.height = scene.height;
+    e.channels = scene.channels;
+    e.crop = crop;
+    e.blurred = std::make_shared<const std::vector<double>>(b);
+    std::lock_guard<std::mutex> lock(s.forward_mutex);
+    if (s.forward_cache.size() >= State::kForwardEntries)
+      s.forward_cache.erase(s.forward_cache.begin());
+    s.forward_cache.push_back(std::move(e));
+  }
   const std::size_t plane = static_cast<std::size_t>(p.rw) * p.rh;
   const SensorGeometry& geo = g->layout.geometry;
   // Relative illumination on the colour channels.
@@ -626,9 +684,22 @@ void DifferentiableImaging::backward(const FloatImage& scene, const CropWindow& 
   }
   const std::shared_ptr<Geometry> g = s.geometry(scene.width, scene.height);
   const CropPlan p = s.plan(scene, crop, *g);
-  std::vector<double> b;
+  // B from render() of the same scene and crop if it is cached, else computed here.
+  std::shared_ptr<const std::vector<double>> cached;
+  {
+    const std::uint64_t hash = s.scene_hash(scene, p, *g);
+    std::lock_guard<std::mutex> lock(s.forward_mutex);
+    for (const State::ForwardEntry& e : s.forward_cache) {
+      if (e.generation == s.generation && e.scene_hash == hash && e.width == scene.width &&
+          e.height == scene.height && e.channels == scene.channels && e.crop.x0 == crop.x0 &&
+          e.crop.y0 == crop.y0 && e.crop.width == crop.width && e.crop.height == crop.height)
+        cached = e.blurred;
+    }
+  }
+  std::vector<double> computed;
   std::vector<std::vector<std::complex<double>>> spectra;
-  s.blur_region(scene, p, *g, b, &spectra);
+  s.blur_region(scene, p, *g, cached ? nullptr : &computed, &spectra);
+  const std::vector<double>& b = cached ? *cached : computed;
   const Optics& o = s.optics;
   const int fields = static_cast<int>(o.reference_y_mm.size());
   const std::size_t plane = static_cast<std::size_t>(p.rw) * p.rh;

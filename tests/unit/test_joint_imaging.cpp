@@ -76,20 +76,38 @@ DifferentiableImagingOptions joint_options(bool ri, bool distortion) {
 
 }  // namespace
 
+// RGB with and without RI and distortion, at the 2x resolution factor, a grey and an RGBA image
+// (the alpha channel is only warped).
 TEST_CASE("joint imaging: a crop equals the Renderer's full image restricted to it") {
   Setup s("doublet");
-  const FloatImage scene = random_scene(240, 180, 7);
+  const FloatImage rgb = random_scene(240, 180, 7);
+  FloatImage grey(240, 180, 1), rgba(240, 180, 4);
+  for (int j = 0; j < 180; ++j)
+    for (int i = 0; i < 240; ++i) {
+      grey.at(i, j, 0) = rgb.at(i, j, 1);
+      for (int c = 0; c < 3; ++c) rgba.at(i, j, c) = rgb.at(i, j, c);
+      rgba.at(i, j, 3) = rgb.at(239 - i, j, 0);
+    }
   const Lens lens_x = s.param.to_lens(s.x.data(), GlassMode::kFixed, s.glasses);
   const ImagingModel model =
       build_imaging_model(lens_x, joint_sampling(), DifferentiableImagingOptions().psf);
-  for (const bool effects : {true, false}) {
-    DifferentiableImaging imaging(s.param, GlassMode::kFixed, s.glasses,
-                                  joint_options(effects, effects));
+  struct Case {
+    bool effects;
+    int res_factor;
+    const FloatImage* scene;
+  };
+  for (const Case& k : {Case{true, 1, &rgb}, Case{false, 1, &rgb}, Case{true, 2, &rgb},
+                        Case{true, 1, &grey}, Case{true, 1, &rgba}}) {
+    DifferentiableImagingOptions options = joint_options(k.effects, k.effects);
+    options.res_factor = k.res_factor;
+    DifferentiableImaging imaging(s.param, GlassMode::kFixed, s.glasses, options);
     imaging.prepare(s.x);
     RenderOptions ro;
-    ro.relative_illumination = effects;
-    ro.distortion = effects;
+    ro.relative_illumination = k.effects;
+    ro.distortion = k.effects;
+    ro.res_factor = k.res_factor;
     const Renderer renderer(model, ro);
+    const FloatImage& scene = *k.scene;
     const FloatImage full = renderer.render(scene).image;
     const CropWindow crops[] = {
         {100, 70, 64, 48}, {0, 0, 64, 48}, {176, 132, 64, 48}, {0, 100, 240, 40}};
@@ -97,14 +115,15 @@ TEST_CASE("joint imaging: a crop equals the Renderer's full image restricted to 
       const FloatImage out = imaging.render(scene, crop);
       REQUIRE(out.width == crop.width);
       REQUIRE(out.height == crop.height);
-      REQUIRE(out.channels == 3);
+      REQUIRE(out.channels == scene.channels);
       double worst = 0;
       for (int j = 0; j < crop.height; ++j)
         for (int i = 0; i < crop.width; ++i)
-          for (int c = 0; c < 3; ++c)
+          for (int c = 0; c < scene.channels; ++c)
             worst = std::max(worst, static_cast<double>(std::abs(
                                         out.at(i, j, c) - full.at(crop.x0 + i, crop.y0 + j, c))));
-      INFO("effects ", effects, " crop at (", crop.x0, ", ", crop.y0, "): max |diff| ", worst);
+      INFO("effects ", k.effects, " res ", k.res_factor, " channels ", scene.channels, " crop at (",
+           crop.x0, ", ", crop.y0, "): max |diff| ", worst);
       // The Renderer works in float: float kernels (rel. 6e-8 each), float accumulation of the
       // ~4 window terms, float RI factors and warp offsets (exact to ~1e-6 px here): a few
       // float ulps of values <= 1 (measured: 1.2e-7 with RI and distortion, 6e-8 without).
@@ -208,5 +227,41 @@ TEST_CASE("joint imaging: gradients w.r.t. every lens variable match finite diff
       INFO(name, " L", loss + 1, ": worst relative error ", worst[loss], " at ", worst_name[loss]);
       CHECK(worst[loss] < 1e-4);
     }
+  }
+}
+
+// A grey image is blurred by the channels' mean kernel, so with G / 3 on each channel of the
+// RGB image (R = G = B = the grey one) the RGB loss is the grey loss: the two adjoints (the grey
+// one is not covered by the finite differences above) must give the same gradient.
+TEST_CASE("joint imaging: the grey image's gradient is the RGB one's with equal channels") {
+  Setup s("doublet");
+  DifferentiableImaging imaging(s.param, GlassMode::kContinuous, {}, joint_options(true, true));
+  imaging.prepare(s.x);
+  const FloatImage rgb_random = random_scene(240, 180, 5);
+  FloatImage grey(240, 180, 1), rgb(240, 180, 3);
+  for (int j = 0; j < 180; ++j)
+    for (int i = 0; i < 240; ++i) {
+      grey.at(i, j, 0) = rgb_random.at(i, j, 0);
+      for (int c = 0; c < 3; ++c) rgb.at(i, j, c) = rgb_random.at(i, j, 0);
+    }
+  const CropWindow crop{20, 110, 80, 60};
+  FloatImage g_grey(crop.width, crop.height, 1), g_rgb(crop.width, crop.height, 3);
+  std::mt19937 rng(9);
+  std::uniform_int_distribution<int> u(-256, 256);  // k / 256: G and G / 3 exact in float
+  for (int j = 0; j < crop.height; ++j)
+    for (int i = 0; i < crop.width; ++i) {
+      const float v = static_cast<float>(u(rng)) / 256.0f;
+      g_grey.at(i, j, 0) = 3.0f * v;
+      for (int c = 0; c < 3; ++c) g_rgb.at(i, j, c) = v;
+    }
+  std::vector<double> dx_grey, dx_rgb;
+  imaging.backward(grey, crop, g_grey, dx_grey);
+  imaging.backward(rgb, crop, g_rgb, dx_rgb);
+  double scale = 0;
+  for (double v : dx_rgb) scale = std::max(scale, std::abs(v));
+  REQUIRE(scale > 0);
+  for (int j = 0; j < s.param.size(); ++j) {
+    INFO(s.param.variables()[j].name, ": grey ", dx_grey[j], " RGB ", dx_rgb[j]);
+    CHECK(std::abs(dx_grey[j] - dx_rgb[j]) <= 1e-9 * scale);
   }
 }

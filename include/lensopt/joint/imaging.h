@@ -107,6 +107,8 @@ class DifferentiableImaging {
   void backward(const FloatImage& scene, const CropWindow& crop, const FloatImage& grad_image,
                 std::vector<double>& grad_x) const;
 
+  // Of the last calls. render() and backward() may run from several threads at once (the patch
+  // kernels of an image size are made once, under a lock); prepare() may not overlap them.
   const ImagingTimings& timings() const;
 
  private:
