@@ -27,6 +27,7 @@ struct OptimizeCommand {
   bool json = false;
   bool quiet = false;
   bool compare_adam = false;
+  bool no_soft_start = false;
   std::string glass_search;
   std::string constraints;
   std::vector<std::string> freeze;
@@ -84,6 +85,11 @@ void apply_optimize_table(const Lens& lens, OptimizeOptions& options) {
     else if (k == "fields") options.sampling.fields = integer();
     else if (k == "max_iterations") options.max_iterations = integer();
     else if (k == "glass_neighbours") options.glass_neighbours = integer();
+    else if (k == "soft_start") {
+      const auto v = node.value<bool>();
+      if (!v) throw Error(where, "[optimize] soft_start must be true or false");
+      options.soft_start = *v;
+    }
     else if (k == "constraints") {
       const auto v = node.value<std::string>();
       if (!v || (*v != "strict" && *v != "paper"))
@@ -107,7 +113,8 @@ void apply_optimize_table(const Lens& lens, OptimizeOptions& options) {
                   fmt::format("unknown key '{}' in [optimize]; known: weight_ray_path, "
                               "weight_ray_angle, weight_glass, min_air_mm, min_glass_mm, "
                               "max_glass_mm, min_image_clearance_mm, max_ray_angle_deg, rings, "
-                              "fields, max_iterations, glass_search, glass_neighbours, freeze, constraints",
+                              "fields, max_iterations, glass_search, glass_neighbours, freeze, constraints, "
+                              "soft_start",
                               k));
     }
   }
@@ -140,6 +147,7 @@ void run_optimize(const OptimizeCommand& cmd) {
   if (!cmd.glass_search.empty())
     options.glass_search = parse_glass_search(cmd.glass_search, SourceLocation{"--glass-search"});
   for (const std::string& f : cmd.freeze) options.freeze.push_back(f);
+  if (cmd.no_soft_start) options.soft_start = false;
   if (cmd.rings > 0) options.sampling.rings = cmd.rings;
   if (cmd.fields > 0) options.sampling.fields = cmd.fields;
   if (cmd.threads >= 0) options.sampling.threads = cmd.threads;
@@ -275,6 +283,8 @@ void setup_optimize(CLI::App& app) {
       ->check(CLI::IsMember({"strict", "paper"}));
   sub->add_option("--freeze", cmd->freeze, "variables or groups to hold (c3, s2, defocus, g1, curvatures, spacings, glasses)")
       ->delimiter(',');
+  sub->add_flag("--no-soft-start", cmd->no_soft_start,
+                "strict constraints: skip the first phase on the paper's soft penalties");
   sub->add_option("--rings", cmd->rings, "pupil rings during optimization (default 8)");
   sub->add_option("--fields", cmd->fields, "fields during optimization (default 11)");
   sub->add_option("--threads", cmd->threads, "threads (0: all cores)");

@@ -100,7 +100,8 @@ ceres::CostFunction* make_cost_for(DesignFunctor* functor, int n, int residuals)
 
 int residual_count(const LensParameterization& param, const TraceOptions& sampling) {
   const Specs& specs = param.structure().specs;
-  const int fields = static_cast<int>(field_angles_deg(specs.half_field_deg, sampling.fields).size());
+  const int fields =
+      static_cast<int>(field_angles_deg(specs.half_field_deg, sampling.fields).size());
   const int rays = static_cast<int>(paper_pupil_samples(sampling.rings).size());
   int glasses = 0;
   for (const LensVariable& v : param.variables()) glasses += v.kind == LensVariable::Kind::kGlass0;
@@ -114,7 +115,8 @@ DesignLoss<double> run_phase(const LensParameterization& param, std::vector<doub
                              GlassMode mode, const std::vector<int>& fixed,
                              const std::vector<int>& frozen, const OptimizeOptions& options,
                              DesignLossOptions& loss, const std::string& name, int max_rounds,
-                             int max_iterations, Counters& counters, double glass_weight_growth = 1.0) {
+                             int max_iterations, Counters& counters,
+                             double glass_weight_growth = 1.0) {
   const int n = param.size();
   DesignLoss<double> current = evaluate_double(param, x, mode, fixed, options.sampling, loss);
   double radius = 1e4;  // Ceres's default initial trust region; carried between rounds
@@ -125,8 +127,8 @@ DesignLoss<double> run_phase(const LensParameterization& param, std::vector<doub
     std::vector<double> weights(field_count);
     for (int h = 0; h < field_count; ++h)
       weights[h] = 1.0 / (field_count * std::max(current.field_rms_mm[h], 1e-5));
-    auto* functor = new DesignFunctor{&param, mode, fixed, options.sampling, loss, weights,
-                                      &counters.evaluations};
+    auto* functor = new DesignFunctor{
+        &param, mode, fixed, options.sampling, loss, weights, &counters.evaluations};
     ceres::Problem problem;
     problem.AddResidualBlock(make_cost_for(functor, n, residual_count(param, options.sampling)),
                              nullptr, x.data());
@@ -165,13 +167,14 @@ DesignLoss<double> run_phase(const LensParameterization& param, std::vector<doub
       violated = true;
     }
     loss.weight_glass *= glass_weight_growth;
-    const double change = std::abs(next.spot_mm - current.spot_mm) / std::max(current.spot_mm, 1e-9);
+    const double change =
+        std::abs(next.spot_mm - current.spot_mm) / std::max(current.spot_mm, 1e-9);
     if (options.verbose) {
       fmt::print(stderr,
                  "lensopt optimize: {} round {}: mean spot {:.4f} um (optimization sampling), "
                  "l_RP {:.2e}, l_RA {:.2e}, l_GV {:.2e}, {} failed rays; {} iterations\n",
-                 name, round + 1, next.spot_mm * 1000, next.ray_path_mm, next.ray_angle,
-                 next.glass, next.failed_rays, summary.iterations.size());
+                 name, round + 1, next.spot_mm * 1000, next.ray_path_mm, next.ray_angle, next.glass,
+                 next.failed_rays, summary.iterations.size());
     }
     current = next;
     if (!violated && change < 2e-3 && glass_weight_growth == 1.0) break;
@@ -197,7 +200,8 @@ DesignLossOptions continued_bounds(const DesignLossOptions& target, const Design
     }
   }
   const double clearance = start.min_travel_mm[k_count - 1];
-  const double angle_deg = std::acos(std::sqrt(std::clamp(start.min_cos2_angle, 0.0, 1.0))) * 180.0 / kPi;
+  const double angle_deg =
+      std::acos(std::sqrt(std::clamp(start.min_cos2_angle, 0.0, 1.0))) * 180.0 / kPi;
   auto lower = [t](double bound, double value) {
     return value < bound ? (value - 1e-4) + t * (bound - value + 1e-4) : bound;
   };
@@ -246,7 +250,8 @@ void DesignLossOptions::validate() const {
   positive(max_glass_mm, "max_glass_mm");
   positive(min_image_clearance_mm, "min_image_clearance_mm");
   if (max_glass_mm < min_glass_mm)
-    throw Error(fmt::format("max_glass_mm = {} is below min_glass_mm = {}", max_glass_mm, min_glass_mm));
+    throw Error(
+        fmt::format("max_glass_mm = {} is below min_glass_mm = {}", max_glass_mm, min_glass_mm));
   if (!(max_ray_angle_deg > 0.0 && max_ray_angle_deg < 90.0))
     throw Error(fmt::format("max_ray_angle_deg = {} must be in (0, 90)", max_ray_angle_deg));
 }
@@ -284,7 +289,8 @@ ConstraintReport check_constraints(const Lens& lens, const DesignLossOptions& lo
       report.rows.push_back({"image clearance", ext.min_travel_mm[k], loss.min_image_clearance_mm,
                              true, ext.min_travel_mm[k] >= loss.min_image_clearance_mm});
     } else if (glass) {
-      const std::string name = fmt::format("glass {}-{} ({})", k + 1, k + 2, lens.surfaces[k].material.label());
+      const std::string name =
+          fmt::format("glass {}-{} ({})", k + 1, k + 2, lens.surfaces[k].material.label());
       report.rows.push_back({name + " min", ext.min_travel_mm[k], loss.min_glass_mm, true,
                              ext.min_travel_mm[k] >= loss.min_glass_mm});
       report.rows.push_back({name + " max", ext.max_travel_mm[k], loss.max_glass_mm, false,
@@ -318,15 +324,18 @@ OptimizeResult optimize_lens(const Lens& start, const OptimizeOptions& options) 
   // The start at full sampling.
   AnalyzeOptions full;
   const AnalysisReport start_report = analyze_lens(start, full);
-  result.start_spot_um = start_report.mean_rms_spot_um.value_or(std::numeric_limits<double>::infinity());
-  for (const FieldReport& f : start_report.fields) result.start_field_spot_um.push_back(f.rms_spot_um.value_or(0.0));
+  result.start_spot_um =
+      start_report.mean_rms_spot_um.value_or(std::numeric_limits<double>::infinity());
+  for (const FieldReport& f : start_report.fields)
+    result.start_field_spot_um.push_back(f.rms_spot_um.value_or(0.0));
   result.start_constraints = check_constraints(start, options.loss, full.trace);
 
   const std::vector<int> frozen_user = param.select(options.freeze);
   std::vector<int> glass_indices;
   for (int i = 0; i < param.size(); ++i) {
     const auto kind = param.variables()[i].kind;
-    if (kind == LensVariable::Kind::kGlass0 || kind == LensVariable::Kind::kGlass1) glass_indices.push_back(i);
+    if (kind == LensVariable::Kind::kGlass0 || kind == LensVariable::Kind::kGlass1)
+      glass_indices.push_back(i);
   }
   auto merged = [](std::vector<int> a, const std::vector<int>& b) {
     a.insert(a.end(), b.begin(), b.end());
@@ -364,6 +373,42 @@ OptimizeResult optimize_lens(const Lens& start, const OptimizeOptions& options) 
   // bounds the start violates tightened in stages from its own values to the targets.
   std::vector<int> fixed = param.nearest_glasses(x.data());
   set_glasses(x, fixed);
+  // Focus first: a start far from focus (a perturbed last spacing is a defocus of a tenth of the
+  // back focal length) has a spot dominated by defocus, and LM's first steps on all variables
+  // then bend the curvatures to compensate and land in a poor basin. The defocus alone is
+  // nearly quadratic, so one short LM round on it (soft penalties) removes it first.
+  if (!interrupted()) {
+    std::vector<int> all_but_defocus;
+    bool defocus_free = false;
+    for (int i = 0; i < param.size(); ++i) {
+      const bool frozen = std::binary_search(frozen_all.begin(), frozen_all.end(), i);
+      if (param.variables()[i].kind == LensVariable::Kind::kDefocus && !frozen)
+        defocus_free = true;
+      else
+        all_but_defocus.push_back(i);
+    }
+    if (defocus_free) {
+      DesignLossOptions focus_loss = options.loss;
+      focus_loss.paper_penalties = true;
+      const DesignLoss<double> f = run_phase(param, x, GlassMode::kFixed, fixed, all_but_defocus,
+                                             options, focus_loss, "focus", 1, iterations, counters);
+      result.log.push_back(
+          fmt::format("focus: {:.4f} um (optimization sampling)", f.spot_mm * 1000));
+    }
+  }
+  // Phase 0 (strict constraints only): the paper's soft penalties first. Squared hinges summed
+  // over rays push a start that crosses a bound straight back inside, often into a worse basin
+  // (the Cooke baseline: 30.6 -> 40.0 um); the soft loss first finds the good basin, where the
+  // design crosses its bounds only slightly, and the continuation below then walks it inside.
+  if (!soft && options.soft_start && !interrupted()) {
+    DesignLossOptions soft_loss = options.loss;
+    soft_loss.paper_penalties = true;
+    const DesignLoss<double> s =
+        run_phase(param, x, GlassMode::kFixed, fixed, frozen_all, options, soft_loss,
+                  "soft penalties", rounds, iterations, counters);
+    result.log.push_back(
+        fmt::format("soft penalties: {:.4f} um (optimization sampling)", s.spot_mm * 1000));
+  }
   DesignExtremes start_extremes;
   evaluate_double(param, x, GlassMode::kFixed, fixed, options.sampling, loss, &start_extremes);
   const DesignLossOptions target_loss = loss;
@@ -375,9 +420,10 @@ OptimizeResult optimize_lens(const Lens& start, const OptimizeOptions& options) 
     loss.weight_ray_path = std::max(loss.weight_ray_path, stage.weight_ray_path);
     loss.weight_ray_angle = std::max(loss.weight_ray_angle, stage.weight_ray_angle);
   }
-  DesignLoss<double> best = run_phase(param, x, GlassMode::kFixed, fixed, frozen_all, options,
-                                      loss, "fixed glasses", rounds, iterations, counters);
-  result.log.push_back(fmt::format("fixed glasses: {:.4f} um (optimization sampling)", best.spot_mm * 1000));
+  DesignLoss<double> best = run_phase(param, x, GlassMode::kFixed, fixed, frozen_all, options, loss,
+                                      "fixed glasses", rounds, iterations, counters);
+  result.log.push_back(
+      fmt::format("fixed glasses: {:.4f} um (optimization sampling)", best.spot_mm * 1000));
 
   const bool search = options.glass_search != GlassSearch::kNone && !glasses_frozen_by_user;
   // Phase B: continuous glasses with an annealed glass-variable loss (its weight grows tenfold
@@ -391,9 +437,9 @@ OptimizeResult optimize_lens(const Lens& start, const OptimizeOptions& options) 
     std::vector<int> snapped = param.nearest_glasses(xc.data());
     set_glasses(xc, snapped);
     DesignLossOptions snapped_loss = loss;
-    const DesignLoss<double> b = run_phase(param, xc, GlassMode::kFixed, snapped, frozen_all,
-                                           options, snapped_loss, "snapped", rounds, iterations,
-                                           counters);
+    const DesignLoss<double> b =
+        run_phase(param, xc, GlassMode::kFixed, snapped, frozen_all, options, snapped_loss,
+                  "snapped", rounds, iterations, counters);
     result.log.push_back(fmt::format("continuous then snapped: {:.4f} um", b.spot_mm * 1000));
     if (feasible(b) && (!feasible(best) || better(b, best))) {
       x = xc;
@@ -426,10 +472,9 @@ OptimizeResult optimize_lens(const Lens& start, const OptimizeOptions& options) 
               fmt::format("element {} as {}", m + 1, param.glass_space().name(candidate)), 2,
               std::max(10, iterations / 3), counters);
           if (feasible(trial) && better(trial, best)) {
-            result.log.push_back(fmt::format("element {}: {} -> {} ({:.4f} um)", m + 1,
-                                             param.glass_space().name(fixed[m]),
-                                             param.glass_space().name(candidate),
-                                             trial.spot_mm * 1000));
+            result.log.push_back(fmt::format(
+                "element {}: {} -> {} ({:.4f} um)", m + 1, param.glass_space().name(fixed[m]),
+                param.glass_space().name(candidate), trial.spot_mm * 1000));
             fixed = trial_fixed;
             x = trial_x;
             best = trial;
@@ -450,16 +495,25 @@ OptimizeResult optimize_lens(const Lens& start, const OptimizeOptions& options) 
   result.lens.name = start.name;
   result.lens.source_path = start.source_path;
   const AnalysisReport final_report = analyze_lens(result.lens, full);
-  result.final_spot_um = final_report.mean_rms_spot_um.value_or(std::numeric_limits<double>::infinity());
-  for (const FieldReport& f : final_report.fields) result.final_field_spot_um.push_back(f.rms_spot_um.value_or(0.0));
+  result.final_spot_um =
+      final_report.mean_rms_spot_um.value_or(std::numeric_limits<double>::infinity());
+  for (const FieldReport& f : final_report.fields)
+    result.final_field_spot_um.push_back(f.rms_spot_um.value_or(0.0));
   result.final_constraints = check_constraints(result.lens, options.loss, full.trace);
-  // Never return a worse lens than the start (when the start itself was feasible with catalog
-  // glasses): keep the start.
-  const bool start_catalog = std::all_of(start.surfaces.begin(), start.surfaces.end(), [](const Surface& s) {
-    return s.material.is_air() || s.material.kind == Material::Kind::kCatalog;
-  });
-  if (start_catalog && result.start_constraints.all_pass() &&
-      (result.final_spot_um > result.start_spot_um || !result.final_constraints.all_pass())) {
+  // Never return a worse lens than the start: designs are ordered by (every constraint met at
+  // full sampling, then mean spot at full sampling); a start with catalog glasses that is not
+  // behind the result in this order is returned instead (a feasible start is never traded for
+  // an infeasible result; an infeasible start only for a feasible result or a smaller spot).
+  const bool start_catalog =
+      std::all_of(start.surfaces.begin(), start.surfaces.end(), [](const Surface& s) {
+        return s.material.is_air() || s.material.kind == Material::Kind::kCatalog;
+      });
+  const bool start_ok = result.start_constraints.all_pass();
+  const bool final_ok = result.final_constraints.all_pass();
+  const bool start_not_behind =
+      (start_ok && !final_ok) ||
+      (start_ok == final_ok && !(result.final_spot_um < result.start_spot_um));
+  if (start_catalog && start_not_behind) {
     result.lens = start;
     result.final_spot_um = result.start_spot_um;
     result.final_field_spot_um = result.start_field_spot_um;
@@ -473,7 +527,8 @@ OptimizeResult optimize_lens(const Lens& start, const OptimizeOptions& options) 
   result.jacobian_evaluations = counters.jacobians;
   result.termination = interrupted() ? std::string("interrupted") : counters.termination;
   result.interrupted = interrupted();
-  result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - clock_start).count();
+  result.seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - clock_start).count();
   return result;
 }
 

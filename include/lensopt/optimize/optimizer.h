@@ -2,6 +2,9 @@
 // same loss for comparison).
 //
 // Phases (Levenberg-Marquardt needs a smooth loss, and quantized glasses are not):
+//   focus: the defocus alone, one LM round (a perturbed start is mostly out of focus);
+//   0. strict constraints only (soft_start): fixed glasses, the paper's soft penalties, to find
+//      the basin of a good design before the strict bounds are imposed;
 //   A. fixed glasses: the start's glasses snapped to the catalog and held; curvatures and
 //      spacings optimized, with constraint continuation: each bound the start violates is moved
 //      in stages from the start's own extreme to its target, so the design walks into the
@@ -31,14 +34,15 @@ namespace lensopt {
 enum class GlassSearch { kNone, kSnap, kNeighbours };
 
 struct OptimizeOptions {
-  TraceOptions sampling;           // optimization sampling (default: 8 rings, 11 fields)
-  DesignLossOptions loss;          // paper weights and bounds
+  TraceOptions sampling;   // optimization sampling (default: 8 rings, 11 fields)
+  DesignLossOptions loss;  // paper weights and bounds
   GlassSearch glass_search = GlassSearch::kNeighbours;
-  int glass_neighbours = 4;        // catalog glasses tried per element in phase 3
-  std::vector<std::string> freeze; // variable names or groups to hold fixed
-  int max_iterations = 50;         // LM iterations per round
-  int max_rounds = 4;              // reweighting rounds per phase
-  bool verbose = true;             // progress on stderr
+  int glass_neighbours = 4;         // catalog glasses tried per element in phase 3
+  std::vector<std::string> freeze;  // variable names or groups to hold fixed
+  int max_iterations = 50;          // LM iterations per round
+  int max_rounds = 4;               // reweighting rounds per phase
+  bool soft_start = true;           // strict constraints: run the paper's soft penalties first
+  bool verbose = true;              // progress on stderr
   const std::atomic<bool>* interrupt = nullptr;  // set (e.g. by SIGINT) to stop early
 
   OptimizeOptions();
@@ -48,10 +52,10 @@ struct OptimizeOptions {
 // Constraint check of a lens at some sampling.
 struct ConstraintReport {
   struct Row {
-    std::string name;   // "air gap 2-3", "glass 1-2", "image clearance", "ray angle", ...
-    double value;       // the extreme found (mm or deg)
-    double bound;       // the bound it is held to
-    bool is_lower;      // value must be >= bound (else <= bound)
+    std::string name;  // "air gap 2-3", "glass 1-2", "image clearance", "ray angle", ...
+    double value;      // the extreme found (mm or deg)
+    double bound;      // the bound it is held to
+    bool is_lower;     // value must be >= bound (else <= bound)
     bool pass;
   };
   std::vector<Row> rows;
@@ -62,9 +66,9 @@ ConstraintReport check_constraints(const Lens& lens, const DesignLossOptions& lo
                                    const TraceOptions& sampling);
 
 struct OptimizeResult {
-  Lens lens;                       // optimized lens (catalog glasses)
-  double start_spot_um = 0;        // full sampling
-  double final_spot_um = 0;        // full sampling
+  Lens lens;                 // optimized lens (catalog glasses)
+  double start_spot_um = 0;  // full sampling
+  double final_spot_um = 0;  // full sampling
   std::vector<double> start_field_spot_um, final_field_spot_um;
   ConstraintReport start_constraints, final_constraints;
   std::vector<std::string> glasses;  // per element
@@ -72,10 +76,10 @@ struct OptimizeResult {
   int loss_evaluations = 0;          // residual evaluations (with or without Jacobian)
   int jacobian_evaluations = 0;
   double seconds = 0;
-  std::string termination;           // Ceres's last termination message / interrupt
+  std::string termination;  // Ceres's last termination message / interrupt
   bool interrupted = false;
-  bool kept_start = false;           // optimization did not improve; the start is returned
-  std::vector<std::string> log;      // phase summaries
+  bool kept_start = false;       // optimization did not improve; the start is returned
+  std::vector<std::string> log;  // phase summaries
 };
 
 OptimizeResult optimize_lens(const Lens& start, const OptimizeOptions& options);
@@ -91,8 +95,8 @@ struct AdamResult {
 };
 AdamResult adam_on_design_loss(const LensParameterization& param, std::vector<double> x,
                                GlassMode mode, const std::vector<int>& fixed_glasses,
-                               const OptimizeOptions& options, double learning_rate,
-                               int max_steps, double target_spot_mm);
+                               const OptimizeOptions& options, double learning_rate, int max_steps,
+                               double target_spot_mm);
 
 // Spot of variables at the optimization sampling (double), mm.
 double design_spot_mm(const LensParameterization& param, const std::vector<double>& x,
