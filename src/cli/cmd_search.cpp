@@ -103,7 +103,10 @@ void run_search_command(const SearchCommand& cmd) {
   if (cmd.threads >= 0) options.optimizer_threads = cmd.threads;
   if (!cmd.shard.empty()) parse_shard(cmd.shard, options.shard_index, options.shard_count);
   if (!cmd.glass_search.empty()) options.optimize.glass_search = glass_search_of(cmd.glass_search);
-  if (!cmd.constraints.empty()) options.optimize.loss.paper_penalties = cmd.constraints == "paper";
+  if (!cmd.constraints.empty()) {
+    options.optimize.loss.paper_penalties = cmd.constraints == "paper";
+    options.paper_then_strict = cmd.constraints == "paper+strict";
+  }
   if (cmd.rings > 0) options.optimize.sampling.rings = cmd.rings;
   if (cmd.fields > 0) options.optimize.sampling.fields = cmd.fields;
   if (cmd.max_iterations > 0) options.optimize.max_iterations = cmd.max_iterations;
@@ -200,8 +203,9 @@ void setup_search(CLI::App& app) {
                   "run slice I of N (1-based): candidates with index mod N = I-1");
   sub->add_option("--glass-search", cmd->glass_search, "none (default) | snap | neighbours")
       ->check(CLI::IsMember({"none", "snap", "neighbours", "neighbors"}));
-  sub->add_option("--constraints", cmd->constraints, "strict (default) | paper")
-      ->check(CLI::IsMember({"strict", "paper"}));
+  sub->add_option("--constraints", cmd->constraints,
+                  "strict (default) | paper | paper+strict (paper penalties, then strict bounds)")
+      ->check(CLI::IsMember({"strict", "paper", "paper+strict"}));
   sub->add_option("--rings", cmd->rings, "pupil rings during optimization (default 8)");
   sub->add_option("--fields", cmd->fields, "fields during optimization (default 11)");
   sub->add_option("--max-iterations", cmd->max_iterations, "LM iterations per round (default 50)");

@@ -268,9 +268,10 @@ void read_search_description(const std::filesystem::path& path, SearchOptions& o
       o.glass_search = parse_glass_search(string(k, n, w), w);
     else if (k == "constraints") {
       const std::string v = string(k, n, w);
-      if (v != "strict" && v != "paper")
-        throw Error(w, "constraints must be \"strict\" or \"paper\"");
+      if (v != "strict" && v != "paper" && v != "paper+strict")
+        throw Error(w, "constraints must be \"strict\", \"paper\" or \"paper+strict\"");
       o.loss.paper_penalties = v == "paper";
+      options.paper_then_strict = v == "paper+strict";
     } else if (k == "rings")
       o.sampling.rings = integer(k, n, w);
     else if (k == "fields")
@@ -416,10 +417,12 @@ uint64_t fnv1a64(const std::string& text, uint64_t hash) {
   return hash;
 }
 
-nlohmann::json optimize_settings_json(const OptimizeOptions& o) {
+nlohmann::json optimize_settings_json(const OptimizeOptions& o, bool paper_then_strict) {
   return {{"glass_search", glass_search_name(o.glass_search)},
           {"glass_neighbours", o.glass_neighbours},
-          {"constraints", o.loss.paper_penalties ? "paper" : "strict"},
+          {"constraints", paper_then_strict        ? "paper+strict"
+                          : o.loss.paper_penalties ? "paper"
+                                                   : "strict"},
           {"rings", o.sampling.rings},
           {"fields", o.sampling.fields},
           {"ray_aiming", o.sampling.ray_aiming},
@@ -442,7 +445,8 @@ nlohmann::json optimize_settings_json(const OptimizeOptions& o) {
 
 std::string search_fingerprint(const std::vector<SearchCandidate>& candidates,
                                const SearchOptions& options) {
-  uint64_t h = detail::fnv1a64(detail::optimize_settings_json(options.optimize).dump());
+  uint64_t h = detail::fnv1a64(
+      detail::optimize_settings_json(options.optimize, options.paper_then_strict).dump());
   for (const SearchCandidate& c : candidates) {
     h = detail::fnv1a64(c.id + "\n", h);
     h = detail::fnv1a64(c.error.empty() ? format_lens_toml(c.start) : "error: " + c.error, h);

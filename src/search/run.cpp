@@ -78,7 +78,7 @@ std::string search_json_text(const std::vector<SearchCandidate>& candidates,
   j["fingerprint"] = fingerprint;
   j["candidates_total"] = candidates.size();
   j["candidates"] = ids;
-  j["optimize"] = detail::optimize_settings_json(options.optimize);
+  j["optimize"] = detail::optimize_settings_json(options.optimize, options.paper_then_strict);
   j["specs"] = {{"f_number", options.f_number},
                 {"half_field_deg", options.half_field_deg},
                 {"sensor_diagonal_mm", options.sensor_diagonal_mm}};
@@ -139,7 +139,7 @@ std::string file_safe_id(const std::string& id) {
 }
 
 CandidateResult run_candidate(const SearchCandidate& candidate, const OptimizeOptions& options,
-                              bool& interrupted) {
+                              bool paper_then_strict, bool& interrupted) {
   interrupted = false;
   CandidateResult r;
   r.index = candidate.index;
@@ -155,20 +155,42 @@ CandidateResult run_candidate(const SearchCandidate& candidate, const OptimizeOp
     return r;
   }
   try {
-    const OptimizeResult o = optimize_lens(candidate.start, options);
+    OptimizeResult o;
+    int stage_iterations = 0, stage_evaluations = 0;
+    double start_spot_um = 0;
+    bool kept_start = true;
+    if (paper_then_strict) {
+      OptimizeOptions soft = options;
+      soft.loss.paper_penalties = true;
+      const OptimizeResult first = optimize_lens(candidate.start, soft);
+      if (first.interrupted) {
+        interrupted = true;
+        return r;
+      }
+      OptimizeOptions strict = options;
+      strict.loss.paper_penalties = false;
+      o = optimize_lens(first.lens, strict);
+      stage_iterations = first.iterations;
+      stage_evaluations = first.loss_evaluations;
+      start_spot_um = first.start_spot_um;
+      kept_start = first.kept_start;
+    } else {
+      o = optimize_lens(candidate.start, options);
+      start_spot_um = o.start_spot_um;
+    }
     if (o.interrupted) {
       interrupted = true;
       return r;
     }
     r.ok = true;
-    r.start_spot_um = std::isfinite(o.start_spot_um) ? o.start_spot_um : kInf;
+    r.start_spot_um = std::isfinite(start_spot_um) ? start_spot_um : kInf;
     r.final_spot_um = std::isfinite(o.final_spot_um) ? o.final_spot_um : kInf;
     r.constraints_met = o.final_constraints.all_pass() && std::isfinite(r.final_spot_um);
     r.failing = failing_constraints(o.final_constraints);
     r.glasses = o.glasses;
-    r.iterations = o.iterations;
-    r.loss_evaluations = o.loss_evaluations;
-    r.kept_start = o.kept_start;
+    r.iterations = stage_iterations + o.iterations;
+    r.loss_evaluations = stage_evaluations + o.loss_evaluations;
+    r.kept_start = kept_start && o.kept_start;
     r.lens_toml = format_lens_toml(o.lens);
   } catch (const Error& e) {
     r.ok = false;
@@ -374,7 +396,7 @@ SearchSummary run_search(const SearchOptions& options, const fs::path& dir,
       const SearchCandidate& c = *pending[i];
       try {
         bool interrupted = false;
-        const CandidateResult r = run_candidate(c, opt, interrupted);
+        const CandidateResult r = run_candidate(c, opt, options.paper_then_strict, interrupted);
         if (interrupted) break;
         const std::string text = result_to_json(r, summary.fingerprint);
         write_file_atomic(dir / "results" / (file_safe_id(c.id) + ".json"), text);

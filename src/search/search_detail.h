@@ -22,6 +22,6 @@ uint64_t fnv1a64(const std::string& text, uint64_t hash = 14695981039346656037ul
 
 // The optimizer settings that change results (not threads or verbosity), for fingerprints and
 // search.json.
-nlohmann::json optimize_settings_json(const OptimizeOptions& options);
+nlohmann::json optimize_settings_json(const OptimizeOptions& options, bool paper_then_strict);
 
 }  // namespace lensopt::detail

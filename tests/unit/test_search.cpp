@@ -435,3 +435,23 @@ TEST_CASE(
   }
   fs::remove_all(dir);
 }
+
+TEST_CASE("search: paper+strict runs the paper's penalties, then strict bounds from that result") {
+  SearchOptions o = tiny_search();
+  o.starts[0].vary_stop = false;
+  o.starts[0].glass_seeds = 1;
+  const auto candidates = make_candidates(o);
+  REQUIRE(candidates.size() == 1);
+  SearchOptions two_stage = o;
+  two_stage.paper_then_strict = true;
+  CHECK(search_fingerprint(candidates, two_stage) != search_fingerprint(candidates, o));
+  bool interrupted = false;
+  const CandidateResult single = run_candidate(candidates[0], o.optimize, false, interrupted);
+  const CandidateResult both = run_candidate(candidates[0], o.optimize, true, interrupted);
+  CHECK_FALSE(interrupted);
+  REQUIRE(single.ok);
+  REQUIRE(both.ok);
+  CHECK(both.start_spot_um == single.start_spot_um);  // the candidate's own start
+  CHECK(both.iterations > single.iterations);         // two optimizations
+  CHECK(std::isfinite(both.final_spot_um));
+}

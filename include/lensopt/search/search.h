@@ -144,10 +144,14 @@ struct SearchOptions {
   double half_field_deg = 25.0;
   double sensor_diagonal_mm = 16.0;  // f = d / (2 tan hfov) = 17.156 mm
   OptimizeOptions optimize;          // each candidate's optimizer settings
-  int top_k = 5;                     // best lenses written as TOML
-  int jobs = 0;                      // candidates in parallel (0: every core)
-  int optimizer_threads = 1;         // threads of each optimization (0: every core)
-  int shard_index = 1;               // this run's shard I of N (1-based)
+  // Constraints "paper+strict": two optimizations per candidate, the paper's soft penalties first
+  // (they reach the basins of the paper's own designs, which cross the bounds slightly), then
+  // strict bounds from that result (which walks it into the feasible set).
+  bool paper_then_strict = false;
+  int top_k = 5;              // best lenses written as TOML
+  int jobs = 0;               // candidates in parallel (0: every core)
+  int optimizer_threads = 1;  // threads of each optimization (0: every core)
+  int shard_index = 1;        // this run's shard I of N (1-based)
   int shard_count = 1;
   bool progress = true;  // one line per finished candidate on stderr
 
@@ -208,10 +212,12 @@ struct CandidateResult {
   int rank = 0;           // 1-based, set by rank_results
 };
 
-// Optimizes one candidate; an error (rays fail, the optimizer throws) is a result, not a throw.
+// Optimizes one candidate (twice with `paper_then_strict`: paper penalties, then strict bounds
+// from that result; iterations, evaluations and time are summed, the start spot is the
+// candidate's own); an error (rays fail, the optimizer throws) is a result, not a throw.
 // `interrupted` is set when options.interrupt stopped it (the result is then not final).
 CandidateResult run_candidate(const SearchCandidate& candidate, const OptimizeOptions& options,
-                              bool& interrupted);
+                              bool paper_then_strict, bool& interrupted);
 
 // Result <-> JSON text (doubles round-trip exactly; +inf is written as null).
 std::string result_to_json(const CandidateResult& result, const std::string& fingerprint);
