@@ -18,14 +18,17 @@ root="$(cd "$(dirname "$0")/.." && pwd)"
 load_before=$(cut -d' ' -f1-3 /proc/loadavg)
 rows=""
 for lens in doublet tessar; do
-  json=$("$lensopt" bench --joint-imaging --json --repeats 5 --rings "$rings" \
-    --lens "$root/lenses/$lens.toml")
-  rows+=$(python3 -c '
+  for threads in 2 1; do
+    json=$("$lensopt" bench --joint-imaging --json --repeats 5 --rings "$rings" \
+      --threads "$threads" --lens "$root/lenses/$lens.toml")
+    rows+=$(python3 -c '
 import json, sys
 j = json.loads(sys.argv[1])
-print("| {lens} | {variables} | {prepare_ms:.0f} ms ({trace_ms:.0f} + {psf_ms:.0f}) | "
-      "{render_4_crops_ms:.0f} ms | {backward_4_crops_ms:.0f} ms | {step_ms:.0f} ms |".format(**j))
+print("| {lens} | {variables} | {threads} | {prepare_ms:.0f} ms ({trace_ms:.0f} + {psf_ms:.0f}) | "
+      "{render_4_crops_ms:.0f} ms | {backward_4_crops_ms:.0f} ms | {step_ms:.0f} ms | "
+      "{step_cpu_ms:.0f} ms |".format(**j))
 ' "$json")$'\n'
+  done
 done
 load_after=$(cut -d' ' -f1-3 /proc/loadavg)
 cpu=$(grep -m1 "model name" /proc/cpuinfo | cut -d: -f2 | sed 's/^ *//')
@@ -38,10 +41,11 @@ with quantized glasses, relative illumination and distortion on. prepare(): 21 P
 $rings rings ($((rings * rings)) rays per field and wavelength, 15 wavelengths), Jets with one
 derivative per lens variable; "trace" is the system, ray aiming, reference heights and RI, "PSF"
 the traced KDE PSFs. Then render + backward of four 256 x 256 crops of a 1280 x 720 chart (the
-first render after prepare() also builds the 81 patch kernels). Median of 5.
+first render after prepare() also builds the 81 patch kernels; backward reuses the render's
+blurred region). Median of 5; "CPU" is the process CPU time of the step (all threads).
 
-| lens | variables | prepare (trace + PSF) | render, 4 crops | backward, 4 crops | whole step |
-|---|---|---|---|---|---|
+| lens | variables | threads | prepare (trace + PSF) | render, 4 crops | backward, 4 crops | whole step, wall | whole step, CPU |
+|---|---|---|---|---|---|---|---|
 $rows
 Machine: $(nproc) cores, $cpu; load average $load_before before, $load_after after (the
 machine is shared with other builds and runs).

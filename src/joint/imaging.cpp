@@ -3,7 +3,8 @@
 //
 // Optics. The variables x are seeded as Jets of width N >= param.size() (one of kJetWidths), so
 // one traced system carries dP_h/dx, dR_h/dx, dy_ref,h/dx and dybar_h/dx. They are stored as
-// values plus derivative rows; no Jet outlives prepare().
+// values plus derivative rows (for a PSF only the bins inside its support box); no Jet outlives
+// prepare().
 //
 // Patch kernels (per full-image size, cached until the next prepare()). K_q[c] is linear in the
 // field PSFs with fixed weights: K_q[c] = L_q (sum_h a_qh P_h[c]) / T (render/psf_resample.h),
@@ -30,6 +31,8 @@
 //   y_ref,k, y_ref,k+1;
 //   dL/dK_q[c](d) = sum_p w_q(p) dL/dB(p, c) S_ext(p - d)  (a correlation, by FFT: the product
 //   of the spectrum of (w_q dL/dB) and the conjugate spectrum of the scene block).
+// backward() recomputes B unless render() of the same crop, scene (hashed) and prepare() left it
+// in a small cache; it always needs the scene blocks' spectra for the correlations.
 // Grey images (1 or 2 channels) use the mean kernel (K_q[0] + K_q[1] + K_q[2]) / 3: its gradient
 // goes 1/3 to each. Further channels (alpha) are not blurred or dimmed, only warped.
 #include "lensopt/joint/imaging.h"
