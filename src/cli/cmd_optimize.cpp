@@ -275,7 +275,7 @@ void setup_optimize(CLI::App& app) {
   sub->add_flag("--in-place", cmd->in_place, "overwrite the input lens (TOML)");
   sub->add_flag("--json", cmd->json, "report as one JSON object on stdout");
   sub->add_flag("-q,--quiet", cmd->quiet, "no per-iteration progress on stderr");
-  sub->add_option("--glass-search", cmd->glass_search, "none | snap | neighbours (default)")
+  sub->add_option("--glass-search", cmd->glass_search, "none (default: keep the start's glasses) | snap | neighbours")
       ->check(CLI::IsMember({"none", "snap", "neighbours", "neighbors"}));
   sub->add_option("--neighbours", cmd->neighbours, "catalog glasses tried per element");
   sub->add_option("--constraints", cmd->constraints,

@@ -12,7 +12,7 @@
 //   B. continuous glasses (unless --glass-search none): g free with the glass-variable loss, its
 //      weight growing tenfold per round (annealed onto catalog glasses), then snapped and
 //      re-optimized; kept only if it beats A with every constraint met;
-//   C. neighbours (--glass-search neighbours, the default): per element, the k catalog glasses
+//   C. neighbours (--glass-search neighbours): per element, the k catalog glasses
 //      nearest in whitened (nd, vd) space are tried, each with a short re-optimization; an
 //      improvement that meets every constraint is kept; repeated until a pass finds none.
 // Each phase runs rounds of LM; between rounds the per-field weights of design_loss.h are
@@ -36,7 +36,9 @@ enum class GlassSearch { kNone, kSnap, kNeighbours };
 struct OptimizeOptions {
   TraceOptions sampling;   // optimization sampling (default: 8 rings, 11 fields)
   DesignLossOptions loss;  // paper weights and bounds
-  GlassSearch glass_search = GlassSearch::kNeighbours;
+  // Default none: the start's glasses (snapped to the catalog) are kept. On the perturbed starts
+  // snap and neighbours took 1.8x and 3.2x the time and found no better glasses (BENCHMARKS.md).
+  GlassSearch glass_search = GlassSearch::kNone;
   int glass_neighbours = 4;         // catalog glasses tried per element in phase 3
   std::vector<std::string> freeze;  // variable names or groups to hold fixed
   int max_iterations = 50;          // LM iterations per round
