@@ -25,6 +25,7 @@ for lens in doublet tessar; do
 import json, sys
 j = json.loads(sys.argv[1])
 print("| {lens} | {variables} | {threads} | {prepare_ms:.0f} ms ({trace_ms:.0f} + {psf_ms:.0f}) | "
+      "{prepare_values_only_ms:.0f} ms | "
       "{render_4_crops_ms:.0f} ms | {backward_4_crops_ms:.0f} ms | {step_ms:.0f} ms | "
       "{step_cpu_ms:.0f} ms |".format(**j))
 ' "$json")$'\n'
@@ -42,10 +43,10 @@ $rings rings ($((rings * rings)) rays per field and wavelength, 15 wavelengths),
 derivative per lens variable; "trace" is the system, ray aiming, reference heights and RI, "PSF"
 the traced KDE PSFs. Then render + backward of four 256 x 256 crops of a 1280 x 720 chart (the
 first render after prepare() also builds the 81 patch kernels; backward reuses the render's
-blurred region). Median of 5; "CPU" is the process CPU time of the step (all threads).
+blurred region; "values only" is prepare(x, false), for evaluation). Median of 5; "CPU" is the process CPU time of the step (all threads).
 
-| lens | variables | threads | prepare (trace + PSF) | render, 4 crops | backward, 4 crops | whole step, wall | whole step, CPU |
-|---|---|---|---|---|---|---|---|
+| lens | variables | threads | prepare (trace + PSF) | prepare, values only | render, 4 crops | backward, 4 crops | whole step, wall | whole step, CPU |
+|---|---|---|---|---|---|---|---|---|---|
 $rows
 Machine: $(nproc) cores, $cpu; load average $load_before before, $load_after after (the
 machine is shared with other builds and runs).

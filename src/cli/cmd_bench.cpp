@@ -141,6 +141,13 @@ void run_joint_imaging_bench(const BenchCommand& cmd) {
     step_ms.push_back(std::chrono::duration<double, std::milli>(t2 - t0).count());
     cpu_ms.push_back(cpu_now_ms() - c0);
   }
+  std::vector<double> values_ms;  // prepare(x, false): values only, for evaluation
+  for (int r = 0; r < cmd.repeats; ++r) {
+    const auto t0 = std::chrono::steady_clock::now();
+    imaging.prepare(x, false);
+    values_ms.push_back(
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+  }
   auto median = [](std::vector<double> v) {
     std::sort(v.begin(), v.end());
     return v[v.size() / 2];
@@ -156,6 +163,7 @@ void run_joint_imaging_bench(const BenchCommand& cmd) {
     j["prepare_ms"] = median(prepare_ms);
     j["trace_ms"] = median(trace_ms);
     j["psf_ms"] = median(psf_ms);
+    j["prepare_values_only_ms"] = median(values_ms);
     j["render_4_crops_ms"] = median(render_ms);
     j["backward_4_crops_ms"] = median(backward_ms);
     j["step_ms"] = median(step_ms);
@@ -170,6 +178,7 @@ void run_joint_imaging_bench(const BenchCommand& cmd) {
         "  prepare (Jets)                    {:10.1f} ms  (trace + RI {:.1f}, PSFs + "
         "kernels {:.1f})\n",
         median(prepare_ms), median(trace_ms), median(psf_ms));
+    fmt::print("  prepare, values only (double)     {:10.1f} ms\n", median(values_ms));
     fmt::print("  render, 4 crops 256x256 of 1280x720 {:8.1f} ms\n", median(render_ms));
     fmt::print("  backward, 4 crops                 {:10.1f} ms\n", median(backward_ms));
     fmt::print("  whole imaging step                {:10.1f} ms  (CPU time {:.1f} ms)\n",

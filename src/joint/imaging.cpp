@@ -50,6 +50,7 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <type_traits>
 
 #include "lensopt/analysis/field_maps.h"
 #include "lensopt/core/error.h"
@@ -94,17 +95,40 @@ struct Optics {
   int ray_failures = 0;
 };
 
+// The value and derivative parts of a double (no derivatives) or a Jet.
+inline double value_part(double v) {
+  return v;
+}
 template <int N>
+double value_part(const ceres::Jet<double, N>& v) {
+  return v.a;
+}
+inline void derivative_part(double, int, double*) {}
+template <int N>
+void derivative_part(const ceres::Jet<double, N>& v, int n, double* out) {
+  for (int j = 0; j < n; ++j) out[j] = v.v[j];
+}
+inline double seed_variable(double x, int, double*) {
+  return x;
+}
+template <int N>
+ceres::Jet<double, N> seed_variable(double x, int j, ceres::Jet<double, N>*) {
+  return ceres::Jet<double, N>(x, j);
+}
+
+// J = double samples the values only (o.derivatives = 0), a Jet also the derivatives.
+template <typename J>
 Optics sample_optics(const LensParameterization& param, GlassMode mode,
                      const std::vector<int>& fixed_glasses,
                      const DifferentiableImagingOptions& options, const std::vector<double>& x,
                      ImagingTimings& timings) {
-  using J = ceres::Jet<double, N>;
-  const int n = param.size();
+  constexpr bool kJets = !std::is_same_v<J, double>;
+  const int n = kJets ? param.size() : 0;  // derivatives stored per value
   const Specs& specs = param.structure().specs;
   auto start = Clock::now();
-  std::vector<J> xj(n);
-  for (int j = 0; j < n; ++j) xj[j] = J(x[j], j);
+  std::vector<J> xj(x.size());
+  for (std::size_t j = 0; j < x.size(); ++j)
+    xj[j] = seed_variable(x[j], static_cast<int>(j), static_cast<J*>(nullptr));
   const TraceLens<J> lens = param.to_trace_lens(xj.data(), mode, fixed_glasses);
   const TraceSystem<J> sys = prepare_system(lens, specs, options.sampling);
   const std::vector<J> y_ref = reference_heights(sys);
@@ -112,15 +136,17 @@ Optics sample_optics(const LensParameterization& param, GlassMode mode,
   timings.trace_s = seconds_since(start);
 
   start = Clock::now();
-  const PsfSet<J> psfs =
-      compute_psfs(sys, specs.wavelength_channels, options.psf, options.sampling.threads);
+  const int trace_threads =
+      options.sampling.threads > 0 ? options.sampling.threads : options.threads;
+  const PsfSet<J> psfs = compute_psfs(sys, specs.wavelength_channels, options.psf, trace_threads);
   Optics o;
-  o.variables = n;
+  o.variables = n;  // 0: values only
   o.fields_deg = sys.fields_deg;
   const int fields = static_cast<int>(sys.fields_deg.size());
   auto store = [n](const J& v, std::vector<double>& values, std::vector<double>& derivatives) {
-    values.push_back(v.a);
-    for (int j = 0; j < n; ++j) derivatives.push_back(v.v[j]);
+    values.push_back(value_part(v));
+    derivatives.resize(derivatives.size() + n);
+    derivative_part(v, n, derivatives.data() + derivatives.size() - n);
   };
   for (int h = 0; h < fields; ++h) {
     store(y_ref[h], o.reference_y_mm, o.d_reference);
@@ -147,8 +173,8 @@ Optics sample_optics(const LensParameterization& param, GlassMode mode,
       for (int r = box[0]; r < box[1]; ++r) {
         for (int i = box[2]; i < box[3]; ++i, d += n) {
           const J& v = grid[static_cast<std::size_t>(r) * g + i];
-          values[static_cast<std::size_t>(r) * g + i] = v.a;
-          for (int j = 0; j < n; ++j) d[j] = v.v[j];
+          values[static_cast<std::size_t>(r) * g + i] = value_part(v);
+          derivative_part(v, n, d);
         }
       }
     }
@@ -173,7 +199,8 @@ Optics sample_optics_any(int width, const LensParameterization& param, GlassMode
   constexpr std::size_t kCount = sizeof(kJetWidths) / sizeof(kJetWidths[0]);
   if constexpr (I < kCount) {
     if (width <= kJetWidths[I])
-      return sample_optics<kJetWidths[I]>(param, mode, fixed_glasses, options, x, timings);
+      return sample_optics<ceres::Jet<double, kJetWidths[I]>>(param, mode, fixed_glasses, options,
+                                                              x, timings);
     return sample_optics_any<I + 1>(width, param, mode, fixed_glasses, options, x, timings);
   } else {
     throw Error(fmt::format("joint imaging supports up to {} lens variables, the lens has {}",
@@ -571,14 +598,16 @@ const ImagingTimings& DifferentiableImaging::timings() const {
   return state_->timings;
 }
 
-void DifferentiableImaging::prepare(const std::vector<double>& x) {
+void DifferentiableImaging::prepare(const std::vector<double>& x, bool derivatives) {
   State& s = *state_;
   if (static_cast<int>(x.size()) != s.param.size()) {
     throw Error(fmt::format("joint imaging: {} variables given, the lens has {}", x.size(),
                             s.param.size()));
   }
-  Optics optics =
-      sample_optics_any(s.param.size(), s.param, s.mode, s.fixed_glasses, s.options, x, s.timings);
+  Optics optics = derivatives ? sample_optics_any(s.param.size(), s.param, s.mode, s.fixed_glasses,
+                                                  s.options, x, s.timings)
+                              : sample_optics<double>(s.param, s.mode, s.fixed_glasses, s.options,
+                                                      x, s.timings);
   for (std::size_t h = 1; h < optics.reference_y_mm.size(); ++h) {
     if (!(optics.reference_y_mm[h] > optics.reference_y_mm[h - 1])) {
       throw Error("cannot render: the paraxial image heights do not increase with the field");
@@ -684,6 +713,9 @@ void DifferentiableImaging::backward(const FloatImage& scene, const CropWindow& 
     throw Error(fmt::format("joint imaging: the gradient image is {}x{}x{}, the crop {}x{}x{}",
                             grad_image.width, grad_image.height, grad_image.channels, crop.width,
                             crop.height, scene.channels));
+  }
+  if (s.prepared && s.optics.variables != n) {
+    throw Error("joint imaging: backward() needs prepare(x) with derivatives");
   }
   const std::shared_ptr<Geometry> g = s.geometry(scene.width, scene.height);
   const CropPlan p = s.plan(scene, crop, *g);

@@ -67,7 +67,8 @@ struct DifferentiableImagingOptions {
   int res_factor = 1;                             // 1 or 2, as RenderOptions
   bool relative_illumination = true;              // apply (and differentiate) the RI map
   bool distortion = true;                         // apply (and differentiate) the distortion warp
-  int threads = 0;                                // 0: all cores
+  int threads = 0;  // threads of render/backward and, unless sampling.threads says, of the
+                    // tracing; 0: all cores
 
   void validate() const;  // throws Error naming the bad value
 };
@@ -92,11 +93,14 @@ class DifferentiableImaging {
   DifferentiableImaging& operator=(const DifferentiableImaging&) = delete;
 
   // Samples the optics of variables x (size param.size()) with derivatives w.r.t. every
-  // variable. Must be called before render()/backward(); again whenever x changes.
-  void prepare(const std::vector<double>& x);
+  // variable. Must be called before render()/backward(); again whenever x changes. With
+  // derivatives = false it samples the values only (in double, several times faster: for
+  // evaluation), and backward() throws until the next prepare with derivatives.
+  void prepare(const std::vector<double>& x, bool derivatives = true);
 
   // The crop of the rendered full image (blur, then RI and distortion as enabled). For the same
-  // lens it equals Renderer::render of the full scene, restricted to the crop.
+  // lens, sampling and PsfOptions it equals Renderer::render of the full scene, restricted to the
+  // crop, to float rounding (the default PsfOptions here differ: joint_psf_options()).
   FloatImage render(const FloatImage& scene, const CropWindow& crop) const;
   // The same crop in double (interleaved channels, FloatImage's layout): what render() rounds
   // to float. For finite-difference checks, where float's 6e-8 per pixel is too coarse.
