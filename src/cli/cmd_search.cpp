@@ -25,7 +25,7 @@ extern "C" void on_search_signal(int) {
 struct SearchCommand {
   std::vector<std::string> inputs;
   std::string output;
-  bool vary_stop = false, vary_cement = false, list = false, quiet = false;
+  bool vary_stop = false, vary_cement = false, list = false, quiet = false, no_soft_start = false;
   std::vector<int> generate;
   std::vector<std::string> stops;
   int glass_seeds = -1, top = -1, jobs = -1, threads = -1;
@@ -111,6 +111,7 @@ void run_search_command(const SearchCommand& cmd) {
   if (cmd.fields > 0) options.optimize.sampling.fields = cmd.fields;
   if (cmd.max_iterations > 0) options.optimize.max_iterations = cmd.max_iterations;
   if (cmd.max_rounds > 0) options.optimize.max_rounds = cmd.max_rounds;
+  if (cmd.no_soft_start) options.optimize.soft_start = false;
   if (cmd.neighbours >= 0) options.optimize.glass_neighbours = cmd.neighbours;
   if (!std::isnan(cmd.f_number)) options.f_number = cmd.f_number;
   if (!std::isnan(cmd.half_field_deg)) options.half_field_deg = cmd.half_field_deg;
@@ -210,6 +211,9 @@ void setup_search(CLI::App& app) {
   sub->add_option("--fields", cmd->fields, "fields during optimization (default 11)");
   sub->add_option("--max-iterations", cmd->max_iterations, "LM iterations per round (default 50)");
   sub->add_option("--max-rounds", cmd->max_rounds, "reweighting rounds per phase (default 4)");
+  sub->add_flag(
+      "--no-soft-start", cmd->no_soft_start,
+      "strict constraints: skip the optimizer's first phase on the paper's soft penalties");
   sub->add_option("--neighbours", cmd->neighbours,
                   "catalog glasses tried per element (neighbours)");
   sub->add_option("--f-number", cmd->f_number, "f-number of every candidate (default 2)");

@@ -298,6 +298,8 @@ void read_search_description(const std::filesystem::path& path, SearchOptions& o
       o.loss.min_image_clearance_mm = number(k, n, w);
     else if (k == "max_ray_angle_deg")
       o.loss.max_ray_angle_deg = number(k, n, w);
+    else if (k == "soft_start")
+      o.soft_start = boolean(k, n, w);
     else if (k == "freeze")
       o.freeze = strings(k, n, w);
     else {
@@ -306,7 +308,7 @@ void read_search_description(const std::filesystem::path& path, SearchOptions& o
                               "rings, fields, max_iterations, max_rounds, glass_neighbours, "
                               "weight_ray_path, weight_ray_angle, weight_glass, min_air_mm, "
                               "min_glass_mm, max_glass_mm, min_image_clearance_mm, "
-                              "max_ray_angle_deg, freeze",
+                              "max_ray_angle_deg, soft_start, freeze",
                               k));
     }
   });
@@ -429,6 +431,7 @@ nlohmann::json optimize_settings_json(const OptimizeOptions& o, bool paper_then_
           {"scale_to_spec", o.sampling.scale_to_spec},
           {"max_iterations", o.max_iterations},
           {"max_rounds", o.max_rounds},
+          {"soft_start", o.soft_start},
           {"freeze", o.freeze},
           {"weight_spot", o.loss.weight_spot},
           {"weight_ray_path", o.loss.weight_ray_path},
