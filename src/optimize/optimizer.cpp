@@ -26,12 +26,18 @@ struct DesignFunctor {
   DesignLossOptions loss;
   std::vector<double> field_weights;
   std::atomic<int>* evaluations;
+  // (evaluation number, l_S in mm) of every evaluation, for the LM-vs-Adam comparison. Ceres
+  // calls the functor from one thread (num_threads = 1), so a plain vector suffices.
+  std::vector<std::pair<int, double>>* trajectory;
 
   template <typename T>
   bool operator()(T const* const* parameters, T* residuals) const {
-    evaluations->fetch_add(1);
-    return evaluate_design<T>(*param, parameters[0], mode, fixed_glasses, sampling, loss,
-                              &field_weights, residuals, static_cast<DesignLoss<T>*>(nullptr));
+    const int number = evaluations->fetch_add(1) + 1;
+    DesignLoss<T> terms;
+    const bool ok = evaluate_design<T>(*param, parameters[0], mode, fixed_glasses, sampling, loss,
+                                       &field_weights, residuals, &terms);
+    if (ok) trajectory->emplace_back(number, value_of(terms.spot_mm));
+    return ok;
   }
 };
 
@@ -77,6 +83,7 @@ DesignLossOptions with_margin(DesignLossOptions loss) {
 
 struct Counters {
   std::atomic<int> evaluations{0};
+  std::vector<std::pair<int, double>> trajectory;
   int jacobians = 0;
   int iterations = 0;
   std::string termination;
@@ -128,7 +135,8 @@ DesignLoss<double> run_phase(const LensParameterization& param, std::vector<doub
     for (int h = 0; h < field_count; ++h)
       weights[h] = 1.0 / (field_count * std::max(current.field_rms_mm[h], 1e-5));
     auto* functor = new DesignFunctor{
-        &param, mode, fixed, options.sampling, loss, weights, &counters.evaluations};
+        &param, mode, fixed, options.sampling, loss, weights, &counters.evaluations,
+                                      &counters.trajectory};
     ceres::Problem problem;
     problem.AddResidualBlock(make_cost_for(functor, n, residual_count(param, options.sampling)),
                              nullptr, x.data());
@@ -525,6 +533,7 @@ OptimizeResult optimize_lens(const Lens& start, const OptimizeOptions& options) 
   result.iterations = counters.iterations;
   result.loss_evaluations = counters.evaluations.load();
   result.jacobian_evaluations = counters.jacobians;
+  result.spot_trajectory = std::move(counters.trajectory);
   result.termination = interrupted() ? std::string("interrupted") : counters.termination;
   result.interrupted = interrupted();
   result.seconds =

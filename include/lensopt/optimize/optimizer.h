@@ -23,6 +23,7 @@
 #include <atomic>
 #include <functional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "lensopt/lens/lens.h"
@@ -77,6 +78,9 @@ struct OptimizeResult {
   int iterations = 0;                // LM iterations, all phases
   int loss_evaluations = 0;          // residual evaluations (with or without Jacobian)
   int jacobian_evaluations = 0;
+  // (evaluation number, mean spot l_S in mm at the optimization sampling) of every LM evaluation
+  // in order, all phases: how many evaluations LM needed to reach a given spot.
+  std::vector<std::pair<int, double>> spot_trajectory;
   double seconds = 0;
   std::string termination;  // Ceres's last termination message / interrupt
   bool interrupted = false;
