@@ -29,6 +29,7 @@ struct OptimizeCommand {
   bool compare_adam = false;
   bool no_soft_start = false;
   int adam_steps = 20000;
+  bool joint = false;
   std::string glass_search;
   std::string constraints;
   std::vector<std::string> freeze;
@@ -314,7 +315,15 @@ void setup_optimize(CLI::App& app) {
   sub->add_flag("--compare-adam", cmd->compare_adam,
                 "also report loss evaluations of LM vs a plain Adam loop on the same loss");
   sub->add_option("--adam-steps", cmd->adam_steps, "largest Adam step count for --compare-adam (default 20000)");
-  sub->callback([cmd] { run_optimize(*cmd); });
+  sub->add_flag("--joint", cmd->joint,
+                "joint lens + network optimization by Adam (options under 'joint', see README)");
+  const auto run_joint = setup_optimize_joint(*sub);
+  sub->callback([cmd, run_joint] {
+    if (!cmd->joint) return run_optimize(*cmd);
+    run_joint({cmd->lens_path, cmd->in_place ? cmd->lens_path : cmd->output_path, cmd->in_place,
+               cmd->json, cmd->quiet, cmd->threads, cmd->weight_ray_path, cmd->weight_ray_angle,
+               cmd->weight_glass, cmd->freeze});
+  });
 }
 
 }  // namespace lensopt::cli

@@ -3,6 +3,10 @@
 #pragma once
 
 #include <CLI/CLI.hpp>
+#include <cmath>
+#include <functional>
+#include <string>
+#include <vector>
 
 namespace lensopt::cli {
 
@@ -11,6 +15,18 @@ namespace lensopt::cli {
 struct ExitCode {
   int code;
 };
+
+// What `optimize` passes to its --joint mode (cmd_optimize_joint.cpp): the options the two modes
+// share. NaN / -1: not given.
+struct OptimizeShared {
+  std::string lens_path, output_path;
+  bool in_place = false, json = false, quiet = false;
+  int threads = -1;
+  double weight_ray_path = NAN, weight_ray_angle = NAN, weight_glass = NAN;
+  std::vector<std::string> freeze;
+};
+// Binds the joint options to `optimize` and returns the joint run.
+std::function<void(const OptimizeShared&)> setup_optimize_joint(CLI::App& optimize);
 
 void setup_catalog(CLI::App& app);    // cmd_catalog.cpp
 void setup_analyze(CLI::App& app);    // cmd_analyze.cpp

@@ -32,6 +32,10 @@ struct TaskBatch {
   std::vector<FloatImage> rendered;            // the lens's images: the task's input
   std::vector<FloatImage> sharp;               // the matching sharp crops (restoration target)
   std::vector<std::filesystem::path> targets;  // per image: a targets file, or empty
+  // Optional: the rendered crops in double (DifferentiableImaging::render_values, same layout as
+  // `rendered`, which must be there too). A double-precision task then uses these as its input,
+  // so finite differences of the loss are not limited by float rounding (6e-8 per pixel).
+  std::vector<std::vector<double>> rendered_values;
 };
 
 struct TaskOutput {
@@ -43,7 +47,7 @@ struct TaskOptions {
   double learning_rate = 1e-3;    // the task's own Adam
   int channels = 3;               // image channels
   unsigned seed = 1;              // weight initialization
-  int features = 32;              // restoration: feature channels F
+  int features = 16;              // restoration: feature channels F
   int layers = 4;                 // restoration: convolution layers (>= 2)
   bool double_precision = false;  // run the network in float64 (gradient checks)
   int threads = 2;                // torch intra-op threads (deterministic for a fixed count)

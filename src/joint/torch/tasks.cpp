@@ -37,6 +37,25 @@ torch::Tensor to_tensor(const std::vector<FloatImage>& images, int channels, tor
   return torch::stack(list).to(dtype).contiguous();
 }
 
+// The task's input: the rendered crops, or their double values when given and the task runs in
+// double.
+torch::Tensor input_tensor(const TaskBatch& batch, const TaskOptions& options) {
+  if (batch.rendered_values.empty() || !options.double_precision)
+    return to_tensor(batch.rendered, options.channels, dtype_of(options));
+  if (batch.rendered_values.size() != batch.rendered.size())
+    throw Error("task batch: rendered_values must match rendered, image for image");
+  std::vector<torch::Tensor> list;
+  for (std::size_t i = 0; i < batch.rendered.size(); ++i) {
+    const FloatImage& im = batch.rendered[i];
+    if (batch.rendered_values[i].size() != im.pixels.size() || im.channels != options.channels)
+      throw Error("task batch: rendered_values must match rendered, image for image");
+    list.push_back(torch::from_blob(const_cast<double*>(batch.rendered_values[i].data()),
+                                    {im.height, im.width, im.channels}, torch::kFloat64)
+                       .permute({2, 0, 1}));
+  }
+  return torch::stack(list).contiguous();
+}
+
 std::vector<FloatImage> from_tensor(const torch::Tensor& t) {
   const torch::Tensor hwc = t.detach().to(torch::kFloat32).permute({0, 2, 3, 1}).contiguous();
   const int b = static_cast<int>(hwc.size(0)), h = static_cast<int>(hwc.size(1)),
@@ -111,7 +130,7 @@ class RestorationTask : public Task {
   TaskOutput step(const TaskBatch& batch, bool train, bool want_grad) override {
     return guarded("restoration task", [&] {
       TaskOutput out;
-      torch::Tensor x = to_tensor(batch.rendered, options_.channels, dtype_of(options_));
+      torch::Tensor x = input_tensor(batch, options_);
       const torch::Tensor y = to_tensor(batch.sharp, options_.channels, dtype_of(options_));
       if (!train && !want_grad) {
         torch::NoGradGuard no_grad;
@@ -132,7 +151,7 @@ class RestorationTask : public Task {
   std::vector<FloatImage> predict(const TaskBatch& batch) override {
     return guarded("restoration task", [&] {
       torch::NoGradGuard no_grad;
-      const torch::Tensor x = to_tensor(batch.rendered, options_.channels, dtype_of(options_));
+      const torch::Tensor x = input_tensor(batch, options_);
       return from_tensor(net_->forward(x).clamp(0.0, 1.0));
     });
   }
@@ -140,7 +159,7 @@ class RestorationTask : public Task {
   double metric(const TaskBatch& batch) override {
     return guarded("restoration task", [&] {
       torch::NoGradGuard no_grad;
-      const torch::Tensor x = to_tensor(batch.rendered, options_.channels, dtype_of(options_));
+      const torch::Tensor x = input_tensor(batch, options_);
       const torch::Tensor y = to_tensor(batch.sharp, options_.channels, dtype_of(options_));
       const torch::Tensor restored = net_->forward(x).clamp(0.0, 1.0);
       const torch::Tensor mse = (restored - y).pow(2).mean({1, 2, 3}).to(torch::kFloat64);
@@ -231,7 +250,7 @@ class TorchScriptTask : public Task {
   TaskOutput step(const TaskBatch& batch, bool train, bool want_grad) override {
     return guarded(name(), [&] {
       TaskOutput out;
-      torch::Tensor x = to_tensor(batch.rendered, options_.channels, dtype_of(options_));
+      torch::Tensor x = input_tensor(batch, options_);
       const torch::Tensor targets = targets_of(batch);
       if (!train && !want_grad) {
         torch::NoGradGuard no_grad;

@@ -1,0 +1,277 @@
+// lensopt optimize LENS --joint -o OUT.toml: joint lens + network optimization (joint/joint.h).
+// Writes OUT.toml (the joint lens), OUT.csv (per-step log, unless --log), OUT.network.pt (the
+// jointly trained network, unless --network), and checkpoints with --checkpoint-every.
+#include <fmt/core.h>
+
+#include <atomic>
+#include <csignal>
+#include <filesystem>
+#include <memory>
+#include <nlohmann/json.hpp>
+
+#include "commands.h"
+#include "lensopt/core/error.h"
+#include "lensopt/joint/joint.h"
+#include "lensopt/lens/lens_io.h"
+
+namespace lensopt::cli {
+namespace {
+
+std::atomic<bool> g_joint_interrupted{false};
+extern "C" void on_joint_sigint(int) {
+  g_joint_interrupted.store(true);
+}
+
+struct JointCommand {
+  std::string task = "restoration";
+  std::string images;
+  int steps = 300;
+  int decay_steps = -1;  // default: two thirds of the steps (the paper: 50k + 100k)
+  int batch = 4;
+  int crop = 256;
+  double lambda_lens = 1.0;
+  double lens_lr = 5e-3;
+  double task_lr = 1e-3;
+  double weight_spot = NAN;
+  unsigned long seed = 1;
+  int checkpoint_every = 0;
+  std::string checkpoint_dir;
+  std::string resume;
+  std::string log;
+  std::string network;
+  bool only_joint = false;
+  bool continuous_glass = false;
+  bool no_image_solve = false;
+  bool no_distortion = false;
+  bool no_relative_illumination = false;
+  int res_factor = 1;
+  int psf_rings = 8, psf_fields = 21;
+  int design_rings = 8, design_fields = 11;
+  int scenes = 6;
+  int scene_width = 1280, scene_height = 720;
+  int eval_crops = 8;
+  int features = 16, layers = 4;
+  int stop_after = -1;
+};
+
+std::filesystem::path beside(const std::filesystem::path& out, const std::string& suffix) {
+  return out.parent_path() / (out.stem().string() + suffix);
+}
+
+void run_joint(const JointCommand& cmd, const OptimizeShared& shared) {
+  if (!torch_available())
+    throw Error(
+        "--joint needs libtorch, and this lensopt was built without it (LENSOPT_WITH_TORCH=OFF); "
+        "install libtorch-dev and rebuild with -DLENSOPT_WITH_TORCH=ON");
+  const Lens lens = read_lens(shared.lens_path);
+  std::filesystem::path out_path = shared.output_path;
+  if (out_path.empty()) throw Error("give -o OUT.toml (or --in-place to overwrite the input)");
+  if (!shared.in_place && std::filesystem::exists(out_path) &&
+      std::filesystem::equivalent(out_path, shared.lens_path))
+    throw Error(SourceLocation{out_path.string()},
+                "refusing to overwrite the input lens; use --in-place to do that");
+  if (out_path.extension() != ".toml")
+    throw Error(SourceLocation{out_path.string()}, "the optimized lens is written as .toml");
+
+  JointOptions options;
+  options.task = cmd.task;
+  options.task_options.learning_rate = cmd.task_lr;
+  options.task_options.seed = static_cast<unsigned>(cmd.seed);
+  options.task_options.features = cmd.features;
+  options.task_options.layers = cmd.layers;
+  if (shared.threads > 0) options.task_options.threads = shared.threads;
+  options.data.images_dir = cmd.images;
+  options.data.batch_size = cmd.batch;
+  options.data.crop_px = cmd.crop;
+  options.data.seed = cmd.seed;
+  options.data.builtin_scenes = cmd.scenes;
+  options.data.builtin_width = cmd.scene_width;
+  options.data.builtin_height = cmd.scene_height;
+  options.data.eval_crops = cmd.eval_crops;
+  options.imaging.sampling.rings = cmd.psf_rings;
+  options.imaging.sampling.fields = cmd.psf_fields;
+  options.imaging.res_factor = cmd.res_factor;
+  options.imaging.distortion = !cmd.no_distortion;
+  options.imaging.relative_illumination = !cmd.no_relative_illumination;
+  options.design_sampling.rings = cmd.design_rings;
+  options.design_sampling.fields = cmd.design_fields;
+  if (shared.threads >= 0) {
+    options.imaging.threads = shared.threads;
+    options.imaging.sampling.threads = shared.threads;
+    options.design_sampling.threads = shared.threads;
+  }
+  if (!std::isnan(cmd.weight_spot)) options.loss.weight_spot = cmd.weight_spot;
+  if (!std::isnan(shared.weight_ray_path)) options.loss.weight_ray_path = shared.weight_ray_path;
+  if (!std::isnan(shared.weight_ray_angle)) options.loss.weight_ray_angle = shared.weight_ray_angle;
+  if (!std::isnan(shared.weight_glass)) options.loss.weight_glass = shared.weight_glass;
+  options.lambda_lens = cmd.lambda_lens;
+  options.lens_learning_rate = cmd.lens_lr;
+  const int decay = cmd.decay_steps >= 0 ? cmd.decay_steps : (2 * cmd.steps) / 3;
+  if (decay > cmd.steps)
+    throw Error(fmt::format("--decay-steps {} exceeds --steps {}", decay, cmd.steps));
+  options.constant_steps = cmd.steps - decay;
+  options.decay_steps = decay;
+  options.glass_mode = cmd.continuous_glass ? GlassMode::kContinuous : GlassMode::kQuantized;
+  options.paraxial_image_solve = !cmd.no_image_solve;
+  options.freeze = shared.freeze;
+  options.run_baselines = !cmd.only_joint;
+  options.checkpoint_every = cmd.checkpoint_every;
+  options.checkpoint_dir = cmd.checkpoint_dir.empty() ? beside(out_path, ".checkpoint")
+                                                      : std::filesystem::path(cmd.checkpoint_dir);
+  options.resume_dir = cmd.resume;
+  options.log_csv = cmd.log.empty() ? beside(out_path, ".csv") : std::filesystem::path(cmd.log);
+  options.stop_after_steps = cmd.stop_after;
+  options.verbose = !shared.quiet;
+  options.interrupt = &g_joint_interrupted;
+  options.validate();
+  const std::filesystem::path network =
+      cmd.network.empty() ? beside(out_path, ".network.pt") : std::filesystem::path(cmd.network);
+
+  g_joint_interrupted.store(false);
+  auto previous = std::signal(SIGINT, on_joint_sigint);
+  JointResult result;
+  try {
+    result = optimize_joint(lens, options, network);
+  } catch (...) {
+    std::signal(SIGINT, previous);
+    throw;
+  }
+  std::signal(SIGINT, previous);
+  if (result.interrupted) {
+    fmt::print(
+        stderr,
+        "lensopt optimize --joint: stopped after {} steps{}; nothing written but the log{}\n",
+        result.steps_done,
+        options.checkpoint_every > 0
+            ? fmt::format(" (resume with --resume {})", options.checkpoint_dir.string())
+            : "",
+        options.checkpoint_every > 0 ? " and the checkpoint" : "");
+    throw ExitCode{130};
+  }
+  write_lens(result.lens, out_path);
+
+  const JointSettingResult* joint = nullptr;
+  const JointSettingResult* fixed_trained = nullptr;
+  for (const auto& s : result.settings) {
+    if (s.name == "joint") joint = &s;
+    if (s.name == "fixed/trained") fixed_trained = &s;
+  }
+  const double margin = joint && fixed_trained ? joint->metric - fixed_trained->metric : NAN;
+  if (shared.json) {
+    nlohmann::json j;
+    j["lens"] = lens.name;
+    j["output"] = out_path.string();
+    j["network"] = network.string();
+    j["log"] = options.log_csv.string();
+    j["task"] = options.task;
+    j["metric"] = result.metric_name;
+    nlohmann::json settings = nlohmann::json::array();
+    for (const auto& s : result.settings)
+      settings.push_back(
+          {{"name", s.name}, {"metric", s.metric}, {"mean_spot_um", s.mean_spot_um}});
+    j["settings"] = settings;
+    if (!std::isnan(margin)) j["joint_minus_fixed_trained"] = margin;
+    j["glasses"] = result.glasses;
+    nlohmann::json changes = nlohmann::json::array();
+    for (const auto& c : result.glass_changes)
+      changes.push_back({{"phase", c.phase},
+                         {"step", c.step},
+                         {"element", c.element + 1},
+                         {"from", c.from},
+                         {"to", c.to}});
+    j["glass_changes"] = changes;
+    j["steps"] = options.total_steps();
+    j["seconds"] = result.seconds;
+    const JointTimings& t = result.timings;
+    j["step_seconds"] = {{"trace", t.trace_s},     {"psf", t.psf_s},
+                         {"render", t.render_s},   {"adjoint", t.adjoint_s},
+                         {"network", t.network_s}, {"design_loss", t.design_loss_s},
+                         {"total", t.step_s},      {"steps", t.steps}};
+    j["notes"] = result.notes;
+    fmt::print("{}\n", j.dump(2));
+    return;
+  }
+  fmt::print("lensopt optimize --joint: {} -> {} (task {}, {} steps)\n", shared.lens_path,
+             out_path.string(), options.task, options.total_steps());
+  fmt::print("  setting          held-out {:<12} mean spot (um)\n", result.metric_name);
+  for (const auto& s : result.settings)
+    fmt::print("  {:<16} {:21.4f}   {:10.2f}\n", s.name, s.metric, s.mean_spot_um);
+  if (!std::isnan(margin))
+    fmt::print("  joint - fixed/trained: {:+.4f} ({})\n", margin,
+               margin > 0 ? "joint wins" : "joint does not win");
+  std::string glasses;
+  for (const std::string& g : result.glasses) glasses += (glasses.empty() ? "" : ", ") + g;
+  fmt::print("  glasses: {}; {} glass changes\n", glasses, result.glass_changes.size());
+  const JointTimings& t = result.timings;
+  fmt::print(
+      "  per joint step: {:.3f} s (trace {:.3f}, PSFs {:.3f}, render {:.3f}, adjoint {:.3f}, "
+      "network {:.3f}, l_lens {:.3f})\n",
+      t.step_s, t.trace_s, t.psf_s, t.render_s, t.adjoint_s, t.network_s, t.design_loss_s);
+  fmt::print("  log {}; network {}; {:.1f} s\n", options.log_csv.string(), network.string(),
+             result.seconds);
+}
+
+}  // namespace
+
+std::function<void(const OptimizeShared&)> setup_optimize_joint(CLI::App& sub) {
+  auto cmd = std::make_shared<JointCommand>();
+  const std::string g = "joint (with --joint)";
+  sub.add_option("--task", cmd->task, "restoration (default) or torchscript:MODEL.pt")->group(g);
+  sub.add_option("--images", cmd->images, "directory of training images (default: built-in scenes)")
+      ->group(g);
+  sub.add_option("--steps", cmd->steps, "optimization steps per trained setting (default 300)")
+      ->group(g);
+  sub.add_option("--decay-steps", cmd->decay_steps,
+                 "of them, half-cosine decay steps at the end (default 2/3 of --steps)")
+      ->group(g);
+  sub.add_option("--batch", cmd->batch, "crops per step (default 4)")->group(g);
+  sub.add_option("--crop", cmd->crop, "crop size, px (default 256)")->group(g);
+  sub.add_option("--lambda-lens", cmd->lambda_lens, "weight of l_lens in l_joint (default 1)")
+      ->group(g);
+  sub.add_option("--lens-lr", cmd->lens_lr, "lens learning rate (default 5e-3)")->group(g);
+  sub.add_option("--task-lr", cmd->task_lr, "network learning rate (default 1e-3)")->group(g);
+  sub.add_option("--weight-spot", cmd->weight_spot, "lambda_S (default 1; 0: the ablation)")
+      ->group(g);
+  sub.add_option("--seed", cmd->seed, "seed of crops, scenes and network (default 1)")->group(g);
+  sub.add_option("--checkpoint-every", cmd->checkpoint_every, "checkpoint every N steps")->group(g);
+  sub.add_option("--checkpoint-dir", cmd->checkpoint_dir,
+                 "checkpoint directory (default OUT.checkpoint)")
+      ->group(g);
+  sub.add_option("--resume", cmd->resume, "resume from a checkpoint directory")->group(g);
+  sub.add_option("--log", cmd->log, "per-step CSV (default OUT.csv)")->group(g);
+  sub.add_option("--network", cmd->network, "trained network file (default OUT.network.pt)")
+      ->group(g);
+  sub.add_flag("--only-joint", cmd->only_joint,
+               "skip the fixed-lens settings (fixed/fixed, fixed/trained)")
+      ->group(g);
+  sub.add_flag("--continuous-glass", cmd->continuous_glass, "ablation: no glass quantization")
+      ->group(g);
+  sub.add_flag("--no-image-solve", cmd->no_image_solve, "ablation: no paraxial image solve")
+      ->group(g);
+  sub.add_flag("--no-distortion", cmd->no_distortion, "render without the distortion warp")
+      ->group(g);
+  sub.add_flag("--no-relative-illumination", cmd->no_relative_illumination,
+               "render without relative illumination")
+      ->group(g);
+  sub.add_option("--res-factor", cmd->res_factor, "simulated resolution factor, 1 or 2")->group(g);
+  sub.add_option("--psf-rings", cmd->psf_rings, "pupil rings of the PSFs (default 8)")->group(g);
+  sub.add_option("--psf-fields", cmd->psf_fields, "PSF fields (default 21)")->group(g);
+  sub.add_option("--design-rings", cmd->design_rings, "pupil rings of l_lens (default 8)")
+      ->group(g);
+  sub.add_option("--design-fields", cmd->design_fields, "fields of l_lens (default 11)")->group(g);
+  sub.add_option("--scenes", cmd->scenes, "built-in scenes: chart + N-1 dead leaves (default 6)")
+      ->group(g);
+  sub.add_option("--scene-width", cmd->scene_width, "built-in scene width, px (default 1280)")
+      ->group(g);
+  sub.add_option("--scene-height", cmd->scene_height, "built-in scene height, px (default 720)")
+      ->group(g);
+  sub.add_option("--eval-crops", cmd->eval_crops, "held-out crops scored (default 8)")->group(g);
+  sub.add_option("--features", cmd->features, "restoration network features (default 16)")
+      ->group(g);
+  sub.add_option("--layers", cmd->layers, "restoration network layers (default 4)")->group(g);
+  sub.add_option("--stop-after", cmd->stop_after, "stop after N steps (as if interrupted)")
+      ->group(g);
+  return [cmd](const OptimizeShared& shared) { run_joint(*cmd, shared); };
+}
+
+}  // namespace lensopt::cli
