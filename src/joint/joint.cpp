@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <ctime>
 #include <nlohmann/json.hpp>
 
 #include "lensopt/core/atomic_file.h"
@@ -299,6 +300,7 @@ JointResult optimize_joint(const Lens& start, const JointOptions& options,
           break;
         }
         const auto step_start = Clock::now();
+        const std::clock_t step_cpu_start = std::clock();
         const double factor = learning_rate_factor(t, options.constant_steps, options.decay_steps);
         const double lr_lens = train_lens ? options.lens_learning_rate * factor : 0.0;
         const double lr_task = options.task_options.learning_rate * factor;
@@ -374,15 +376,15 @@ JointResult optimize_joint(const Lens& start, const JointOptions& options,
           jt.network_s += network_s;
           jt.design_loss_s += design_s;
           jt.step_s += seconds_since(step_start);
+          jt.step_cpu_s += static_cast<double>(std::clock() - step_cpu_start) / CLOCKS_PER_SEC;
           ++jt.steps;
         }
         if (options.verbose && (t % 10 == 0 || t == total))
           say(fmt::format("  {} step {}/{}: task loss {:.6g}, l_lens {:.6g}, mean spot {:.2f} um",
                           phase, t, total, out.loss, l_lens, design.loss.spot_mm * 1000.0));
-        if (options.checkpoint_every > 0 && t % options.checkpoint_every == 0 && t < total) {
-          log.flush();
+        log.flush();  // the whole (small) log, atomically, every step
+        if (options.checkpoint_every > 0 && t % options.checkpoint_every == 0 && t < total)
           checkpoint(phase, t, x, m, v);
-        }
       }
       log.flush();
       if (result.interrupted) {
@@ -415,6 +417,7 @@ JointResult optimize_joint(const Lens& start, const JointOptions& options,
     jt.network_s /= s;
     jt.design_loss_s /= s;
     jt.step_s /= s;
+    jt.step_cpu_s /= s;
   }
   if (!network_out.empty() && task && !result.interrupted) task->save_network(network_out);
   result.metric_name = task ? task->metric_name() : "";

@@ -103,6 +103,7 @@ struct JointTimings {
   double network_s = 0;      // the task's forward, backward and update
   double design_loss_s = 0;  // l_lens and its gradient (Jets)
   double step_s = 0;         // the whole step
+  double step_cpu_s = 0;     // the whole step's process CPU time (all threads)
   int steps = 0;
 };
 
