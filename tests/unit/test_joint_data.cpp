@@ -12,6 +12,7 @@
 #include "lensopt/joint/data.h"
 #include "lensopt/lens/lens_io.h"
 #include "lensopt/optimize/design_gradient.h"
+#include "test_joint_support.h"
 #include "test_support.h"
 
 using namespace lensopt;
@@ -82,7 +83,7 @@ TEST_CASE(
 }
 
 TEST_CASE("joint data: a directory of images, its split and its targets files") {
-  const auto dir = std::filesystem::temp_directory_path() / "lensopt_test_joint_data";
+  const auto dir = test::joint_temp_dir("lensopt_test_joint_data");
   std::filesystem::remove_all(dir);
   std::filesystem::create_directories(dir);
   for (int i = 0; i < 5; ++i)

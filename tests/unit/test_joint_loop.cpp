@@ -63,7 +63,7 @@ std::vector<std::vector<std::string>> csv_rows(const std::filesystem::path& path
 }
 
 std::filesystem::path fresh_dir(const std::string& name) {
-  const auto dir = std::filesystem::temp_directory_path() / name;
+  const auto dir = test::joint_temp_dir(name);
   std::filesystem::remove_all(dir);
   std::filesystem::create_directories(dir);
   return dir;

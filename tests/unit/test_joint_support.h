@@ -1,9 +1,17 @@
 // Helpers shared by the joint optimization's tests.
 #pragma once
 
+#include <unistd.h>
+
 #include <filesystem>
+#include <string>
 
 namespace lensopt::test {
+
+// A temporary directory of this process (several test runs may share the machine's /tmp).
+inline std::filesystem::path joint_temp_dir(const std::string& name) {
+  return std::filesystem::temp_directory_path() / (name + "-" + std::to_string(::getpid()));
+}
 
 // Writes a small TorchScript restorer (a residual 3x3 convolution; forward(images, targets)
 // returns the MSE to the targets) to dir/restorer.pt and returns its path; empty without

@@ -136,7 +136,7 @@ TEST_CASE("joint task: restoration trains, and its image gradient matches finite
 }
 
 TEST_CASE("joint task: save and load restore the weights and the Adam state exactly") {
-  const auto dir = std::filesystem::temp_directory_path() / "lensopt_test_joint_task";
+  const auto dir = test::joint_temp_dir("lensopt_test_joint_task");
   std::filesystem::create_directories(dir);
   TaskOptions o;
   o.features = 8;
@@ -157,7 +157,7 @@ TEST_CASE("joint task: save and load restore the weights and the Adam state exac
 }
 
 TEST_CASE("joint task: a TorchScript module trains through torchscript:MODEL.pt") {
-  const auto dir = std::filesystem::temp_directory_path() / "lensopt_test_joint_ts";
+  const auto dir = test::joint_temp_dir("lensopt_test_joint_ts");
   const std::filesystem::path model = test::write_test_torchscript_module(dir);
   TaskOptions o;
   o.learning_rate = 2e-3;
