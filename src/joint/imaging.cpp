@@ -521,11 +521,11 @@ void DifferentiableImaging::State::blur_region(
   const int tasks = static_cast<int>(p.tasks.size());
   if (spectra) spectra->assign(tasks, {});
   const int nthreads = thread_count(options.threads);
-  std::vector<std::vector<double>> accumulators(nthreads);
+  // Each task's windowed output in its own buffer, added in task order afterwards: the sum does
+  // not depend on which thread ran which task (runs are reproducible to the last bit).
+  std::vector<std::vector<double>> outputs(blurred ? tasks : 0);
 #pragma omp parallel num_threads(nthreads)
   {
-    std::vector<double>& acc = accumulators[omp_get_thread_num()];
-    if (blurred) acc.assign(plane * p.colours, 0.0);
 #pragma omp for schedule(dynamic, 1)
     for (int ti = 0; ti < tasks; ++ti) {
       const BlurTask& t = p.tasks[ti];
@@ -565,18 +565,26 @@ void DifferentiableImaging::State::blur_region(
       const int px = t.q % PsfGrid::kPatches, py = t.q / PsfGrid::kPatches;
       const std::vector<double>& wx = g.window_x[px];
       const std::vector<double>& wy = g.window_y[py];
-      double* out = acc.data() + plane * t.c;
+      std::vector<double>& out = outputs[ti];
+      out.resize(static_cast<std::size_t>(t.x1 - t.x0) * (t.y1 - t.y0));
       for (int j = t.y0; j < t.y1; ++j) {
         const double* row = real.data + static_cast<std::size_t>(j - t.y0 + r) * nx + r;
-        double* dst = out + static_cast<std::size_t>(j - p.ry0) * p.rw + (t.x0 - p.rx0);
+        double* dst = out.data() + static_cast<std::size_t>(j - t.y0) * (t.x1 - t.x0);
         const double w = wy[j];
-        for (int i = t.x0; i < t.x1; ++i) dst[i - t.x0] += w * wx[i] * row[i - t.x0];
+        for (int i = t.x0; i < t.x1; ++i) dst[i - t.x0] = w * wx[i] * row[i - t.x0];
       }
     }
   }
   if (!blurred) return;
-  for (const auto& acc : accumulators)
-    for (std::size_t i = 0; i < plane * p.colours; ++i) (*blurred)[i] += acc[i];
+  for (int ti = 0; ti < tasks; ++ti) {
+    const BlurTask& t = p.tasks[ti];
+    const double* src = outputs[ti].data();
+    for (int j = t.y0; j < t.y1; ++j) {
+      double* dst = blurred->data() + plane * t.c + static_cast<std::size_t>(j - p.ry0) * p.rw +
+                    (t.x0 - p.rx0);
+      for (int i = 0; i < t.x1 - t.x0; ++i) dst[i] += *src++;
+    }
+  }
 }
 
 DifferentiableImaging::DifferentiableImaging(const LensParameterization& param, GlassMode mode,
