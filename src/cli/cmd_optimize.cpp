@@ -1,16 +1,17 @@
 // lensopt optimize LENS -o OUT.toml: baseline spot-size optimization (Ceres Levenberg-Marquardt).
 #include <fmt/core.h>
+#include <toml++/toml.h>
 
 #include <atomic>
 #include <csignal>
 #include <filesystem>
 #include <memory>
 #include <nlohmann/json.hpp>
-#include <toml++/toml.h>
 
 #include "commands.h"
 #include "lensopt/core/error.h"
 #include "lensopt/lens/lens_io.h"
+#include "lensopt/optimize/optimize_table.h"
 #include "lensopt/optimize/optimizer.h"
 
 namespace lensopt::cli {
@@ -18,7 +19,9 @@ namespace {
 
 std::atomic<bool> g_interrupted{false};
 
-extern "C" void on_sigint(int) { g_interrupted.store(true); }
+extern "C" void on_sigint(int) {
+  g_interrupted.store(true);
+}
 
 struct OptimizeCommand {
   std::string lens_path;
@@ -40,13 +43,6 @@ struct OptimizeCommand {
          max_ray_angle_deg = NAN;
 };
 
-GlassSearch parse_glass_search(const std::string& s, const SourceLocation& where) {
-  if (s == "none") return GlassSearch::kNone;
-  if (s == "snap") return GlassSearch::kSnap;
-  if (s == "neighbours" || s == "neighbors") return GlassSearch::kNeighbours;
-  throw Error(where, fmt::format("glass_search = '{}' must be none, snap or neighbours", s));
-}
-
 // Applies the lens file's [optimize] table (when the lens is a TOML file).
 void apply_optimize_table(const Lens& lens, OptimizeOptions& options) {
   const std::filesystem::path path = lens.source_path;
@@ -64,69 +60,18 @@ void apply_optimize_table(const Lens& lens, OptimizeOptions& options) {
   for (const auto& [key, node] : *table) {
     const SourceLocation where{path.string(), static_cast<int>(node.source().begin.line),
                                static_cast<int>(node.source().begin.column)};
-    auto number = [&]() {
-      const auto v = node.value<double>();
-      if (!v) throw Error(where, fmt::format("[optimize] {} must be a number", key.str()));
-      return *v;
-    };
-    auto integer = [&]() {
-      const auto v = node.value<int64_t>();
-      if (!v) throw Error(where, fmt::format("[optimize] {} must be an integer", key.str()));
-      return static_cast<int>(*v);
-    };
     const std::string k(key.str());
-    if (k == "weight_ray_path") options.loss.weight_ray_path = number();
-    else if (k == "weight_ray_angle") options.loss.weight_ray_angle = number();
-    else if (k == "weight_glass") options.loss.weight_glass = number();
-    else if (k == "min_air_mm") options.loss.min_air_mm = number();
-    else if (k == "min_glass_mm") options.loss.min_glass_mm = number();
-    else if (k == "max_glass_mm") options.loss.max_glass_mm = number();
-    else if (k == "min_image_clearance_mm") options.loss.min_image_clearance_mm = number();
-    else if (k == "max_ray_angle_deg") options.loss.max_ray_angle_deg = number();
-    else if (k == "rings") options.sampling.rings = integer();
-    else if (k == "fields") options.sampling.fields = integer();
-    else if (k == "max_iterations") options.max_iterations = integer();
-    else if (k == "glass_neighbours") options.glass_neighbours = integer();
-    else if (k == "soft_start") {
-      const auto v = node.value<bool>();
-      if (!v) throw Error(where, "[optimize] soft_start must be true or false");
-      options.soft_start = *v;
-    }
-    else if (k == "constraints") {
-      const auto v = node.value<std::string>();
-      if (!v || (*v != "strict" && *v != "paper"))
-        throw Error(where, "[optimize] constraints must be \"strict\" or \"paper\"");
-      options.loss.paper_penalties = *v == "paper";
-    }
-    else if (k == "glass_search") {
-      const auto v = node.value<std::string>();
-      if (!v) throw Error(where, "[optimize] glass_search must be a string");
-      options.glass_search = parse_glass_search(*v, where);
-    } else if (k == "freeze") {
-      const toml::array* arr = node.as_array();
-      if (!arr) throw Error(where, "[optimize] freeze must be an array of variable names");
-      for (const auto& item : *arr) {
-        const auto v = item.value<std::string>();
-        if (!v) throw Error(where, "[optimize] freeze entries must be strings");
-        options.freeze.push_back(*v);
-      }
-    } else {
-      throw Error(where,
-                  fmt::format("unknown key '{}' in [optimize]; known: weight_ray_path, "
-                              "weight_ray_angle, weight_glass, min_air_mm, min_glass_mm, "
-                              "max_glass_mm, min_image_clearance_mm, max_ray_angle_deg, rings, "
-                              "fields, max_iterations, glass_search, glass_neighbours, freeze, constraints, "
-                              "soft_start",
-                              k));
-    }
+    if (!apply_optimize_key(k, node, where, options))
+      throw Error(where, fmt::format("unknown key '{}' in [optimize]; known: {}", k,
+                                     optimize_table_keys()));
   }
 }
 
 std::string format_constraints(const ConstraintReport& c) {
   std::string out;
   for (const ConstraintReport::Row& r : c.rows) {
-    out += fmt::format("    {:<34} {:10.4f}  {} {:8.3f}  {}\n", r.name, r.value, r.is_lower ? ">=" : "<=",
-                       r.bound, r.pass ? "pass" : "FAIL");
+    out += fmt::format("    {:<34} {:10.4f}  {} {:8.3f}  {}\n", r.name, r.value,
+                       r.is_lower ? ">=" : "<=", r.bound, r.pass ? "pass" : "FAIL");
   }
   out += fmt::format("    {:<34} {:10d}  == {:8d}  {}\n", "ray failures", c.ray_failures, 0,
                      c.ray_failures == 0 ? "pass" : "FAIL");
@@ -136,8 +81,11 @@ std::string format_constraints(const ConstraintReport& c) {
 nlohmann::json constraints_json(const ConstraintReport& c) {
   nlohmann::json rows = nlohmann::json::array();
   for (const ConstraintReport::Row& r : c.rows)
-    rows.push_back({{"name", r.name}, {"value", r.value}, {"bound", r.bound},
-                    {"kind", r.is_lower ? "min" : "max"}, {"pass", r.pass}});
+    rows.push_back({{"name", r.name},
+                    {"value", r.value},
+                    {"bound", r.bound},
+                    {"kind", r.is_lower ? "min" : "max"},
+                    {"pass", r.pass}});
   return {{"rows", rows}, {"ray_failures", c.ray_failures}, {"all_pass", c.all_pass()}};
 }
 
@@ -212,13 +160,15 @@ void run_optimize(const OptimizeCommand& cmd) {
   } else {
     fmt::print("lensopt optimize: {} -> {}\n", cmd.lens_path, out_path.string());
     fmt::print("  mean RMS spot (full sampling): {:.3f} um -> {:.3f} um{}\n", result.start_spot_um,
-               result.final_spot_um, result.kept_start ? "  (no improvement found: start kept)" : "");
+               result.final_spot_um,
+               result.kept_start ? "  (no improvement found: start kept)" : "");
     fmt::print("  field (deg index)   before (um)   after (um)\n");
     for (std::size_t h = 0; h < result.final_field_spot_um.size(); ++h)
       fmt::print("  {:17d}   {:11.3f}   {:10.3f}\n", h,
                  h < result.start_field_spot_um.size() ? result.start_field_spot_um[h] : 0.0,
                  result.final_field_spot_um[h]);
-    fmt::print("  constraints after (full sampling):\n{}", format_constraints(result.final_constraints));
+    fmt::print("  constraints after (full sampling):\n{}",
+               format_constraints(result.final_constraints));
     std::string glasses;
     for (const std::string& g : result.glasses) glasses += (glasses.empty() ? "" : ", ") + g;
     fmt::print("  glasses: {}\n", glasses);
@@ -232,8 +182,8 @@ void run_optimize(const OptimizeCommand& cmd) {
     std::string failing;
     for (const ConstraintReport::Row& r : result.final_constraints.rows)
       if (!r.pass)
-        failing += fmt::format("{}{} = {:.4f} ({} {})", failing.empty() ? "" : "; ", r.name, r.value,
-                               r.is_lower ? ">=" : "<=", r.bound);
+        failing += fmt::format("{}{} = {:.4f} ({} {})", failing.empty() ? "" : "; ", r.name,
+                               r.value, r.is_lower ? ">=" : "<=", r.bound);
     if (result.final_constraints.ray_failures > 0)
       failing += fmt::format("{}{} failing rays", failing.empty() ? "" : "; ",
                              result.final_constraints.ray_failures);
@@ -248,7 +198,8 @@ void run_optimize(const OptimizeCommand& cmd) {
     fixed.glass_search = GlassSearch::kNone;
     fixed.verbose = false;
     const OptimizeResult lm = optimize_lens(lens, fixed);
-    const LensParameterization param(lens, GlassSpace(*load_catalog(lens.catalog_name.empty() ? "ohara" : lens.catalog_name)));
+    const LensParameterization param(
+        lens, GlassSpace(*load_catalog(lens.catalog_name.empty() ? "ohara" : lens.catalog_name)));
     const std::vector<double> x0 = param.from_lens(lens);
     const std::vector<int> glasses = param.nearest_glasses(x0.data());
     const std::vector<double> x_lm = param.from_lens(lm.lens);
@@ -266,16 +217,18 @@ void run_optimize(const OptimizeCommand& cmd) {
     }
     const AdamResult adam = adam_on_design_loss(param, x0, GlassMode::kFixed, glasses, fixed, 5e-3,
                                                 cmd.adam_steps, target_mm);
-    fmt::print("  LM vs Adam (glasses fixed, optimization sampling, target {:.4f} um = LM's final "
-               "+ 1 %): LM reached it after {} of its {} loss evaluations; Adam (lr 5e-3) {} "
-               "{:.4f} um after {} evaluations ({}{:.1f}x LM's)\n",
-               target_mm * 1000, lm_evaluations, lm.loss_evaluations,
-               adam.reached ? "reached" : "stopped at", adam.spot_mm * 1000, adam.evaluations,
-               adam.reached ? "" : "> ",
-               static_cast<double>(adam.evaluations) / std::max(1, lm_evaluations));
+    fmt::print(
+        "  LM vs Adam (glasses fixed, optimization sampling, target {:.4f} um = LM's final "
+        "+ 1 %): LM reached it after {} of its {} loss evaluations; Adam (lr 5e-3) {} "
+        "{:.4f} um after {} evaluations ({}{:.1f}x LM's)\n",
+        target_mm * 1000, lm_evaluations, lm.loss_evaluations,
+        adam.reached ? "reached" : "stopped at", adam.spot_mm * 1000, adam.evaluations,
+        adam.reached ? "" : "> ",
+        static_cast<double>(adam.evaluations) / std::max(1, lm_evaluations));
   }
   if (result.interrupted) {
-    fmt::print(stderr, "lensopt optimize: interrupted; the best lens so far is in {}\n", out_path.string());
+    fmt::print(stderr, "lensopt optimize: interrupted; the best lens so far is in {}\n",
+               out_path.string());
     throw ExitCode{130};
   }
 }
@@ -284,19 +237,23 @@ void run_optimize(const OptimizeCommand& cmd) {
 
 void setup_optimize(CLI::App& app) {
   auto cmd = std::make_shared<OptimizeCommand>();
-  CLI::App* sub = app.add_subcommand("optimize", "Optimize a lens for spot size (Ceres Levenberg-Marquardt)");
+  CLI::App* sub =
+      app.add_subcommand("optimize", "Optimize a lens for spot size (Ceres Levenberg-Marquardt)");
   sub->add_option("LENS", cmd->lens_path, "starting lens (.toml or the paper's .yml)")->required();
   sub->add_option("-o,--output", cmd->output_path, "optimized lens (.toml), written atomically");
   sub->add_flag("--in-place", cmd->in_place, "overwrite the input lens (TOML)");
   sub->add_flag("--json", cmd->json, "report as one JSON object on stdout");
   sub->add_flag("-q,--quiet", cmd->quiet, "no per-iteration progress on stderr");
-  sub->add_option("--glass-search", cmd->glass_search, "none (default: keep the start's glasses) | snap | neighbours")
+  sub->add_option("--glass-search", cmd->glass_search,
+                  "none (default: keep the start's glasses) | snap | neighbours")
       ->check(CLI::IsMember({"none", "snap", "neighbours", "neighbors"}));
   sub->add_option("--neighbours", cmd->neighbours, "catalog glasses tried per element");
   sub->add_option("--constraints", cmd->constraints,
                   "strict (default: every bound held) or paper (the paper's soft penalties)")
       ->check(CLI::IsMember({"strict", "paper"}));
-  sub->add_option("--freeze", cmd->freeze, "variables or groups to hold (c3, s2, defocus, g1, curvatures, spacings, glasses)")
+  sub->add_option(
+         "--freeze", cmd->freeze,
+         "variables or groups to hold (c3, s2, defocus, g1, curvatures, spacings, glasses)")
       ->delimiter(',');
   sub->add_flag("--no-soft-start", cmd->no_soft_start,
                 "strict constraints: skip the first phase on the paper's soft penalties");
@@ -310,11 +267,13 @@ void setup_optimize(CLI::App& app) {
   sub->add_option("--min-air-mm", cmd->min_air_mm, "smallest air gap (default 0.01)");
   sub->add_option("--min-glass-mm", cmd->min_glass_mm, "thinnest glass (default 1)");
   sub->add_option("--max-glass-mm", cmd->max_glass_mm, "thickest glass (default 3)");
-  sub->add_option("--min-image-clearance-mm", cmd->min_image_clearance_mm, "image clearance (default 12)");
+  sub->add_option("--min-image-clearance-mm", cmd->min_image_clearance_mm,
+                  "image clearance (default 12)");
   sub->add_option("--max-ray-angle-deg", cmd->max_ray_angle_deg, "largest ray angle (default 60)");
   sub->add_flag("--compare-adam", cmd->compare_adam,
                 "also report loss evaluations of LM vs a plain Adam loop on the same loss");
-  sub->add_option("--adam-steps", cmd->adam_steps, "largest Adam step count for --compare-adam (default 20000)");
+  sub->add_option("--adam-steps", cmd->adam_steps,
+                  "largest Adam step count for --compare-adam (default 20000)");
   sub->add_flag("--joint", cmd->joint,
                 "joint lens + network optimization by Adam (options under 'joint', see README)");
   const auto run_joint = setup_optimize_joint(*sub);

@@ -13,6 +13,7 @@
 
 #include "lensopt/core/error.h"
 #include "lensopt/lens/lens_io.h"
+#include "lensopt/optimize/optimize_table.h"
 #include "lensopt/search/search.h"
 #include "search_detail.h"
 
@@ -60,25 +61,6 @@ void apply_specs(Lens& lens, const SearchOptions& options) {
   lens.specs.f_number = options.f_number;
   lens.specs.half_field_deg = options.half_field_deg;
   lens.specs.sensor_diagonal_mm = options.sensor_diagonal_mm;
-}
-
-std::string glass_search_name(GlassSearch g) {
-  switch (g) {
-    case GlassSearch::kNone:
-      return "none";
-    case GlassSearch::kSnap:
-      return "snap";
-    case GlassSearch::kNeighbours:
-      return "neighbours";
-  }
-  return "?";
-}
-
-GlassSearch parse_glass_search(const std::string& s, const SourceLocation& where) {
-  if (s == "none") return GlassSearch::kNone;
-  if (s == "snap") return GlassSearch::kSnap;
-  if (s == "neighbours" || s == "neighbors") return GlassSearch::kNeighbours;
-  throw Error(where, fmt::format("glass_search = '{}' must be none, snap or neighbours", s));
 }
 
 }  // namespace
@@ -263,54 +245,17 @@ void read_search_description(const std::filesystem::path& path, SearchOptions& o
     }
   });
   for_each("optimize", [&](const std::string& k, const toml::node& n, const SourceLocation& w) {
-    OptimizeOptions& o = options.optimize;
-    if (k == "glass_search")
-      o.glass_search = parse_glass_search(string(k, n, w), w);
-    else if (k == "constraints") {
-      const std::string v = string(k, n, w);
-      if (v != "strict" && v != "paper" && v != "paper+strict")
-        throw Error(w, "constraints must be \"strict\", \"paper\" or \"paper+strict\"");
-      o.loss.paper_penalties = v == "paper";
-      options.paper_then_strict = v == "paper+strict";
-    } else if (k == "rings")
-      o.sampling.rings = integer(k, n, w);
-    else if (k == "fields")
-      o.sampling.fields = integer(k, n, w);
-    else if (k == "max_iterations")
-      o.max_iterations = integer(k, n, w);
-    else if (k == "max_rounds")
-      o.max_rounds = integer(k, n, w);
-    else if (k == "glass_neighbours")
-      o.glass_neighbours = integer(k, n, w);
-    else if (k == "weight_ray_path")
-      o.loss.weight_ray_path = number(k, n, w);
-    else if (k == "weight_ray_angle")
-      o.loss.weight_ray_angle = number(k, n, w);
-    else if (k == "weight_glass")
-      o.loss.weight_glass = number(k, n, w);
-    else if (k == "min_air_mm")
-      o.loss.min_air_mm = number(k, n, w);
-    else if (k == "min_glass_mm")
-      o.loss.min_glass_mm = number(k, n, w);
-    else if (k == "max_glass_mm")
-      o.loss.max_glass_mm = number(k, n, w);
-    else if (k == "min_image_clearance_mm")
-      o.loss.min_image_clearance_mm = number(k, n, w);
-    else if (k == "max_ray_angle_deg")
-      o.loss.max_ray_angle_deg = number(k, n, w);
-    else if (k == "soft_start")
-      o.soft_start = boolean(k, n, w);
-    else if (k == "freeze")
-      o.freeze = strings(k, n, w);
-    else {
-      throw Error(w,
-                  fmt::format("unknown key '{}' in [optimize]; known: glass_search, constraints, "
-                              "rings, fields, max_iterations, max_rounds, glass_neighbours, "
-                              "weight_ray_path, weight_ray_angle, weight_glass, min_air_mm, "
-                              "min_glass_mm, max_glass_mm, min_image_clearance_mm, "
-                              "max_ray_angle_deg, soft_start, freeze",
-                              k));
+    // "paper+strict" is the search's own: two optimizations per candidate.
+    if (k == "constraints" &&
+        n.value<std::string>() == std::optional<std::string>("paper+strict")) {
+      options.optimize.loss.paper_penalties = false;
+      options.paper_then_strict = true;
+      return;
     }
+    if (k == "constraints") options.paper_then_strict = false;
+    if (!apply_optimize_key(k, n, w, options.optimize))
+      throw Error(
+          w, fmt::format("unknown key '{}' in [optimize]; known: {}", k, optimize_table_keys()));
   });
 }
 

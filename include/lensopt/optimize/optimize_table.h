@@ -1,0 +1,27 @@
+// The [optimize] table of a lens TOML or search description: one parser for `lensopt optimize`
+// and `lensopt search`, so both accept the same keys with the same checks.
+#pragma once
+
+#include <toml++/toml.h>
+
+#include <string>
+
+#include "lensopt/core/error.h"
+#include "lensopt/optimize/optimizer.h"
+
+namespace lensopt {
+
+// "none", "snap", "neighbours" (or "neighbors"); throws Error at `where` otherwise.
+GlassSearch parse_glass_search(const std::string& name, const SourceLocation& where);
+std::string glass_search_name(GlassSearch search);
+
+// Applies one key of an [optimize] table to `options`. Returns false for an unknown key (the
+// caller may know keys of its own); throws Error at `where` for a value of the wrong type or
+// out of range.
+bool apply_optimize_key(const std::string& key, const toml::node& node, const SourceLocation& where,
+                        OptimizeOptions& options);
+
+// The keys apply_optimize_key knows, comma-separated, for error messages.
+const char* optimize_table_keys();
+
+}  // namespace lensopt

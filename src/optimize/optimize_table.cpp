@@ -1,0 +1,105 @@
+#include "lensopt/optimize/optimize_table.h"
+
+#include <fmt/format.h>
+
+#include <cstdint>
+
+namespace lensopt {
+
+GlassSearch parse_glass_search(const std::string& name, const SourceLocation& where) {
+  if (name == "none") return GlassSearch::kNone;
+  if (name == "snap") return GlassSearch::kSnap;
+  if (name == "neighbours" || name == "neighbors") return GlassSearch::kNeighbours;
+  throw Error(where, fmt::format("glass_search = '{}' must be none, snap or neighbours", name));
+}
+
+std::string glass_search_name(GlassSearch search) {
+  switch (search) {
+    case GlassSearch::kNone:
+      return "none";
+    case GlassSearch::kSnap:
+      return "snap";
+    case GlassSearch::kNeighbours:
+      return "neighbours";
+  }
+  return "?";
+}
+
+const char* optimize_table_keys() {
+  return "glass_search, constraints, rings, fields, max_iterations, max_rounds, glass_neighbours, "
+         "weight_ray_path, weight_ray_angle, weight_glass, min_air_mm, min_glass_mm, "
+         "max_glass_mm, min_image_clearance_mm, max_ray_angle_deg, soft_start, freeze";
+}
+
+bool apply_optimize_key(const std::string& key, const toml::node& node, const SourceLocation& where,
+                        OptimizeOptions& options) {
+  auto number = [&] {
+    const auto v = node.value<double>();
+    if (!v) throw Error(where, fmt::format("[optimize] {} must be a number", key));
+    return *v;
+  };
+  auto integer = [&] {
+    const auto v = node.value<int64_t>();
+    if (!v) throw Error(where, fmt::format("[optimize] {} must be an integer", key));
+    return static_cast<int>(*v);
+  };
+  auto text = [&] {
+    const auto v = node.value<std::string>();
+    if (!v) throw Error(where, fmt::format("[optimize] {} must be a string", key));
+    return *v;
+  };
+  DesignLossOptions& loss = options.loss;
+  if (key == "weight_ray_path")
+    loss.weight_ray_path = number();
+  else if (key == "weight_ray_angle")
+    loss.weight_ray_angle = number();
+  else if (key == "weight_glass")
+    loss.weight_glass = number();
+  else if (key == "min_air_mm")
+    loss.min_air_mm = number();
+  else if (key == "min_glass_mm")
+    loss.min_glass_mm = number();
+  else if (key == "max_glass_mm")
+    loss.max_glass_mm = number();
+  else if (key == "min_image_clearance_mm")
+    loss.min_image_clearance_mm = number();
+  else if (key == "max_ray_angle_deg")
+    loss.max_ray_angle_deg = number();
+  else if (key == "rings")
+    options.sampling.rings = integer();
+  else if (key == "fields")
+    options.sampling.fields = integer();
+  else if (key == "max_iterations")
+    options.max_iterations = integer();
+  else if (key == "max_rounds")
+    options.max_rounds = integer();
+  else if (key == "glass_neighbours")
+    options.glass_neighbours = integer();
+  else if (key == "glass_search")
+    options.glass_search = parse_glass_search(text(), where);
+  else if (key == "soft_start") {
+    const auto v = node.value<bool>();
+    if (!v) throw Error(where, "[optimize] soft_start must be true or false");
+    options.soft_start = *v;
+  } else if (key == "constraints") {
+    const std::string v = text();
+    if (v != "strict" && v != "paper")
+      throw Error(where,
+                  fmt::format("[optimize] constraints = '{}' must be \"strict\" or \"paper\"", v));
+    loss.paper_penalties = v == "paper";
+  } else if (key == "freeze") {
+    const toml::array* items = node.as_array();
+    if (!items) throw Error(where, "[optimize] freeze must be an array of variable names");
+    options.freeze.clear();
+    for (const auto& item : *items) {
+      const auto v = item.value<std::string>();
+      if (!v) throw Error(where, "[optimize] freeze entries must be strings");
+      options.freeze.push_back(*v);
+    }
+  } else {
+    return false;
+  }
+  return true;
+}
+
+}  // namespace lensopt
