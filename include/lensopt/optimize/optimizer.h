@@ -38,7 +38,7 @@ struct OptimizeOptions {
   TraceOptions sampling;   // optimization sampling (default: 8 rings, 11 fields)
   DesignLossOptions loss;  // paper weights and bounds
   // Default none: the start's glasses (snapped to the catalog) are kept. On the perturbed starts
-  // snap and neighbours took 1.8x and 3.2x the time and found no better glasses (BENCHMARKS.md).
+  // snap and neighbours took 1.5x and 2.7x the CPU time and found no better glasses (BENCHMARKS.md).
   GlassSearch glass_search = GlassSearch::kNone;
   int glass_neighbours = 4;         // catalog glasses tried per element in phase 3
   std::vector<std::string> freeze;  // variable names or groups to hold fixed
