@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# README's main job: install dependencies, build, then analyse, optimize, tolerance, render and
-# plot the lenses, catalog and chart that ship with the project. Outputs in out/.
+# README's main job: install dependencies, build, then analyse, optimize (alone and jointly with
+# a restoration network), search, tolerance, render and plot the lenses, catalog and chart that
+# ship with the project. Outputs in out/.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 tools/install-deps.sh
@@ -21,6 +22,9 @@ echo "== tracer benchmark"
 "$lensopt" bench
 echo "== optimization (Doublet, Levenberg-Marquardt)"
 "$lensopt" optimize lenses/doublet.toml -o out/doublet-optimized.toml -q
+echo "== joint optimization (Doublet + restoration network, a short run of 30 steps per setting)"
+"$lensopt" optimize lenses/doublet.toml --joint --steps 30 --crop 128 --eval-crops 8 \
+  -o out/doublet-joint.toml -q
 echo "== tolerancing (Tessar, 2000 trials)"
 "$lensopt" tolerance lenses/tessar.toml --trials 2000 --seed 1 --csv out/tessar-trials.csv \
   --histogram out/tessar-histogram.svg > out/tessar-tolerance.txt
