@@ -11,6 +11,7 @@
 
 #include "commands.h"
 #include "lensopt/core/error.h"
+#include "lensopt/optimize/optimize_table.h"
 #include "lensopt/search/search.h"
 
 namespace lensopt::cli {
@@ -39,12 +40,6 @@ struct MergeCommand {
   std::string output;
   int top = 5;
 };
-
-GlassSearch glass_search_of(const std::string& s) {
-  if (s == "none") return GlassSearch::kNone;
-  if (s == "snap") return GlassSearch::kSnap;
-  return GlassSearch::kNeighbours;
-}
 
 void print_leaderboard(const SearchSummary& s, int rows) {
   fmt::print("  rank  final (um)  start (um)  constraints  id\n");
@@ -102,7 +97,9 @@ void run_search_command(const SearchCommand& cmd) {
   if (cmd.jobs >= 0) options.jobs = cmd.jobs;
   if (cmd.threads >= 0) options.optimizer_threads = cmd.threads;
   if (!cmd.shard.empty()) parse_shard(cmd.shard, options.shard_index, options.shard_count);
-  if (!cmd.glass_search.empty()) options.optimize.glass_search = glass_search_of(cmd.glass_search);
+  if (!cmd.glass_search.empty())
+    options.optimize.glass_search =
+        parse_glass_search(cmd.glass_search, SourceLocation{"--glass-search"});
   if (!cmd.constraints.empty()) {
     options.optimize.loss.paper_penalties = cmd.constraints == "paper";
     options.paper_then_strict = cmd.constraints == "paper+strict";
