@@ -10,6 +10,7 @@ packages=(
   libfftw3-dev
   libtorch-dev
   python3
+  ccache
 )
 missing=()
 for p in "${packages[@]}"; do
