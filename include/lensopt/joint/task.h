@@ -24,6 +24,7 @@
 #include <string>
 #include <vector>
 
+#include "lensopt/detection/coco_eval.h"
 #include "lensopt/render/image.h"
 
 namespace lensopt {
@@ -36,6 +37,9 @@ struct TaskBatch {
   // `rendered`, which must be there too). A double-precision task then uses these as its input,
   // so finite differences of the loss are not limited by float rounding (6e-8 per pixel).
   std::vector<std::vector<double>> rendered_values;
+  // Detection tasks: per image, the ground-truth boxes in the crop's pixels (as the image shows
+  // them: moved with the crop and, in training, distorted like the image; detection/boxes.h).
+  std::vector<std::vector<GroundTruth>> boxes;
 };
 
 struct TaskOutput {
@@ -69,6 +73,9 @@ class Task {
   // The task's output images for a batch (restoration: the restored crops, clamped to [0, 1]);
   // empty for tasks whose output is not an image.
   virtual std::vector<FloatImage> predict(const TaskBatch& batch) = 0;
+  // Detection tasks: per image, the detected boxes in the crop's pixels (Detection::image is the
+  // index in the batch); empty for other tasks.
+  virtual std::vector<std::vector<Detection>> detect(const TaskBatch&) { return {}; }
   // Weights and optimizer state, written atomically; load restores both exactly.
   virtual void save(const std::filesystem::path& path) const = 0;
   virtual void load(const std::filesystem::path& path) = 0;
@@ -80,7 +87,9 @@ class Task {
 // Whether lensopt was built with libtorch (CMake option LENSOPT_WITH_TORCH).
 bool torch_available();
 
-// "restoration" (the built-in small CNN) or "torchscript:MODEL.pt". Throws Error if libtorch is
+// "restoration" (the built-in small CNN), "detection" (the built-in detector, joint/detector.h)
+// or "torchscript:MODEL.pt" (a restoration-style module, or a detector by the contract of
+// joint/detector.h, told apart by forward's argument count). Throws Error if libtorch is
 // not built in, the model cannot be loaded, or the spec is unknown.
 std::unique_ptr<Task> make_task(const std::string& spec, const TaskOptions& options);
 

@@ -11,80 +11,11 @@
 #include "lensopt/core/error.h"
 #include "lensopt/joint/data.h"
 #include "lensopt/joint/task.h"
+#include "torch_common.h"
+#include "lensopt/joint/detector.h"
 
 namespace lensopt {
 namespace {
-
-torch::Dtype dtype_of(const TaskOptions& options) {
-  return options.double_precision ? torch::kFloat64 : torch::kFloat32;
-}
-
-// B x C x H x W tensor (a copy) of a batch of interleaved images.
-torch::Tensor to_tensor(const std::vector<FloatImage>& images, int channels, torch::Dtype dtype) {
-  if (images.empty()) throw Error("a task batch must hold at least one image");
-  std::vector<torch::Tensor> list;
-  for (const FloatImage& im : images) {
-    if (im.channels != channels || im.width != images[0].width || im.height != images[0].height)
-      throw Error(
-          fmt::format("task batch: a {}x{}x{} image among {}x{}x{} ones (the task has {} "
-                      "channels)",
-                      im.width, im.height, im.channels, images[0].width, images[0].height,
-                      images[0].channels, channels));
-    list.push_back(torch::from_blob(const_cast<float*>(im.pixels.data()),
-                                    {im.height, im.width, im.channels}, torch::kFloat32)
-                       .permute({2, 0, 1}));
-  }
-  return torch::stack(list).to(dtype).contiguous();
-}
-
-// The task's input: the rendered crops, or their double values when given and the task runs in
-// double.
-torch::Tensor input_tensor(const TaskBatch& batch, const TaskOptions& options) {
-  if (batch.rendered_values.empty() || !options.double_precision)
-    return to_tensor(batch.rendered, options.channels, dtype_of(options));
-  if (batch.rendered_values.size() != batch.rendered.size())
-    throw Error("task batch: rendered_values must match rendered, image for image");
-  std::vector<torch::Tensor> list;
-  for (std::size_t i = 0; i < batch.rendered.size(); ++i) {
-    const FloatImage& im = batch.rendered[i];
-    if (batch.rendered_values[i].size() != im.pixels.size() || im.channels != options.channels)
-      throw Error("task batch: rendered_values must match rendered, image for image");
-    list.push_back(torch::from_blob(const_cast<double*>(batch.rendered_values[i].data()),
-                                    {im.height, im.width, im.channels}, torch::kFloat64)
-                       .permute({2, 0, 1}));
-  }
-  return torch::stack(list).contiguous();
-}
-
-std::vector<FloatImage> from_tensor(const torch::Tensor& t) {
-  const torch::Tensor hwc = t.detach().to(torch::kFloat32).permute({0, 2, 3, 1}).contiguous();
-  const int b = static_cast<int>(hwc.size(0)), h = static_cast<int>(hwc.size(1)),
-            w = static_cast<int>(hwc.size(2)), c = static_cast<int>(hwc.size(3));
-  std::vector<FloatImage> out;
-  const float* data = hwc.data_ptr<float>();
-  for (int i = 0; i < b; ++i) {
-    FloatImage im(w, h, c);
-    std::copy_n(data + static_cast<std::size_t>(i) * w * h * c, im.pixels.size(),
-                im.pixels.begin());
-    out.push_back(std::move(im));
-  }
-  return out;
-}
-
-// Runs a libtorch call, turning its exceptions into lensopt::Error with a context.
-template <typename F>
-auto guarded(const std::string& context, F&& f) {
-  try {
-    return f();
-  } catch (const c10::Error& e) {
-    throw Error(fmt::format("{}: {}", context, e.what_without_backtrace()));
-  }
-}
-
-void set_adam_learning_rate(torch::optim::Adam& adam, double learning_rate) {
-  for (auto& group : adam.param_groups())
-    static_cast<torch::optim::AdamOptions&>(group.options()).lr(learning_rate);
-}
 
 // The restoration network y = x + N(x) (task.h).
 struct RestorationNetImpl : torch::nn::Module {
@@ -365,9 +296,15 @@ std::unique_ptr<Task> make_task(const std::string& spec, const TaskOptions& opti
   options.validate();
   if (spec == "restoration") return std::make_unique<RestorationTask>(options);
   const std::string prefix = "torchscript:";
-  if (spec.rfind(prefix, 0) == 0 && spec.size() > prefix.size())
-    return std::make_unique<TorchScriptTask>(spec.substr(prefix.size()), options);
-  throw Error(fmt::format("unknown task '{}'; known: restoration, torchscript:MODEL.pt", spec));
+  if (spec == "detection") return make_detection_task(options);
+  if (spec.rfind(prefix, 0) == 0 && spec.size() > prefix.size()) {
+    const std::filesystem::path model = spec.substr(prefix.size());
+    if (std::filesystem::is_regular_file(model) && is_torchscript_detector(model))
+      return make_torchscript_detection_task(model, options);
+    return std::make_unique<TorchScriptTask>(model, options);
+  }
+  throw Error(fmt::format(
+      "unknown task '{}'; known: restoration, detection, torchscript:MODEL.pt", spec));
 }
 
 }  // namespace lensopt

@@ -1,0 +1,86 @@
+// Tensor helpers shared by the libtorch tasks (src/joint/torch/ only: it includes libtorch).
+#pragma once
+
+#include <fmt/format.h>
+#include <torch/torch.h>
+
+#include <string>
+#include <vector>
+
+#include "lensopt/core/error.h"
+#include "lensopt/joint/task.h"
+
+namespace lensopt {
+
+inline torch::Dtype dtype_of(const TaskOptions& options) {
+  return options.double_precision ? torch::kFloat64 : torch::kFloat32;
+}
+
+// B x C x H x W tensor (a copy) of a batch of interleaved images.
+inline torch::Tensor to_tensor(const std::vector<FloatImage>& images, int channels, torch::Dtype dtype) {
+  if (images.empty()) throw Error("a task batch must hold at least one image");
+  std::vector<torch::Tensor> list;
+  for (const FloatImage& im : images) {
+    if (im.channels != channels || im.width != images[0].width || im.height != images[0].height)
+      throw Error(
+          fmt::format("task batch: a {}x{}x{} image among {}x{}x{} ones (the task has {} "
+                      "channels)",
+                      im.width, im.height, im.channels, images[0].width, images[0].height,
+                      images[0].channels, channels));
+    list.push_back(torch::from_blob(const_cast<float*>(im.pixels.data()),
+                                    {im.height, im.width, im.channels}, torch::kFloat32)
+                       .permute({2, 0, 1}));
+  }
+  return torch::stack(list).to(dtype).contiguous();
+}
+
+// The task's input: the rendered crops, or their double values when given and the task runs in
+// double.
+inline torch::Tensor input_tensor(const TaskBatch& batch, const TaskOptions& options) {
+  if (batch.rendered_values.empty() || !options.double_precision)
+    return to_tensor(batch.rendered, options.channels, dtype_of(options));
+  if (batch.rendered_values.size() != batch.rendered.size())
+    throw Error("task batch: rendered_values must match rendered, image for image");
+  std::vector<torch::Tensor> list;
+  for (std::size_t i = 0; i < batch.rendered.size(); ++i) {
+    const FloatImage& im = batch.rendered[i];
+    if (batch.rendered_values[i].size() != im.pixels.size() || im.channels != options.channels)
+      throw Error("task batch: rendered_values must match rendered, image for image");
+    list.push_back(torch::from_blob(const_cast<double*>(batch.rendered_values[i].data()),
+                                    {im.height, im.width, im.channels}, torch::kFloat64)
+                       .permute({2, 0, 1}));
+  }
+  return torch::stack(list).contiguous();
+}
+
+inline std::vector<FloatImage> from_tensor(const torch::Tensor& t) {
+  const torch::Tensor hwc = t.detach().to(torch::kFloat32).permute({0, 2, 3, 1}).contiguous();
+  const int b = static_cast<int>(hwc.size(0)), h = static_cast<int>(hwc.size(1)),
+            w = static_cast<int>(hwc.size(2)), c = static_cast<int>(hwc.size(3));
+  std::vector<FloatImage> out;
+  const float* data = hwc.data_ptr<float>();
+  for (int i = 0; i < b; ++i) {
+    FloatImage im(w, h, c);
+    std::copy_n(data + static_cast<std::size_t>(i) * w * h * c, im.pixels.size(),
+                im.pixels.begin());
+    out.push_back(std::move(im));
+  }
+  return out;
+}
+
+// Runs a libtorch call, turning its exceptions into lensopt::Error with a context.
+template <typename F>
+auto guarded(const std::string& context, F&& f) {
+  try {
+    return f();
+  } catch (const c10::Error& e) {
+    throw Error(fmt::format("{}: {}", context, e.what_without_backtrace()));
+  }
+}
+
+inline void set_adam_learning_rate(torch::optim::Adam& adam, double learning_rate) {
+  for (auto& group : adam.param_groups())
+    static_cast<torch::optim::AdamOptions&>(group.options()).lr(learning_rate);
+}
+
+}  // namespace lensopt

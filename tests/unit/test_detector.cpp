@@ -1,0 +1,148 @@
+// The detection tasks: the built-in detector learns the generated scenes (its AP rises from the
+// untrained one's), and a TorchScript detector defined here by the contract of joint/detector.h
+// trains and returns its detections.
+#ifdef LENSOPT_WITH_TORCH
+#include <torch/script.h>
+#include <torch/torch.h>
+#undef CHECK
+#undef CHECK_EQ
+#undef CHECK_NE
+#undef CHECK_LT
+#undef CHECK_LE
+#undef CHECK_GT
+#undef CHECK_GE
+#endif
+
+#include <doctest/doctest.h>
+#include <unistd.h>
+
+#include <filesystem>
+
+#include "lensopt/core/error.h"
+#include "lensopt/detection/scenes.h"
+#include "lensopt/joint/detector.h"
+#include "lensopt/joint/task.h"
+
+using namespace lensopt;
+
+#ifdef LENSOPT_WITH_TORCH
+
+namespace {
+
+// Batches of 128 x 128 crops (top-left, centre-bottom) of generated scenes with their boxes.
+TaskBatch scene_batch(int first_seed, int scenes) {
+  TaskBatch batch;
+  for (int s = 0; s < scenes; ++s) {
+    const DetectionScene scene = make_detection_scene(256, 144, first_seed + s);
+    const int x0 = (s % 2) * 128, y0 = 16;
+    FloatImage crop(128, 128, 3);
+    for (int y = 0; y < 128; ++y)
+      for (int x = 0; x < 128; ++x)
+        for (int c = 0; c < 3; ++c) crop.at(x, y, c) = scene.image.at(x0 + x, y0 + y, c);
+    std::vector<GroundTruth> boxes;
+    for (const GroundTruth& g : scene.boxes)
+      if (auto b = crop_box(g.box, x0, y0, 128, 128)) {
+        GroundTruth moved = g;
+        moved.box = *b;
+        boxes.push_back(moved);
+      }
+    batch.rendered.push_back(crop);
+    batch.sharp.push_back(crop);
+    batch.boxes.push_back(boxes);
+  }
+  return batch;
+}
+
+}  // namespace
+
+TEST_CASE("detector: the built-in detector learns the generated scenes") {
+  TaskOptions o;
+  o.learning_rate = 2e-3;
+  o.seed = 3;
+  auto task = make_task("detection", o);
+  CHECK(task->metric_name() == "AP");
+  const TaskBatch batch = scene_batch(100, 4);
+  const double loss0 = task->step(batch, false, false).loss;
+  const double ap0 = task->metric(batch);
+  for (int k = 0; k < 150; ++k) task->step(batch, true, false);
+  const double loss1 = task->step(batch, false, false).loss;
+  const double ap1 = task->metric(batch);
+  MESSAGE("built-in detector on 4 crops, 150 steps: loss " << loss0 << " -> " << loss1 << ", AP "
+                                                          << ap0 << " -> " << ap1);
+  CHECK(loss1 < 0.5 * loss0);
+  CHECK(ap1 > ap0 + 0.1);
+  // The image gradient has the batch's layout and is not zero.
+  const TaskOutput out = task->step(batch, false, true);
+  REQUIRE(out.grad_rendered.size() == 4);
+  double norm = 0;
+  for (float v : out.grad_rendered[0].pixels) norm += double(v) * v;
+  CHECK(norm > 0);
+  // Detections: at most 100 per image, inside a sane range, scores in (0, 1].
+  const auto dets = task->detect(batch);
+  REQUIRE(dets.size() == 4);
+  for (const auto& list : dets) {
+    CHECK(list.size() <= 100);
+    for (const Detection& d : list) {
+      CHECK(d.score > 0);
+      CHECK(d.score <= 1);
+      CHECK(d.category >= 1);
+      CHECK(d.category <= 6);
+    }
+  }
+  // Sides must be multiples of 16.
+  TaskBatch odd = batch;
+  odd.rendered.resize(1);
+  odd.rendered[0] = FloatImage(120, 128, 3);
+  odd.boxes.resize(1);
+  CHECK_THROWS_AS(task->step(odd, false, false), lensopt::Error);
+}
+
+TEST_CASE("detector: a TorchScript detector by the (images, boxes, labels) contract") {
+  const auto dir = std::filesystem::temp_directory_path() /
+                   ("lensopt-test-detector-" + std::to_string(::getpid()));
+  std::filesystem::create_directories(dir);
+  // One learned box for every image: the training loss is its squared distance to the valid
+  // ground-truth boxes; evaluation returns it with score 0.9 and label 1, plus a padding row.
+  torch::jit::Module m("FixedBox");
+  m.register_parameter("box", torch::tensor({0.0f, 0.0f, 10.0f, 10.0f}), false);
+  m.register_attribute("training", c10::BoolType::get(), true);  // nn.Module's flag
+  m.define(R"JIT(
+def forward(self, images, boxes, labels):
+    if self.training:
+        valid = (labels >= 0).to(images.dtype).unsqueeze(2)
+        d = (boxes.to(images.dtype) - self.box.to(images.dtype)) ** 2 * valid
+        return torch.sum(d) / torch.clamp(torch.sum(valid), min=1.0) + 0.0 * torch.mean(images)
+    b = images.size(0)
+    row = torch.cat([self.box.to(images.dtype), torch.tensor([0.9, 1.0], dtype=images.dtype)])
+    pad = torch.zeros(6, dtype=images.dtype)
+    return torch.stack([row, pad]).unsqueeze(0).repeat(b, 1, 1)
+)JIT");
+  m.save((dir / "fixed.pt").string());
+  CHECK(is_torchscript_detector(dir / "fixed.pt"));
+  TaskOptions o;
+  o.learning_rate = 0.5;
+  auto task = make_task("torchscript:" + (dir / "fixed.pt").string(), o);
+  CHECK(task->metric_name() == "AP");
+  TaskBatch batch;
+  batch.rendered = {FloatImage(32, 32, 3, 0.5f), FloatImage(32, 32, 3, 0.5f)};
+  batch.sharp = batch.rendered;
+  GroundTruth g;
+  g.category = 1;
+  g.box = {4, 6, 20, 22};
+  batch.boxes = {{g}, {g}};
+  const double before = task->step(batch, false, false).loss;
+  for (int k = 0; k < 200; ++k) task->step(batch, true, false);
+  task->set_learning_rate(0.01);
+  for (int k = 0; k < 200; ++k) task->step(batch, true, false);
+  const double after = task->step(batch, false, false).loss;
+  CHECK(after < 1e-2 * before);
+  const auto dets = task->detect(batch);
+  REQUIRE(dets.size() == 2);
+  REQUIRE(dets[0].size() == 1);  // the padding row is dropped
+  CHECK(dets[0][0].score == doctest::Approx(0.9));
+  CHECK(dets[0][0].box.x0 == doctest::Approx(4).epsilon(1e-2));
+  CHECK(task->metric(batch) == doctest::Approx(1.0));  // the learned box is the ground truth
+  std::filesystem::remove_all(dir);
+}
+
+#endif
