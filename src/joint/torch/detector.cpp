@@ -289,11 +289,7 @@ class TorchScriptDetectionTask : public Task {
                       [&] { return torch::jit::load(path.string()); });
     module_.to(dtype_of(options));
     module_.train();
-    for (const torch::Tensor& p : module_.parameters())
-      if (p.requires_grad()) parameters_.push_back(p);
-    if (parameters_.empty())
-      throw Error(SourceLocation{path.string()},
-                  "the TorchScript detector has no parameter that requires a gradient");
+    parameters_ = trainable_parameters(module_, path);
     adam_ = std::make_unique<torch::optim::Adam>(parameters_,
                                                  torch::optim::AdamOptions(options.learning_rate));
   }

@@ -163,15 +163,7 @@ class TorchScriptTask : public Task {
                   "the TorchScript module has no forward(images, targets)");
     module_.to(dtype_of(options));
     module_.train();
-    // The parameters that require a gradient (PyTorch's nn.Parameter default); a module saved
-    // with none flagged (e.g. defined in C++) trains all of them.
-    for (const torch::Tensor& p : module_.parameters())
-      if (p.requires_grad()) parameters_.push_back(p);
-    if (parameters_.empty())
-      for (torch::Tensor p : module_.parameters()) parameters_.push_back(p.requires_grad_(true));
-    if (parameters_.empty())
-      throw Error(SourceLocation{model_path.string()},
-                  "the TorchScript module has no trainable parameters");
+    parameters_ = trainable_parameters(module_, model_path);
     adam_ = std::make_unique<torch::optim::Adam>(parameters_,
                                                  torch::optim::AdamOptions(options.learning_rate));
   }

@@ -2,7 +2,10 @@
 #pragma once
 
 #include <fmt/format.h>
+#include <torch/script.h>
 #include <torch/torch.h>
+
+#include <filesystem>
 
 #include <string>
 #include <vector>
@@ -81,6 +84,21 @@ auto guarded(const std::string& context, F&& f) {
 inline void set_adam_learning_rate(torch::optim::Adam& adam, double learning_rate) {
   for (auto& group : adam.param_groups())
     static_cast<torch::optim::AdamOptions&>(group.options()).lr(learning_rate);
+}
+
+// The parameters of a TorchScript module that Adam trains: those that require a gradient
+// (PyTorch's nn.Parameter default); a module saved with none flagged (e.g. defined in C++) trains
+// all of them. Throws Error naming the file if it has none.
+inline std::vector<torch::Tensor> trainable_parameters(const torch::jit::Module& module,
+                                                       const std::filesystem::path& path) {
+  std::vector<torch::Tensor> parameters;
+  for (const torch::Tensor& p : module.parameters())
+    if (p.requires_grad()) parameters.push_back(p);
+  if (parameters.empty())
+    for (torch::Tensor p : module.parameters()) parameters.push_back(p.requires_grad_(true));
+  if (parameters.empty())
+    throw Error(SourceLocation{path.string()}, "the TorchScript module has no trainable parameters");
+  return parameters;
 }
 
 }  // namespace lensopt
