@@ -14,6 +14,7 @@
 #include "lensopt/analysis/spot_adjoint.h"
 #include "lensopt/joint/imaging.h"
 #include "lensopt/lens/lens_io.h"
+#include "lensopt/optimize/design_gradient.h"
 #include "lensopt/render/chart.h"
 
 namespace lensopt::cli {
@@ -86,6 +87,23 @@ void run_bench(const BenchCommand& cmd) {
     adjoint_difference =
         std::max(adjoint_difference, std::abs(adjoint.gradient[i] - gradient.gradient[i]) /
                                          std::max(std::abs(gradient.gradient[i]), 1e-6 * largest));
+  // The lens design loss l_lens at the optimizer's sampling (8 rings x 11 fields, the
+  // constraint rays at 21 fields): its gradient by Jets (before issue 18) and by the adjoint.
+  const LensParameterization param(lens, GlassSpace(*load_catalog("ohara")));
+  const std::vector<double> x = param.from_lens(lens);
+  TraceOptions design_sampling;
+  design_sampling.rings = 8;
+  design_sampling.fields = 11;
+  design_sampling.threads = cmd.threads;
+  double design_jets_cpu_ms = 0, design_adjoint_cpu_ms = 0;
+  const double design_jets_ms = median_ms(
+      std::max(1, cmd.repeats / 4),
+      [&] { design_loss_gradient_jets(param, x, GlassMode::kQuantized, {}, design_sampling, {}); },
+      &design_jets_cpu_ms);
+  const double design_adjoint_ms = median_ms(
+      cmd.repeats,
+      [&] { design_loss_gradient(param, x, GlassMode::kQuantized, {}, design_sampling, {}); },
+      &design_adjoint_cpu_ms);
   const TraceSystem<double> sys = prepare_system(trace_lens, lens.specs, options);
   const double rays = static_cast<double>(sys.fields_deg.size()) * sys.wavelength_count *
                       static_cast<double>(sys.pupil.size());
@@ -102,6 +120,10 @@ void run_bench(const BenchCommand& cmd) {
     j["spot_eval_ms"] = eval_ms;
     j["spot_grad_ms"] = grad_ms;
     j["spot_grad_adjoint_ms"] = adjoint_ms;
+    j["design_grad_jets_ms"] = design_jets_ms;
+    j["design_grad_adjoint_ms"] = design_adjoint_ms;
+    j["design_grad_jets_cpu_ms"] = design_jets_cpu_ms;
+    j["design_grad_adjoint_cpu_ms"] = design_adjoint_cpu_ms;
     j["spot_eval_cpu_ms"] = eval_cpu_ms;
     j["spot_grad_cpu_ms"] = grad_cpu_ms;
     j["spot_grad_adjoint_cpu_ms"] = adjoint_cpu_ms;
@@ -123,6 +145,10 @@ void run_bench(const BenchCommand& cmd) {
         "  gradient, {} variables (adjoint)  {:10.2f} ms   (CPU {:.2f} ms; {:.1f}x the "
         "evaluation; max relative difference from the Jets {:.1e})\n",
         variables.size(), adjoint_ms, adjoint_cpu_ms, adjoint_ms / eval_ms, adjoint_difference);
+    fmt::print(
+        "  l_lens gradient, {} variables, 8 rings x 11 fields: Jets {:.2f} ms (CPU {:.2f}), "
+        "adjoint {:.2f} ms (CPU {:.2f})\n",
+        param.size(), design_jets_ms, design_jets_cpu_ms, design_adjoint_ms, design_adjoint_cpu_ms);
     fmt::print("  ray-surface intersections         {:10.3g} per s\n", ray_surfaces_per_s);
   }
 }
