@@ -11,8 +11,10 @@
 #include "commands.h"
 #include "lensopt/analysis/gradient.h"
 #include "lensopt/analysis/spot.h"
+#include "lensopt/analysis/spot_adjoint.h"
 #include "lensopt/joint/imaging.h"
 #include "lensopt/lens/lens_io.h"
+#include "lensopt/optimize/design_gradient.h"
 #include "lensopt/render/chart.h"
 
 namespace lensopt::cli {
@@ -27,16 +29,28 @@ struct BenchCommand {
   int rings = 8;               // its PSF sampling
 };
 
+// Process CPU time (all threads), ms: on a shared machine the wall time depends on the load.
+double cpu_now_ms() {
+  timespec t{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
+  return t.tv_sec * 1e3 + t.tv_nsec * 1e-6;
+}
+
+// Median wall time (ms) of `repeats` runs of f; `cpu_ms` (if given) gets the median CPU time.
 template <typename F>
-double median_ms(int repeats, F&& f) {
-  std::vector<double> times;
+double median_ms(int repeats, F&& f, double* cpu_ms = nullptr) {
+  std::vector<double> times, cpu;
   for (int i = 0; i < repeats; ++i) {
+    const double c0 = cpu_now_ms();
     const auto start = std::chrono::steady_clock::now();
     f();
     const auto stop = std::chrono::steady_clock::now();
+    cpu.push_back(cpu_now_ms() - c0);
     times.push_back(std::chrono::duration<double, std::milli>(stop - start).count());
   }
   std::sort(times.begin(), times.end());
+  std::sort(cpu.begin(), cpu.end());
+  if (cpu_ms) *cpu_ms = cpu[cpu.size() / 2];
   return times[times.size() / 2];
 }
 
@@ -48,14 +62,48 @@ void run_bench(const BenchCommand& cmd) {
   const std::vector<PrescriptionVariable> variables = all_prescription_variables(lens);
 
   double mean_spot_um = 0;
-  const double eval_ms = median_ms(cmd.repeats, [&] {
-    const TraceSystem<double> sys = prepare_system(trace_lens, lens.specs, options);
-    mean_spot_um = evaluate_spots(sys, options.threads).mean_rms_spot_mm * 1000.0;
-  });
+  double eval_cpu_ms = 0, grad_cpu_ms = 0, adjoint_cpu_ms = 0;
+  const double eval_ms = median_ms(
+      cmd.repeats,
+      [&] {
+        const TraceSystem<double> sys = prepare_system(trace_lens, lens.specs, options);
+        mean_spot_um = evaluate_spots(sys, options.threads).mean_rms_spot_mm * 1000.0;
+      },
+      &eval_cpu_ms);
   SpotGradient gradient;
-  const double grad_ms = median_ms(std::max(1, cmd.repeats / 10), [&] {
-    gradient = mean_spot_gradient_auto(trace_lens, lens.specs, variables, options);
-  });
+  const double grad_ms = median_ms(
+      std::max(1, cmd.repeats / 10),
+      [&] { gradient = mean_spot_gradient_auto(trace_lens, lens.specs, variables, options); },
+      &grad_cpu_ms);
+  // The adjoint (reverse-mode) gradient, and its largest relative difference from the Jets.
+  SpotGradient adjoint;
+  const double adjoint_ms = median_ms(
+      cmd.repeats,
+      [&] { adjoint = mean_spot_gradient_fast(trace_lens, lens.specs, variables, options); },
+      &adjoint_cpu_ms);
+  double largest = 0, adjoint_difference = 0;
+  for (double d : gradient.gradient) largest = std::max(largest, std::abs(d));
+  for (std::size_t i = 0; i < variables.size(); ++i)
+    adjoint_difference =
+        std::max(adjoint_difference, std::abs(adjoint.gradient[i] - gradient.gradient[i]) /
+                                         std::max(std::abs(gradient.gradient[i]), 1e-6 * largest));
+  // The lens design loss l_lens at the optimizer's sampling (8 rings x 11 fields, the
+  // constraint rays at 21 fields): its gradient by Jets (before issue 18) and by the adjoint.
+  const LensParameterization param(lens, GlassSpace(*load_catalog("ohara")));
+  const std::vector<double> x = param.from_lens(lens);
+  TraceOptions design_sampling;
+  design_sampling.rings = 8;
+  design_sampling.fields = 11;
+  design_sampling.threads = cmd.threads;
+  double design_jets_cpu_ms = 0, design_adjoint_cpu_ms = 0;
+  const double design_jets_ms = median_ms(
+      std::max(1, cmd.repeats / 4),
+      [&] { design_loss_gradient_jets(param, x, GlassMode::kQuantized, {}, design_sampling, {}); },
+      &design_jets_cpu_ms);
+  const double design_adjoint_ms = median_ms(
+      cmd.repeats,
+      [&] { design_loss_gradient(param, x, GlassMode::kQuantized, {}, design_sampling, {}); },
+      &design_adjoint_cpu_ms);
   const TraceSystem<double> sys = prepare_system(trace_lens, lens.specs, options);
   const double rays = static_cast<double>(sys.fields_deg.size()) * sys.wavelength_count *
                       static_cast<double>(sys.pupil.size());
@@ -71,6 +119,15 @@ void run_bench(const BenchCommand& cmd) {
     j["mean_rms_spot_um"] = mean_spot_um;
     j["spot_eval_ms"] = eval_ms;
     j["spot_grad_ms"] = grad_ms;
+    j["spot_grad_adjoint_ms"] = adjoint_ms;
+    j["design_grad_jets_ms"] = design_jets_ms;
+    j["design_grad_adjoint_ms"] = design_adjoint_ms;
+    j["design_grad_jets_cpu_ms"] = design_jets_cpu_ms;
+    j["design_grad_adjoint_cpu_ms"] = design_adjoint_cpu_ms;
+    j["spot_eval_cpu_ms"] = eval_cpu_ms;
+    j["spot_grad_cpu_ms"] = grad_cpu_ms;
+    j["spot_grad_adjoint_cpu_ms"] = adjoint_cpu_ms;
+    j["adjoint_max_relative_difference"] = adjoint_difference;
     j["ray_surfaces_per_s"] = ray_surfaces_per_s;
     fmt::print("{}\n", j.dump(2));
   } else {
@@ -80,9 +137,18 @@ void run_bench(const BenchCommand& cmd) {
         lens.name, lens.surfaces.size(), sys.fields_deg.size(), sys.wavelength_count,
         sys.pupil.size(), threads);
     fmt::print("  mean RMS spot                     {:10.3f} um\n", mean_spot_um);
-    fmt::print("  spot evaluation (double)          {:10.2f} ms   (median of {})\n", eval_ms,
-               cmd.repeats);
-    fmt::print("  gradient, {} variables (Jets)     {:10.2f} ms\n", variables.size(), grad_ms);
+    fmt::print("  spot evaluation (double)          {:10.2f} ms   (CPU {:.2f} ms; median of {})\n",
+               eval_ms, eval_cpu_ms, cmd.repeats);
+    fmt::print("  gradient, {} variables (Jets)     {:10.2f} ms   (CPU {:.2f} ms)\n",
+               variables.size(), grad_ms, grad_cpu_ms);
+    fmt::print(
+        "  gradient, {} variables (adjoint)  {:10.2f} ms   (CPU {:.2f} ms; {:.1f}x the "
+        "evaluation; max relative difference from the Jets {:.1e})\n",
+        variables.size(), adjoint_ms, adjoint_cpu_ms, adjoint_ms / eval_ms, adjoint_difference);
+    fmt::print(
+        "  l_lens gradient, {} variables, 8 rings x 11 fields: Jets {:.2f} ms (CPU {:.2f}), "
+        "adjoint {:.2f} ms (CPU {:.2f})\n",
+        param.size(), design_jets_ms, design_jets_cpu_ms, design_adjoint_ms, design_adjoint_cpu_ms);
     fmt::print("  ray-surface intersections         {:10.3g} per s\n", ray_surfaces_per_s);
   }
 }
@@ -112,12 +178,6 @@ void run_joint_imaging_bench(const BenchCommand& cmd) {
     grads.push_back(std::move(g));
   }
   std::vector<double> trace_ms, psf_ms, render_ms, backward_ms, prepare_ms, step_ms, cpu_ms;
-  // Process CPU time (all threads): on a shared machine the wall time depends on the load.
-  auto cpu_now_ms = [] {
-    timespec t{};
-    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
-    return t.tv_sec * 1e3 + t.tv_nsec * 1e-6;
-  };
   imaging.prepare(x);  // warm-up (FFTW plans, allocations)
   for (int r = 0; r < cmd.repeats; ++r) {
     const double c0 = cpu_now_ms();
@@ -192,7 +252,8 @@ void setup_bench(CLI::App& app) {
   auto cmd = std::make_shared<BenchCommand>();
   CLI::App* sub = app.add_subcommand("bench", "Benchmark the tracer (Tessar, full sampling)");
   sub->add_option("--lens", cmd->lens_path, "lens to benchmark (default: lenses/tessar.toml)");
-  sub->add_flag("--json", cmd->json, "JSON keys spot_eval_ms, spot_grad_ms, ray_surfaces_per_s");
+  sub->add_flag("--json", cmd->json,
+                "JSON keys spot_eval_ms, spot_grad_ms, spot_grad_adjoint_ms, ray_surfaces_per_s");
   sub->add_option("--repeats", cmd->repeats, "repetitions (median reported)")
       ->check(CLI::Range(1, 10000));
   sub->add_option("--threads", cmd->threads, "threads (0: all cores)")->check(CLI::Range(0, 1024));

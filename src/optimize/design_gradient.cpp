@@ -1,6 +1,12 @@
 #include "lensopt/optimize/design_gradient.h"
 
+#include <omp.h>
+
 #include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "lensopt/analysis/spot_adjoint.h"
 
 namespace lensopt {
 namespace {
@@ -34,6 +40,244 @@ void accumulate(const LensParameterization& param, const std::vector<double>& x,
   }
 }
 
+// The constraint-field system of evaluate_design on Jets with x[first, first + N) seeded.
+template <int N>
+TraceSystem<ceres::Jet<double, N>> design_system(const LensParameterization& param,
+                                                 const std::vector<double>& x, int first,
+                                                 GlassMode mode,
+                                                 const std::vector<int>& fixed_glasses,
+                                                 const TraceOptions& sampling) {
+  using J = ceres::Jet<double, N>;
+  const int n = param.size();
+  std::vector<J> xj(n);
+  for (int i = 0; i < n; ++i) {
+    xj[i] = J(x[i]);
+    if (i >= first && i < first + N) xj[i].v[i - first] = 1.0;
+  }
+  const TraceLens<J> lens = param.to_trace_lens(xj.data(), mode, fixed_glasses);
+  TraceOptions constraint_options = sampling;
+  constraint_options.scale_to_spec = false;
+  constraint_options.fields = constraint_field_count(sampling.fields, kConstraintFields);
+  return prepare_system(lens, param.structure().specs, constraint_options);
+}
+
+// Step 2 of the header for the design loss: the loss terms of evaluate_design in double and the
+// adjoints of l_lens (without the glass term) with respect to the system's parameters.
+SystemAdjoint design_adjoint(const TraceSystem<double>& sys, const TraceOptions& sampling,
+                             const DesignLossOptions& options, DesignLoss<double>& loss) {
+  const int all_fields = static_cast<int>(sys.fields_deg.size());
+  const int field_stride = sampling.fields > 1 ? (all_fields - 1) / (sampling.fields - 1) : 1;
+  const int field_count = sampling.fields > 1 ? sampling.fields : 1;
+  const int wl = sys.wavelength_count;
+  const int rays = static_cast<int>(sys.pupil.size());
+  const int k_count = sys.lens.surface_count();
+  const double n_r = static_cast<double>(field_count) * wl * rays;
+  const PupilSamples edge = pupil_edge_samples(kEdgeRays);
+  const double cos2_max = std::pow(std::cos(options.max_ray_angle_deg * kPi / 180.0), 2);
+  std::vector<double> lower(k_count), upper(k_count);
+  for (int k = 0; k < k_count; ++k) {
+    if (k == k_count - 1) {
+      lower[k] = options.min_image_clearance_mm;
+      upper[k] = std::numeric_limits<double>::infinity();
+    } else if (sys.lens.is_glass[k]) {
+      lower[k] = options.min_glass_mm;
+      upper[k] = options.max_glass_mm;
+    } else {
+      lower[k] = options.min_air_mm;
+      upper[k] = std::numeric_limits<double>::infinity();
+    }
+  }
+  const double path_weight = options.weight_ray_path / n_r;
+  const double angle_weight = options.weight_ray_angle / n_r;
+
+  std::vector<double> field_rms(field_count, 0.0), path_linear(all_fields, 0.0),
+      angle_linear(all_fields, 0.0);
+  std::vector<int> failed(all_fields, 0);
+  std::vector<SystemAdjoint> per_field(all_fields);
+  const int nthreads = sampling.threads > 0 ? sampling.threads : omp_get_max_threads();
+#pragma omp parallel num_threads(nthreads)
+  {
+    RayBundle<double> bundle;
+    RayRecord<double> record;
+    AdjointTape tape;
+    BundleAdjoint adjoint;
+    std::vector<std::vector<double>> travel_seed, zeta_seed, zeta_prime_seed;
+    std::vector<double> ys, xs, seed_x, seed_y;
+    std::vector<char> ok;
+#pragma omp for schedule(dynamic, 1)
+    for (int hf = 0; hf < all_fields; ++hf) {
+      SystemAdjoint& adj = per_field[hf];
+      adj.reset(k_count, wl, 0);
+      adj.start.assign(static_cast<std::size_t>(all_fields) * wl * 4, 0.0);
+      const bool spot_field = hf % field_stride == 0;
+      const int h = hf / field_stride;
+      // The spot of field h (evaluate_design's formula) and its seed scale.
+      double y_mean = 0.0, spot_scale = 0.0;
+      if (spot_field) {
+        ys.assign(static_cast<std::size_t>(wl) * rays, 0.0);
+        xs.assign(static_cast<std::size_t>(wl) * rays, 0.0);
+        ok.assign(static_cast<std::size_t>(wl) * rays, 0);
+        for (int w = 0; w < wl; ++w) {
+          start_rays(sys, hf, w, bundle);
+          trace_bundle(sys.lens, w, k_count, true, bundle,
+                       static_cast<RayRecord<double>*>(nullptr));
+          for (int p = 0; p < rays; ++p) {
+            const std::size_t i = static_cast<std::size_t>(w) * rays + p;
+            ok[i] = bundle.status[p] == kRayOk;
+            if (ok[i]) {
+              ys[i] = bundle.y[p];
+              xs[i] = bundle.x[p];
+            }
+          }
+        }
+        int count = 0;
+        double y_sum = 0.0;
+        for (std::size_t i = 0; i < ys.size(); ++i)
+          if (ok[i]) {
+            y_sum += ys[i];
+            ++count;
+          }
+        y_mean = count > 0 ? y_sum / count : 0.0;
+        double s2 = 0.0;
+        for (std::size_t i = 0; i < ys.size(); ++i)
+          if (ok[i]) {
+            const double dy = ys[i] - y_mean;
+            s2 += dy * dy + xs[i] * xs[i];
+          }
+        const double var = count > 0 ? s2 / count : 0.0;
+        field_rms[h] = var > 0.0 ? std::sqrt(var) : 0.0;
+        // d sqrt(s2 / N) / dY_i = (Y_i - ybar) / (N S); l_S = mean over the F spot fields.
+        if (field_rms[h] > 0.0)
+          spot_scale =
+              options.weight_spot / (static_cast<double>(field_count) * count * field_rms[h]);
+      }
+      double path_sum = 0.0, angle_sum = 0.0;
+      // The penalties of a traced bundle and their seeds (evaluate_design's add_constraints).
+      auto constraint_seeds = [&](const RayBundle<double>& b) {
+        const std::size_t count = b.size();
+        for (auto* seeds : {&travel_seed, &zeta_seed, &zeta_prime_seed}) {
+          seeds->resize(k_count);
+          for (auto& v : *seeds) v.assign(count, 0.0);
+        }
+        for (std::size_t p = 0; p < count; ++p) {
+          const bool traced = b.status[p] == kRayOk;
+          const int last_valid = traced ? k_count - 1 : b.failed_surface[p];
+          for (int k = 0; k <= last_valid && k < k_count; ++k) {
+            if (traced || k < last_valid) {
+              const double dz = record.axial_travel_mm[k][p];
+              const double below = lower[k] - dz;
+              const double above = std::isfinite(upper[k]) ? dz - upper[k] : 0.0;
+              path_sum += (below > 0.0 ? below : 0.0) + (above > 0.0 ? above : 0.0);
+              travel_seed[k][p] =
+                  path_weight * ((above > 0.0 ? 1.0 : 0.0) - (below > 0.0 ? 1.0 : 0.0));
+            }
+            const double va = cos2_max - record.cos2_incidence[k][p];
+            const double vb = cos2_max - record.cos2_refraction[k][p];
+            angle_sum += (va > 0.0 ? va : 0.0) + (vb > 0.0 ? vb : 0.0);
+            zeta_seed[k][p] = va > 0.0 ? -angle_weight : 0.0;
+            zeta_prime_seed[k][p] = vb > 0.0 ? -angle_weight : 0.0;
+          }
+        }
+      };
+      auto backward = [&](int w, const PupilSamples& pupil, bool spot) {
+        AdjointSeeds seeds;
+        seeds.travel = &travel_seed;
+        seeds.zeta = &zeta_seed;
+        seeds.zeta_prime = &zeta_prime_seed;
+        if (spot && spot_scale > 0.0) {
+          seed_x.resize(bundle.size());
+          seed_y.resize(bundle.size());
+          for (std::size_t i = 0; i < bundle.size(); ++i) {
+            seed_x[i] = bundle.x[i] * spot_scale;
+            seed_y[i] = (bundle.y[i] - y_mean) * spot_scale;
+          }
+          seeds.x_image = seed_x.data();
+          seeds.y_image = seed_y.data();
+        }
+        adjoint.reset(k_count);
+        trace_bundle_adjoint(sys.lens, w, bundle, tape, seeds, adjoint);
+        adj.add_bundle(adjoint, hf, w, wl, pupil);
+      };
+      for (int w = 0; w < wl; ++w) {
+        if (spot_field) {
+          start_rays(sys, hf, w, bundle);
+          record.resize(k_count, bundle.size());
+          trace_bundle_taped(sys.lens, w, bundle, &record, tape);
+          for (std::size_t p = 0; p < bundle.size(); ++p) failed[hf] += bundle.status[p] != kRayOk;
+          constraint_seeds(bundle);
+          backward(w, sys.pupil, true);
+        }
+        start_rays(sys, hf, w, bundle, &edge);
+        record.resize(k_count, bundle.size());
+        trace_bundle_taped(sys.lens, w, bundle, &record, tape);
+        for (std::size_t p = 0; p < bundle.size(); ++p) failed[hf] += bundle.status[p] != kRayOk;
+        constraint_seeds(bundle);
+        backward(w, edge, false);
+      }
+      path_linear[hf] = path_sum;
+      angle_linear[hf] = angle_sum;
+    }
+  }
+  SystemAdjoint out;
+  out.reset(k_count, wl, all_fields);
+  for (int hf = 0; hf < all_fields; ++hf) out.add(per_field[hf]);
+  double spot = 0.0, path = 0.0, angle = 0.0;
+  int failed_total = 0;
+  for (int h = 0; h < field_count; ++h) spot += field_rms[h];
+  for (int hf = 0; hf < all_fields; ++hf) {
+    path += path_linear[hf];
+    angle += angle_linear[hf];
+    failed_total += failed[hf];
+  }
+  loss.spot_mm = spot / field_count;
+  loss.ray_path_mm = path / n_r;
+  loss.ray_angle = angle / n_r;
+  loss.field_rms_mm = field_rms;
+  loss.failed_rays = failed_total;
+  loss.rays = static_cast<int>(n_r);
+  return out;
+}
+
+template <int N>
+DesignValueGradient design_adjoint_gradient(const LensParameterization& param,
+                                            const std::vector<double>& x, GlassMode mode,
+                                            const std::vector<int>& fixed_glasses,
+                                            const TraceOptions& sampling,
+                                            const DesignLossOptions& options) {
+  DesignValueGradient out;
+  const int n = param.size();
+  out.gradient.assign(n, 0.0);
+  SystemAdjoint adj;
+  for (int first = 0; first < n || first == 0; first += N) {
+    const auto sys = design_system<N>(param, x, first, mode, fixed_glasses, sampling);
+    if (first == 0) {
+      const TraceSystem<double> values = system_values(sys);
+      if (!adjoint_supported(values.lens))
+        return design_loss_gradient_jets(param, x, mode, fixed_glasses, sampling, options);
+      adj = design_adjoint(values, sampling, options, out.loss);
+    }
+    chain_system_adjoint(sys, adj, std::min(N, n - first), out.gradient.data() + first);
+    if (n == 0) break;
+  }
+  // The glass-variable loss, direct: l_GV = sum ||g - g*||^2, g* the nearest catalog glass.
+  double glass = 0.0;
+  for (int i = 0; i < n; ++i) {
+    if (param.variables()[i].kind != LensVariable::Kind::kGlass0) continue;
+    const Eigen::Vector2d g(x[i], x[i + 1]);
+    const Eigen::Vector2d p = param.glass_space().glass_point(param.glass_space().nearest(g));
+    const double d0 = x[i] - p[0], d1 = x[i + 1] - p[1];
+    glass += d0 * d0 + d1 * d1;
+    out.gradient[i] += 2.0 * options.weight_glass * d0;
+    out.gradient[i + 1] += 2.0 * options.weight_glass * d1;
+  }
+  out.loss.glass = glass;
+  out.loss.total = options.weight_spot * out.loss.spot_mm +
+                   options.weight_ray_path * out.loss.ray_path_mm +
+                   options.weight_ray_angle * out.loss.ray_angle + options.weight_glass * glass;
+  out.finite = std::isfinite(out.loss.spot_mm + out.loss.ray_path_mm + out.loss.ray_angle + glass);
+  return out;
+}
+
 }  // namespace
 
 DesignValueGradient design_loss_gradient(const LensParameterization& param,
@@ -41,6 +285,18 @@ DesignValueGradient design_loss_gradient(const LensParameterization& param,
                                          const std::vector<int>& fixed_glasses,
                                          const TraceOptions& sampling,
                                          const DesignLossOptions& options) {
+  const int n = param.size();
+  if (n <= 8) return design_adjoint_gradient<8>(param, x, mode, fixed_glasses, sampling, options);
+  if (n <= 16) return design_adjoint_gradient<16>(param, x, mode, fixed_glasses, sampling, options);
+  return design_adjoint_gradient<kDesignGradientWidth>(param, x, mode, fixed_glasses, sampling,
+                                                       options);
+}
+
+DesignValueGradient design_loss_gradient_jets(const LensParameterization& param,
+                                              const std::vector<double>& x, GlassMode mode,
+                                              const std::vector<int>& fixed_glasses,
+                                              const TraceOptions& sampling,
+                                              const DesignLossOptions& options) {
   DesignValueGradient out;
   const int n = param.size();
   out.gradient.assign(n, 0.0);

@@ -11,6 +11,7 @@
 
 #include "lensopt/analysis/analyze.h"
 #include "lensopt/core/error.h"
+#include "lensopt/optimize/design_gradient.h"
 
 namespace lensopt {
 namespace {
@@ -134,8 +135,13 @@ DesignLoss<double> run_phase(const LensParameterization& param, std::vector<doub
     std::vector<double> weights(field_count);
     for (int h = 0; h < field_count; ++h)
       weights[h] = 1.0 / (field_count * std::max(current.field_rms_mm[h], 1e-5));
-    auto* functor = new DesignFunctor{
-        &param, mode, fixed, options.sampling, loss, weights, &counters.evaluations,
+    auto* functor = new DesignFunctor{&param,
+                                      mode,
+                                      fixed,
+                                      options.sampling,
+                                      loss,
+                                      weights,
+                                      &counters.evaluations,
                                       &counters.trajectory};
     ceres::Problem problem;
     problem.AddResidualBlock(make_cost_for(functor, n, residual_count(param, options.sampling)),
@@ -545,28 +551,24 @@ AdamResult adam_on_design_loss(const LensParameterization& param, std::vector<do
                                GlassMode mode, const std::vector<int>& fixed_glasses,
                                const OptimizeOptions& options, double learning_rate, int max_steps,
                                double target_spot_mm) {
-  using J = ceres::Jet<double, kStride>;
   const int n = param.size();
-  if (n > kStride) throw Error(fmt::format("adam comparison supports up to {} variables", kStride));
   const std::vector<int> frozen = param.select(options.freeze);
   std::vector<double> m(n, 0.0), v(n, 0.0);
   const double beta1 = 0.9, beta2 = 0.999, eps = 1e-8;
   AdamResult result;
   for (int step = 1; step <= max_steps; ++step) {
-    std::vector<J> xj(n);
-    for (int i = 0; i < n; ++i) xj[i] = J(x[i], i);
-    DesignLoss<J> loss;
-    evaluate_design<J>(param, xj.data(), mode, fixed_glasses, options.sampling, options.loss,
-                       nullptr, nullptr, &loss);
+    // l_lens and its gradient by the adjoint (design_gradient.h).
+    const DesignValueGradient loss =
+        design_loss_gradient(param, x, mode, fixed_glasses, options.sampling, options.loss);
     ++result.evaluations;
-    result.spot_mm = loss.spot_mm.a;
+    result.spot_mm = loss.loss.spot_mm;
     if (result.spot_mm <= target_spot_mm) {
       result.reached = true;
       break;
     }
     for (int i = 0; i < n; ++i) {
       if (std::find(frozen.begin(), frozen.end(), i) != frozen.end()) continue;
-      const double g = loss.total.v[i];
+      const double g = loss.gradient[i];
       m[i] = beta1 * m[i] + (1 - beta1) * g;
       v[i] = beta2 * v[i] + (1 - beta2) * g * g;
       const double m_hat = m[i] / (1 - std::pow(beta1, step));

@@ -1,0 +1,150 @@
+// The mean RMS spot and its gradient by reverse mode (adjoint): the same derivative as
+// analysis/gradient.h (forward-mode Jets through everything) at the cost of a few double traces.
+//
+// Split of the pipeline:
+//   1. Lens level, in Jets (few rays): the prescription seeded with the variables, scaling to the
+//      spec focal length, paraxial pupil, stop radius and ray aiming (prepare_system on
+//      ceres::Jet<double, N>). It gives every parameter the ray trace reads as a Jet over the
+//      variables: per surface k, c_k and t_k; per surface and wavelength mu_{k,w} = n_{k-1}/n_k;
+//      per field h and wavelength w the ray start x = s_x p_x, y = o_y + s_y p_y, z = z_EP with
+//      s_x = R_EP sx_hw, o_y = R_EP oy_hw, s_y = R_EP sy_hw (system.h's pupil map).
+//   2. Every ray in double: field by field, a forward trace of all wavelengths gives the field's
+//      spot S_h, centroid ybar_h and traced count N_h; then per wavelength a taped forward trace
+//      and the backward pass (trace/adjoint.h) with the seeds of L = (1/F) sum_h S_h:
+//        dL/dY_i = (Y_i - ybar_h) / (F N_h S_h),   dL/dX_i = X_i / (F N_h S_h)
+//      (the centroid's own derivative drops out: sum_i (Y_i - ybar_h) = 0), 0 for failed rays and
+//      for fields with S_h = 0. The backward pass sums the adjoints a_c, a_t, a_mu per surface and
+//      a_sx = sum_i a_x0,i p_x,i, a_oy = sum_i a_y0,i, a_sy = sum_i a_y0,i p_y,i, a_zEP = sum_i
+//      a_z0,i per (field, wavelength). Per-field sums are added in field order (deterministic).
+//   3. Chain rule with the Jets of step 1: dL/dv_j = sum over parameters P of a_P dP/dv_j.
+// Supported: spherical surfaces without clear apertures (the kernel of trace/kernel.h);
+// adjoint_supported() says when, and mean_spot_gradient_fast falls back to the Jet path otherwise.
+#pragma once
+
+#include <ceres/jet.h>
+
+#include <vector>
+
+#include "lensopt/analysis/gradient.h"
+#include "lensopt/trace/adjoint.h"
+
+namespace lensopt {
+
+// Adjoints of a scalar of the traced rays with respect to the double parameters of a system.
+struct SystemAdjoint {
+  double value = 0.0;             // the scalar (mean spot, mm)
+  std::vector<double> curvature;  // K
+  std::vector<double> thickness;  // K
+  std::vector<double> mu;         // [w * K + k], w < W (the spec wavelengths)
+  std::vector<double> start;      // [(h * W + w) * 4 + j]: j = s_x, o_y, s_y, z_EP
+
+  void reset(int surfaces, int wavelengths, int fields);
+  // Adds the bundle adjoint of field h, wavelength w started from `pupil` samples.
+  void add_bundle(const BundleAdjoint& bundle, int h, int w, int wavelengths,
+                  const PupilSamples& pupil);
+  void add(const SystemAdjoint& other);
+};
+
+// True when the adjoint kernel traces this lens exactly as the forward kernel does.
+bool adjoint_supported(const TraceLens<double>& lens);
+
+// The mean RMS spot of a prepared double system and its adjoints (step 2).
+SystemAdjoint mean_spot_adjoint(const TraceSystem<double>& sys, int threads);
+
+// The double values of a system prepared on Jets.
+template <typename J>
+TraceSystem<double> system_values(const TraceSystem<J>& in) {
+  TraceSystem<double> out;
+  auto v = [](const std::vector<J>& a) {
+    std::vector<double> r(a.size());
+    for (std::size_t i = 0; i < a.size(); ++i) r[i] = value_of(a[i]);
+    return r;
+  };
+  out.lens.curvature_per_mm = v(in.lens.curvature_per_mm);
+  out.lens.thickness_mm = v(in.lens.thickness_mm);
+  out.lens.nd = v(in.lens.nd);
+  out.lens.vd = v(in.lens.vd);
+  out.lens.is_glass = in.lens.is_glass;
+  out.lens.catalog_offset = in.lens.catalog_offset;
+  out.lens.wavelengths_nm = in.lens.wavelengths_nm;
+  out.lens.stop = in.lens.stop;
+  out.scale = value_of(in.scale);
+  out.efl_mm = value_of(in.efl_mm);
+  out.bfl_mm = value_of(in.bfl_mm);
+  out.epd_mm = value_of(in.epd_mm);
+  out.entrance_pupil_z_mm = value_of(in.entrance_pupil_z_mm);
+  out.stop_radius_mm = value_of(in.stop_radius_mm);
+  out.fields_deg = in.fields_deg;
+  out.pupil_maps.resize(in.pupil_maps.size());
+  for (std::size_t i = 0; i < in.pupil_maps.size(); ++i) {
+    out.pupil_maps[i] = {value_of(in.pupil_maps[i].scale_x), value_of(in.pupil_maps[i].offset_y),
+                         value_of(in.pupil_maps[i].scale_y)};
+  }
+  out.wavelength_count = in.wavelength_count;
+  out.pupil = in.pupil;
+  return out;
+}
+
+// Step 3: gradient[j] += sum_P a_P dP/dv_j for the Jet directions j < count of `sys`.
+template <typename J>
+void chain_system_adjoint(const TraceSystem<J>& sys, const SystemAdjoint& adj, int count,
+                          double* gradient) {
+  const int k_count = sys.lens.surface_count();
+  const int wl = sys.wavelength_count;
+  const int fields = static_cast<int>(sys.fields_deg.size());
+  auto add = [&](const J& p, double a) {
+    if (a == 0.0) return;
+    for (int j = 0; j < count; ++j) gradient[j] += a * p.v[j];
+  };
+  for (int k = 0; k < k_count; ++k) {
+    add(sys.lens.curvature_per_mm[k], adj.curvature[k]);
+    add(sys.lens.thickness_mm[k], adj.thickness[k]);
+  }
+  for (int w = 0; w < wl; ++w)
+    for (int k = 0; k < k_count; ++k)
+      add(sys.lens.index(k - 1, w) / sys.lens.index(k, w),
+          adj.mu[static_cast<std::size_t>(w) * k_count + k]);
+  const J r_ep = sys.epd_mm / K<J>(2.0);
+  for (int h = 0; h < fields; ++h)
+    for (int w = 0; w < wl; ++w) {
+      const PupilMap<J>& map = sys.pupil_map(h, w);
+      const double* a = &adj.start[(static_cast<std::size_t>(h) * wl + w) * 4];
+      add(r_ep * map.scale_x, a[0]);
+      add(r_ep * map.offset_y, a[1]);
+      add(r_ep * map.scale_y, a[2]);
+      add(sys.entrance_pupil_z_mm, a[3]);
+    }
+}
+
+// The mean spot and its gradient with respect to `variables` by the adjoint (steps 1-3), the
+// Jet preparation in chunks of N variables.
+template <int N = 24>
+SpotGradient mean_spot_gradient_adjoint(const TraceLens<double>& lens, const Specs& specs,
+                                        const std::vector<PrescriptionVariable>& variables,
+                                        const TraceOptions& options) {
+  using J = ceres::Jet<double, N>;
+  SpotGradient out;
+  out.gradient.assign(variables.size(), 0.0);
+  const int count = static_cast<int>(variables.size());
+  SystemAdjoint adj;
+  for (int first = 0; first < count || first == 0; first += N) {
+    const int chunk = std::min(N, count - first);
+    const TraceLens<J> lens_j = convert_trace_lens<J>(lens, variables, first, chunk,
+                                                      [](double v, int j) { return J(v, j); });
+    const TraceSystem<J> sys = prepare_system(lens_j, specs, options);
+    if (first == 0) {
+      adj = mean_spot_adjoint(system_values(sys), options.threads);
+      out.mean_rms_spot_mm = adj.value;
+    }
+    if (chunk > 0) chain_system_adjoint(sys, adj, chunk, out.gradient.data() + first);
+    if (count == 0) break;
+  }
+  return out;
+}
+
+// The fastest exact gradient: the adjoint where supported, else the Jet path.
+SpotGradient mean_spot_gradient_fast(const TraceLens<double>& lens, const Specs& specs,
+                                     const std::vector<PrescriptionVariable>& variables,
+                                     const TraceOptions& options);
+
+}  // namespace lensopt

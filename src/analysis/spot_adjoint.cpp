@@ -1,0 +1,124 @@
+// The mean spot's adjoint over every field, wavelength and pupil ray (analysis/spot_adjoint.h).
+#include "lensopt/analysis/spot_adjoint.h"
+
+#include <omp.h>
+
+namespace lensopt {
+
+void SystemAdjoint::reset(int surfaces, int wavelengths, int fields) {
+  value = 0.0;
+  curvature.assign(surfaces, 0.0);
+  thickness.assign(surfaces, 0.0);
+  mu.assign(static_cast<std::size_t>(wavelengths) * surfaces, 0.0);
+  start.assign(static_cast<std::size_t>(fields) * wavelengths * 4, 0.0);
+}
+
+void SystemAdjoint::add_bundle(const BundleAdjoint& bundle, int h, int w, int wavelengths,
+                               const PupilSamples& pupil) {
+  const int k_count = static_cast<int>(curvature.size());
+  for (int k = 0; k < k_count; ++k) {
+    curvature[k] += bundle.curvature[k];
+    thickness[k] += bundle.thickness[k];
+    mu[static_cast<std::size_t>(w) * k_count + k] += bundle.mu[k];
+  }
+  double a_sx = 0.0, a_oy = 0.0, a_sy = 0.0, a_z = 0.0;
+  for (std::size_t i = 0; i < pupil.size(); ++i) {
+    a_sx += bundle.x0[i] * pupil.x[i];
+    a_oy += bundle.y0[i];
+    a_sy += bundle.y0[i] * pupil.y[i];
+    a_z += bundle.z0[i];
+  }
+  double* a = &start[(static_cast<std::size_t>(h) * wavelengths + w) * 4];
+  a[0] += a_sx;
+  a[1] += a_oy;
+  a[2] += a_sy;
+  a[3] += a_z;
+}
+
+void SystemAdjoint::add(const SystemAdjoint& other) {
+  value += other.value;
+  for (std::size_t i = 0; i < curvature.size(); ++i) curvature[i] += other.curvature[i];
+  for (std::size_t i = 0; i < thickness.size(); ++i) thickness[i] += other.thickness[i];
+  for (std::size_t i = 0; i < mu.size(); ++i) mu[i] += other.mu[i];
+  for (std::size_t i = 0; i < start.size(); ++i) start[i] += other.start[i];
+}
+
+bool adjoint_supported(const TraceLens<double>& lens) {
+  // Spheres without clear apertures: everything the kernel of trace/kernel.h traces. (Surface
+  // profiles and clipping apertures, when a lens has them, take the Jet path.)
+  return lens.surface_count() > 0;
+}
+
+SystemAdjoint mean_spot_adjoint(const TraceSystem<double>& sys, int threads) {
+  const int field_count = static_cast<int>(sys.fields_deg.size());
+  const int k_count = sys.lens.surface_count();
+  const int wl = sys.wavelength_count;
+  // Per-field results, added in field order afterwards so the sum does not depend on threads.
+  std::vector<SystemAdjoint> per_field(field_count);
+  std::vector<double> field_rms(field_count, 0.0);
+  const int nthreads = threads > 0 ? threads : omp_get_max_threads();
+#pragma omp parallel num_threads(nthreads)
+  {
+    RayBundle<double> rays;
+    AdjointTape tape;
+    BundleAdjoint bundle;
+    std::vector<double> seed_x, seed_y;
+#pragma omp for schedule(dynamic, 1)
+    for (int h = 0; h < field_count; ++h) {
+      SystemAdjoint& adj = per_field[h];
+      adj.reset(k_count, wl, 1);
+      adj.start.assign(static_cast<std::size_t>(field_count) * wl * 4, 0.0);
+      // Forward: the field's spot, centroid and count.
+      SpotAccumulator<double> acc;
+      for (int w = 0; w < wl; ++w) {
+        start_rays(sys, h, w, rays);
+        trace_bundle(sys.lens, w, k_count, true, rays, static_cast<RayRecord<double>*>(nullptr));
+        acc.add(rays);
+      }
+      const double rms = acc.rms();
+      field_rms[h] = rms;
+      if (!(rms > 0.0)) continue;
+      const double ybar = acc.centroid();
+      const double scale = 1.0 / (static_cast<double>(field_count) * acc.count * rms);
+      // Backward per wavelength from a taped forward trace.
+      for (int w = 0; w < wl; ++w) {
+        start_rays(sys, h, w, rays);
+        trace_bundle_taped(sys.lens, w, rays, nullptr, tape);
+        seed_x.resize(rays.size());
+        seed_y.resize(rays.size());
+        for (std::size_t i = 0; i < rays.size(); ++i) {
+          seed_x[i] = rays.x[i] * scale;
+          seed_y[i] = (rays.y[i] - ybar) * scale;
+        }
+        AdjointSeeds seeds;
+        seeds.x_image = seed_x.data();
+        seeds.y_image = seed_y.data();
+        bundle.reset(k_count);
+        trace_bundle_adjoint(sys.lens, w, rays, tape, seeds, bundle);
+        adj.add_bundle(bundle, h, w, wl, sys.pupil);
+      }
+    }
+  }
+  SystemAdjoint out;
+  out.reset(k_count, wl, field_count);
+  double sum = 0.0;
+  for (int h = 0; h < field_count; ++h) {
+    sum += field_rms[h];
+    if (per_field[h].curvature.empty()) continue;
+    out.add(per_field[h]);
+  }
+  out.value = sum / field_count;
+  return out;
+}
+
+SpotGradient mean_spot_gradient_fast(const TraceLens<double>& lens, const Specs& specs,
+                                     const std::vector<PrescriptionVariable>& variables,
+                                     const TraceOptions& options) {
+  if (!adjoint_supported(lens)) return mean_spot_gradient_auto(lens, specs, variables, options);
+  if (variables.size() <= 8) return mean_spot_gradient_adjoint<8>(lens, specs, variables, options);
+  if (variables.size() <= 16)
+    return mean_spot_gradient_adjoint<16>(lens, specs, variables, options);
+  return mean_spot_gradient_adjoint<24>(lens, specs, variables, options);
+}
+
+}  // namespace lensopt

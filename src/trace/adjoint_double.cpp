@@ -1,0 +1,266 @@
+// The adjoint (reverse-mode) double ray-trace kernel (trace/adjoint.h), built like the forward
+// kernel for several x86-64 levels (GCC target_clones).
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+
+#include "lensopt/trace/adjoint.h"
+
+namespace lensopt {
+namespace detail {
+
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
+__attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default")))
+#endif
+void trace_surface_adjoint_double(double c, double mu, int k, std::size_t count,
+                                  const double* const state[6], const std::int8_t* failed_surface,
+                                  double* const a[6], const double* travel_seed,
+                                  const double* zeta_seed, const double* zeta_prime_seed,
+                                  double sums[3]) {
+  const double* __restrict px = state[0];
+  const double* __restrict py = state[1];
+  const double* __restrict pz = state[2];
+  const double* __restrict pl = state[3];
+  const double* __restrict pm = state[4];
+  const double* __restrict pn = state[5];
+  double* __restrict ax = a[0];
+  double* __restrict ay = a[1];
+  double* __restrict az = a[2];
+  double* __restrict al = a[3];
+  double* __restrict am = a[4];
+  double* __restrict an = a[5];
+  const std::int8_t* __restrict fs = failed_surface;
+  const double mu2 = mu * mu;
+  double sum_c = 0.0, sum_t = 0.0, sum_mu = 0.0;
+#pragma omp simd reduction(+ : sum_c, sum_t, sum_mu)
+  for (std::size_t i = 0; i < count; ++i) {
+    const bool live = fs[i] < 0 || fs[i] >= k;
+    // Forward again from the taped state (its z is already relative to vertex k: zr).
+    const double x = px[i], y = py[i], zr = pz[i], l = pl[i], m = pm[i], n = pn[i];
+    const double s0 = -zr / n;
+    const double x1 = x + s0 * l;
+    const double y1 = y + s0 * m;
+    const double q = x1 * x1 + y1 * y1;
+    const double f = c * q;
+    const double p = x1 * l + y1 * m;
+    const double g = n - c * p;
+    const double zeta_raw = g * g - c * f;
+    const bool miss = zeta_raw < 0.0;
+    const double zeta = miss ? 1.0 : zeta_raw;
+    const double ci = std::sqrt(zeta);
+    const double den = g + ci;
+    const double s1 = f / den;
+    const double x2 = x1 + s1 * l;
+    const double y2 = y1 + s1 * m;
+    const double z2 = s1 * n;
+    const double zp_raw = 1.0 - mu2 * (1.0 - zeta);
+    const bool tir = zp_raw < 0.0;
+    const double zp = tir ? zeta : zp_raw;
+    const double sp = std::sqrt(zp);
+    const double gamma = sp - mu * ci;
+    // Backward.
+    const double a_l_out = live ? al[i] : 0.0;
+    const double a_m_out = live ? am[i] : 0.0;
+    const double a_n_out = live ? an[i] : 0.0;
+    const double a_travel = live && travel_seed ? travel_seed[i] : 0.0;
+    const double a_zeta_seed = live && zeta_seed ? zeta_seed[i] : 0.0;
+    const double a_zp_seed = live && zeta_prime_seed ? zeta_prime_seed[i] : 0.0;
+    double a_mu = a_l_out * l + a_m_out * m + a_n_out * n;
+    const double a_gamma = -c * (a_l_out * x2 + a_m_out * y2) + a_n_out * (1.0 - c * z2);
+    double a_c = -gamma * (a_l_out * x2 + a_m_out * y2 + a_n_out * z2);
+    const double gc = gamma * c;
+    const double a_x2 = (live ? ax[i] : 0.0) - gc * a_l_out;
+    const double a_y2 = (live ? ay[i] : 0.0) - gc * a_m_out;
+    const double a_z2 = (live ? az[i] : 0.0) + a_travel - gc * a_n_out;
+    double a_l = mu * a_l_out;
+    double a_m = mu * a_m_out;
+    double a_n = mu * a_n_out;
+    // sqrt(zeta') of the refraction; on total internal reflection it is sqrt(zeta).
+    const double a_zp_used = a_gamma / (2.0 * sp);
+    const double a_zp_raw = a_zp_seed + (tir ? 0.0 : a_zp_used);
+    double a_zeta = (tir ? a_zp_used : 0.0) + mu2 * a_zp_raw;
+    a_mu = a_mu - a_gamma * ci - 2.0 * mu * (1.0 - zeta) * a_zp_raw;
+    double a_ci = -mu * a_gamma;
+    // The intersection.
+    const double a_s1 = a_x2 * l + a_y2 * m + a_z2 * n;
+    a_l += s1 * a_x2;
+    a_m += s1 * a_y2;
+    a_n += s1 * a_z2;
+    double a_f = a_s1 / den;
+    const double a_den = -a_s1 * s1 / den;
+    double a_g = a_den;
+    a_ci += a_den;
+    a_zeta += a_ci / (2.0 * ci);
+    // A miss traced on with the constant zeta = 1: only the record's seed reaches zeta_raw.
+    const double a_zeta_raw = a_zeta_seed + (miss ? 0.0 : a_zeta);
+    a_g += 2.0 * g * a_zeta_raw;
+    a_c -= f * a_zeta_raw;
+    a_f -= c * a_zeta_raw;
+    a_n += a_g;
+    a_c -= p * a_g;
+    const double a_p = -c * a_g;
+    a_c += q * a_f;
+    const double a_q = c * a_f;
+    const double a_x1 = a_x2 + a_p * l + 2.0 * x1 * a_q;
+    const double a_y1 = a_y2 + a_p * m + 2.0 * y1 * a_q;
+    a_l += a_p * x1;
+    a_m += a_p * y1;
+    // The transfer to the vertex plane.
+    const double a_s0 = a_x1 * l + a_y1 * m;
+    a_l += s0 * a_x1;
+    a_m += s0 * a_y1;
+    const double a_zr = -a_s0 / n - a_travel;
+    a_n -= a_s0 * s0 / n;
+    ax[i] = live ? a_x1 : 0.0;
+    ay[i] = live ? a_y1 : 0.0;
+    az[i] = live ? a_zr : 0.0;
+    al[i] = live ? a_l : 0.0;
+    am[i] = live ? a_m : 0.0;
+    an[i] = live ? a_n : 0.0;
+    sum_c += live ? a_c : 0.0;
+    sum_t += live ? -a_zr : 0.0;
+    sum_mu += live ? a_mu : 0.0;
+  }
+  sums[0] += sum_c;
+  sums[1] += sum_t;
+  sums[2] += sum_mu;
+}
+
+}  // namespace detail
+
+void trace_bundle_taped(const TraceLens<double>& lens, int w, RayBundle<double>& rays,
+                        RayRecord<double>* record, AdjointTape& tape) {
+  const std::size_t count = rays.size();
+  const int k_count = lens.surface_count();
+  tape.resize(k_count, count);
+  double* x = rays.x.data();
+  double* y = rays.y.data();
+  double* z = rays.z.data();
+  double* l = rays.l.data();
+  double* m = rays.m.data();
+  double* n = rays.n.data();
+  std::uint8_t* status = rays.status.data();
+  std::int8_t* failed_at = rays.failed_surface.data();
+  rays.failure_scratch.resize(count);
+  std::int32_t* failure = rays.failure_scratch.data();
+  for (std::size_t i = 0; i < count; ++i) {
+    if (!(n[i] > 0.0) && status[i] == kRayOk) {
+      status[i] = kRayBackwards;
+      failed_at[i] = 0;
+      n[i] = 1.0;
+    }
+  }
+  const std::size_t bytes = count * sizeof(double);
+  auto save = [&](int k, double shift) {
+    // The tape holds z relative to the vertex of surface k (the shift applied), so the backward
+    // pass needs no shift; a_t = -a_zr there.
+    double* tz = tape.at(k, 2);
+    for (std::size_t i = 0; i < count; ++i) tz[i] = z[i] - shift;
+    std::memcpy(tape.at(k, 0), x, bytes);
+    std::memcpy(tape.at(k, 1), y, bytes);
+    std::memcpy(tape.at(k, 3), l, bytes);
+    std::memcpy(tape.at(k, 4), m, bytes);
+    std::memcpy(tape.at(k, 5), n, bytes);
+  };
+  for (int k = 0; k < k_count; ++k) {
+    const double c = lens.curvature_per_mm[k];
+    const double shift = k > 0 ? lens.thickness_mm[k - 1] : 0.0;
+    const double mu = lens.index(k - 1, w) / lens.index(k, w);
+    save(k, shift);
+    detail::trace_surface_double(c, shift, mu, count, x, y, z, l, m, n, failure,
+                                 record && k > 0 ? record->axial_travel_mm[k - 1].data() : nullptr,
+                                 record ? record->cos2_incidence[k].data() : nullptr,
+                                 record ? record->cos2_refraction[k].data() : nullptr,
+                                 record != nullptr);
+    for (std::size_t i = 0; i < count; ++i) {
+      if (failure[i] != kRayOk && status[i] == kRayOk) {
+        status[i] = static_cast<std::uint8_t>(failure[i]);
+        failed_at[i] = static_cast<std::int8_t>(k);
+      }
+    }
+  }
+  const int last = k_count - 1;
+  const double t = lens.thickness_mm[last];
+  save(k_count, t);
+  double* travel = record ? record->axial_travel_mm[last].data() : nullptr;
+  for (std::size_t i = 0; i < count; ++i) {
+    const double z_rel = z[i] - t;
+    if (travel) travel[i] = -z_rel;
+    if (!(n[i] > 0.0)) {
+      if (status[i] == kRayOk) {
+        status[i] = kRayBackwards;
+        failed_at[i] = static_cast<std::int8_t>(last);
+      }
+      continue;
+    }
+    const double s = -z_rel / n[i];
+    x[i] = x[i] + s * l[i];
+    y[i] = y[i] + s * m[i];
+    z[i] = 0.0;
+  }
+}
+
+void trace_bundle_adjoint(const TraceLens<double>& lens, int w, const RayBundle<double>& rays,
+                          const AdjointTape& tape, const AdjointSeeds& seeds, BundleAdjoint& out) {
+  const std::size_t count = rays.size();
+  const int k_count = lens.surface_count();
+  const int last = k_count - 1;
+  out.x0.resize(count);
+  out.y0.resize(count);
+  out.z0.resize(count);
+  // Adjoints of the state, carried from the image backwards: a_x, a_y, a_z in out.x0/y0/z0,
+  // a_l, a_m, a_n in thread-local scratch.
+  thread_local std::vector<double> scratch;
+  scratch.resize(3 * count);
+  double* const a[6] = {out.x0.data(),  out.y0.data(),          out.z0.data(),
+                        scratch.data(), scratch.data() + count, scratch.data() + 2 * count};
+  const std::uint8_t* status = rays.status.data();
+  const std::int8_t* fs = rays.failed_surface.data();
+  // Image transfer: zr = z - T, s = -zr / n, X = x + s l, Y = y + s m, travel = -zr.
+  {
+    const double* x = tape.at(k_count, 0);
+    const double* y = tape.at(k_count, 1);
+    const double* zr = tape.at(k_count, 2);
+    const double* l = tape.at(k_count, 3);
+    const double* m = tape.at(k_count, 4);
+    const double* n = tape.at(k_count, 5);
+    const double* travel_seed = seeds.travel ? (*seeds.travel)[last].data() : nullptr;
+    double sum_t = 0.0;
+    for (std::size_t i = 0; i < count; ++i) {
+      // The last space's travel is recorded for rays live there; the transfer only for traced rays.
+      const bool live = fs[i] < 0 || fs[i] >= last;
+      const bool traced = status[i] == kRayOk;
+      const double a_x_img = traced && seeds.x_image ? seeds.x_image[i] : 0.0;
+      const double a_y_img = traced && seeds.y_image ? seeds.y_image[i] : 0.0;
+      const double a_travel = live && travel_seed ? travel_seed[i] : 0.0;
+      const double s = -zr[i] / n[i];
+      const double a_s = traced ? a_x_img * l[i] + a_y_img * m[i] : 0.0;
+      const double a_zr = traced ? -a_s / n[i] - a_travel : -a_travel;
+      a[0][i] = a_x_img;
+      a[1][i] = a_y_img;
+      a[2][i] = a_zr;
+      a[3][i] = traced ? a_x_img * s : 0.0;
+      a[4][i] = traced ? a_y_img * s : 0.0;
+      a[5][i] = traced ? -a_s * s / n[i] : 0.0;
+      sum_t -= a_zr;
+    }
+    out.thickness[last] += sum_t;
+  }
+  for (int k = last; k >= 0; --k) {
+    const double c = lens.curvature_per_mm[k];
+    const double mu = lens.index(k - 1, w) / lens.index(k, w);
+    const double* const state[6] = {tape.at(k, 0), tape.at(k, 1), tape.at(k, 2),
+                                    tape.at(k, 3), tape.at(k, 4), tape.at(k, 5)};
+    double sums[3] = {0.0, 0.0, 0.0};
+    detail::trace_surface_adjoint_double(
+        c, mu, k, count, state, fs, a,
+        seeds.travel && k > 0 ? (*seeds.travel)[k - 1].data() : nullptr,
+        seeds.zeta ? (*seeds.zeta)[k].data() : nullptr,
+        seeds.zeta_prime ? (*seeds.zeta_prime)[k].data() : nullptr, sums);
+    out.curvature[k] += sums[0];
+    if (k > 0) out.thickness[k - 1] += sums[1];
+    out.mu[k] += sums[2];
+  }
+}
+
+}  // namespace lensopt

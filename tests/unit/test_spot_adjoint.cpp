@@ -1,0 +1,232 @@
+// The adjoint (reverse-mode) gradient of the mean spot against the Jet gradient (forward mode,
+// itself checked against finite differences in test_gradient.cpp) and against central finite
+// differences: the three baselines and the .zmx lenses, with and without ray aiming and scaling;
+// and the adjoint gradient of the lens design loss l_lens against its Jet gradient.
+#include <doctest/doctest.h>
+
+#include <cmath>
+
+#include "lensopt/analysis/spot_adjoint.h"
+#include "lensopt/formats/zmx.h"
+#include "lensopt/glass/glass.h"
+#include "lensopt/lens/lens_io.h"
+#include "lensopt/optimize/design_gradient.h"
+#include "lensopt/optimize/optimizer.h"
+#include "test_support.h"
+
+using namespace lensopt;
+
+namespace {
+
+double mean_spot(const Lens& lens, const TraceOptions& options) {
+  const TraceSystem<double> sys = prepare_system(make_trace_lens(lens), lens.specs, options);
+  return evaluate_spots(sys, options.threads).mean_rms_spot_mm;
+}
+
+// Worst relative difference of two gradients, each entry relative to the larger of its own size
+// and 1e-6 of the gradient's largest entry (an entry that is zero up to rounding).
+double worst_relative(const std::vector<double>& a, const std::vector<double>& b) {
+  double largest = 0;
+  for (double d : b) largest = std::max(largest, std::abs(d));
+  double worst = 0;
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    const double denominator = std::max(std::abs(b[i]), 1e-6 * largest);
+    worst = std::max(worst, std::abs(a[i] - b[i]) / denominator);
+  }
+  return worst;
+}
+
+// The adjoint equals the Jet gradient within 1e-9 relative; the value equals the evaluation.
+void check_against_jets(const Lens& lens, const TraceOptions& options) {
+  const std::vector<PrescriptionVariable> variables = all_prescription_variables(lens);
+  const TraceLens<double> trace_lens = make_trace_lens(lens);
+  const SpotGradient jets = mean_spot_gradient_auto(trace_lens, lens.specs, variables, options);
+  const SpotGradient adjoint =
+      mean_spot_gradient_adjoint<8>(trace_lens, lens.specs, variables, options);
+  REQUIRE(adjoint.gradient.size() == variables.size());
+  CHECK(adjoint.mean_rms_spot_mm == doctest::Approx(mean_spot(lens, options)).epsilon(1e-12));
+  const double worst = worst_relative(adjoint.gradient, jets.gradient);
+  for (std::size_t i = 0; i < variables.size(); ++i)
+    INFO(variables[i].name(), ": adjoint ", adjoint.gradient[i], " jets ", jets.gradient[i]);
+  INFO(lens.name, ": worst relative difference ", worst);
+  CHECK(worst < 1e-9);
+}
+
+}  // namespace
+
+TEST_CASE("spot adjoint: equals the Jet gradient on the baselines (full sampling, aiming on)") {
+  for (const char* name : {"doublet", "cooke", "tessar"}) {
+    const Lens lens = read_lens(test::source_dir() / "lenses" / (std::string(name) + ".toml"));
+    check_against_jets(lens, TraceOptions{});
+  }
+}
+
+TEST_CASE("spot adjoint: without ray aiming, without scaling, and on the .zmx lenses") {
+  for (const char* name : {"doublet", "cooke", "tessar"}) {
+    const Lens lens = read_lens(test::source_dir() / "lenses" / (std::string(name) + ".toml"));
+    TraceOptions options;
+    options.rings = 12;
+    options.fields = 7;
+    options.ray_aiming = false;
+    check_against_jets(lens, options);
+    options.ray_aiming = true;
+    options.scale_to_spec = false;
+    check_against_jets(lens, options);
+  }
+  for (const char* name : {"achromat_ac254_100", "cooke_triplet_50", "double_gauss_100"}) {
+    const Lens lens =
+        read_zmx(test::source_dir() / "lenses" / "zmx" / (std::string(name) + ".zmx")).lens;
+    TraceOptions options;
+    options.rings = 12;
+    options.fields = 7;
+    for (bool aiming : {true, false}) {
+      options.ray_aiming = aiming;
+      check_against_jets(lens, options);
+    }
+  }
+}
+
+TEST_CASE("spot adjoint: matches central finite differences, and a single thread") {
+  // The Cooke at reduced sampling: every variable against a Richardson-extrapolated central
+  // difference (as test_gradient.cpp), with and without ray aiming.
+  const Lens lens = read_lens(test::source_dir() / "lenses" / "cooke.toml");
+  const std::vector<PrescriptionVariable> variables = all_prescription_variables(lens);
+  for (bool aiming : {true, false}) {
+    TraceOptions options;
+    options.rings = 10;
+    options.fields = 5;
+    options.ray_aiming = aiming;
+    const SpotGradient g =
+        mean_spot_gradient_adjoint<24>(make_trace_lens(lens), lens.specs, variables, options);
+    std::vector<double> fd(variables.size());
+    for (std::size_t i = 0; i < variables.size(); ++i) {
+      const double x0 = variable_value(lens, variables[i]);
+      double scale = 1.0;
+      if (variables[i].kind == PrescriptionVariable::Kind::kCurvature) scale = 0.05;
+      if (variables[i].kind == PrescriptionVariable::Kind::kVd) scale = 40.0;
+      auto central = [&](double h) {
+        Lens plus = lens, minus = lens;
+        set_variable_value(plus, variables[i], x0 + h);
+        set_variable_value(minus, variables[i], x0 - h);
+        return (mean_spot(plus, options) - mean_spot(minus, options)) / (2 * h);
+      };
+      const double h = 2e-5 * scale;
+      fd[i] = (4 * central(h / 2) - central(h)) / 3;
+    }
+    const double worst = worst_relative(g.gradient, fd);
+    INFO("aiming ", aiming, ": worst relative error against finite differences ", worst);
+    CHECK(worst < 1e-5);
+    // One thread gives the same numbers (per-field sums added in field order).
+    TraceOptions one = options;
+    one.threads = 1;
+    const SpotGradient g1 =
+        mean_spot_gradient_adjoint<24>(make_trace_lens(lens), lens.specs, variables, one);
+    for (std::size_t i = 0; i < variables.size(); ++i) CHECK(g1.gradient[i] == g.gradient[i]);
+  }
+}
+
+TEST_CASE("spot adjoint: rays that fail contribute nothing (Jets agree)") {
+  // A field so wide that some rays miss or reflect totally: failed rays leave the spot, and the
+  // adjoint must leave them out exactly as the Jets do.
+  Lens lens = read_lens(test::source_dir() / "lenses" / "tessar.toml");
+  lens.specs.half_field_deg = 42.0;
+  TraceOptions options;
+  options.rings = 12;
+  options.fields = 7;
+  const SpotResult<double> spots =
+      evaluate_spots(prepare_system(make_trace_lens(lens), lens.specs, options));
+  MESSAGE("failed rays at 42 deg: ", spots.total_failed);
+  check_against_jets(lens, options);
+}
+
+namespace {
+
+// The adjoint gradient of l_lens equals the Jet gradient within 1e-9 relative, and the terms agree.
+void check_design(const LensParameterization& param, const std::vector<double>& x, GlassMode mode,
+                  const TraceOptions& sampling, const DesignLossOptions& loss) {
+  const DesignValueGradient adjoint = design_loss_gradient(param, x, mode, {}, sampling, loss);
+  const DesignValueGradient jets = design_loss_gradient_jets(param, x, mode, {}, sampling, loss);
+  CHECK(adjoint.finite == jets.finite);
+  CHECK(adjoint.loss.total == doctest::Approx(jets.loss.total).epsilon(1e-12));
+  CHECK(adjoint.loss.spot_mm == doctest::Approx(jets.loss.spot_mm).epsilon(1e-12));
+  CHECK(adjoint.loss.ray_path_mm == doctest::Approx(jets.loss.ray_path_mm).epsilon(1e-12));
+  CHECK(adjoint.loss.ray_angle == doctest::Approx(jets.loss.ray_angle).epsilon(1e-12));
+  CHECK(adjoint.loss.failed_rays == jets.loss.failed_rays);
+  const double worst = worst_relative(adjoint.gradient, jets.gradient);
+  for (int i = 0; i < param.size(); ++i)
+    INFO(param.variables()[i].name, ": adjoint ", adjoint.gradient[i], " jets ", jets.gradient[i]);
+  INFO("path ", jets.loss.ray_path_mm, " angle ", jets.loss.ray_angle, "; worst ", worst);
+  CHECK(worst < 1e-9);
+}
+
+}  // namespace
+
+TEST_CASE("design adjoint: the gradient of l_lens equals the Jet gradient (active constraints)") {
+  const GlassSpace glasses(*load_catalog("ohara"));
+  for (const char* name : {"cooke-seed1", "tessar-seed2", "doublet-seed3"}) {
+    const Lens lens =
+        read_lens(test::source_dir() / "lenses" / "starts" / (std::string(name) + ".toml"));
+    LensParameterization param(lens, glasses);
+    const std::vector<double> x = param.from_lens(lens);
+    TraceOptions sampling;
+    sampling.rings = 6;
+    sampling.fields = 3;
+    DesignLossOptions loss;
+    loss.min_image_clearance_mm = 14.0;  // the ray-path hinge active
+    loss.max_ray_angle_deg = 20.0;       // the ray-angle hinge active
+    loss.max_glass_mm = 2.0;
+    for (GlassMode mode : {GlassMode::kQuantized, GlassMode::kContinuous})
+      check_design(param, x, mode, sampling, loss);
+    check_design(param, x, GlassMode::kQuantized, sampling, DesignLossOptions{});
+    param.set_paraxial_image_solve(false);
+    check_design(param, param.from_lens(lens), GlassMode::kQuantized, sampling, loss);
+  }
+}
+
+TEST_CASE("design adjoint: rays that fail still pull through their records (Jets agree)") {
+  // A wide field makes rays miss or reflect totally: their incidence records up to the failing
+  // surface enter the angle penalty, with derivatives.
+  Lens lens = read_lens(test::source_dir() / "lenses" / "tessar.toml");
+  lens.specs.half_field_deg = 42.0;
+  const LensParameterization param(lens, GlassSpace(*load_catalog("ohara")));
+  TraceOptions sampling;
+  sampling.rings = 6;
+  sampling.fields = 3;
+  const DesignValueGradient jets = design_loss_gradient_jets(
+      param, param.from_lens(lens), GlassMode::kQuantized, {}, sampling, DesignLossOptions{});
+  MESSAGE("failed rays: ", jets.loss.failed_rays, " of ", jets.loss.rays);
+  CHECK(jets.loss.failed_rays > 0);
+  check_design(param, param.from_lens(lens), GlassMode::kQuantized, sampling, DesignLossOptions{});
+}
+
+TEST_CASE("design adjoint: the Adam comparison loop takes the same steps as with Jet gradients") {
+  const Lens lens = read_lens(test::source_dir() / "lenses" / "starts" / "cooke-seed2.toml");
+  const LensParameterization param(lens, GlassSpace(*load_catalog("ohara")));
+  const std::vector<double> x0 = param.from_lens(lens);
+  const std::vector<int> glasses = param.nearest_glasses(x0.data());
+  OptimizeOptions options;
+  options.sampling.rings = 4;
+  options.sampling.fields = 3;
+  const int steps = 12;
+  const double lr = 5e-3;
+  const AdamResult adam =
+      adam_on_design_loss(param, x0, GlassMode::kFixed, glasses, options, lr, steps, 0.0);
+  // The same Adam update on the Jet gradient (optimizer.cpp's loop before the adjoint).
+  std::vector<double> x = x0, m(x.size(), 0.0), v(x.size(), 0.0);
+  for (int step = 1; step <= steps; ++step) {
+    const DesignValueGradient g = design_loss_gradient_jets(param, x, GlassMode::kFixed, glasses,
+                                                            options.sampling, options.loss);
+    for (std::size_t i = 0; i < x.size(); ++i) {
+      m[i] = 0.9 * m[i] + 0.1 * g.gradient[i];
+      v[i] = 0.999 * v[i] + 0.001 * g.gradient[i] * g.gradient[i];
+      const double m_hat = m[i] / (1 - std::pow(0.9, step));
+      const double v_hat = v[i] / (1 - std::pow(0.999, step));
+      x[i] -= lr * m_hat / (std::sqrt(v_hat) + 1e-8);
+    }
+  }
+  REQUIRE(adam.x.size() == x.size());
+  for (std::size_t i = 0; i < x.size(); ++i) {
+    INFO(param.variables()[i].name, ": adjoint ", adam.x[i], " jets ", x[i]);
+    CHECK(std::abs(adam.x[i] - x[i]) <= 1e-9 * std::max(1.0, std::abs(x[i])));
+  }
+}
