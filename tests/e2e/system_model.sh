@@ -36,7 +36,7 @@ PY
     "$lensopt" plot "$zmx" -k "$kind" -o "$tmp/${name}_$kind.svg" > /dev/null 2> "$tmp/err" ||
       fail "plot $kind $zmx: $(cat "$tmp/err")"
     [ -s "$tmp/${name}_$kind.svg" ] || fail "plot $kind $zmx is empty"
-    ! grep -qi "nan" "$tmp/${name}_$kind.svg" || fail "plot $kind $zmx has NaN"
+    ! grep -qwE "NaN|nan" "$tmp/${name}_$kind.svg" || fail "plot $kind $zmx has NaN"
   done
 done
 
