@@ -38,11 +38,15 @@ void run_analyze(const AnalyzeCommand& cmd) {
   } else {
     fmt::print("{}", format_report_text(report));
   }
-  // A failed analysis (no focal length, a field with no traced ray) never exits 0.
-  if (!std::isfinite(report.efl_mm) || !report.mean_rms_spot_um) {
-    fmt::print(stderr, "lensopt analyze: error: the analysis failed ({}): {}\n", lens.source_path,
-               !std::isfinite(report.efl_mm) ? "the paraxial focal length is not finite"
-                                             : "a field has no ray reaching the image");
+  // A failed analysis (no finite first-order data, or no ray reaches the image) never exits 0.
+  int traced = 0;
+  for (const FieldReport& f : report.fields) traced += f.traced_rays;
+  const bool first_order =
+      std::isfinite(report.efl_mm) && std::isfinite(report.epd_mm) && std::isfinite(report.bfl_mm);
+  if (!first_order || traced == 0) {
+    fmt::print(
+        stderr, "lensopt analyze: error: the analysis failed ({}): {}\n", lens.source_path,
+        !first_order ? "the paraxial first-order data are not finite" : "no ray reaches the image");
     throw ExitCode{2};
   }
   if (report.ray_failures > 0) {
@@ -85,7 +89,8 @@ void setup_analyze(CLI::App& app) {
       "float by stop size, and a finite or infinite object. Surfaces with a semi-diameter are "
       "clear apertures: rays outside are vignetted and counted per field and surface. Colour "
       "channels: < 500 nm B, < 600 nm G, else R; an empty channel borrows the nearest "
-      "wavelength. Exit status: 0 ok, 2 the analysis failed, 3 a ray failed under --strict.");
+      "wavelength. Exit status: 0 ok, 2 the analysis failed (no finite first-order data or no ray "
+      "reaching the image), 3 a ray failed under --strict.");
   sub->callback([cmd] { run_analyze(*cmd); });
 }
 
