@@ -19,6 +19,7 @@
 #include <optional>
 #include <set>
 
+#include "lensopt/analysis/apertures.h"
 #include "lensopt/core/atomic_file.h"
 #include "lensopt/core/error.h"
 #include "lensopt/core/text.h"
@@ -1107,6 +1108,14 @@ std::string format_zmx(const Lens& lens) {
   line(specs.object_at_infinity()
            ? std::string("  DISZ INFINITY")
            : fmt::format("  DISZ {}", number_text(specs.object_distance_mm)));
+  // Surfaces without a clear aperture get OpticStudio's automatic semi-diameter ("DIAM r 0",
+  // not an aperture when read back); none if the lens cannot be traced.
+  std::vector<double> automatic;
+  try {
+    automatic = automatic_semi_diameters(lens);
+  } catch (const Error&) {
+    automatic.clear();
+  }
   int number = 1;
   for (const Surface& s : lens.surfaces) {
     line(fmt::format("SURF {}", number++));
@@ -1126,8 +1135,13 @@ std::string format_zmx(const Lens& lens) {
         break;
     }
     if (s.is_stop) line("  STOP");
-    if (s.semi_diameter_mm != 0.0)
+    if (s.semi_diameter_mm != 0.0) {
       line(fmt::format("  DIAM {} 1", number_text(s.semi_diameter_mm)));
+    } else if (static_cast<std::size_t>(number - 2) < automatic.size() &&
+               std::isfinite(automatic[static_cast<std::size_t>(number - 2)])) {
+      line(
+          fmt::format("  DIAM {} 0", number_text(automatic[static_cast<std::size_t>(number - 2)])));
+    }
   }
   line(fmt::format("SURF {}", number));
   line("  TYPE STANDARD");

@@ -2,10 +2,12 @@
 // as OpticStudio has them (wavelengths with weights and a primary, field types and weights,
 // apertures, finite objects, spec modes), clear apertures and vignetting factors.
 #include <doctest/doctest.h>
+#include <fmt/format.h>
 
 #include <cmath>
 
 #include "lensopt/analysis/analyze.h"
+#include "lensopt/analysis/apertures.h"
 #include "lensopt/analysis/field_maps.h"
 #include "lensopt/analysis/spot.h"
 #include "lensopt/core/error.h"
@@ -295,6 +297,16 @@ TEST_CASE("system: a stop-sized front aperture vignettes as the clipped pupil ar
     CHECK(ri_clipped[h] / ri_free[h] == doctest::Approx(expected).epsilon(0.02));
     CHECK(ri_clipped[h] < ri_free[h]);
   }
+  // Automatic semi-diameters (no aperture given): at the front surface the largest height is the
+  // pupil edge shifted by L tan(theta_max), r + L tan(12 deg); at the stop it is r.
+  const std::vector<double> automatic = automatic_semi_diameters(open);
+  CHECK(automatic[0] ==
+        doctest::Approx(r + length * std::tan(12.0 * kPiValue / 180.0)).epsilon(1e-12));
+  CHECK(automatic[1] == doctest::Approx(r).epsilon(1e-12));
+  // Written to .zmx as automatic DIAMs (flag 0), which read back as no aperture.
+  const std::string zmx = format_zmx(open);
+  CHECK(zmx.find(fmt::format("  DIAM {} 0\r\n", automatic[0])) != std::string::npos);
+  CHECK(parse_zmx(zmx, "auto.zmx").lens.surfaces[0].semi_diameter_mm == 0.0);
   // Counted per field and surface in analyze, apart from failures.
   AnalyzeOptions a;
   a.trace = t;
