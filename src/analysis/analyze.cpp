@@ -23,8 +23,7 @@ AnalysisReport analyze_lens(const Lens& lens_in, const AnalyzeOptions& options) 
   options.trace.validate();
   Lens lens = lens_in;
   if (options.dispersion) lens.specs.dispersion = *options.dispersion;
-  const TraceLens<double> trace_lens = make_trace_lens(lens);
-  const TraceSystem<double> sys = prepare_system(trace_lens, lens.specs, options.trace);
+  const TraceSystem<double> sys = prepare_lens_system(lens, options.trace);
   const SpotResult<double> spots = evaluate_spots(sys, options.trace.threads);
 
   AnalysisReport r;
@@ -46,22 +45,44 @@ AnalysisReport analyze_lens(const Lens& lens_in, const AnalyzeOptions& options) 
   r.dispersion = dispersion_name(lens.specs.dispersion);
   r.ray_failures = spots.total_failed;
   r.failures_by_surface = spots.failed_by_surface;
+  r.vignetted_by_surface.assign(sys.lens.surface_count(), 0);
+  for (std::size_t h = 0; h < spots.vignetted_by_field_surface.size(); ++h)
+    for (int k = 0; k < sys.lens.surface_count(); ++k) {
+      r.vignetted_by_surface[k] += spots.vignetted_by_field_surface[h][k];
+      r.vignetted_rays += spots.vignetted_by_field_surface[h][k];
+    }
+  static const char* kKinds[] = {"angle", "object height", "paraxial image height",
+                                 "real image height"};
+  r.field_kind = kKinds[static_cast<int>(sys.field_type)];
+  r.field_unit = sys.field_type == FieldType::kAngle ? "deg" : "mm";
+  r.spec_mode = lens.specs.mode == SpecMode::kPaper ? "paper" : "as-written";
+  static const char* kApertures[] = {"f-number", "entrance pupil diameter", "object-space NA",
+                                     "float by stop size"};
+  r.aperture = lens.specs.mode == SpecMode::kPaper
+                   ? "f-number"
+                   : kApertures[static_cast<int>(lens.specs.aperture_type)];
+  r.object_distance_mm = sys.object_at_infinity() ? 0.0 : sys.object_distance_mm;
+  r.primary_wavelength_nm = sys.lens.reference_nm();
 
   const int field_count = static_cast<int>(sys.fields_deg.size());
   const std::vector<double> y_ref = reference_heights(sys);
   const double y_ref_last = y_ref.back();
   const std::vector<double> ri = relative_illuminations(sys);
 
-  double spot_sum = 0;
+  double spot_sum = 0, weight_sum = 0;
   bool all_fields_traced = true;
   for (int h = 0; h < field_count; ++h) {
     FieldReport f;
     f.field_deg = sys.fields_deg[h];
+    f.field_value = sys.field_values[h];
+    f.weight = sys.field_weights[h];
+    f.vignetted_rays = spots.vignetted_rays[h];
     f.traced_rays = spots.traced_rays[h];
     f.failed_rays = spots.failed_rays[h];
     if (f.traced_rays > 0) {
       f.rms_spot_um = spots.rms_spot_mm[h] * 1000.0;
-      spot_sum += *f.rms_spot_um;
+      spot_sum += f.weight * *f.rms_spot_um;
+      weight_sum += f.weight;
     } else {
       all_fields_traced = false;
     }
@@ -82,7 +103,8 @@ AnalysisReport analyze_lens(const Lens& lens_in, const AnalyzeOptions& options) 
     r.max_aiming_error = std::max(r.max_aiming_error, f.aiming_error);
     r.fields.push_back(f);
   }
-  if (all_fields_traced) r.mean_rms_spot_um = spot_sum / field_count;
+  if (all_fields_traced && weight_sum > 0.0 && std::isfinite(spot_sum))
+    r.mean_rms_spot_um = spot_sum / weight_sum;
   return r;
 }
 
@@ -104,13 +126,25 @@ std::string format_report_text(const AnalysisReport& r) {
                   "ray aiming {}, dispersion {}",
                   r.fields.size(), r.wavelength_count, r.rays_per_field_wavelength, r.rings,
                   r.ray_aiming ? "on" : "off", r.dispersion));
+  line(
+      fmt::format("  system: spec mode {}, aperture {}, object {}, primary wavelength {} nm, "
+                  "fields by {}",
+                  r.spec_mode, r.aperture,
+                  r.object_distance_mm > 0 ? fmt::format("at {} mm", r.object_distance_mm)
+                                           : std::string("at infinity"),
+                  r.primary_wavelength_nm, r.field_kind));
   line("");
-  line("  field (deg)  RMS spot (um)  distortion (%)  rel. illum.  aiming err (%)  failed rays");
+  const std::string head = fmt::format("field ({})", r.field_unit);
+  line(
+      fmt::format("  {:>11}  angle (deg)  RMS spot (um)  distortion (%)  rel. illum.  "
+                  "aiming err (%)  failed rays  vignetted",
+                  head));
   for (const FieldReport& f : r.fields) {
-    line(fmt::format("  {:11.3f}  {:>13}  {:14.4f}  {:11.4f}  {:14.4f}  {:11d}", f.field_deg,
+    line(fmt::format("  {:11.3f}  {:11.3f}  {:>13}  {:14.4f}  {:11.4f}  {:14.4f}  {:11d}  {:9d}",
+                     f.field_value, f.field_deg,
                      f.rms_spot_um ? fmt::format("{:.3f}", *f.rms_spot_um) : std::string("n/a"),
                      f.distortion_percent, f.relative_illumination, 100.0 * f.aiming_error,
-                     f.failed_rays));
+                     f.failed_rays, f.vignetted_rays));
   }
   line("");
   line(fmt::format("  mean RMS spot: {}", r.mean_rms_spot_um
@@ -127,9 +161,17 @@ std::string format_report_text(const AnalysisReport& r) {
     std::string fields;
     for (const FieldReport& f : r.fields)
       if (f.failed_rays > 0)
-        fields += fmt::format("{}{:.2f}", fields.empty() ? "" : ", ", f.field_deg);
-    line(fmt::format("  ray failures: {} ({}); fields affected (deg): {}", r.ray_failures, where,
-                     fields));
+        fields += fmt::format("{}{:.4g}", fields.empty() ? "" : ", ", f.field_value);
+    line(fmt::format("  ray failures: {} ({}); fields affected ({}): {}", r.ray_failures, where,
+                     r.field_unit, fields));
+  }
+  if (r.vignetted_rays > 0) {
+    std::string where;
+    for (std::size_t k = 0; k < r.vignetted_by_surface.size(); ++k)
+      if (r.vignetted_by_surface[k] > 0)
+        where += fmt::format("{}surface {}: {}", where.empty() ? "" : ", ", k + 1,
+                             r.vignetted_by_surface[k]);
+    line(fmt::format("  vignetted rays (clear apertures): {} ({})", r.vignetted_rays, where));
   }
   line(fmt::format("  largest ray-aiming error: {:.4f} % of the stop radius",
                    100.0 * r.max_aiming_error));
@@ -167,6 +209,24 @@ std::string format_report_json(const AnalysisReport& r) {
     aiming.push_back(finite_or_null(f.aiming_error));
   }
   j["fields_deg"] = fields;
+  json values = json::array(), weights = json::array(), vignetted = json::array();
+  for (const FieldReport& f : r.fields) {
+    values.push_back(finite_or_null(f.field_value));
+    weights.push_back(finite_or_null(f.weight));
+    vignetted.push_back(f.vignetted_rays);
+  }
+  j["field_values"] = values;
+  j["field_unit"] = r.field_unit;
+  j["field_kind"] = r.field_kind;
+  j["field_weights"] = weights;
+  j["spec_mode"] = r.spec_mode;
+  j["aperture"] = r.aperture;
+  j["object_distance_mm"] =
+      r.object_distance_mm > 0 ? finite_or_null(r.object_distance_mm) : json(nullptr);
+  j["primary_wavelength_nm"] = finite_or_null(r.primary_wavelength_nm);
+  j["vignetted_rays"] = r.vignetted_rays;
+  j["vignetted_rays_per_field"] = vignetted;
+  j["vignetted_rays_per_surface"] = r.vignetted_by_surface;
   j["rms_spot_um"] = spots;
   j["mean_rms_spot_um"] = r.mean_rms_spot_um ? finite_or_null(*r.mean_rms_spot_um) : json(nullptr);
   j["distortion_percent"] = distortion;

@@ -1,6 +1,7 @@
 // lensopt analyze LENS: first-order data, spots, distortion, relative illumination, failures.
 #include <fmt/core.h>
 
+#include <cmath>
 #include <memory>
 
 #include "commands.h"
@@ -18,6 +19,7 @@ struct AnalyzeCommand {
   bool no_ray_aiming = false;
   bool no_scale = false;
   std::string dispersion;  // "" = the lens's own
+  std::string mode;        // "" = the lens's own spec mode
   AnalyzeOptions options;
 };
 
@@ -27,12 +29,25 @@ void run_analyze(const AnalyzeCommand& cmd) {
   options.trace.scale_to_spec = !cmd.no_scale;
   if (cmd.dispersion == "abbe") options.dispersion = DispersionModel::kAbbe;
   if (cmd.dispersion == "catalog") options.dispersion = DispersionModel::kCatalog;
-  const Lens lens = read_lens(cmd.lens_path);
+  Lens lens = read_lens(cmd.lens_path);
+  if (cmd.mode == "paper") lens.specs.mode = SpecMode::kPaper;
+  if (cmd.mode == "as-written") lens.specs.mode = SpecMode::kAsWritten;
   const AnalysisReport report = analyze_lens(lens, options);
   if (cmd.json) {
     fmt::print("{}\n", format_report_json(report));
   } else {
     fmt::print("{}", format_report_text(report));
+  }
+  // A failed analysis (no finite first-order data, or no ray reaches the image) never exits 0.
+  int traced = 0;
+  for (const FieldReport& f : report.fields) traced += f.traced_rays;
+  const bool first_order =
+      std::isfinite(report.efl_mm) && std::isfinite(report.epd_mm) && std::isfinite(report.bfl_mm);
+  if (!first_order || traced == 0) {
+    fmt::print(
+        stderr, "lensopt analyze: error: the analysis failed ({}): {}\n", lens.source_path,
+        !first_order ? "the paraxial first-order data are not finite" : "no ray reaches the image");
+    throw ExitCode{2};
   }
   if (report.ray_failures > 0) {
     fmt::print(stderr, "lensopt analyze: warning: {} rays failed ({})\n", report.ray_failures,
@@ -51,7 +66,8 @@ void setup_analyze(CLI::App& app) {
   sub->add_flag("--json", cmd->json, "one JSON object on stdout");
   sub->add_option("--rings", cmd->options.trace.rings, "pupil rings (rings^2 half-pupil rays)")
       ->check(CLI::Range(1, 256));
-  sub->add_option("--fields", cmd->options.trace.fields, "field angles from 0 to hfov")
+  sub->add_option("--fields", cmd->options.trace.fields,
+                  "field angles from 0 to hfov (paper mode, or a lens without written fields)")
       ->check(CLI::Range(1, 1000));
   sub->add_option("--threads", cmd->options.trace.threads, "threads (0: all cores)")
       ->check(CLI::Range(0, 1024));
@@ -59,7 +75,22 @@ void setup_analyze(CLI::App& app) {
   sub->add_flag("--no-scale", cmd->no_scale, "trace the prescription as written");
   sub->add_option("--dispersion", cmd->dispersion, "abbe (the paper's) or catalog")
       ->check(CLI::IsMember({"abbe", "catalog"}));
+  sub->add_option("--mode", cmd->mode,
+                  "spec mode: paper (scale to f = d / (2 tan hfov), EPD = f / N, fields 0..hfov) "
+                  "or as-written (the lens's own aperture, fields and object distance)")
+      ->check(CLI::IsMember({"paper", "as-written"}));
   sub->add_flag("--strict", cmd->strict, "exit with status 3 if any ray fails");
+  sub->footer(
+      "System model: a lens is traced in its spec mode. The paper's lenses (lenses/*.toml, the "
+      "paper's YAML) use the paper's mode; a .zmx import or a TOML with a [system] table is "
+      "traced as written: wavelengths with weights and a primary (the paraxial reference), "
+      "fields by angle, object height, paraxial or real image height with weights and "
+      "vignetting factors (VDY, VCX, VCY), aperture by EPD, image-space F/#, object-space NA or "
+      "float by stop size, and a finite or infinite object. Surfaces with a semi-diameter are "
+      "clear apertures: rays outside are vignetted and counted per field and surface. Colour "
+      "channels: < 500 nm B, < 600 nm G, else R; an empty channel borrows the nearest "
+      "wavelength. Exit status: 0 ok, 2 the analysis failed (no finite first-order data or no ray "
+      "reaching the image), 3 a ray failed under --strict.");
   sub->callback([cmd] { run_analyze(*cmd); });
 }
 

@@ -19,21 +19,20 @@
 #include <optional>
 #include <set>
 
+#include "lensopt/analysis/apertures.h"
 #include "lensopt/core/atomic_file.h"
 #include "lensopt/core/error.h"
 #include "lensopt/core/text.h"
 #include "lensopt/glass/dispersion.h"
 #include "lensopt/glass/glass.h"
 #include "lensopt/paraxial/paraxial.h"
+#include "lensopt/trace/system.h"
 #include "lensopt/trace/trace_lens.h"
 
 namespace lensopt {
 namespace {
 
 constexpr std::array<char, 3> kChannelLetters = {'R', 'G', 'B'};
-// Channel boundaries for wavelengths without a lensopt note: < 490 nm B, < 580 nm G, else R.
-constexpr double kBlueBelowNm = 490.0;
-constexpr double kGreenBelowNm = 580.0;
 // Relative agreement a lensopt note must have with the Zemax value it refines.
 constexpr double kNoteTolerance = 1e-9;
 // Line numbers listed per ignored keyword before "and N more".
@@ -112,7 +111,7 @@ struct RawSurface {
   int glas_column = 0;
   bool is_stop = false;
   int stop_line = 0;
-  double semi_diameter_mm = 0.0;
+  double semi_diameter_mm = 0.0;  // a fixed (user) DIAM: a clear aperture
 };
 
 struct Wavelength {
@@ -211,7 +210,13 @@ class ZmxParser {
   double unit_mm_ = 1.0;
   std::optional<double> enpd_;
   std::optional<double> fnum_;
+  std::optional<double> obna_;
+  bool floa_ = false;
   int aperture_line_ = 0;
+  int field_type_ = 0;
+  std::vector<double> field_weights_;
+  std::map<std::string, std::vector<double>> vignetting_;
+  int vdxn_line_ = 0;
   std::map<int, Wavelength> wavm_;
   std::vector<Wavelength> wavl_;
   int wavelength_line_ = 0;
@@ -233,6 +238,8 @@ class ZmxParser {
   std::optional<DispersionModel> note_dispersion_;
   std::optional<std::vector<int>> note_channels_;
   std::optional<std::vector<double>> note_wavelengths_nm_;
+  std::optional<double> note_primary_nm_;
+  bool note_mode_paper_ = false;
   std::string note_toml_;
   int note_line_ = 0;
 };
@@ -244,9 +251,9 @@ bool is_setting_keyword(const std::string& key) {
   static const std::set<std::string> kSettings = {
       "PFIL", "LANG", "GFAC", "RAIM", "PUSH", "SDMA", "ROPD", "PICB", "POLS", "GLRS",
       "GSTD", "NSCD", "COFN", "SUMM", "DMFS", "BLNK", "RWRE", "TOL",  "MNUM", "MOFF",
-      "OPDX", "SCOL", "SQFN", "VDXN", "VDYN", "VCXN", "VCYN", "VANN", "HIDE", "MIRR",
-      "SLAB", "POPS", "FLAP", "MEMA", "COAT", "TCE",  "ENVD", "EFFL", "ZVDX", "ZVDY",
-      "ZVCX", "ZVCY", "ZVAN", "WAVN", "XFLD", "YFLD", "FIMP", "BLAN", "CONF", "DESC"};
+      "OPDX", "SCOL", "SQFN", "VANN", "HIDE", "MIRR", "SLAB", "POPS", "FLAP", "MEMA",
+      "COAT", "TCE",  "ENVD", "EFFL", "ZVDX", "ZVDY", "ZVCX", "ZVCY", "ZVAN", "WAVN",
+      "XFLD", "YFLD", "FIMP", "BLAN", "CONF", "DESC"};
   return kSettings.count(key) > 0;
 }
 
@@ -310,8 +317,11 @@ bool ZmxParser::surface_line(const Line& line, const std::string& key) {
     return true;
   }
   if (key == "DIAM") {
+    // "DIAM r flag": flag 1 is a fixed (user) semi-diameter, a clear aperture that clips rays;
+    // otherwise OpticStudio computed it from the beam (automatic) and lensopt computes its own.
     RawSurface& s = surface(line);
-    s.semi_diameter_mm = std::abs(number(line, 1, "DIAM (semi-diameter)"));
+    const double r = std::abs(number(line, 1, "DIAM (semi-diameter)"));
+    if (line.fields.size() > 2 && line.fields[2] == "1") s.semi_diameter_mm = r;
     return true;
   }
   if (key == "CONI") {
@@ -384,6 +394,10 @@ void ZmxParser::note_line(const Line& line) {
       channels.push_back(static_cast<int>(it - kChannelLetters.begin()));
     }
     note_channels_ = channels;
+  } else if (key == "primary_wavelength_nm") {
+    note_primary_nm_ = number(line, 4, "primary_wavelength_nm");
+  } else if (key == "mode") {
+    note_mode_paper_ = line.fields[4] == "paper";
   } else if (key == "wavelengths_nm") {
     std::vector<double> values;
     for (std::size_t i = 4; i < line.fields.size(); ++i)
@@ -431,10 +445,18 @@ void ZmxParser::system_line(const Line& line, const std::string& key) {
     aperture_line_ = line.number;
     if (line.fields.size() > 2 && line.fields[2] != "0")
       warn(line.number, "FNUM with a non-zero flag: taken as the image-space F/# (EFL / EPD)");
-  } else if (key == "FLOA" || key == "OBNA" || key == "OBSA" || key == "PWFN" || key == "FNUO") {
+  } else if (key == "OBNA") {
+    obna_ = number(line, 1, "OBNA (object-space NA)");
+    if (!(*obna_ > 0.0 && *obna_ < 1.0)) fail(line, 1, "OBNA must be in (0, 1)");
+    aperture_line_ = line.number;
+  } else if (key == "FLOA") {
+    floa_ = true;
+    aperture_line_ = line.number;
+  } else if (key == "OBSA" || key == "PWFN" || key == "FNUO") {
     fail(line, 0,
-         fmt::format("aperture type {} is not supported; lensopt needs the entrance pupil "
-                     "diameter (ENPD) or the image-space F/# (FNUM)",
+         fmt::format("aperture type {} is not supported; lensopt takes the entrance pupil "
+                     "diameter (ENPD), the image-space F/# (FNUM), the object-space NA (OBNA) "
+                     "or float by stop size (FLOA)",
                      key));
   } else if (key == "WAVM") {
     const int index = integer(line, 1, "the wavelength number");
@@ -455,16 +477,24 @@ void ZmxParser::system_line(const Line& line, const std::string& key) {
     has_ftyp_ = true;
     ftyp_line_ = line.number;
     const int type = integer(line, 1, "the field type");
-    if (type != 0) {
-      static const std::array<const char*, 4> kTypes = {
-          "angle", "object height", "paraxial image height", "real image height"};
+    if (type < 0 || type > 3)
       fail(line, 1,
-           fmt::format("field type {} ({}) is not supported; lensopt needs field angles in "
-                       "degrees (FTYP 0) for an object at infinity",
-                       type, type >= 0 && type < 4 ? kTypes[type] : "unknown"));
-    }
+           fmt::format("field type {} is not supported; lensopt takes angle (0), object height "
+                       "(1), paraxial image height (2) and real image height (3)",
+                       type));
+    field_type_ = type;
     if (line.fields.size() > 3) field_count_ = integer(line, 3, "the number of fields");
     if (line.fields.size() > 4) wavelength_count_ = integer(line, 4, "the number of wavelengths");
+  } else if (key == "VDXN" || key == "VDYN" || key == "VCXN" || key == "VCYN") {
+    std::vector<double>& values = vignetting_[key];
+    values.clear();
+    for (std::size_t i = 1; i < line.fields.size(); ++i)
+      values.push_back(number(line, i, "a vignetting factor"));
+    if (key == "VDXN") vdxn_line_ = line.number;
+  } else if (key == "FWGN") {
+    field_weights_.clear();
+    for (std::size_t i = 1; i < line.fields.size(); ++i)
+      field_weights_.push_back(number(line, i, "a field weight"));
   } else if (key == "XFLN" || key == "YFLN") {
     std::vector<double>& values = key == "XFLN" ? xfln_ : yfln_;
     values.clear();
@@ -476,14 +506,9 @@ void ZmxParser::system_line(const Line& line, const std::string& key) {
   } else if (key == "PWAV") {
     pwav_ = integer(line, 1, "the primary wavelength number");
     pwav_line_ = line.number;
-  } else if (key == "FWGN" || key == "FWGT" || key == "WWGT") {
-    // Weights: lensopt weighs fields and wavelengths equally; unequal ones are reported.
-    bool equal = true;
-    for (std::size_t i = 2; i < line.fields.size(); ++i)
-      equal = equal && line.fields[i] == line.fields[1];
-    if (!equal)
-      warn(line.number,
-           fmt::format("weights ignored (lensopt weighs them equally): '{}'", line.text));
+  } else if (key == "FWGT" || key == "WWGT") {
+    // Old-style weight lines (FWGN and WAVM carry the weights OpticStudio uses).
+    ignore(line);
   } else if (key == "GCAT") {
     for (std::size_t i = 1; i < line.fields.size(); ++i)
       gcat_.emplace_back(std::string(line.fields[i]), line.number);
@@ -630,10 +655,10 @@ ZmxImport ZmxParser::parse(std::string_view bytes) {
 
   // Object and image.
   const RawSurface& object = surfaces_.front();
-  if (!object.thickness_infinite)
+  if (!object.thickness_infinite && !(object.thickness_mm > 0.0))
     fail_at(object.disz_line > 0 ? object.disz_line : object.line, 1,
-            fmt::format("the object is at {} mm; lensopt images objects at infinity (DISZ "
-                        "INFINITY on SURF 0)",
+            fmt::format("the object is at {} mm; lensopt needs a positive object distance or "
+                        "INFINITY",
                         object.thickness_mm * unit_mm_));
   if (!object.glass.empty())
     fail_at(object.glas_line, object.glas_column, "the object space must be air");
@@ -738,21 +763,21 @@ ZmxImport ZmxParser::parse(std::string_view bytes) {
     if (wavelength_count_ >= 0 && static_cast<int>(waves.size()) > wavelength_count_)
       waves.resize(static_cast<std::size_t>(wavelength_count_));
   }
-  if (waves.size() < 2)
+  if (waves.empty())
     fail_at(wavelength_line_ > 0 ? wavelength_line_ : last_line, 1,
-            fmt::format("{} wavelength{}; lensopt needs at least 2 (WAVM lines)", waves.size(),
-                        waves.size() == 1 ? "" : "s"));
+            "no wavelength; the file needs WAVM lines");
   std::vector<double> wavelengths_nm;
+  std::vector<double> weights;
   bool equal_weights = true;
   for (const Wavelength& w : waves) {
     const double nm = w.nm;
     if (!(nm > 200.0 && nm < 20000.0))
       fail_at(w.line, 1, fmt::format("wavelength {} um is out of range", w.um));
+    if (!(w.weight >= 0.0)) fail_at(w.line, 1, "a wavelength weight must be >= 0");
     wavelengths_nm.push_back(nm);
+    weights.push_back(w.weight);
     equal_weights = equal_weights && w.weight == waves.front().weight;
   }
-  if (!equal_weights)
-    warn(waves.front().line, "wavelength weights ignored (lensopt weights wavelengths equally)");
   if (note_wavelengths_nm_) {
     bool agrees = note_wavelengths_nm_->size() == wavelengths_nm.size();
     for (std::size_t i = 0; agrees && i < wavelengths_nm.size(); ++i)
@@ -764,75 +789,144 @@ ZmxImport ZmxParser::parse(std::string_view bytes) {
       warn(note_line_, "the lensopt wavelengths note disagrees with the WAVM lines; ignored");
     }
   }
-  if (pwav_ > 0) {
-    std::size_t closest = 0;
-    for (std::size_t i = 0; i < wavelengths_nm.size(); ++i)
-      if (std::abs(wavelengths_nm[i] - kWavelengthD_nm) <
-          std::abs(wavelengths_nm[closest] - kWavelengthD_nm))
-        closest = i;
-    if (static_cast<std::size_t>(pwav_) != closest + 1)
-      warn(pwav_line_, fmt::format("primary wavelength {} ignored: lensopt's paraxial reference "
-                                   "is {} nm",
-                                   pwav_, kWavelengthD_nm));
-  }
   lens.specs.wavelengths_nm = wavelengths_nm;
+  if (!equal_weights) lens.specs.wavelength_weights = weights;
+  // The primary wavelength: PWAV's (OpticStudio's paraxial reference), else the note's.
+  if (pwav_ > 0 && static_cast<std::size_t>(pwav_) <= wavelengths_nm.size()) {
+    lens.specs.primary_wavelength_nm = wavelengths_nm[static_cast<std::size_t>(pwav_) - 1];
+  } else if (pwav_ > 0) {
+    fail_at(pwav_line_, 2,
+            fmt::format("PWAV {} names no active wavelength ({} are active)", pwav_,
+                        wavelengths_nm.size()));
+  } else {
+    lens.specs.primary_wavelength_nm = wavelengths_nm.front();
+  }
+  if (note_primary_nm_) lens.specs.primary_wavelength_nm = *note_primary_nm_;
   if (note_channels_ && note_channels_->size() == wavelengths_nm.size()) {
     lens.specs.wavelength_channels = *note_channels_;
   } else {
+    lens.specs.wavelength_channels = default_wavelength_channels(wavelengths_nm);
     std::vector<std::string> assigned;
-    lens.specs.wavelength_channels.clear();
-    for (const double nm : wavelengths_nm) {
-      const int channel = nm < kBlueBelowNm ? 2 : (nm < kGreenBelowNm ? 1 : 0);
-      lens.specs.wavelength_channels.push_back(channel);
-      assigned.push_back(fmt::format("{} nm {}", nm, kChannelLetters[channel]));
-    }
+    for (std::size_t i = 0; i < wavelengths_nm.size(); ++i)
+      assigned.push_back(fmt::format(
+          "{} nm {}", wavelengths_nm[i],
+          kChannelLetters[static_cast<std::size_t>(lens.specs.wavelength_channels[i])]));
     warn(wavelength_line_,
-         fmt::format("colour channels assigned by wavelength (< 490 nm B, < 580 nm G, else R): {}",
+         fmt::format("colour channels assigned by wavelength (< 500 nm B, < 600 nm G, else R; an "
+                     "empty channel borrows the nearest wavelength): {}",
                      fmt::join(assigned, ", ")));
   }
 
-  // Field: the largest active field, in degrees.
-  std::size_t fields = std::max(xfln_.size(), yfln_.size());
-  if (field_count_ >= 0) fields = std::min(fields, static_cast<std::size_t>(field_count_));
-  double half_field_deg = 0.0;
-  for (std::size_t i = 0; i < fields; ++i) {
+  // Fields: the active ones, radial distance sqrt(x^2 + y^2) (the lens is rotationally
+  // symmetric), with their weights and vignetting factors.
+  std::size_t field_count = std::max(xfln_.size(), yfln_.size());
+  if (field_count_ >= 0)
+    field_count = std::min(field_count, static_cast<std::size_t>(field_count_));
+  if (field_count == 0) field_count = 1;
+  lens.specs.field_type = static_cast<FieldType>(field_type_);
+  lens.specs.fields.clear();
+  auto factor = [&](const char* key, std::size_t i) {
+    const auto it = vignetting_.find(key);
+    return it != vignetting_.end() && i < it->second.size() ? it->second[i] : 0.0;
+  };
+  bool dropped_vdx = false;
+  for (std::size_t i = 0; i < field_count; ++i) {
     const double x = i < xfln_.size() ? xfln_[i] : 0.0;
     const double y = i < yfln_.size() ? yfln_[i] : 0.0;
-    half_field_deg = std::max(half_field_deg, x == 0.0 ? std::abs(y) : std::hypot(x, y));
+    FieldPoint f;
+    f.value = x == 0.0 ? std::abs(y) : std::hypot(x, y);
+    f.weight = i < field_weights_.size() ? field_weights_[i] : 1.0;
+    f.vignetting.vdy = factor("VDYN", i);
+    f.vignetting.vcx = factor("VCXN", i);
+    f.vignetting.vcy = factor("VCYN", i);
+    if (factor("VDXN", i) != 0.0) dropped_vdx = true;
+    if (!(f.vignetting.vcx < 1.0) || !(f.vignetting.vcy < 1.0))
+      fail_at(yfln_line_ > 0 ? yfln_line_ : last_line, 1,
+              fmt::format("field {}: vignetting compression VCX, VCY must be < 1", i + 1));
+    lens.specs.fields.push_back(f);
   }
-  if (!(half_field_deg < 89.0))
-    fail_at(yfln_line_ > 0 ? yfln_line_ : last_line, 1,
-            fmt::format("the largest field is {} deg; lensopt needs less than 89", half_field_deg));
-  lens.specs.half_field_deg = half_field_deg;
+  if (dropped_vdx)
+    warn(vdxn_line_,
+         "x-decentre vignetting factors (VDXN) ignored: lensopt traces half pupils "
+         "symmetric in x");
+  if (!object.thickness_infinite) lens.specs.object_distance_mm = object.thickness_mm * unit_mm_;
+  if (lens.specs.field_type == FieldType::kObjectHeight && lens.specs.object_at_infinity())
+    fail_at(ftyp_line_, 1, "object-height fields (FTYP 1) need a finite object distance");
+  if (lens.specs.field_type == FieldType::kAngle) {
+    for (const FieldPoint& f : lens.specs.fields)
+      if (!(f.value < 89.0))
+        fail_at(yfln_line_ > 0 ? yfln_line_ : last_line, 1,
+                fmt::format("the field {} deg must be less than 89", f.value));
+  } else {
+    for (FieldPoint& f : lens.specs.fields) f.value *= unit_mm_;
+  }
 
   // Aperture.
-  if (!fnum_ && !enpd_)
-    fail_at(last_line, 1, "no aperture: the file needs ENPD (entrance pupil diameter) or FNUM");
-  lens.specs.f_number = fnum_ ? *fnum_ : 2.0;
+  if (!fnum_ && !enpd_ && !obna_ && !floa_)
+    fail_at(last_line, 1,
+            "no aperture: the file needs ENPD, FNUM, OBNA or FLOA (float by stop size)");
+  lens.specs.mode = SpecMode::kAsWritten;
+  if (fnum_) {
+    lens.specs.aperture_type = ApertureType::kFNumber;
+    lens.specs.f_number = *fnum_;
+  } else if (enpd_) {
+    lens.specs.aperture_type = ApertureType::kEntrancePupilDiameter;
+    lens.specs.aperture_value = *enpd_ * unit_mm_;
+  } else if (obna_) {
+    lens.specs.aperture_type = ApertureType::kObjectNA;
+    lens.specs.aperture_value = *obna_;
+    if (lens.specs.object_at_infinity())
+      fail_at(aperture_line_, 1, "OBNA (object-space NA) needs a finite object distance");
+  } else {
+    lens.specs.aperture_type = ApertureType::kFloatByStop;
+    const int stop = lens.stop_index();
+    if (stop < 0 || !(lens.surfaces[stop].semi_diameter_mm > 0.0)) {
+      // The stop's DIAM sets the aperture whatever its flag.
+      for (const RawSurface& raw : surfaces_)
+        if (raw.is_stop && raw.semi_diameter_mm > 0.0 && stop >= 0)
+          lens.surfaces[stop].semi_diameter_mm = raw.semi_diameter_mm * unit_mm_;
+    }
+    if (stop < 0 || !(lens.surfaces[stop].semi_diameter_mm > 0.0))
+      fail_at(aperture_line_, 1, "FLOA (float by stop size) needs the stop's DIAM");
+  }
+  lens.specs.half_field_deg =
+      lens.specs.field_type == FieldType::kAngle ? lens.specs.max_field_value() : 0.0;
   try {
     lens.validate();
   } catch (const Error& error) {
     throw Error(SourceLocation{file_}, error.message());
   }
-  const double efl_mm = paraxial_data(make_trace_lens(lens), kWavelengthD_nm).efl_mm;
-  if (!fnum_) {
-    const double epd_mm = *enpd_ * unit_mm_;
-    if (!(efl_mm > 0.0) || !std::isfinite(efl_mm))
-      fail_at(
-          aperture_line_, 1,
-          fmt::format("ENPD needs a positive focal length, but the paraxial EFL is {} mm", efl_mm));
-    lens.specs.f_number = efl_mm / epd_mm;
-  }
-
-  // Sensor: the note's, else the one whose spec focal length is the lens's EFL.
+  // The summary specs the paper's machinery uses (optimize, tolerance): the chief-ray half field,
+  // the image-space F/# and the sensor whose spec focal length is the lens's EFL.
+  TraceOptions summary;
+  summary.rings = 1;
+  summary.ray_aiming = false;
+  const TraceSystem<double> sys = prepare_lens_system(lens, summary);
+  const double efl_mm = sys.efl_mm;
+  double half_field_deg = 0.0;
+  for (const double a : sys.fields_deg) half_field_deg = std::max(half_field_deg, std::abs(a));
+  if (lens.specs.field_type == FieldType::kAngle) half_field_deg = lens.specs.max_field_value();
+  if (!(half_field_deg < 89.0) || !std::isfinite(half_field_deg))
+    fail_at(yfln_line_ > 0 ? yfln_line_ : last_line, 1,
+            fmt::format("the largest field is {} deg; lensopt needs less than 89", half_field_deg));
+  lens.specs.half_field_deg = half_field_deg;
+  if (!(efl_mm > 0.0) || !std::isfinite(efl_mm))
+    fail_at(
+        aperture_line_, 1,
+        fmt::format("the paraxial EFL is {} mm; lensopt needs a positive focal length", efl_mm));
+  if (!fnum_) lens.specs.f_number = efl_mm / sys.epd_mm;
   if (note_sensor_mm_) {
     lens.specs.sensor_diagonal_mm = *note_sensor_mm_;
-  } else if (half_field_deg > 0.0 && efl_mm > 0.0 && std::isfinite(efl_mm)) {
-    constexpr double kPi = 3.14159265358979323846;
+  } else if (half_field_deg > 0.0) {
     lens.specs.sensor_diagonal_mm = 2.0 * efl_mm * std::tan(half_field_deg * kPi / 180.0);
-  } else {
-    warn(yfln_line_, fmt::format("the largest field is 0 deg: sensor diagonal left at {} mm",
-                                 lens.specs.sensor_diagonal_mm));
+  }
+  if (note_mode_paper_) {
+    // Written by lensopt from a lens in the paper's mode: its specs are f/#, hfov and sensor.
+    lens.specs.mode = SpecMode::kPaper;
+    lens.specs.fields.clear();
+    lens.specs.field_type = FieldType::kAngle;
+    lens.specs.aperture_type = ApertureType::kFNumber;
+    lens.specs.aperture_value = 0.0;
   }
   lens.extra_toml = note_toml_;
   try {
@@ -926,8 +1020,24 @@ std::string format_zmx(const Lens& lens) {
       start = end + 1;
     }
   }
+  if (specs.mode == SpecMode::kPaper) line("NOTE 0 lensopt mode paper");
+  line("NOTE 0 lensopt primary_wavelength_nm " + number_text(specs.primary_wavelength_nm));
   line("UNIT MM X W X CM MR CPMM");
-  line(fmt::format("FNUM {} 0", number_text(specs.f_number)));
+  const bool as_written = specs.mode == SpecMode::kAsWritten;
+  switch (as_written ? specs.aperture_type : ApertureType::kFNumber) {
+    case ApertureType::kFNumber:
+      line(fmt::format("FNUM {} 0", number_text(specs.f_number)));
+      break;
+    case ApertureType::kEntrancePupilDiameter:
+      line(fmt::format("ENPD {}", number_text(specs.aperture_value)));
+      break;
+    case ApertureType::kObjectNA:
+      line(fmt::format("OBNA {}", number_text(specs.aperture_value)));
+      break;
+    case ApertureType::kFloatByStop:
+      line("FLOA");
+      break;
+  }
 
   // Catalogs: the lens's, then any other its glasses come from.
   std::vector<std::string> gcat;
@@ -947,24 +1057,47 @@ std::string format_zmx(const Lens& lens) {
     if (!gcat.empty()) line(fmt::format("GCAT {}", fmt::join(gcat, " ")));
   }
 
-  // Fields: 0, 0.7 and 1 of the half field (one field on axis when it is 0).
-  std::vector<double> fields = {0.0};
-  if (specs.half_field_deg != 0.0) fields = {0.0, 0.7 * specs.half_field_deg, specs.half_field_deg};
-  std::vector<std::string> x_texts, y_texts, weight_texts;
-  for (const double f : fields) {
-    x_texts.push_back("0");
-    y_texts.push_back(number_text(f));
-    weight_texts.push_back("1");
+  // Fields: the written ones, else 0, 0.7 and 1 of the half field (one on axis when it is 0).
+  std::vector<FieldPoint> fields;
+  if (as_written && !specs.fields.empty()) {
+    fields = specs.fields;
+  } else {
+    fields.push_back({});
+    if (specs.half_field_deg != 0.0)
+      for (const double f : {0.7, 1.0}) fields.push_back({f * specs.half_field_deg, 1.0, {}});
   }
-  line(fmt::format("FTYP 0 0 {} {} 0 0 0", fields.size(), specs.wavelengths_nm.size()));
+  const int field_type =
+      as_written && !specs.fields.empty() ? static_cast<int>(specs.field_type) : 0;
+  std::vector<std::string> x_texts, y_texts, weight_texts, vdy, vcx, vcy;
+  bool vignetting = false;
+  for (const FieldPoint& f : fields) {
+    x_texts.push_back("0");
+    y_texts.push_back(number_text(f.value));
+    weight_texts.push_back(number_text(f.weight));
+    vdy.push_back(number_text(f.vignetting.vdy));
+    vcx.push_back(number_text(f.vignetting.vcx));
+    vcy.push_back(number_text(f.vignetting.vcy));
+    vignetting = vignetting || f.vignetting.any();
+  }
+  line(
+      fmt::format("FTYP {} 0 {} {} 0 0 0", field_type, fields.size(), specs.wavelengths_nm.size()));
   line(fmt::format("XFLN {}", fmt::join(x_texts, " ")));
   line(fmt::format("YFLN {}", fmt::join(y_texts, " ")));
   line(fmt::format("FWGN {}", fmt::join(weight_texts, " ")));
+  if (vignetting) {
+    line(fmt::format("VDYN {}", fmt::join(vdy, " ")));
+    line(fmt::format("VCXN {}", fmt::join(vcx, " ")));
+    line(fmt::format("VCYN {}", fmt::join(vcy, " ")));
+  }
   std::size_t primary = 0;
   for (std::size_t i = 0; i < specs.wavelengths_nm.size(); ++i) {
-    line(fmt::format("WAVM {} {} 1", i + 1, micrometre_text(specs.wavelengths_nm[i])));
-    if (std::abs(specs.wavelengths_nm[i] - kWavelengthD_nm) <
-        std::abs(specs.wavelengths_nm[primary] - kWavelengthD_nm))
+    const double weight = specs.wavelength_weights.size() == specs.wavelengths_nm.size()
+                              ? specs.wavelength_weights[i]
+                              : 1.0;
+    line(fmt::format("WAVM {} {} {}", i + 1, micrometre_text(specs.wavelengths_nm[i]),
+                     number_text(weight)));
+    if (std::abs(specs.wavelengths_nm[i] - specs.primary_wavelength_nm) <
+        std::abs(specs.wavelengths_nm[primary] - specs.primary_wavelength_nm))
       primary = i;
   }
   line(fmt::format("PWAV {}", primary + 1));
@@ -972,7 +1105,17 @@ std::string format_zmx(const Lens& lens) {
   line("SURF 0");
   line("  TYPE STANDARD");
   line("  CURV 0");
-  line("  DISZ INFINITY");
+  line(specs.object_at_infinity()
+           ? std::string("  DISZ INFINITY")
+           : fmt::format("  DISZ {}", number_text(specs.object_distance_mm)));
+  // Surfaces without a clear aperture get OpticStudio's automatic semi-diameter ("DIAM r 0",
+  // not an aperture when read back); none if the lens cannot be traced.
+  std::vector<double> automatic;
+  try {
+    automatic = automatic_semi_diameters(lens);
+  } catch (const Error&) {
+    automatic.clear();
+  }
   int number = 1;
   for (const Surface& s : lens.surfaces) {
     line(fmt::format("SURF {}", number++));
@@ -992,8 +1135,13 @@ std::string format_zmx(const Lens& lens) {
         break;
     }
     if (s.is_stop) line("  STOP");
-    if (s.semi_diameter_mm != 0.0)
+    if (s.semi_diameter_mm != 0.0) {
       line(fmt::format("  DIAM {} 1", number_text(s.semi_diameter_mm)));
+    } else if (static_cast<std::size_t>(number - 2) < automatic.size() &&
+               std::isfinite(automatic[static_cast<std::size_t>(number - 2)])) {
+      line(
+          fmt::format("  DIAM {} 0", number_text(automatic[static_cast<std::size_t>(number - 2)])));
+    }
   }
   line(fmt::format("SURF {}", number));
   line("  TYPE STANDARD");

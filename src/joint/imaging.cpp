@@ -124,7 +124,8 @@ Optics sample_optics(const LensParameterization& param, GlassMode mode,
                      ImagingTimings& timings) {
   constexpr bool kJets = !std::is_same_v<J, double>;
   const int n = kJets ? param.size() : 0;  // derivatives stored per value
-  const Specs& specs = param.structure().specs;
+  Specs specs = param.structure().specs;
+  specs.mode = SpecMode::kPaper;  // the paper's sampling in every spec mode
   auto start = Clock::now();
   std::vector<J> xj(x.size());
   for (std::size_t j = 0; j < x.size(); ++j)

@@ -2,6 +2,7 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <cmath>
 
 #include "lensopt/core/error.h"
@@ -36,6 +37,19 @@ std::string Material::label() const {
       return fmt::format("model({:.5f}, {:.2f})", nd, vd);
   }
   return "?";
+}
+
+std::vector<int> default_wavelength_channels(const std::vector<double>& wavelengths_nm) {
+  std::vector<int> out;
+  for (const double nm : wavelengths_nm) out.push_back(nm < 500.0 ? 2 : (nm < 600.0 ? 1 : 0));
+  return out;
+}
+
+double Specs::max_field_value() const {
+  if (fields.empty()) return half_field_deg;
+  double out = 0.0;
+  for (const FieldPoint& f : fields) out = std::max(out, std::abs(f.value));
+  return out;
 }
 
 const std::vector<double>& paper_wavelengths_nm() {
@@ -94,7 +108,8 @@ void Lens::validate() const {
   for (std::size_t i = 0; i < surfaces.size(); ++i) {
     const Surface& s = surfaces[i];
     const int n = static_cast<int>(i) + 1;
-    if (!std::isfinite(s.curvature_per_mm)) fail(fmt::format("surface {}: curvature is not finite", n));
+    if (!std::isfinite(s.curvature_per_mm))
+      fail(fmt::format("surface {}: curvature is not finite", n));
     if (!std::isfinite(s.thickness_mm)) fail(fmt::format("surface {}: thickness is not finite", n));
     if (s.is_stop) {
       ++stops;
@@ -110,7 +125,8 @@ void Lens::validate() const {
     }
   }
   if (stops == 0) fail("no surface is marked as the aperture stop");
-  if (stops > 1) fail(fmt::format("{} surfaces are marked as the aperture stop; one must be", stops));
+  if (stops > 1)
+    fail(fmt::format("{} surfaces are marked as the aperture stop; one must be", stops));
   if (!surfaces.back().material.is_air()) fail("the last surface must be followed by air");
   if (!(specs.f_number > 0.0)) fail(fmt::format("f_number = {} must be > 0", specs.f_number));
   if (!(specs.half_field_deg >= 0.0 && specs.half_field_deg < 89.0))
@@ -122,6 +138,45 @@ void Lens::validate() const {
     if (!(w > 200.0 && w < 20000.0)) fail(fmt::format("wavelength {} nm is out of range", w));
   if (specs.wavelength_channels.size() != specs.wavelengths_nm.size())
     fail("wavelength channels and wavelengths differ in count");
+  if (!specs.wavelength_weights.empty()) {
+    if (specs.wavelength_weights.size() != specs.wavelengths_nm.size())
+      fail("wavelength weights and wavelengths differ in count");
+    for (double w : specs.wavelength_weights)
+      if (!(w >= 0.0) || !std::isfinite(w))
+        fail(fmt::format("wavelength weight {} must be >= 0", w));
+  }
+  if (!(specs.primary_wavelength_nm > 200.0 && specs.primary_wavelength_nm < 20000.0))
+    fail(fmt::format("primary wavelength {} nm is out of range", specs.primary_wavelength_nm));
+  for (const FieldPoint& f : specs.fields) {
+    if (!std::isfinite(f.value)) fail("a field value is not finite");
+    if (!(f.weight >= 0.0) || !std::isfinite(f.weight))
+      fail(fmt::format("field weight {} must be >= 0", f.weight));
+    const VignettingFactors& v = f.vignetting;
+    if (!std::isfinite(v.vdx) || !std::isfinite(v.vdy) || !(v.vcx < 1.0) || !(v.vcy < 1.0) ||
+        !std::isfinite(v.vcx) || !std::isfinite(v.vcy))
+      fail("vignetting factors must be finite with VCX, VCY < 1");
+  }
+  if (!specs.object_at_infinity() && !(specs.object_distance_mm > 0.0))
+    fail(fmt::format("object distance {} mm must be > 0 (or infinite)", specs.object_distance_mm));
+  if (specs.field_type == FieldType::kObjectHeight && specs.object_at_infinity())
+    fail("object-height fields need a finite object distance");
+  if (specs.aperture_type == ApertureType::kObjectNA && specs.object_at_infinity())
+    fail("an object-space NA aperture needs a finite object distance");
+  if ((specs.aperture_type == ApertureType::kEntrancePupilDiameter ||
+       specs.aperture_type == ApertureType::kObjectNA) &&
+      !(specs.aperture_value > 0.0 && std::isfinite(specs.aperture_value)))
+    fail(fmt::format("aperture value {} must be > 0", specs.aperture_value));
+  if (specs.aperture_type == ApertureType::kObjectNA && !(specs.aperture_value < 1.0))
+    fail(fmt::format("object-space NA {} must be < 1", specs.aperture_value));
+  if (specs.aperture_type == ApertureType::kFloatByStop) {
+    const int s = stop_index();
+    if (s < 0 || !(surfaces[s].semi_diameter_mm > 0.0))
+      fail("aperture 'float by stop size' needs the stop's semi-diameter");
+  }
+  if (specs.mode == SpecMode::kPaper && !(specs.half_field_deg > 0.0))
+    fail(
+        "the paper's spec mode scales to f = d / (2 tan(hfov)) and needs half_field_deg > 0; "
+        "trace the lens as written (mode = \"as-written\") for an on-axis-only lens");
 }
 
 Lens scaled(const Lens& lens, double scale) {

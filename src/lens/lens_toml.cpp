@@ -74,7 +74,23 @@ std::string did_you_mean(std::string_view key, std::span<const std::string_view>
 
 namespace {
 
-constexpr std::array<std::string_view, 3> kTopLevelKeys = {"lens", "specs", "surfaces"};
+constexpr std::array<std::string_view, 4> kTopLevelKeys = {"lens", "specs", "system", "surfaces"};
+constexpr std::array<std::string_view, 12> kSystemKeys = {"mode",
+                                                          "primary_wavelength_nm",
+                                                          "wavelength_weights",
+                                                          "aperture",
+                                                          "aperture_value",
+                                                          "field_type",
+                                                          "fields",
+                                                          "field_weights",
+                                                          "vdy",
+                                                          "vcx",
+                                                          "vcy",
+                                                          "object_distance_mm"};
+constexpr std::array<std::string_view, 4> kApertureNames = {"f-number", "epd", "object-na",
+                                                            "float-by-stop"};
+constexpr std::array<std::string_view, 4> kFieldTypeNames = {
+    "angle", "object-height", "paraxial-image-height", "real-image-height"};
 constexpr std::array<std::string_view, 2> kLensKeys = {"name", "catalog"};
 constexpr std::array<std::string_view, 6> kSpecsKeys = {
     "f_number", "half_field_deg", "sensor_diagonal_mm", "wavelengths_nm", "channels", "dispersion"};
@@ -244,10 +260,6 @@ Specs read_specs(const TomlReader& reader, const toml::table& table) {
   }
   const Entry wavelengths = entry(table, "wavelengths_nm");
   const Entry channels = entry(table, "channels");
-  if (wavelengths && !channels)
-    reader.fail(wavelengths,
-                "wavelengths_nm is given without channels; add channels = [\"R\", "
-                "\"G\", ...], one of R, G, B per wavelength");
   if (channels && !wavelengths) reader.fail(channels, "channels is given without wavelengths_nm");
   if (wavelengths) {
     const toml::array& values = reader.array(*wavelengths.node, "wavelengths_nm");
@@ -259,10 +271,13 @@ Specs read_specs(const TomlReader& reader, const toml::table& table) {
         reader.fail(value, fmt::format("wavelength {} nm is out of range (200, 20000)", w));
       specs.wavelengths_nm.push_back(w);
     }
+    specs.wavelength_channels = default_wavelength_channels(specs.wavelengths_nm);
+  }
+  if (wavelengths && channels) {
     const toml::array& letters = reader.array(*channels.node, "channels");
-    if (letters.size() != values.size())
+    if (letters.size() != specs.wavelengths_nm.size())
       reader.fail(*channels.node, fmt::format("channels has {} entries but wavelengths_nm has {}",
-                                              letters.size(), values.size()));
+                                              letters.size(), specs.wavelengths_nm.size()));
     specs.wavelength_channels.clear();
     for (const toml::node& value : letters) {
       const std::string letter = reader.string(value, "a channel");
@@ -287,6 +302,106 @@ Specs read_specs(const TomlReader& reader, const toml::table& table) {
     }
   }
   return specs;
+}
+
+// [system]: the lens's own system data (lens.h); its presence makes the mode "as-written".
+void read_system(const TomlReader& reader, const toml::table& table, Specs& specs) {
+  reader.check_keys(table, kSystemKeys, "[system]");
+  specs.mode = SpecMode::kAsWritten;
+  auto name_index = [&](const toml::node& node, const auto& names, std::string_view what) {
+    const std::string value = lower(reader.string(node, what));
+    for (std::size_t i = 0; i < names.size(); ++i)
+      if (value == names[i]) return static_cast<int>(i);
+    std::vector<std::string> quoted;
+    for (const auto& n : names) quoted.push_back(fmt::format("\"{}\"", n));
+    reader.fail(node,
+                fmt::format("{} = \"{}\" must be one of {}", what, value, fmt::join(quoted, ", ")));
+  };
+  auto numbers = [&](const toml::node& node, std::string_view what) {
+    std::vector<double> out;
+    for (const toml::node& v : reader.array(node, what))
+      out.push_back(reader.finite_number(v, what));
+    return out;
+  };
+  if (const Entry e = entry(table, "mode")) {
+    const std::string mode = lower(reader.string(*e.node, "mode"));
+    if (mode == "paper") {
+      specs.mode = SpecMode::kPaper;
+    } else if (mode != "as-written") {
+      reader.fail(*e.node, fmt::format("mode = \"{}\" must be \"paper\" or \"as-written\"", mode));
+    }
+  }
+  if (const Entry e = entry(table, "primary_wavelength_nm")) {
+    specs.primary_wavelength_nm = reader.finite_number(*e.node, "primary_wavelength_nm");
+    if (!(specs.primary_wavelength_nm > 200.0 && specs.primary_wavelength_nm < 20000.0))
+      reader.fail(*e.node, "primary_wavelength_nm is out of range (200, 20000)");
+  } else if (!specs.wavelengths_nm.empty() && specs.wavelengths_nm != paper_wavelengths_nm()) {
+    // Without a primary: the wavelength nearest the d line.
+    double best = specs.wavelengths_nm.front();
+    for (double w : specs.wavelengths_nm)
+      if (std::abs(w - kWavelengthD_nm) < std::abs(best - kWavelengthD_nm)) best = w;
+    specs.primary_wavelength_nm = best;
+  }
+  if (const Entry e = entry(table, "wavelength_weights")) {
+    specs.wavelength_weights = numbers(*e.node, "wavelength_weights");
+    if (specs.wavelength_weights.size() != specs.wavelengths_nm.size())
+      reader.fail(*e.node,
+                  fmt::format("wavelength_weights has {} entries for {} wavelengths",
+                              specs.wavelength_weights.size(), specs.wavelengths_nm.size()));
+    for (double w : specs.wavelength_weights)
+      if (!(w >= 0.0)) reader.fail(*e.node, "wavelength weights must be >= 0");
+  }
+  if (const Entry e = entry(table, "aperture"))
+    specs.aperture_type =
+        static_cast<ApertureType>(name_index(*e.node, kApertureNames, "aperture"));
+  if (const Entry e = entry(table, "aperture_value")) {
+    specs.aperture_value = reader.finite_number(*e.node, "aperture_value");
+    if (!(specs.aperture_value > 0.0)) reader.fail(*e.node, "aperture_value must be > 0");
+  } else if (specs.aperture_type == ApertureType::kEntrancePupilDiameter ||
+             specs.aperture_type == ApertureType::kObjectNA) {
+    reader.fail(table.source(), "[system] aperture needs aperture_value (EPD in mm, or the NA)");
+  }
+  if (const Entry e = entry(table, "field_type"))
+    specs.field_type = static_cast<FieldType>(name_index(*e.node, kFieldTypeNames, "field_type"));
+  if (const Entry e = entry(table, "object_distance_mm")) {
+    specs.object_distance_mm = reader.number(*e.node, "object_distance_mm");
+    if (!(specs.object_distance_mm > 0.0))
+      reader.fail(*e.node, "object_distance_mm must be > 0 (inf: an object at infinity)");
+  }
+  if (const Entry e = entry(table, "fields")) {
+    const std::vector<double> values = numbers(*e.node, "fields");
+    if (values.empty()) reader.fail(*e.node, "fields is empty");
+    specs.fields.clear();
+    for (double v : values) specs.fields.push_back({v, 1.0, {}});
+    if (specs.field_type == FieldType::kAngle) {
+      for (double v : values)
+        if (!(std::abs(v) < 89.0))
+          reader.fail(*e.node, fmt::format("field {} deg must be below 89", v));
+      specs.half_field_deg = specs.max_field_value();
+    }
+  }
+  auto per_field = [&](std::string_view key, auto assign) {
+    if (const Entry e = entry(table, key)) {
+      const std::vector<double> values = numbers(*e.node, key);
+      if (values.size() != specs.fields.size())
+        reader.fail(*e.node, fmt::format("{} has {} entries for {} fields", key, values.size(),
+                                         specs.fields.size()));
+      for (std::size_t i = 0; i < values.size(); ++i) assign(specs.fields[i], values[i], *e.node);
+    }
+  };
+  per_field("field_weights", [&](FieldPoint& f, double v, const toml::node& n) {
+    if (!(v >= 0.0)) reader.fail(n, "field weights must be >= 0");
+    f.weight = v;
+  });
+  per_field("vdy", [](FieldPoint& f, double v, const toml::node&) { f.vignetting.vdy = v; });
+  per_field("vcx", [&](FieldPoint& f, double v, const toml::node& n) {
+    if (!(v < 1.0)) reader.fail(n, "vcx must be < 1");
+    f.vignetting.vcx = v;
+  });
+  per_field("vcy", [&](FieldPoint& f, double v, const toml::node& n) {
+    if (!(v < 1.0)) reader.fail(n, "vcy must be < 1");
+    f.vignetting.vcy = v;
+  });
 }
 
 Material read_material(const TomlReader& reader, const toml::node& node, int surface_number,
@@ -598,6 +713,8 @@ Lens parse_lens_toml(std::string_view text, const std::string& source_name) {
 
   if (const toml::node* node = root.get("specs"))
     lens.specs = read_specs(reader, reader.table(*node, "[specs]"));
+  if (const toml::node* node = root.get("system"))
+    read_system(reader, reader.table(*node, "[system]"), lens.specs);
 
   const toml::node* surfaces_node = root.get("surfaces");
   if (surfaces_node == nullptr) reader.fail_file("no [[surfaces]]: a lens needs at least two");
@@ -668,6 +785,51 @@ std::string format_lens_toml(const Lens& lens) {
     line("channels", fmt::format("[{}]", fmt::join(channels, ", ")));
   }
   line("dispersion", specs.dispersion == DispersionModel::kCatalog ? "\"catalog\"" : "\"abbe\"");
+
+  // [system]: written for a lens traced as written, or with system data beyond the paper's.
+  const bool default_system =
+      specs.mode == SpecMode::kPaper && specs.primary_wavelength_nm == kWavelengthD_nm &&
+      specs.wavelength_weights.empty() && specs.fields.empty() && specs.object_at_infinity();
+  if (!default_system) {
+    out += "\n[system]\n";
+    line("mode", specs.mode == SpecMode::kPaper ? "\"paper\"" : "\"as-written\"");
+    line("primary_wavelength_nm", number_text(specs.primary_wavelength_nm));
+    auto list = [](const std::vector<double>& v) {
+      std::vector<std::string> t;
+      for (double x : v) t.push_back(number_text(x));
+      return fmt::format("[{}]", fmt::join(t, ", "));
+    };
+    if (!specs.wavelength_weights.empty())
+      line("wavelength_weights", list(specs.wavelength_weights));
+    line("aperture", fmt::format("\"{}\"", kApertureNames[static_cast<int>(specs.aperture_type)]));
+    if (specs.aperture_type == ApertureType::kEntrancePupilDiameter ||
+        specs.aperture_type == ApertureType::kObjectNA)
+      line("aperture_value", number_text(specs.aperture_value));
+    if (!specs.object_at_infinity())
+      line("object_distance_mm", number_text(specs.object_distance_mm));
+    if (!specs.fields.empty()) {
+      line("field_type",
+           fmt::format("\"{}\"", kFieldTypeNames[static_cast<int>(specs.field_type)]));
+      std::vector<double> values, weights, vdy, vcx, vcy;
+      bool weighted = false, vignetted = false;
+      for (const FieldPoint& f : specs.fields) {
+        values.push_back(f.value);
+        weights.push_back(f.weight);
+        vdy.push_back(f.vignetting.vdy);
+        vcx.push_back(f.vignetting.vcx);
+        vcy.push_back(f.vignetting.vcy);
+        weighted = weighted || f.weight != 1.0;
+        vignetted = vignetted || f.vignetting.any();
+      }
+      line("fields", list(values));
+      if (weighted) line("field_weights", list(weights));
+      if (vignetted) {
+        line("vdy", list(vdy));
+        line("vcx", list(vcx));
+        line("vcy", list(vcy));
+      }
+    }
+  }
 
   for (const Surface& surface : lens.surfaces) {
     out += "\n[[surfaces]]\n";

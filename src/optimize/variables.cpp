@@ -72,6 +72,13 @@ LensParameterization::LensParameterization(const Lens& lens, GlassSpace glasses)
     : structure_(lens), glasses_(std::move(glasses)) {
   lens.validate();
   focal_length_mm_ = lens.specs.focal_length_mm();
+  if (!std::isfinite(focal_length_mm_) || !(focal_length_mm_ > 0.0))
+    throw Error(SourceLocation{lens.source_path},
+                fmt::format("the optimizer works at the spec focal length d / (2 tan hfov), which "
+                            "is {} mm for half_field_deg = {} and sensor_diagonal_mm = {}; give "
+                            "the lens a field",
+                            focal_length_mm_, lens.specs.half_field_deg,
+                            lens.specs.sensor_diagonal_mm));
   const int k_count = static_cast<int>(lens.surfaces.size());
   const int last = k_count - 1;
   if (lens.surfaces[last - 1].material.is_air()) {
@@ -96,6 +103,27 @@ LensParameterization::LensParameterization(const Lens& lens, GlassSpace glasses)
     variables_.push_back({Kind::kGlass1, k, fmt::format("g{}.1", k + 1), "glasses"});
   }
   if (glass_count == 0) throw Error(SourceLocation{lens.source_path}, "the lens has no glass");
+  // The catalog model: each catalog glass's correction at the traced wavelengths, as
+  // make_trace_lens computes it for a lens holding that glass.
+  if (lens.specs.dispersion == DispersionModel::kCatalog) {
+    std::shared_ptr<const Catalog> catalog;
+    try {
+      catalog = load_catalog(glasses_.catalog_name());
+    } catch (const Error&) {
+      catalog = nullptr;
+    }
+    if (catalog) {
+      const std::vector<double> wavelengths = trace_wavelengths_nm(lens.specs);
+      glass_offsets_.resize(glasses_.size());
+      for (int j = 0; j < glasses_.size(); ++j) {
+        const Glass* g = catalog->find(glasses_.name(j));
+        glass_offsets_[j] =
+            g && g->formula_supported
+                ? catalog_offsets(*g, glasses_.nd(j), glasses_.vd(j), wavelengths, g->name)
+                : std::vector<double>(wavelengths.size(), 0.0);
+      }
+    }
+  }
 }
 
 std::vector<double> LensParameterization::from_lens(const Lens& lens_in) const {
@@ -115,8 +143,12 @@ std::vector<double> LensParameterization::from_lens(const Lens& lens_in) const {
     const LensVariable& v = variables_[i];
     const Surface& s = lens.surfaces[v.surface];
     switch (v.kind) {
-      case LensVariable::Kind::kCurvature: x[i] = s.curvature_per_mm * f; break;
-      case LensVariable::Kind::kSpacing: x[i] = s.thickness_mm / f; break;
+      case LensVariable::Kind::kCurvature:
+        x[i] = s.curvature_per_mm * f;
+        break;
+      case LensVariable::Kind::kSpacing:
+        x[i] = s.thickness_mm / f;
+        break;
       case LensVariable::Kind::kDefocus:
         x[i] = paraxial_image_solve_ ? (s.thickness_mm - sys.bfl_mm) / f : s.thickness_mm / f;
         break;
@@ -126,7 +158,8 @@ std::vector<double> LensParameterization::from_lens(const Lens& lens_in) const {
         x[i + 1] = g[1];
         break;
       }
-      case LensVariable::Kind::kGlass1: break;
+      case LensVariable::Kind::kGlass1:
+        break;
     }
   }
   return x;
@@ -156,7 +189,8 @@ Lens LensParameterization::to_lens(const double* x, GlassMode mode,
     if (mode == GlassMode::kContinuous) {
       s.material = Material::model(tl.nd[k], tl.vd[k]);
     } else {
-      const int j = mode == GlassMode::kFixed ? fixed_glasses.at(glass_number) : nearest[glass_number];
+      const int j =
+          mode == GlassMode::kFixed ? fixed_glasses.at(glass_number) : nearest[glass_number];
       Material m;
       m.kind = Material::Kind::kCatalog;
       m.glass_name = glasses_.name(j);
@@ -188,7 +222,8 @@ std::vector<int> LensParameterization::select(const std::vector<std::string>& na
     for (int i = 0; i < size(); ++i) {
       const LensVariable& v = variables_[i];
       const std::string glass_pair = fmt::format("g{}", v.surface + 1);
-      const bool glass = v.kind == LensVariable::Kind::kGlass0 || v.kind == LensVariable::Kind::kGlass1;
+      const bool glass =
+          v.kind == LensVariable::Kind::kGlass0 || v.kind == LensVariable::Kind::kGlass1;
       if (raw == v.name || raw == v.group || (glass && raw == glass_pair)) {
         out.push_back(i);
         found = true;
@@ -197,8 +232,8 @@ std::vector<int> LensParameterization::select(const std::vector<std::string>& na
     if (!found) {
       std::string known;
       for (const LensVariable& v : variables_) known += (known.empty() ? "" : ", ") + v.name;
-      throw Error(fmt::format("unknown variable '{}'; known: curvatures, spacings, glasses, {}", raw,
-                              known));
+      throw Error(fmt::format("unknown variable '{}'; known: curvatures, spacings, glasses, {}",
+                              raw, known));
     }
   }
   std::sort(out.begin(), out.end());

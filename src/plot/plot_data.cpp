@@ -6,6 +6,7 @@
 #include <cmath>
 
 #include "lensopt/core/error.h"
+#include "lensopt/render/psf.h"
 #include "lensopt/trace/kernel.h"
 
 namespace lensopt::plot {
@@ -46,7 +47,7 @@ PlotContext make_plot_context(const Lens& lens, const TraceOptions& trace) {
   AnalyzeOptions options;
   options.trace = trace;
   ctx.report = analyze_lens(lens, options);
-  ctx.sys = prepare_system(make_trace_lens(lens), lens.specs, trace);
+  ctx.sys = prepare_lens_system(lens, trace);
 
   const std::vector<double>& nm = lens.specs.wavelengths_nm;
   const int count = static_cast<int>(nm.size());
@@ -64,6 +65,12 @@ PlotContext make_plot_context(const Lens& lens, const TraceOptions& trace) {
     std::sort(members.begin(), members.end(), [&](int a, int b) { return nm[a] < nm[b]; });
     if (!members.empty()) ctx.channel_wavelength[c] = members[members.size() / 2];
   }
+  // A channel without a wavelength shows the one that feeds it (render/psf.h).
+  const auto feeds = channel_wavelengths(ctx.wavelength_channel, nm);
+  for (int c = 0; c < 3; ++c)
+    if (!feeds[c].empty() && std::find(ctx.wavelength_channel.begin(), ctx.wavelength_channel.end(),
+                                       c) == ctx.wavelength_channel.end())
+      ctx.channel_wavelength[c] = feeds[c].front();
   return ctx;
 }
 
@@ -193,9 +200,21 @@ FieldCurveData compute_field_curves(const PlotContext& ctx, double delta, int fi
   fine.fields = fields;
   fine.rings = 1;
   fine.scale_to_spec = false;
-  const TraceSystem<double> sys =
-      prepare_system(ctx.sys.lens, value_of(ctx.sys.efl_mm), ctx.lens.specs.f_number,
-                     ctx.lens.specs.half_field_deg, fine);
+  // The lens's own setup (aperture, object distance), sampled at `fields` angles up to its
+  // largest chief-ray angle.
+  SystemSetup setup = specs_setup(ctx.lens.specs, fine);
+  setup.scale = false;
+  if (ctx.lens.specs.mode == SpecMode::kPaper) {
+    setup.aperture_type = ApertureType::kFNumber;
+    setup.f_number = ctx.lens.specs.f_number;
+  }
+  if (setup.aperture_type == ApertureType::kFloatByStop)
+    setup.stop_semi_diameter_mm = value_of(ctx.sys.stop_radius_mm);
+  setup.field_type = FieldType::kAngle;
+  setup.field_values = field_angles_deg(ctx.sys.fields_deg.back(), fields);
+  setup.field_weights.clear();
+  setup.vignetting.clear();
+  const TraceSystem<double> sys = prepare_system(ctx.sys.lens, setup, fine);
   FieldCurveData out;
   out.lens_name = ctx.lens.name;
   out.field_deg = sys.fields_deg;

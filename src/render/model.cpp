@@ -32,7 +32,7 @@ ImagingModel build_imaging_model(const Lens& lens, const TraceOptions& trace,
   analyze_options.trace = trace;
   const AnalysisReport report = analyze_lens(lens, analyze_options);
   const TraceLens<double> trace_lens = make_trace_lens(lens);
-  const TraceSystem<double> sys = prepare_system(trace_lens, lens.specs, trace);
+  const TraceSystem<double> sys = prepare_system(trace_lens, lens_setup(lens, trace), trace);
 
   ImagingModel model;
   model.lens_name = lens.name;

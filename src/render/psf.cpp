@@ -2,6 +2,8 @@
 
 #include <fmt/format.h>
 
+#include <cmath>
+
 #include "lensopt/core/error.h"
 
 namespace lensopt {
@@ -26,20 +28,30 @@ void validate_wavelength_channels(const std::vector<int>& channels, int waveleng
         fmt::format("{} wavelength channels for {} wavelengths: give one channel (R, G or "
                     "B) per wavelength",
                     channels.size(), wavelength_count));
-  std::array<int, kColourChannels> used{};
   for (std::size_t w = 0; w < channels.size(); ++w) {
     if (channels[w] < 0 || channels[w] >= kColourChannels)
       throw Error(fmt::format("wavelength {} has channel {}; channels are 0 (R), 1 (G), 2 (B)",
                               w + 1, channels[w]));
-    ++used[channels[w]];
   }
-  static const char* kNames[] = {"R", "G", "B"};
-  for (int k = 0; k < kColourChannels; ++k)
-    if (used[k] == 0)
-      throw Error(
-          fmt::format("no wavelength is assigned to colour channel {}: an RGB render "
-                      "needs at least one wavelength per channel",
-                      kNames[k]));
+}
+
+std::array<std::vector<int>, kColourChannels> channel_wavelengths(
+    const std::vector<int>& channels, const std::vector<double>& wavelengths_nm) {
+  constexpr std::array<double, kColourChannels> kCentreNm = {620.0, 550.0, 460.0};
+  std::array<std::vector<int>, kColourChannels> out;
+  for (std::size_t w = 0; w < channels.size(); ++w)
+    if (channels[w] >= 0 && channels[w] < kColourChannels)
+      out[channels[w]].push_back(static_cast<int>(w));
+  for (int k = 0; k < kColourChannels; ++k) {
+    if (!out[k].empty() || wavelengths_nm.empty()) continue;
+    std::size_t best = 0;
+    for (std::size_t w = 1; w < wavelengths_nm.size(); ++w)
+      if (std::abs(wavelengths_nm[w] - kCentreNm[k]) <
+          std::abs(wavelengths_nm[best] - kCentreNm[k]))
+        best = w;
+    out[k].push_back(static_cast<int>(best));
+  }
+  return out;
 }
 
 }  // namespace lensopt

@@ -225,6 +225,7 @@ void read_search_description(const std::filesystem::path& path, SearchOptions& o
     }
   }
   for_each("specs", [&](const std::string& k, const toml::node& n, const SourceLocation& w) {
+    options.specs_given = true;
     if (k == "f_number")
       options.f_number = number(k, n, w);
     else if (k == "half_field_deg")
@@ -270,7 +271,7 @@ std::vector<SearchCandidate> make_candidates(const SearchOptions& options) {
     }
   };
   auto push = [&](const std::string& source, const std::string& layout, int seed,
-                  const std::function<Lens()>& build) {
+                  const std::function<Lens()>& build, bool own_specs = false) {
     SearchCandidate c;
     c.index = static_cast<int>(out.size());
     c.source = source;
@@ -280,7 +281,7 @@ std::vector<SearchCandidate> make_candidates(const SearchOptions& options) {
     try {
       c.start = build();
       c.start.name = c.id;
-      apply_specs(c.start, options);
+      if (options.specs_given || !own_specs) apply_specs(c.start, options);
       c.start.validate();
     } catch (const Error& e) {
       c.error = e.message();
@@ -303,10 +304,14 @@ std::vector<SearchCandidate> make_candidates(const SearchOptions& options) {
         if (!form) {
           // Only the lens as given; seeds and layouts need its elements.
           for (int seed = 0; seed < g.glass_seeds; ++seed) {
-            push(label, "as-given", seed, [&]() -> Lens {
-              if (seed == 0) return lens;
-              throw Error("glass seeds need a lens of elements and one stop in air: " + form_error);
-            });
+            push(
+                label, "as-given", seed,
+                [&]() -> Lens {
+                  if (seed == 0) return lens;
+                  throw Error("glass seeds need a lens of elements and one stop in air: " +
+                              form_error);
+                },
+                true);
           }
           continue;
         }
@@ -316,15 +321,18 @@ std::vector<SearchCandidate> make_candidates(const SearchOptions& options) {
         for (const LensLayout& layout :
              layout_variants(form->layout, g.vary_stop, g.vary_cement, g.stops)) {
           for (int seed = 0; seed < g.glass_seeds; ++seed) {
-            push(label, layout.code(), seed, [&]() -> Lens {
-              if (seed == 0 && layout == form->layout) return lens;
-              LensForm f = with_layout(*form, layout);
-              seed_glasses(f, seed, *load_catalog(catalog_name));
-              Lens l = compose_lens(f, lens);
-              if (l.catalog_name.empty() && seed > 0) l.catalog_name = catalog_name;
-              l.surfaces.back().thickness_mm = detail::rebuilt_image_mm(l, defocus_mm);
-              return l;
-            });
+            push(
+                label, layout.code(), seed,
+                [&]() -> Lens {
+                  if (seed == 0 && layout == form->layout) return lens;
+                  LensForm f = with_layout(*form, layout);
+                  seed_glasses(f, seed, *load_catalog(catalog_name));
+                  Lens l = compose_lens(f, lens);
+                  if (l.catalog_name.empty() && seed > 0) l.catalog_name = catalog_name;
+                  l.surfaces.back().thickness_mm = detail::rebuilt_image_mm(l, defocus_mm);
+                  return l;
+                },
+                true);
           }
         }
       }

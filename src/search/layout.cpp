@@ -35,7 +35,7 @@ Error form_error(const Lens& lens, const std::string& message) {
 // Paraxial back focal length (587.6 nm) of a lens as written, mm; NaN if it has no power.
 double paraxial_bfl_mm(const Lens& lens) {
   const TraceLens<double> tl = make_trace_lens(lens);
-  const ParaxialData<double> p = paraxial_data(tl, kWavelengthD_nm);
+  const ParaxialData<double> p = paraxial_data(tl, tl.reference_nm());
   return std::isfinite(p.bfl_mm) ? p.bfl_mm : std::numeric_limits<double>::quiet_NaN();
 }
 
@@ -180,7 +180,7 @@ LensForm decompose_lens(const Lens& lens) {
   }
   if (!stop_seen) throw form_error(lens, "the stop is not between elements");
   form.layout.elements = static_cast<int>(form.elements.size());
-  const double efl = paraxial_data(make_trace_lens(lens), kWavelengthD_nm).efl_mm;
+  const double efl = paraxial_data(make_trace_lens(lens), lens.specs.primary_wavelength_nm).efl_mm;
   form.focal_length_mm = std::isfinite(efl) && efl > 0 ? efl : lens.specs.focal_length_mm();
   return form;
 }

@@ -286,8 +286,7 @@ ToleranceModel::ToleranceModel(const Lens& lens, const ToleranceOptions& options
   scale_options.fields = 1;
   scale_options.ray_aiming = false;
   scale_options.scale_to_spec = true;
-  const TraceSystem<double> unscaled =
-      prepare_system(make_trace_lens(lens), lens.specs, scale_options);
+  const TraceSystem<double> unscaled = prepare_lens_system(lens, scale_options);
   m.scale = unscaled.scale;
   if (!(std::isfinite(m.scale) && m.scale > 0))
     throw Error(SourceLocation{lens.source_path},
@@ -297,7 +296,7 @@ ToleranceModel::ToleranceModel(const Lens& lens, const ToleranceOptions& options
   m.nominal = make_trace_lens(m.scaled_lens);
   m.parameters = tolerance_parameters(m.scaled_lens, options.tolerances);
 
-  const ParaxialData<double> par = paraxial_data(m.nominal, kWavelengthD_nm);
+  const ParaxialData<double> par = paraxial_data(m.nominal, m.nominal.reference_nm());
   const double r_ep = par.efl_mm / lens.specs.f_number / 2.0;
   m.stop_height_mm = par.stop_magnification * r_ep;
   m.image_distance0_mm = m.nominal.thickness_mm.back();
@@ -351,7 +350,7 @@ TrialResult ToleranceModel::evaluate(const std::vector<double>& perturbations) c
 
   TraceLens<double> tl = m.apply(perturbations);
   const int last = tl.surface_count() - 1;
-  const ParaxialData<double> par = paraxial_data(tl, kWavelengthD_nm);
+  const ParaxialData<double> par = paraxial_data(tl, tl.reference_nm());
   // Reference image plane: the paraxial solve (also the start of the best-RMS search).
   const double t_ref = m.options.compensator == FocusCompensator::kNone ? m.image_distance0_mm
                                                                         : par.bfl_mm + m.defocus_mm;
@@ -409,8 +408,9 @@ TrialResult ToleranceModel::evaluate(const std::vector<double>& perturbations) c
   for (int h = 0; h < field_count; ++h) {
     r.rms_spot_um[h] = moments[h].rms(tau) * 1000.0;
     sum += r.rms_spot_um[h];
-    y_ref[h] = paraxial_image_height(sys.lens, sys.entrance_pupil_z_mm,
-                                     std::tan(sys.fields_deg[h] * kPi / 180.0), kWavelengthD_nm);
+    y_ref[h] =
+        paraxial_image_height(sys.lens, sys.entrance_pupil_z_mm,
+                              std::tan(sys.fields_deg[h] * kPi / 180.0), sys.lens.reference_nm());
   }
   r.mean_spot_um = sum / field_count;
   const double y_ref_last = y_ref.back();

@@ -1,5 +1,7 @@
 #include <fmt/format.h>
 
+#include <algorithm>
+
 #include "lensopt/core/error.h"
 #include "lensopt/trace/system.h"
 
@@ -36,6 +38,77 @@ PupilSamples pupil_edge_samples(int count) {
     out.y.push_back(std::sin(azimuth));
   }
   return out;
+}
+
+SystemSetup paper_setup(double focal_length_mm, double f_number, double half_field_deg,
+                        int field_count) {
+  SystemSetup setup;
+  setup.scale = true;
+  setup.focal_length_mm = focal_length_mm;
+  setup.aperture_type = ApertureType::kFNumber;
+  setup.f_number = f_number;
+  setup.field_type = FieldType::kAngle;
+  setup.field_values = field_angles_deg(half_field_deg, field_count);
+  return setup;
+}
+
+SystemSetup specs_setup(const Specs& specs, const TraceOptions& options) {
+  if (specs.mode == SpecMode::kPaper) {
+    SystemSetup setup =
+        paper_setup(specs.focal_length_mm(), specs.f_number, specs.half_field_deg, options.fields);
+    setup.scale = options.scale_to_spec;
+    return setup;
+  }
+  SystemSetup setup;
+  setup.scale = false;
+  setup.aperture_type = specs.aperture_type;
+  setup.f_number = specs.f_number;
+  setup.aperture_value = specs.aperture_value;
+  setup.object_distance_mm = specs.object_distance_mm;
+  setup.field_type = specs.field_type;
+  if (specs.fields.empty()) {
+    setup.field_values = field_angles_deg(specs.half_field_deg, options.fields);
+    setup.field_type = FieldType::kAngle;
+    return setup;
+  }
+  std::vector<FieldPoint> fields = specs.fields;
+  for (FieldPoint& f : fields) f.value = std::abs(f.value);  // rotational symmetry
+  std::stable_sort(fields.begin(), fields.end(),
+                   [](const FieldPoint& a, const FieldPoint& b) { return a.value < b.value; });
+  // Fields at the same radial distance are one field (their weights add).
+  std::vector<FieldPoint> unique;
+  for (const FieldPoint& f : fields) {
+    if (!unique.empty() && unique.back().value == f.value) {
+      unique.back().weight += f.weight;
+    } else {
+      unique.push_back(f);
+    }
+  }
+  fields = unique;
+  bool any_vignetting = false;
+  for (const FieldPoint& f : fields) {
+    setup.field_values.push_back(f.value);
+    setup.field_weights.push_back(f.weight);
+    setup.vignetting.push_back(f.vignetting);
+    any_vignetting = any_vignetting || f.vignetting.any();
+  }
+  if (!any_vignetting) setup.vignetting.clear();
+  return setup;
+}
+
+SystemSetup lens_setup(const Lens& lens, const TraceOptions& options) {
+  SystemSetup setup = specs_setup(lens.specs, options);
+  const int stop = lens.stop_index();
+  if (stop >= 0) setup.stop_semi_diameter_mm = lens.surfaces[stop].semi_diameter_mm;
+  if (setup.aperture_type == ApertureType::kFloatByStop && !(setup.stop_semi_diameter_mm > 0.0))
+    throw Error(SourceLocation{lens.source_path},
+                "aperture 'float by stop size' needs the stop's semi-diameter");
+  return setup;
+}
+
+TraceSystem<double> prepare_lens_system(const Lens& lens, const TraceOptions& options) {
+  options.validate();
+  return prepare_system(make_trace_lens(lens), lens_setup(lens, options), options);
 }
 
 std::vector<double> field_angles_deg(double half_field_deg, int count) {

@@ -69,12 +69,31 @@ void set_variable_value(Lens& lens, const PrescriptionVariable& v, double value)
   }
 }
 
+std::vector<double> trace_wavelengths_nm(const Specs& specs) {
+  std::vector<double> out = specs.wavelengths_nm;
+  out.push_back(specs.primary_wavelength_nm);  // reference wavelength, last
+  return out;
+}
+
+std::vector<double> catalog_offsets(const Glass& glass, double nd, double vd,
+                                    const std::vector<double>& wavelengths_nm,
+                                    const std::string& what) {
+  if (!glass.formula_supported)
+    throw Error(
+        fmt::format("{}: glass {} uses an unsupported dispersion formula; use "
+                    "dispersion = \"abbe\"",
+                    what, glass.name));
+  std::vector<double> out(wavelengths_nm.size());
+  for (std::size_t w = 0; w < wavelengths_nm.size(); ++w)
+    out[w] = glass.index(wavelengths_nm[w]) - abbe_index(nd, vd, wavelengths_nm[w]);
+  return out;
+}
+
 TraceLens<double> make_trace_lens(const Lens& lens) {
   lens.validate();
   TraceLens<double> out;
   const int k_count = static_cast<int>(lens.surfaces.size());
-  out.wavelengths_nm = lens.specs.wavelengths_nm;
-  out.wavelengths_nm.push_back(kWavelengthD_nm);  // reference wavelength, last
+  out.wavelengths_nm = trace_wavelengths_nm(lens.specs);
   out.stop = lens.stop_index();
   for (const Surface& s : lens.surfaces) {
     out.curvature_per_mm.push_back(s.curvature_per_mm);
@@ -84,20 +103,25 @@ TraceLens<double> make_trace_lens(const Lens& lens) {
     out.nd.push_back(glass ? s.material.nd : 1.0);
     out.vd.push_back(glass ? s.material.vd : 0.0);
   }
+  bool clips = false;
+  for (const Surface& s : lens.surfaces) clips = clips || s.semi_diameter_mm > 0.0;
+  // The stop's semi-diameter sets the pupil (float by stop size); it does not clip the aimed rays.
+  // A clear aperture passes rays up to 1e-9 beyond its edge, so a pupil-edge ray that lies on it
+  // (x^2 + y^2 = r^2 up to rounding) is not vignetted.
+  constexpr double kEdgeTolerance = 1.0 + 1e-9;
+  if (clips)
+    for (const Surface& s : lens.surfaces)
+      out.semi_diameter_mm.push_back(s.is_stop ? 0.0 : s.semi_diameter_mm * kEdgeTolerance);
   if (lens.specs.dispersion == DispersionModel::kCatalog) {
     out.catalog_offset.assign(k_count, std::vector<double>(out.wavelengths_nm.size(), 0.0));
     for (int k = 0; k < k_count; ++k) {
       const Material& m = lens.surfaces[k].material;
       if (m.kind != Material::Kind::kCatalog || !m.glass) continue;
-      if (!m.glass->formula_supported) {
-        throw Error(SourceLocation{lens.source_path},
-                    fmt::format("surface {}: glass {} uses an unsupported dispersion formula; use "
-                                "dispersion = \"abbe\"",
-                                k + 1, m.glass_name));
-      }
-      for (std::size_t w = 0; w < out.wavelengths_nm.size(); ++w) {
-        const double wl = out.wavelengths_nm[w];
-        out.catalog_offset[k][w] = m.glass->index(wl) - abbe_index(m.nd, m.vd, wl);
+      try {
+        out.catalog_offset[k] = catalog_offsets(*m.glass, m.nd, m.vd, out.wavelengths_nm,
+                                                fmt::format("surface {}", k + 1));
+      } catch (const Error& e) {
+        throw Error(SourceLocation{lens.source_path}, e.message());
       }
     }
   }

@@ -13,18 +13,17 @@
 #include <string>
 #include <vector>
 
+#include "lens_checks.h"
 #include "lensopt/core/atomic_file.h"
 #include "lensopt/core/error.h"
 #include "lensopt/glass/glass.h"
 #include "lensopt/lens/lens_io.h"
-#include "lens_checks.h"
 #include "test_support.h"
 
 using namespace lensopt;
 using lensopt::test::bits;
 
 namespace {
-
 
 // format -> parse gives the same lens, and format(parse(format(l))) == format(l).
 void check_round_trip(const Lens& lens, const std::string& source_name) {
@@ -529,10 +528,10 @@ thickness_mm = 15.0
     check_contains(model, "bad.toml:12:");
     check_contains(model, "unknown key 'v' in the material of surface 2 (did you mean 'vd'?)");
 
-    const std::string wavelengths =
-        toml_error(std::string("[specs]\nwavelengths_nm = [500.0, 600.0]\n") + kGoodToml);
-    check_contains(wavelengths, "bad.toml:2:1:");
-    check_contains(wavelengths, "wavelengths_nm is given without channels");
+    // Wavelengths without channels get them by band (< 500 nm B, < 600 nm G, else R).
+    const Lens banded = parse_lens_toml(
+        std::string("[specs]\nwavelengths_nm = [486.1, 587.6, 656.3]\n") + kGoodToml, "bands.toml");
+    CHECK(banded.specs.wavelength_channels == std::vector<int>{2, 1, 0});
 
     const std::string channels = toml_error(
         std::string("[specs]\nwavelengths_nm = [500.0, 600.0]\nchannels = [\"G\", \"X\"]\n") +

@@ -6,7 +6,10 @@
 // Relative illumination (Rimmer): the image-space projected solid angle of the aimed pupil,
 // approximated by the ellipse through the upper, lower and sagittal rays in direction-cosine
 // space, R_h = (dM_h L_h) / (dM_0 L_0) with dM = (M_top - M_bottom) / 2 and L the sagittal ray's
-// x direction cosine, at 587.6 nm.
+// x direction cosine, at the primary wavelength; with clear apertures, times the fraction of the
+// field's pupil rays that pass them, relative to the axis (vignetting).
+// Clear apertures: rays outside a surface's semi-diameter are vignetted, counted per field and
+// surface apart from failures; the mean RMS spot weighs fields by their weights.
 #pragma once
 
 #include <optional>
@@ -24,10 +27,13 @@ struct AnalyzeOptions {
 };
 
 struct FieldReport {
-  double field_deg = 0;
+  double field_deg = 0;    // chief-ray angle in object space
+  double field_value = 0;  // as written (deg or mm, AnalysisReport::field_unit)
+  double weight = 1;
+  int vignetted_rays = 0;             // clipped by a clear aperture (not failures)
   std::optional<double> rms_spot_um;  // none if no ray reached the image
   double centroid_y_mm = 0;
-  double reference_y_mm = 0;          // paraxial chief-ray height
+  double reference_y_mm = 0;  // paraxial chief-ray height
   double distortion_percent = 0;
   double relative_illumination = 0;
   int traced_rays = 0;
@@ -55,7 +61,15 @@ struct AnalysisReport {
   std::optional<double> mean_rms_spot_um;
   int ray_failures = 0;
   std::vector<int> failures_by_surface;  // 0-based surface index
-  double max_aiming_error = 0;           // fraction of the stop radius
+  int vignetted_rays = 0;
+  std::vector<int> vignetted_by_surface;  // 0-based surface index
+  std::string field_kind = "angle";       // angle, object height, paraxial / real image height
+  std::string field_unit = "deg";         // deg or mm
+  std::string spec_mode = "paper";        // paper or as-written
+  std::string aperture = "f-number";
+  double object_distance_mm = 0;  // 0: at infinity
+  double primary_wavelength_nm = 0;
+  double max_aiming_error = 0;  // fraction of the stop radius
 };
 
 AnalysisReport analyze_lens(const Lens& lens, const AnalyzeOptions& options);

@@ -27,8 +27,8 @@ std::vector<T> reference_heights(const TraceSystem<T>& sys) {
   std::vector<T> y(sys.fields_deg.size());
   for (std::size_t h = 0; h < y.size(); ++h) {
     const double tan_theta = std::tan(sys.fields_deg[h] * kPi / 180.0);
-    y[h] =
-        paraxial_image_height(sys.lens, sys.entrance_pupil_z_mm, K<T>(tan_theta), kWavelengthD_nm);
+    y[h] = paraxial_image_height(sys.lens, sys.entrance_pupil_z_mm, K<T>(tan_theta),
+                                 sys.lens.reference_nm());
   }
   return y;
 }
@@ -40,22 +40,31 @@ bool pupil_edge_directions(const TraceSystem<T>& sys, int h, std::array<T, 3>& o
   using std::cos;
   using std::sin;
   const int w = sys.wavelength_count;  // reference wavelength
+  // (x, y) = r_EP (scale_x (1 - VCX) px, offset_y + scale_y (VDY + (1 - VCY) py)) at the top,
+  // bottom and sagittal edge; the sagittal ray at the pupil's centre height.
+  const VignettingFactors v =
+      h < static_cast<int>(sys.vignetting.size()) ? sys.vignetting[h] : VignettingFactors{};
   const PupilMap<T>& map = sys.pupil_map(h, w);
-  const double theta = sys.fields_deg[h] * kPi / 180.0;
   const T r_ep = sys.epd_mm / K<T>(2.0);
+  const T half_y = map.scale_y * K<T>(1.0 - v.vcy);
+  const T centre_y = map.offset_y + map.scale_y * K<T>(v.vdy);
+  const T px[3] = {K<T>(0.0), K<T>(0.0), map.scale_x * K<T>(1.0 - v.vcx)};
+  const T py[3] = {centre_y + half_y, centre_y - half_y, centre_y};
+  const double theta = sys.fields_deg[h] * kPi / 180.0;
+  const double object_y = sys.field_object_y_mm.empty() ? 0.0 : sys.field_object_y_mm[h];
   RayBundle<T> rays;
   rays.resize(3);
-  const T px[3] = {K<T>(0.0), K<T>(0.0), map.scale_x};
-  const T py[3] = {map.offset_y + map.scale_y, map.offset_y - map.scale_y, map.offset_y};
   for (int i = 0; i < 3; ++i) {
     rays.x[i] = r_ep * px[i];
     rays.y[i] = r_ep * py[i];
     rays.z[i] = sys.entrance_pupil_z_mm;
-    rays.l[i] = K<T>(0.0);
-    rays.m[i] = K<T>(sin(theta));
-    rays.n[i] = K<T>(cos(theta));
+    detail::field_ray_direction(sys.object_distance_mm, sin(theta), cos(theta), object_y, rays.x[i],
+                                rays.y[i], rays.z[i], rays.l[i], rays.m[i], rays.n[i]);
   }
-  trace_bundle(sys.lens, w, sys.lens.surface_count(), true, rays,
+  // Edge rays are geometry here: clear apertures are accounted for by the transmitted fraction.
+  TraceLens<T> open_lens = sys.lens;
+  open_lens.semi_diameter_mm.clear();
+  trace_bundle(open_lens, w, open_lens.surface_count(), true, rays,
                static_cast<RayRecord<T>*>(nullptr));
   for (int i = 0; i < 3; ++i)
     if (rays.status[i] != kRayOk) return false;
@@ -75,6 +84,23 @@ std::vector<T> relative_illuminations(const TraceSystem<T>& sys) {
   for (int h = 0; h < field_count; ++h) {
     if (!pupil_edge_directions(sys, h, d)) continue;
     ri[h] = K<T>(0.5) * (d[0] - d[1]) * d[2] / axis_area;
+  }
+  // Clear apertures: times the fraction of the field's pupil rays (reference wavelength) that
+  // pass every aperture, relative to the axis (the pupil samples are uniform in area).
+  if (!sys.lens.semi_diameter_mm.empty()) {
+    const int w = sys.wavelength_count;
+    RayBundle<T> rays;
+    auto passed = [&](int h) {
+      start_rays(sys, h, w, rays);
+      trace_bundle(sys.lens, w, sys.lens.surface_count(), true, rays,
+                   static_cast<RayRecord<T>*>(nullptr));
+      int n = 0;
+      for (std::size_t i = 0; i < rays.size(); ++i) n += rays.status[i] == kRayVignetted ? 0 : 1;
+      return static_cast<double>(n) / static_cast<double>(rays.size());
+    };
+    const double axis = passed(0);
+    for (int h = 0; h < field_count; ++h)
+      ri[h] = axis > 0.0 ? ri[h] * K<T>(passed(h) / axis) : K<T>(0.0);
   }
   return ri;
 }

@@ -17,11 +17,13 @@ namespace lensopt {
 
 template <typename T>
 struct SpotResult {
-  std::vector<T> rms_spot_mm;    // per field
-  std::vector<T> centroid_y_mm;  // per field, over all wavelengths
-  std::vector<int> traced_rays;  // per field: rays that reached the image (half pupil)
-  std::vector<int> failed_rays;  // per field
+  std::vector<T> rms_spot_mm;          // per field
+  std::vector<T> centroid_y_mm;        // per field, over all wavelengths
+  std::vector<int> traced_rays;        // per field: rays that reached the image (half pupil)
+  std::vector<int> failed_rays;        // per field (vignetted rays are counted apart)
   std::vector<int> failed_by_surface;  // per surface where the failure happened
+  std::vector<int> vignetted_rays;     // per field: rays clipped by a clear aperture
+  std::vector<std::vector<int>> vignetted_by_field_surface;  // [field][surface]
   T mean_rms_spot_mm;
   int total_failed = 0;
 };
@@ -79,6 +81,8 @@ SpotResult<T> evaluate_spots(const TraceSystem<T>& sys, int threads = 0) {
   out.failed_by_surface.assign(sys.lens.surface_count(), 0);
   std::vector<std::vector<int>> failed_at(field_count,
                                           std::vector<int>(sys.lens.surface_count(), 0));
+  out.vignetted_rays.assign(field_count, 0);
+  out.vignetted_by_field_surface.assign(field_count, std::vector<int>(sys.lens.surface_count(), 0));
   const int nthreads = threads > 0 ? threads : omp_get_max_threads();
 #pragma omp parallel num_threads(nthreads)
   {
@@ -93,6 +97,11 @@ SpotResult<T> evaluate_spots(const TraceSystem<T>& sys, int threads = 0) {
                      static_cast<RayRecord<T>*>(nullptr));
         for (std::size_t i = 0; i < rays.size(); ++i) {
           if (rays.status[i] == kRayOk) continue;
+          if (rays.status[i] == kRayVignetted) {
+            ++out.vignetted_rays[h];
+            ++out.vignetted_by_field_surface[h][rays.failed_surface[i]];
+            continue;
+          }
           ++failed;
           if (rays.failed_surface[i] >= 0) ++failed_at[h][rays.failed_surface[i]];
         }

@@ -4,6 +4,8 @@
 // degrees unless a name says otherwise.
 #pragma once
 
+#include <cmath>
+#include <limits>
 #include <memory>
 #include <optional>
 #include <string>
@@ -21,7 +23,8 @@ struct Material {
   std::string glass_name;  // catalog glass name (kCatalog)
   double nd = 1.0;         // d-line index (catalog's figure for kCatalog)
   double vd = 0.0;         // Abbe number (catalog's figure for kCatalog); 0 for air
-  std::shared_ptr<const Glass> glass;  // the catalog entry (kCatalog), for DispersionModel::kCatalog
+  std::shared_ptr<const Glass>
+      glass;  // the catalog entry (kCatalog), for DispersionModel::kCatalog
 
   bool is_air() const { return kind == Kind::kAir; }
   static Material air() { return {}; }
@@ -41,14 +44,65 @@ struct Surface {
   bool written_as_radius = true;  // TOML round trip: written as radius_mm (else curvature_per_mm)
 };
 
-// First-order specifications and sampling (SPEC "Lens model").
+// How a lens's specs are applied when it is traced.
+//   kPaper:     the paper's mode. The prescription is scaled to f = d / (2 tan(hfov)); the
+//               entrance pupil is f / N; fields are sampled from 0 to hfov. Default for the
+//               paper's lenses (lenses/*.toml) and its YAML.
+//   kAsWritten: the prescription is traced as written (no scaling); the aperture is the
+//               written one (aperture_type); fields are sampled from 0 to the largest written
+//               field. Default for .zmx imports and TOML with a [system] table.
+enum class SpecMode { kPaper, kAsWritten };
+
+// The system aperture, as OpticStudio names them.
+enum class ApertureType {
+  kFNumber,                // image-space F/# (f_number): EPD = EFL / N
+  kEntrancePupilDiameter,  // aperture_value = EPD, mm
+  kObjectNA,               // aperture_value = n sin(U) of the axial marginal ray (finite object)
+  kFloatByStop,            // EPD = 2 (stop semi-diameter) / (paraxial stop magnification)
+};
+
+// Field types, as OpticStudio's FTYP numbers them (0..3).
+enum class FieldType { kAngle, kObjectHeight, kParaxialImageHeight, kRealImageHeight };
+
+// OpticStudio's vignetting factors of one field: the normalized pupil point (px, py) is moved to
+//   px' = VDX + (1 - VCX) px,   py' = VDY + (1 - VCY) py
+// (decentre and compression; the pupil of that field is smaller, so fewer rays are clipped).
+struct VignettingFactors {
+  double vdx = 0.0, vdy = 0.0, vcx = 0.0, vcy = 0.0;
+  bool any() const { return vdx != 0.0 || vdy != 0.0 || vcx != 0.0 || vcy != 0.0; }
+};
+
+// One field point as written: its value (deg for kAngle, mm for the heights), its weight and its
+// vignetting factors. The lens is rotationally symmetric, so a field is its radial distance.
+struct FieldPoint {
+  double value = 0.0;
+  double weight = 1.0;
+  VignettingFactors vignetting;
+};
+
+// First-order specifications and sampling (SPEC "Lens model"), and the system data an optical
+// engineer writes (wavelengths with weights and a primary, fields with a type and weights, the
+// aperture, the object distance).
 struct Specs {
   double f_number = 2.0;
   double half_field_deg = 25.0;
   double sensor_diagonal_mm = 16.0;
-  std::vector<double> wavelengths_nm;  // default: the paper's 15 (R, G, B five each)
-  std::vector<int> wavelength_channels;  // 0 = R, 1 = G, 2 = B, one per wavelength
+  std::vector<double> wavelengths_nm;              // default: the paper's 15 (R, G, B five each)
+  std::vector<int> wavelength_channels;            // 0 = R, 1 = G, 2 = B, one per wavelength
+  std::vector<double> wavelength_weights;          // one per wavelength, or empty: all 1
+  double primary_wavelength_nm = kWavelengthD_nm;  // the paraxial reference wavelength
   DispersionModel dispersion = DispersionModel::kAbbe;
+
+  SpecMode mode = SpecMode::kPaper;
+  ApertureType aperture_type = ApertureType::kFNumber;
+  double aperture_value = 0.0;  // EPD (mm) or object NA; unused for kFNumber and kFloatByStop
+  FieldType field_type = FieldType::kAngle;
+  std::vector<FieldPoint> fields;  // as written (kAsWritten); empty: 0 and half_field_deg
+  double object_distance_mm = std::numeric_limits<double>::infinity();  // object to surface 1
+
+  bool object_at_infinity() const { return !std::isfinite(object_distance_mm); }
+  // The largest written field value (deg or mm), or half_field_deg without written fields.
+  double max_field_value() const;
 
   // The paper's defaults: f/2, 25 deg, 16 mm, 15 wavelengths.
   Specs();
@@ -56,6 +110,11 @@ struct Specs {
   // f = d / (2 tan(hfov)), mm.
   double focal_length_mm() const;
 };
+
+// Colour channels for any wavelength set: by band (< 500 nm B, < 600 nm G, else R), so F, d, C
+// map to B, G, R. A channel left empty borrows the nearest wavelength when PSFs are made
+// (channel_wavelengths in render/psf.h), so a single wavelength feeds all three.
+std::vector<int> default_wavelength_channels(const std::vector<double>& wavelengths_nm);
 
 // The paper's 15 wavelengths (nm), R then G then B, and their channels.
 const std::vector<double>& paper_wavelengths_nm();
@@ -80,8 +139,8 @@ struct Lens {
   double total_track_mm() const;
 
   // Throws Error if the lens cannot be traced: no surfaces, no stop or a curved stop, a
-  // non-finite number, a glass with nd <= 1 or vd <= 0, fewer than 2 wavelengths or a spec out of
-  // range. Messages name the surface (1-based) and source_path.
+  // non-finite number, a glass with nd <= 1 or vd <= 0, no wavelength or a spec out of range.
+  // Messages name the surface (1-based) and source_path.
   void validate() const;
 };
 

@@ -65,11 +65,11 @@ struct DesignLossOptions {
 // The paper's loss terms (double values; also the Jet values when evaluated on Jets).
 template <typename T>
 struct DesignLoss {
-  T spot_mm;        // l_S
-  T ray_path_mm;    // l_RP (linear hinge, as the paper)
-  T ray_angle;      // l_RA
-  T glass;          // l_GV
-  T total;          // l_lens with the options' weights
+  T spot_mm;      // l_S
+  T ray_path_mm;  // l_RP (linear hinge, as the paper)
+  T ray_angle;    // l_RA
+  T glass;        // l_GV
+  T total;        // l_lens with the options' weights
   std::vector<T> field_rms_mm;
   int failed_rays = 0;
   int rays = 0;
@@ -136,7 +136,9 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
   const TraceLens<T> lens = param.to_trace_lens(x, mode, fixed_glasses);
   TraceOptions topt = trace_options;
   topt.scale_to_spec = false;  // the forward map gives the spec focal length exactly
-  const Specs& specs = param.structure().specs;
+  // The optimizer samples as the paper does (fields 0..hfov, EPD = f / N) in every spec mode.
+  Specs specs = param.structure().specs;
+  specs.mode = SpecMode::kPaper;
   // Constraint rays run at every one of the paper's fields (at least 21); spot rays at the
   // sampling's fields, which must be a subset (F - 1 dividing the constraint field count - 1)
   // or get their own system.
@@ -269,7 +271,8 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
           for (int j = 0; j < 2; ++j)
             residuals[angle_offset + (hf * k_count + k) * 2 + j] =
                 options.paper_penalties
-                    ? detail::safe_norm(K<T>(options.weight_ray_angle / n_r) * angle_soft[2 * k + j])
+                    ? detail::safe_norm(K<T>(options.weight_ray_angle / n_r) *
+                                        angle_soft[2 * k + j])
                     : detail::safe_norm(K<T>(options.weight_ray_angle) * angle_sq[2 * k + j]);
         }
       }
@@ -292,7 +295,8 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
       field_rms[h] = count > 0 ? detail::safe_norm(s2 / K<T>(count)) : K<T>(0.0);
       if (residuals) {
         const double a_h = field_weights ? (*field_weights)[h] : 1.0 / field_count;
-        const T scale = K<T>(std::sqrt(options.weight_spot * a_h / (static_cast<double>(wl) * rays)));
+        const T scale =
+            K<T>(std::sqrt(options.weight_spot * a_h / (static_cast<double>(wl) * rays)));
         T* r = residuals + static_cast<std::size_t>(h) * spot_block;
         for (std::size_t i = 0; i < ys.size(); ++i) {
           r[2 * i] = ok[i] ? scale * (ys[i] - y_mean) : K<T>(0.0);
@@ -335,10 +339,13 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
     *extremes = field_extremes[0];
     for (int h = 1; h < all_fields; ++h) {
       for (int k = 0; k < k_count; ++k) {
-        extremes->min_travel_mm[k] = std::min(extremes->min_travel_mm[k], field_extremes[h].min_travel_mm[k]);
-        extremes->max_travel_mm[k] = std::max(extremes->max_travel_mm[k], field_extremes[h].max_travel_mm[k]);
+        extremes->min_travel_mm[k] =
+            std::min(extremes->min_travel_mm[k], field_extremes[h].min_travel_mm[k]);
+        extremes->max_travel_mm[k] =
+            std::max(extremes->max_travel_mm[k], field_extremes[h].max_travel_mm[k]);
       }
-      extremes->min_cos2_angle = std::min(extremes->min_cos2_angle, field_extremes[h].min_cos2_angle);
+      extremes->min_cos2_angle =
+          std::min(extremes->min_cos2_angle, field_extremes[h].min_cos2_angle);
     }
   }
   if (loss) {
@@ -352,7 +359,8 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
     loss->failed_rays = failed_total;
     loss->rays = static_cast<int>(n_r);
   }
-  const double total_value = value_of(spot) + value_of(path) + value_of(angle) + value_of(glass_loss);
+  const double total_value =
+      value_of(spot) + value_of(path) + value_of(angle) + value_of(glass_loss);
   return std::isfinite(total_value);
 }
 

@@ -69,9 +69,9 @@ class GlassSpace {
 struct LensVariable {
   enum class Kind { kCurvature, kSpacing, kDefocus, kGlass0, kGlass1 };
   Kind kind;
-  int surface;          // 0-based surface index
-  std::string name;     // "c1", "s3", "defocus", "g2.0", "g2.1" (1-based surface numbers)
-  std::string group;    // "curvatures", "spacings", "glasses"
+  int surface;        // 0-based surface index
+  std::string name;   // "c1", "s3", "defocus", "g2.0", "g2.1" (1-based surface numbers)
+  std::string group;  // "curvatures", "spacings", "glasses"
 };
 
 // How glass variables enter the forward pass.
@@ -106,29 +106,39 @@ class LensParameterization {
   // (continuous). `fixed_glasses` gives the glass per element for kFixed.
   Lens to_lens(const double* x, GlassMode mode, const std::vector<int>& fixed_glasses = {}) const;
 
-  // The TraceLens<T> of variables x: steps 1-4 of the header. Wavelengths of the specs plus the
-  // 587.6 nm reference (as make_trace_lens). Abbe dispersion model.
+  // The TraceLens<T> of variables x: steps 1-4 of the header. Wavelengths and dispersion as
+  // make_trace_lens builds them (trace_wavelengths_nm; with the catalog model, the catalog
+  // correction of the chosen catalog glass in the quantized and fixed modes; continuous glasses
+  // are model glasses, abbe model), so the optimizer traces what the reports trace.
   template <typename T>
   TraceLens<T> to_trace_lens(const T* x, GlassMode mode,
                              const std::vector<int>& fixed_glasses = {}) const {
     TraceLens<T> lens;
     const int k_count = static_cast<int>(structure_.surfaces.size());
-    lens.wavelengths_nm = structure_.specs.wavelengths_nm;
-    lens.wavelengths_nm.push_back(kWavelengthD_nm);
+    lens.wavelengths_nm = trace_wavelengths_nm(structure_.specs);
+    const double reference_nm = lens.wavelengths_nm.back();
+    if (!glass_offsets_.empty())
+      lens.catalog_offset.assign(k_count, std::vector<double>(lens.wavelengths_nm.size(), 0.0));
     lens.stop = structure_.stop_index();
     lens.curvature_per_mm.assign(k_count, K<T>(0.0));
     lens.thickness_mm.assign(k_count, K<T>(0.0));
     lens.nd.assign(k_count, K<T>(1.0));
     lens.vd.assign(k_count, K<T>(0.0));
     lens.is_glass.assign(k_count, 0);
-    for (int k = 0; k < k_count; ++k) lens.is_glass[k] = structure_.surfaces[k].material.is_air() ? 0 : 1;
+    for (int k = 0; k < k_count; ++k)
+      lens.is_glass[k] = structure_.surfaces[k].material.is_air() ? 0 : 1;
     int glass_number = 0;
     for (int i = 0; i < size(); ++i) {
       const LensVariable& v = variables_[i];
       switch (v.kind) {
-        case LensVariable::Kind::kCurvature: lens.curvature_per_mm[v.surface] = x[i]; break;
-        case LensVariable::Kind::kSpacing: lens.thickness_mm[v.surface] = x[i]; break;
-        case LensVariable::Kind::kDefocus: break;  // after the image solve
+        case LensVariable::Kind::kCurvature:
+          lens.curvature_per_mm[v.surface] = x[i];
+          break;
+        case LensVariable::Kind::kSpacing:
+          lens.thickness_mm[v.surface] = x[i];
+          break;
+        case LensVariable::Kind::kDefocus:
+          break;  // after the image solve
         case LensVariable::Kind::kGlass0: {
           T g0 = x[i], g1 = x[i + 1];
           if (mode == GlassMode::kQuantized || mode == GlassMode::kFixed) {
@@ -149,17 +159,25 @@ class LensParameterization {
             }
           }
           glasses_.unwhiten(g0, g1, lens.nd[v.surface], lens.vd[v.surface]);
+          if (!glass_offsets_.empty() && mode != GlassMode::kContinuous) {
+            const int j =
+                mode == GlassMode::kFixed
+                    ? fixed_glasses.at(glass_number)
+                    : glasses_.nearest(Eigen::Vector2d(value_of(x[i]), value_of(x[i + 1])));
+            lens.catalog_offset[v.surface] = glass_offsets_[j];
+          }
           ++glass_number;
           break;
         }
-        case LensVariable::Kind::kGlass1: break;  // handled with kGlass0
+        case LensVariable::Kind::kGlass1:
+          break;  // handled with kGlass0
       }
     }
     // Fixed (frozen by structure) values: the stop is flat; frozen variables are still variables.
     const int last = k_count - 1;
-    lens.curvature_per_mm[last] = solve_last_curvature(lens, K<T>(1.0), kWavelengthD_nm);
+    lens.curvature_per_mm[last] = solve_last_curvature(lens, K<T>(1.0), reference_nm);
     if (paraxial_image_solve_) {
-      const ParaxialData<T> par = paraxial_data(lens, kWavelengthD_nm);
+      const ParaxialData<T> par = paraxial_data(lens, reference_nm);
       lens.thickness_mm[last] = par.bfl_mm + x[defocus_index_];
     } else {
       lens.thickness_mm[last] = x[defocus_index_];  // ablation: s_{K-1} = s'_{K-1} f
@@ -201,6 +219,8 @@ class LensParameterization {
   Lens structure_;
   GlassSpace glasses_;
   std::vector<LensVariable> variables_;
+  // Catalog-model corrections per catalog glass j and traced wavelength (empty: abbe model).
+  std::vector<std::vector<double>> glass_offsets_;
   double focal_length_mm_ = 1.0;
   int defocus_index_ = -1;
   bool paraxial_image_solve_ = true;

@@ -75,8 +75,14 @@ struct PsfSet {
 };
 
 // Checks a wavelength-to-channel list against a wavelength count: one entry per wavelength,
-// each 0..2, and every channel used. Throws Error naming the problem.
+// each 0..2. Throws Error naming the problem. (A channel without a wavelength borrows one.)
 void validate_wavelength_channels(const std::vector<int>& channels, int wavelength_count);
+
+// The wavelengths feeding each colour channel: those assigned to it, or, for a channel without
+// one, the wavelength nearest its centre (R 620 nm, G 550 nm, B 460 nm): a single wavelength
+// feeds all three channels, two feed the third by proximity.
+std::array<std::vector<int>, kColourChannels> channel_wavelengths(
+    const std::vector<int>& channels, const std::vector<double>& wavelengths_nm);
 
 namespace detail {
 
@@ -180,14 +186,18 @@ FieldPsf<T> field_psf(const TraceSystem<T>& sys, int h, const std::vector<int>& 
     out.psf[k].assign(cells, K<T>(0.0));
     out.support[k] = {g, 0, g, 0};
   }
-  for (int w = 0; w < wavelength_count; ++w) {
-    const int k = channels[w];
-    std::vector<T>& grid = out.psf[k];
-    for (std::size_t i = 0; i < xs[w].size(); ++i) {
-      detail::kde_deposit((xs[w][i]) * inv_bin_mm, (ys[w][i] - out.centroid_y_mm) * inv_bin_mm,
-                          options, grid, &out.support[k]);
+  const std::vector<double> spec_nm(sys.lens.wavelengths_nm.begin(),
+                                    sys.lens.wavelengths_nm.begin() + wavelength_count);
+  const auto members = channel_wavelengths(channels, spec_nm);
+  for (int k = 0; k < kColourChannels; ++k) {
+    for (const int w : members[k]) {
+      std::vector<T>& grid = out.psf[k];
+      for (std::size_t i = 0; i < xs[w].size(); ++i) {
+        detail::kde_deposit((xs[w][i]) * inv_bin_mm, (ys[w][i] - out.centroid_y_mm) * inv_bin_mm,
+                            options, grid, &out.support[k]);
+      }
+      out.traced_rays[k] += static_cast<int>(xs[w].size());
     }
-    out.traced_rays[k] += static_cast<int>(xs[w].size());
   }
   for (int k = 0; k < kColourChannels; ++k) {
     std::vector<T>& grid = out.psf[k];

@@ -140,10 +140,13 @@ struct StartGroup {
 struct SearchOptions {
   std::vector<StartGroup> starts;  // in order; a source named twice gets a suffix ("cooke-2")
   std::string catalog = "ohara";   // for generated starts and glass seeds
-  double f_number = 2.0;           // specs of every candidate (default: the paper's)
+  double f_number = 2.0;           // specs of generated candidates (default: the paper's)
   double half_field_deg = 25.0;
   double sensor_diagonal_mm = 16.0;  // f = d / (2 tan hfov) = 17.156 mm
-  OptimizeOptions optimize;          // each candidate's optimizer settings
+  // True when [specs] or a --f-number / --half-field-deg / --focal-length-mm option gave specs:
+  // then every candidate gets them. Otherwise a start read from a lens file keeps its own.
+  bool specs_given = false;
+  OptimizeOptions optimize;  // each candidate's optimizer settings
   // Constraints "paper+strict": two optimizations per candidate, the paper's soft penalties first
   // (they reach the basins of the paper's own designs, which cross the bounds slightly), then
   // strict bounds from that result (which walks it into the feasible set).

@@ -13,6 +13,8 @@
 //      N = (-c x, -c y, 1 - c z):
 //        zeta' = 1 - mu^2 (1 - zeta) = cos^2(I'),  zeta' < 0: total internal reflection
 //        d' = mu d + (sqrt(zeta') - mu sqrt(zeta)) N
+//   5. Clear aperture (only at a surface with a semi-diameter r_k > 0): a ray whose intersection
+//      has x2^2 + y2^2 > r_k^2 is vignetted (kRayVignetted; a select, not a jump).
 // After the last surface the ray is transferred to the image plane at t_{K-1}.
 // Per ray and surface the kernel can record what the design losses need: the axial travel
 // dz_k = t_k + z_{k+1} - z_k in every space k (after surface k, the last one up to the image),
@@ -34,6 +36,7 @@ enum RayStatus : std::uint8_t {
   kRayMissedSurface = 1,            // zeta < 0: no intersection with the sphere
   kRayTotalInternalReflection = 2,  // zeta' < 0
   kRayBackwards = 3,                // direction with n <= 0 (cannot reach the next surface)
+  kRayVignetted = 4,                // outside a surface's clear semi-diameter (x^2 + y^2 > r^2)
 };
 
 // A batch of rays, structure of arrays. All arrays have size() entries.
@@ -182,6 +185,14 @@ void trace_bundle(const TraceLens<T>& lens, int w, int end, bool to_image, RayBu
     } else {
       detail::trace_surface<T, false>(c, shift, mu, count, x, y, z, l, m, n, failure, nullptr,
                                       nullptr, nullptr);
+    }
+    // Step 5: the clear aperture of surface k, if it has one.
+    if (!lens.semi_diameter_mm.empty() && lens.semi_diameter_mm[k] > 0.0) {
+      const T limit = K<T>(lens.semi_diameter_mm[k] * lens.semi_diameter_mm[k]);
+      for (std::size_t i = 0; i < count; ++i) {
+        const bool outside = x[i] * x[i] + y[i] * y[i] > limit;
+        failure[i] = (outside && failure[i] == kRayOk) ? std::int32_t{kRayVignetted} : failure[i];
+      }
     }
     // The first failure of a ray wins.
     for (std::size_t i = 0; i < count; ++i) {

@@ -23,6 +23,7 @@
 
 #include <array>
 #include <cmath>
+#include <limits>
 #include <vector>
 
 #include "lensopt/core/scalar.h"
@@ -71,14 +72,24 @@ struct PupilMap {
 
 template <typename T>
 struct TraceSystem {
-  TraceLens<T> lens;      // scaled prescription
-  T scale;                // scale factor applied to the prescription
-  T efl_mm;               // at the reference wavelength (587.6 nm)
+  TraceLens<T> lens;  // scaled prescription
+  T scale;            // scale factor applied to the prescription
+  T efl_mm;           // at the reference wavelength (587.6 nm)
   T bfl_mm;
-  T epd_mm;               // entrance pupil diameter = EFL / N
-  T entrance_pupil_z_mm;  // from the first vertex
-  T stop_radius_mm;       // real on-axis marginal ray height at the stop
-  std::vector<double> fields_deg;
+  T epd_mm;                        // entrance pupil diameter = EFL / N
+  T entrance_pupil_z_mm;           // from the first vertex
+  T stop_radius_mm;                // real on-axis marginal ray height at the stop
+  std::vector<double> fields_deg;  // chief-ray angle in object space per field
+  // The fields as written (deg or mm, field_type), their weights and vignetting factors.
+  std::vector<double> field_values;
+  FieldType field_type = FieldType::kAngle;
+  std::vector<double> field_weights;
+  std::vector<VignettingFactors> vignetting;
+  // Object distance from surface 1 (infinite: collimated fields) and, for a finite object, the
+  // object point's height per field (rays start on the entrance pupil aimed from it).
+  double object_distance_mm = std::numeric_limits<double>::infinity();
+  std::vector<double> field_object_y_mm;
+  bool object_at_infinity() const { return !std::isfinite(object_distance_mm); }
   // Aimed pupils, [field * (W + 1) + w]; w = W is the reference wavelength (587.6 nm).
   std::vector<PupilMap<T>> pupil_maps;
   int wavelength_count = 0;  // W: the spec wavelengths (the reference one is extra)
@@ -91,12 +102,38 @@ struct TraceSystem {
 
 namespace detail {
 
-// Traces the upper, lower and sagittal pupil rays of one field and wavelength to the stop,
-// returning stop coordinates and their derivatives with respect to the pupil coordinate.
+// Direction cosines of a ray from field h's object point through (x, y, z_ep): collimated at the
+// chief angle for an object at infinity, else from the object point (0, y_obj, -d).
 template <typename T>
-void trace_aiming_rays(const TraceLens<ceres::Jet<T, 1>>& lens_a, int w, const T& sin_theta,
-                       const T& cos_theta, const T& r_ep, const T& z_ep, const PupilMap<T>& map,
-                       T stop_coord[3], T stop_derivative[3]) {
+void field_ray_direction(double object_distance_mm, double sin_theta, double cos_theta,
+                         double object_y_mm, const T& x, const T& y, const T& z_ep, T& l, T& m,
+                         T& n) {
+  using std::sqrt;
+  if (!std::isfinite(object_distance_mm)) {
+    l = K<T>(0.0);
+    m = K<T>(sin_theta);
+    n = K<T>(cos_theta);
+    return;
+  }
+  const T dx = x;
+  const T dy = y - K<T>(object_y_mm);
+  const T dz = z_ep + K<T>(object_distance_mm);
+  const T inv = K<T>(1.0) / sqrt(dx * dx + dy * dy + dz * dz);
+  l = dx * inv;
+  m = dy * inv;
+  n = dz * inv;
+}
+
+}  // namespace detail
+
+namespace detail {
+
+// Traces the upper, lower and sagittal pupil rays of field h and wavelength w to the stop,
+// returning stop coordinates and their derivatives with respect to the pupil coordinate.
+template <typename T, typename System>
+void trace_aiming_rays(const TraceLens<ceres::Jet<T, 1>>& lens_a, int w, const System& sys, int h,
+                       const T& r_ep, const T& z_ep, const PupilMap<T>& map, T stop_coord[3],
+                       T stop_derivative[3]) {
   using J = ceres::Jet<T, 1>;
   RayBundle<J> rays;
   rays.resize(3);
@@ -112,11 +149,12 @@ void trace_aiming_rays(const TraceLens<ceres::Jet<T, 1>>& lens_a, int w, const T
   rays.y[1] = r * bottom_y;
   rays.x[2] = r * side_x;
   rays.y[2] = r * J(map.offset_y);
+  const double theta = sys.fields_deg[h] * kPi / 180.0;
   for (int i = 0; i < 3; ++i) {
     rays.z[i] = J(z_ep);
-    rays.l[i] = zero;
-    rays.m[i] = J(sin_theta);
-    rays.n[i] = J(cos_theta);
+    field_ray_direction(sys.object_distance_mm, std::sin(theta), std::cos(theta),
+                        sys.field_object_y_mm[h], rays.x[i], rays.y[i], rays.z[i], rays.l[i],
+                        rays.m[i], rays.n[i]);
   }
   trace_bundle(lens_a, w, lens_a.stop + 1, false, rays, static_cast<RayRecord<J>*>(nullptr));
   stop_coord[0] = rays.y[0].a;
@@ -140,74 +178,188 @@ std::array<T, 3> aimed_stop_coordinates(const TraceSystem<T>& sys, int h, int w)
       convert_trace_lens<J>(sys.lens, {}, 0, 0, [](double v, int) { return K<J>(v); });
   const double theta = sys.fields_deg[h] * kPi / 180.0;
   T coord[3], deriv[3];
-  detail::trace_aiming_rays<T>(lens_a, w, K<T>(sin(theta)), K<T>(cos(theta)),
-                               sys.epd_mm / K<T>(2.0), sys.entrance_pupil_z_mm, sys.pupil_map(h, w),
-                               coord, deriv);
+  (void)theta;
+  detail::trace_aiming_rays<T>(lens_a, w, sys, h, sys.epd_mm / K<T>(2.0), sys.entrance_pupil_z_mm,
+                               sys.pupil_map(h, w), coord, deriv);
   return {coord[0], coord[1], coord[2]};
 }
 
-// Prepares a lens for tracing. `focal_length_mm` is the spec focal length (used when scaling),
-// `f_number` the spec f-number, fields from 0 to `half_field_deg`.
+// What prepare_system sets up: the paper's mode (scale to a focal length, EPD = EFL / N,
+// fields 0..hfov) or a lens's own system data (SpecMode::kAsWritten, see lens.h).
+struct SystemSetup {
+  bool scale = true;  // scale the prescription to focal_length_mm
+  double focal_length_mm = 0.0;
+  ApertureType aperture_type = ApertureType::kFNumber;
+  double f_number = 2.0;               // kFNumber
+  double aperture_value = 0.0;         // EPD (mm) or object NA
+  double stop_semi_diameter_mm = 0.0;  // kFloatByStop
+  double object_distance_mm = std::numeric_limits<double>::infinity();
+  FieldType field_type = FieldType::kAngle;
+  std::vector<double> field_values;  // deg or mm, as the type says
+  std::vector<double> field_weights;
+  std::vector<VignettingFactors> vignetting;  // per field, or empty
+};
+
+// The paper's setup: scale to f, EPD = f / N, `field_count` angles from 0 to hfov.
+SystemSetup paper_setup(double focal_length_mm, double f_number, double half_field_deg,
+                        int field_count);
+// The setup of a lens's specs: the paper's in SpecMode::kPaper, else the written system data
+// (fields as written, sorted by value; without written fields 0 and half_field_deg sampled as
+// the paper does). `scale_to_spec` = false turns the paper's scaling off.
+SystemSetup lens_setup(const Lens& lens, const TraceOptions& options);
+
+// Prepares a lens for tracing with a setup (see SystemSetup).
 template <typename T>
-TraceSystem<T> prepare_system(const TraceLens<T>& lens_in, double focal_length_mm,
-                              double f_number, double half_field_deg,
+TraceSystem<T> prepare_system(const TraceLens<T>& lens_in, const SystemSetup& setup,
                               const TraceOptions& options) {
+  using std::atan;
   using std::cos;
   using std::sin;
+  using std::tan;
   TraceSystem<T> sys;
   sys.lens = lens_in;
-  const int reference_w = static_cast<int>(lens_in.wavelengths_nm.size()) - 1;  // 587.6 nm
+  const int reference_w = static_cast<int>(lens_in.wavelengths_nm.size()) - 1;  // primary
   const double reference_nm = lens_in.wavelengths_nm[reference_w];
   ParaxialData<T> par = paraxial_data(sys.lens, reference_nm);
-  sys.scale = options.scale_to_spec ? K<T>(focal_length_mm) / par.efl_mm : K<T>(1.0);
-  if (options.scale_to_spec) {
+  sys.scale = setup.scale ? K<T>(setup.focal_length_mm) / par.efl_mm : K<T>(1.0);
+  if (setup.scale) {
     for (int k = 0; k < sys.lens.surface_count(); ++k) {
       sys.lens.curvature_per_mm[k] = sys.lens.curvature_per_mm[k] / sys.scale;
       sys.lens.thickness_mm[k] = sys.lens.thickness_mm[k] * sys.scale;
     }
+    for (double& r : sys.lens.semi_diameter_mm) r *= value_of(sys.scale);
     par = paraxial_data(sys.lens, reference_nm);
   }
   sys.efl_mm = par.efl_mm;
   sys.bfl_mm = par.bfl_mm;
   sys.entrance_pupil_z_mm = par.entrance_pupil_z_mm;
-  sys.epd_mm = par.efl_mm / K<T>(f_number);
+  sys.object_distance_mm = setup.object_distance_mm;
+  const double z_ep = value_of(par.entrance_pupil_z_mm);
+  switch (setup.aperture_type) {
+    case ApertureType::kFNumber:
+      sys.epd_mm = par.efl_mm / K<T>(setup.f_number);
+      break;
+    case ApertureType::kEntrancePupilDiameter:
+      sys.epd_mm = K<T>(setup.aperture_value);
+      break;
+    case ApertureType::kObjectNA: {
+      const double u = std::asin(setup.aperture_value);
+      sys.epd_mm =
+          K<T>(2.0 * std::tan(u)) * (par.entrance_pupil_z_mm + K<T>(setup.object_distance_mm));
+      break;
+    }
+    case ApertureType::kFloatByStop:
+      sys.epd_mm =
+          K<T>(2.0 * setup.stop_semi_diameter_mm * value_of(sys.scale)) / par.stop_magnification;
+      break;
+  }
+  using std::abs;
+  if (value_of(sys.epd_mm) < 0.0) sys.epd_mm = -sys.epd_mm;
   const T r_ep = sys.epd_mm / K<T>(2.0);
   sys.wavelength_count = reference_w;
-  sys.fields_deg = field_angles_deg(half_field_deg, options.fields);
   sys.pupil = paper_pupil_samples(options.rings);
 
-  // Stop radius from the real on-axis marginal ray at the reference wavelength.
+  // Fields: every written value as the chief-ray angle in object space (and, for a finite
+  // object, the object point). Heights on the image are solved for: paraxially (linear in
+  // tan(theta)), or on the real chief ray through the pupil centre (secant iterations).
+  const int field_count = static_cast<int>(setup.field_values.size());
+  sys.field_values = setup.field_values;
+  sys.field_type = setup.field_type;
+  sys.field_weights = setup.field_weights;
+  sys.vignetting = setup.vignetting;
+  if (sys.field_weights.size() != setup.field_values.size())
+    sys.field_weights.assign(setup.field_values.size(), 1.0);
+  if (sys.vignetting.size() != setup.field_values.size())
+    sys.vignetting.assign(setup.field_values.size(), VignettingFactors{});
+  const double d_obj = setup.object_distance_mm;
+  const bool finite = std::isfinite(d_obj);
+  const double paraxial_per_tan =
+      value_of(paraxial_image_height(sys.lens, par.entrance_pupil_z_mm, K<T>(1.0), reference_nm));
+  // Real chief-ray image height at tan(theta) (finite or not), reference wavelength.
+  auto real_height = [&](double tan_theta) {
+    RayBundle<T> chief;
+    chief.resize(1);
+    const double theta = std::atan(tan_theta);
+    chief.x[0] = K<T>(0.0);
+    chief.y[0] = K<T>(0.0);
+    chief.z[0] = par.entrance_pupil_z_mm;
+    chief.l[0] = K<T>(0.0);
+    chief.m[0] = K<T>(std::sin(theta));
+    chief.n[0] = K<T>(std::cos(theta));
+    trace_bundle(sys.lens, reference_w, sys.lens.surface_count(), true, chief,
+                 static_cast<RayRecord<T>*>(nullptr));
+    return chief.status[0] == kRayOk ? value_of(chief.y[0]) : std::nan("");
+  };
+  sys.fields_deg.assign(field_count, 0.0);
+  sys.field_object_y_mm.assign(field_count, 0.0);
+  for (int h = 0; h < field_count; ++h) {
+    const double v = setup.field_values[h];
+    double tan_theta = 0.0;
+    switch (setup.field_type) {
+      case FieldType::kAngle:
+        tan_theta = std::tan(v * kPi / 180.0);
+        break;
+      case FieldType::kObjectHeight:
+        tan_theta = finite ? v / (d_obj + z_ep) : 0.0;
+        break;
+      case FieldType::kParaxialImageHeight:
+        tan_theta = paraxial_per_tan != 0.0 ? v / paraxial_per_tan : 0.0;
+        break;
+      case FieldType::kRealImageHeight: {
+        tan_theta = paraxial_per_tan != 0.0 ? v / paraxial_per_tan : 0.0;
+        if (v == 0.0) break;
+        double t0 = 0.0, y0 = 0.0, t1 = tan_theta, y1 = real_height(t1);
+        for (int it = 0; it < 40 && std::isfinite(y1) && std::abs(y1 - v) > 1e-13 * std::abs(v);
+             ++it) {
+          const double t2 = t1 + (v - y1) * (t1 - t0) / (y1 - y0);
+          t0 = t1;
+          y0 = y1;
+          t1 = t2;
+          y1 = real_height(t1);
+        }
+        tan_theta = t1;
+        break;
+      }
+    }
+    // An angle field keeps its written value exactly.
+    sys.fields_deg[h] =
+        setup.field_type == FieldType::kAngle ? v : std::atan(tan_theta) * 180.0 / kPi;
+    sys.field_object_y_mm[h] = finite ? -(d_obj + z_ep) * tan_theta : 0.0;
+  }
+
+  // Stop radius: the stop's semi-diameter (float by stop size), else the height at the stop of
+  // the real on-axis marginal ray at the reference wavelength.
   {
     RayBundle<T> marginal;
     marginal.resize(1);
     marginal.x[0] = K<T>(0.0);
     marginal.y[0] = r_ep;
     marginal.z[0] = sys.entrance_pupil_z_mm;
-    marginal.l[0] = K<T>(0.0);
-    marginal.m[0] = K<T>(0.0);
-    marginal.n[0] = K<T>(1.0);
+    detail::field_ray_direction(d_obj, 0.0, 1.0, 0.0, marginal.x[0], marginal.y[0], marginal.z[0],
+                                marginal.l[0], marginal.m[0], marginal.n[0]);
     trace_bundle(sys.lens, reference_w, sys.lens.stop + 1, false, marginal,
                  static_cast<RayRecord<T>*>(nullptr));
     sys.stop_radius_mm = marginal.y[0];
+    if (setup.aperture_type == ApertureType::kFloatByStop)
+      sys.stop_radius_mm = K<T>(setup.stop_semi_diameter_mm * value_of(sys.scale));
   }
 
-  const int field_count = static_cast<int>(sys.fields_deg.size());
   const int wl = sys.wavelength_count + 1;  // aim the reference wavelength too
   const PupilMap<T> identity{K<T>(1.0), K<T>(0.0), K<T>(1.0)};
   sys.pupil_maps.assign(static_cast<std::size_t>(field_count) * wl, identity);
   if (!options.ray_aiming) return sys;
 
   using J = ceres::Jet<T, 1>;
-  const TraceLens<J> lens_a = convert_trace_lens<J>(
-      sys.lens, {}, 0, 0, [](double v, int) { return K<J>(v); });
+  const TraceLens<J> lens_a =
+      convert_trace_lens<J>(sys.lens, {}, 0, 0, [](double v, int) { return K<J>(v); });
   const T r_s = sys.stop_radius_mm;
   for (int h = 0; h < field_count; ++h) {
-    const double theta = sys.fields_deg[h] * kPi / 180.0;
-    if (h == 0) continue;  // on axis the pupil is not aberrated by definition of R_s
+    // On axis the pupil is not aberrated by the definition of R_s (unless R_s is given).
+    if (sys.fields_deg[h] == 0.0 && setup.aperture_type != ApertureType::kFloatByStop) continue;
     for (int w = 0; w < wl; ++w) {
       T coord[3], deriv[3];
-      detail::trace_aiming_rays<T>(lens_a, w, K<T>(sin(theta)), K<T>(cos(theta)), r_ep,
-                                   sys.entrance_pupil_z_mm, identity, coord, deriv);
+      detail::trace_aiming_rays<T>(lens_a, w, sys, h, r_ep, sys.entrance_pupil_z_mm, identity,
+                                   coord, deriv);
       const T top = K<T>(1.0) + (r_s - coord[0]) / deriv[0];
       const T bottom = K<T>(-1.0) + (-r_s - coord[1]) / deriv[1];
       const T side = K<T>(1.0) + (r_s - coord[2]) / deriv[2];
@@ -220,32 +372,41 @@ TraceSystem<T> prepare_system(const TraceLens<T>& lens_in, double focal_length_m
   return sys;
 }
 
+// The paper's prepare_system: `focal_length_mm` is the spec focal length (used when scaling),
+// `f_number` the spec f-number, options.fields angles from 0 to `half_field_deg`.
+template <typename T>
+TraceSystem<T> prepare_system(const TraceLens<T>& lens_in, double focal_length_mm, double f_number,
+                              double half_field_deg, const TraceOptions& options) {
+  SystemSetup setup = paper_setup(focal_length_mm, f_number, half_field_deg, options.fields);
+  setup.scale = options.scale_to_spec;
+  return prepare_system(lens_in, setup, options);
+}
+
 // Fills `rays` with rays of field h and wavelength w at the entrance pupil, for normalized pupil
-// samples `pupil` (default: the system's half-pupil pattern) under the aimed pupil map.
+// samples `pupil` (default: the system's half-pupil pattern) under the field's vignetting factors
+// (px' = (1 - VCX) px, py' = VDY + (1 - VCY) py) and then the aimed pupil map.
 template <typename T>
 void start_rays(const TraceSystem<T>& sys, int h, int w, RayBundle<T>& rays,
                 const PupilSamples* samples = nullptr) {
-  using std::cos;
-  using std::sin;
   const PupilSamples& pupil = samples ? *samples : sys.pupil;
   const std::size_t count = pupil.size();
   rays.resize(count);
   const PupilMap<T>& map = sys.pupil_map(h, w);
   const double theta = sys.fields_deg[h] * kPi / 180.0;
+  const double sin_t = std::sin(theta), cos_t = std::cos(theta);
+  const VignettingFactors v =
+      h < static_cast<int>(sys.vignetting.size()) ? sys.vignetting[h] : VignettingFactors{};
   const T r_ep = sys.epd_mm / K<T>(2.0);
-  const T sx = r_ep * map.scale_x;
-  const T sy = r_ep * map.scale_y;
-  const T oy = r_ep * map.offset_y;
-  const T m0 = K<T>(sin(theta));
-  const T n0 = K<T>(cos(theta));
-  const T l0 = K<T>(0.0);
+  const T sx = r_ep * map.scale_x * K<T>(1.0 - v.vcx);
+  const T sy = r_ep * map.scale_y * K<T>(1.0 - v.vcy);
+  const T oy = r_ep * (map.offset_y + map.scale_y * K<T>(v.vdy));
+  const double object_y = sys.field_object_y_mm.empty() ? 0.0 : sys.field_object_y_mm[h];
   for (std::size_t i = 0; i < count; ++i) {
     rays.x[i] = sx * K<T>(pupil.x[i]);
     rays.y[i] = oy + sy * K<T>(pupil.y[i]);
     rays.z[i] = sys.entrance_pupil_z_mm;
-    rays.l[i] = l0;
-    rays.m[i] = m0;
-    rays.n[i] = n0;
+    detail::field_ray_direction(sys.object_distance_mm, sin_t, cos_t, object_y, rays.x[i],
+                                rays.y[i], rays.z[i], rays.l[i], rays.m[i], rays.n[i]);
   }
 }
 
@@ -253,12 +414,17 @@ void start_rays(const TraceSystem<T>& sys, int h, int w, RayBundle<T>& rays,
 
 namespace lensopt {
 
-// prepare_system with the specs of a lens (focal length, f-number, half field).
+// The setup of specs alone (no stop semi-diameter: kFloatByStop needs lens_setup).
+SystemSetup specs_setup(const Specs& specs, const TraceOptions& options);
+
+// prepare_system with the specs of a lens (its spec mode, see lens.h).
 template <typename T>
 TraceSystem<T> prepare_system(const TraceLens<T>& lens, const Specs& specs,
                               const TraceOptions& options) {
-  return prepare_system(lens, specs.focal_length_mm(), specs.f_number, specs.half_field_deg,
-                        options);
+  return prepare_system(lens, specs_setup(specs, options), options);
 }
+
+// The one way from a Lens to a traced system: make_trace_lens and its spec mode.
+TraceSystem<double> prepare_lens_system(const Lens& lens, const TraceOptions& options);
 
 }  // namespace lensopt
