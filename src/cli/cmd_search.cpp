@@ -110,11 +110,19 @@ void run_search_command(const SearchCommand& cmd) {
   if (cmd.max_rounds > 0) options.optimize.max_rounds = cmd.max_rounds;
   if (cmd.no_soft_start) options.optimize.soft_start = false;
   if (cmd.neighbours >= 0) options.optimize.glass_neighbours = cmd.neighbours;
-  if (!std::isnan(cmd.f_number)) options.f_number = cmd.f_number;
-  if (!std::isnan(cmd.half_field_deg)) options.half_field_deg = cmd.half_field_deg;
-  if (!std::isnan(cmd.focal_length_mm))
+  if (!std::isnan(cmd.f_number)) {
+    options.f_number = cmd.f_number;
+    options.f_number_given = true;
+  }
+  if (!std::isnan(cmd.half_field_deg)) {
+    options.half_field_deg = cmd.half_field_deg;
+    options.half_field_given = true;
+  }
+  if (!std::isnan(cmd.focal_length_mm)) {
     options.sensor_diagonal_mm =
         2.0 * cmd.focal_length_mm * std::tan(options.half_field_deg * M_PI / 180.0);
+    options.sensor_diagonal_given = true;
+  }
   options.progress = !cmd.quiet;
   options.validate();
 
@@ -213,8 +221,10 @@ void setup_search(CLI::App& app) {
       "strict constraints: skip the optimizer's first phase on the paper's soft penalties");
   sub->add_option("--neighbours", cmd->neighbours,
                   "catalog glasses tried per element (neighbours)");
-  sub->add_option("--f-number", cmd->f_number, "f-number of every candidate (default 2)");
-  sub->add_option("--half-field-deg", cmd->half_field_deg, "half field of view (default 25)");
+  sub->add_option("--f-number", cmd->f_number,
+                  "f-number of every candidate (default: a lens file's own; generated starts 2)");
+  sub->add_option("--half-field-deg", cmd->half_field_deg,
+                  "half field of view (default: a lens file's own; generated starts 25)");
   sub->add_option("--focal-length-mm", cmd->focal_length_mm,
                   "focal length (default 17.156: 16 mm diagonal)");
   sub->add_flag("--list", cmd->list, "print the candidate list (index, shard, id) and exit");
