@@ -56,7 +56,8 @@ void setup_export(CLI::App& app) {
   sub->add_option("--image-size", cmd->image_size, "WIDTHxHEIGHT of the image (default 1280x720)");
   sub->add_option("--res-factor", cmd->res_factor, "simulated resolution factor: 1 or 2")
       ->check(CLI::IsMember({1, 2}));
-  sub->add_option("--jobs,-j", cmd->jobs, "threads (0: all cores)")->check(CLI::Range(0, 1024));
+  sub->add_option("--threads,--jobs,-j", cmd->jobs, "threads (0: all cores; --jobs: old name)")
+      ->check(CLI::Range(0, 1024));
   sub->callback([cmd] { run_export(*cmd); });
 }
 

@@ -1,6 +1,7 @@
 // lensopt optimize LENS -o OUT.toml: baseline spot-size optimization (Ceres Levenberg-Marquardt).
 #include <fmt/core.h>
 #include <toml++/toml.h>
+#include <unistd.h>
 
 #include <atomic>
 #include <csignal>
@@ -35,6 +36,7 @@ struct OptimizeCommand {
   bool joint = false;
   std::string glass_search;
   std::string constraints;
+  std::string bounds = "auto";
   std::vector<std::string> freeze;
   // Command-line overrides (NaN / -1: not given).
   int rings = -1, fields = -1, max_iterations = -1, neighbours = -1, threads = -1;
@@ -89,9 +91,45 @@ nlohmann::json constraints_json(const ConstraintReport& c) {
   return {{"rows", rows}, {"ray_failures", c.ray_failures}, {"all_pass", c.all_pass()}};
 }
 
+// The output path, checked before any work: given, .toml, not the input (unless --in-place), in
+// a folder that exists and is writable.
+std::filesystem::path checked_output_path(const OptimizeCommand& cmd) {
+  std::filesystem::path out_path = cmd.output_path;
+  if (cmd.in_place) out_path = cmd.lens_path;
+  if (out_path.empty()) throw Error("give -o OUT.toml (or --in-place to overwrite the input)");
+  if (!cmd.in_place && std::filesystem::exists(out_path) &&
+      std::filesystem::equivalent(out_path, cmd.lens_path))
+    throw Error(SourceLocation{out_path.string()},
+                "refusing to overwrite the input lens; use --in-place to do that");
+  if (out_path.extension() != ".toml")
+    throw Error(SourceLocation{out_path.string()}, "the optimized lens is written as .toml");
+  const std::filesystem::path folder =
+      out_path.has_parent_path() ? out_path.parent_path() : std::filesystem::path(".");
+  std::error_code ec;
+  if (!std::filesystem::is_directory(folder, ec))
+    throw Error(SourceLocation{out_path.string()},
+                fmt::format("the output folder {} does not exist", folder.string()));
+  if (::access(folder.c_str(), W_OK) != 0)
+    throw Error(SourceLocation{out_path.string()},
+                fmt::format("the output folder {} is not writable", folder.string()));
+  return out_path;
+}
+
+BoundsMode parse_bounds(const std::string& name) {
+  if (name == "paper") return BoundsMode::kPaper;
+  if (name == "lens") return BoundsMode::kLens;
+  return BoundsMode::kAuto;
+}
+
 void run_optimize(const OptimizeCommand& cmd) {
+  const std::filesystem::path out_path = checked_output_path(cmd);
   const Lens lens = read_lens(cmd.lens_path);
   OptimizeOptions options;
+  // Bounds first (the paper's for the paper's lenses, else from the lens itself), then the lens
+  // file's [optimize] table and the command line override single values.
+  options.loss = bounds_for(lens, options.loss, parse_bounds(cmd.bounds));
+  const bool paper_bounds = parse_bounds(cmd.bounds) == BoundsMode::kPaper ||
+                            (parse_bounds(cmd.bounds) == BoundsMode::kAuto && is_paper_lens(lens));
   apply_optimize_table(lens, options);
   if (!cmd.constraints.empty()) options.loss.paper_penalties = cmd.constraints == "paper";
   if (!cmd.glass_search.empty())
@@ -117,16 +155,13 @@ void run_optimize(const OptimizeCommand& cmd) {
   options.verbose = !cmd.quiet;
   options.interrupt = &g_interrupted;
   options.validate();
-
-  std::filesystem::path out_path = cmd.output_path;
-  if (cmd.in_place) out_path = cmd.lens_path;
-  if (out_path.empty()) throw Error("give -o OUT.toml (or --in-place to overwrite the input)");
-  if (!cmd.in_place && std::filesystem::exists(out_path) &&
-      std::filesystem::equivalent(out_path, cmd.lens_path))
-    throw Error(SourceLocation{out_path.string()},
-                "refusing to overwrite the input lens; use --in-place to do that");
-  if (out_path.extension() != ".toml")
-    throw Error(SourceLocation{out_path.string()}, "the optimized lens is written as .toml");
+  if (!cmd.quiet && !cmd.json)
+    fmt::print(stderr,
+               "lensopt optimize: {} bounds: air >= {:.4g} mm, glass {:.4g}..{:.4g} mm, image "
+               "clearance >= {:.4g} mm, ray angle <= {:.4g} deg\n",
+               paper_bounds ? "the paper's" : "lens-derived", options.loss.min_air_mm,
+               options.loss.min_glass_mm, options.loss.max_glass_mm,
+               options.loss.min_image_clearance_mm, options.loss.max_ray_angle_deg);
 
   g_interrupted.store(false);
   auto previous = std::signal(SIGINT, on_sigint);
@@ -154,6 +189,12 @@ void run_optimize(const OptimizeCommand& cmd) {
     j["termination"] = result.termination;
     j["interrupted"] = result.interrupted;
     j["kept_start"] = result.kept_start;
+    j["bounds"] = {{"mode", paper_bounds ? "paper" : "lens"},
+                   {"min_air_mm", options.loss.min_air_mm},
+                   {"min_glass_mm", options.loss.min_glass_mm},
+                   {"max_glass_mm", options.loss.max_glass_mm},
+                   {"min_image_clearance_mm", options.loss.min_image_clearance_mm},
+                   {"max_ray_angle_deg", options.loss.max_ray_angle_deg}};
     j["log"] = result.log;
     j["sampling"] = {{"rings", options.sampling.rings}, {"fields", options.sampling.fields}};
     fmt::print("{}\n", j.dump(2));
@@ -248,6 +289,10 @@ void setup_optimize(CLI::App& app) {
                   "none (default: keep the start's glasses) | snap | neighbours")
       ->check(CLI::IsMember({"none", "snap", "neighbours", "neighbors"}));
   sub->add_option("--neighbours", cmd->neighbours, "catalog glasses tried per element");
+  sub->add_option("--bounds", cmd->bounds,
+                  "auto (default: the paper's bounds for the paper's lenses, else derived from "
+                  "the lens: its focal length and start values) | lens | paper")
+      ->check(CLI::IsMember({"auto", "lens", "paper"}));
   sub->add_option("--constraints", cmd->constraints,
                   "strict (default: every bound held) or paper (the paper's soft penalties)")
       ->check(CLI::IsMember({"strict", "paper"}));
@@ -264,12 +309,12 @@ void setup_optimize(CLI::App& app) {
   sub->add_option("--weight-ray-path", cmd->weight_ray_path, "lambda_RP (default 100)");
   sub->add_option("--weight-ray-angle", cmd->weight_ray_angle, "lambda_RA (default 100)");
   sub->add_option("--weight-glass", cmd->weight_glass, "lambda_GV (default 0.01)");
-  sub->add_option("--min-air-mm", cmd->min_air_mm, "smallest air gap (default 0.01)");
-  sub->add_option("--min-glass-mm", cmd->min_glass_mm, "thinnest glass (default 1)");
-  sub->add_option("--max-glass-mm", cmd->max_glass_mm, "thickest glass (default 3)");
+  sub->add_option("--min-air-mm", cmd->min_air_mm, "smallest air gap (paper: 0.01)");
+  sub->add_option("--min-glass-mm", cmd->min_glass_mm, "thinnest glass (paper: 1)");
+  sub->add_option("--max-glass-mm", cmd->max_glass_mm, "thickest glass (paper: 3)");
   sub->add_option("--min-image-clearance-mm", cmd->min_image_clearance_mm,
-                  "image clearance (default 12)");
-  sub->add_option("--max-ray-angle-deg", cmd->max_ray_angle_deg, "largest ray angle (default 60)");
+                  "image clearance (paper: 12)");
+  sub->add_option("--max-ray-angle-deg", cmd->max_ray_angle_deg, "largest ray angle (paper: 60)");
   sub->add_flag("--compare-adam", cmd->compare_adam,
                 "also report loss evaluations of LM vs a plain Adam loop on the same loss");
   sub->add_option("--adam-steps", cmd->adam_steps,

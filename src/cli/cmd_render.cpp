@@ -188,8 +188,10 @@ void setup_render(CLI::App& app) {
                   "image is a quadrant of a sensor twice as large)")
       ->check(CLI::IsMember({1, 2}));
   sub->add_flag("--no-distortion", cmd->no_distortion, "do not apply the distortion warp");
-  sub->add_flag("--no-ri", cmd->no_ri, "do not apply relative illumination");
-  sub->add_option("--jobs,-j", cmd->jobs, "threads in all (0: all cores)")
+  sub->add_flag("--no-relative-illumination,--no-ri", cmd->no_ri,
+                "do not apply relative illumination (--no-ri: old name)");
+  sub->add_option("--threads,--jobs,-j", cmd->jobs,
+                  "threads in all (0: all cores; --jobs: old name)")
       ->check(CLI::Range(0, 1024));
   sub->add_flag("--force", cmd->force, "render images whose output already exists");
   sub->add_flag("--quiet,-q", cmd->quiet, "no progress bar");

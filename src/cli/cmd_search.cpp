@@ -110,14 +110,19 @@ void run_search_command(const SearchCommand& cmd) {
   if (cmd.max_rounds > 0) options.optimize.max_rounds = cmd.max_rounds;
   if (cmd.no_soft_start) options.optimize.soft_start = false;
   if (cmd.neighbours >= 0) options.optimize.glass_neighbours = cmd.neighbours;
-  if (!std::isnan(cmd.f_number) || !std::isnan(cmd.half_field_deg) ||
-      !std::isnan(cmd.focal_length_mm))
-    options.specs_given = true;
-  if (!std::isnan(cmd.f_number)) options.f_number = cmd.f_number;
-  if (!std::isnan(cmd.half_field_deg)) options.half_field_deg = cmd.half_field_deg;
-  if (!std::isnan(cmd.focal_length_mm))
+  if (!std::isnan(cmd.f_number)) {
+    options.f_number = cmd.f_number;
+    options.f_number_given = true;
+  }
+  if (!std::isnan(cmd.half_field_deg)) {
+    options.half_field_deg = cmd.half_field_deg;
+    options.half_field_given = true;
+  }
+  if (!std::isnan(cmd.focal_length_mm)) {
     options.sensor_diagonal_mm =
         2.0 * cmd.focal_length_mm * std::tan(options.half_field_deg * M_PI / 180.0);
+    options.sensor_diagonal_given = true;
+  }
   options.progress = !cmd.quiet;
   options.validate();
 
@@ -217,7 +222,7 @@ void setup_search(CLI::App& app) {
   sub->add_option("--neighbours", cmd->neighbours,
                   "catalog glasses tried per element (neighbours)");
   sub->add_option("--f-number", cmd->f_number,
-                  "f-number of every candidate (default: a lens file's own; generated starts f/2)");
+                  "f-number of every candidate (default: a lens file's own; generated starts 2)");
   sub->add_option("--half-field-deg", cmd->half_field_deg,
                   "half field of view (default: a lens file's own; generated starts 25)");
   sub->add_option("--focal-length-mm", cmd->focal_length_mm,

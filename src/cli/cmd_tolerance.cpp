@@ -121,7 +121,8 @@ void setup_tolerance(CLI::App& app) {
   cmd->trials_opt = sub->add_option("--trials", cmd->trials, "Monte-Carlo trials (default 10000)")
                         ->check(CLI::Range(1, 100000000));
   cmd->seed_opt = sub->add_option("--seed", cmd->seed, "random seed (default 1)");
-  sub->add_option("--jobs", cmd->jobs, "threads over trials (0: all cores)")
+  sub->add_option("--threads,--jobs", cmd->jobs,
+                  "threads over trials (0: all cores; --jobs: old name)")
       ->check(CLI::Range(0, 1024));
   sub->add_option("--csv", cmd->csv_path, "per-trial CSV file (written atomically)");
   sub->add_flag("--json", cmd->json, "everything as one JSON object on stdout");
@@ -157,7 +158,7 @@ void setup_tolerance(CLI::App& app) {
                   "rows of the sensitivity table in the text summary")
       ->check(CLI::Range(0, 100000));
   sub->add_flag("--no-sensitivity", cmd->no_sensitivity, "skip the sensitivity table");
-  sub->add_flag("--quiet", cmd->quiet, "no progress on stderr");
+  sub->add_flag("-q,--quiet", cmd->quiet, "no progress on stderr");
   sub->callback([cmd] { run_tolerance_command(*cmd); });
 }
 

@@ -44,6 +44,15 @@ std::string upper(std::string_view text) {
   return out;
 }
 
+// A decimal field, or nothing when it is not one.
+std::optional<double> parse_double(std::string_view text) {
+  double value = 0.0;
+  const auto [end, ec] = std::from_chars(text.data(), text.data() + text.size(), value);
+  if (ec != std::errc() || end != text.data() + text.size() || !std::isfinite(value))
+    return std::nullopt;
+  return value;
+}
+
 bool is_blank(char ch) {
   return ch == ' ' || ch == '\t' || ch == '\r' || ch == '\f' || ch == '\v';
 }
@@ -307,6 +316,16 @@ bool ZmxParser::surface_line(const Line& line, const std::string& key) {
       s.glass = name;
     } else if (upper(name) != "AIR") {
       s.glass = name;
+      // "GLAS name 0 0 nd vd ...": the index data OpticStudio saved with a catalog glass, used
+      // only to suggest the nearest glasses when the name is in none of the catalogs.
+      if (line.fields.size() > 5) {
+        const auto nd = parse_double(line.fields[4]);
+        const auto vd = parse_double(line.fields[5]);
+        if (nd && vd && *nd > 1.0 && *vd > 0.0) {
+          s.model_nd = *nd;
+          s.model_vd = *vd;
+        }
+      }
     }
     return true;
   }
@@ -587,23 +606,46 @@ Material ZmxParser::resolve_glass(const RawSurface& raw, std::vector<CatalogEntr
     return Material::from_catalog(*glass);
   }
   std::vector<std::string> searched;
-  std::vector<std::string> closest;
+  // Nearest glasses over all catalogs searched: by name (edit distance) and, when the GLAS line
+  // carries the glass's nd and vd, on the glass map.
+  std::vector<std::pair<std::size_t, std::string>> by_name;  // (rank in its catalog, name)
+  std::vector<std::pair<double, std::string>> by_index;      // (map distance, "NAME (nd, vd)")
   for (const CatalogEntry& entry : catalogs) {
     if (entry.catalog) {
       searched.push_back(fmt::format("{} ({})", entry.requested, entry.catalog->path));
-      for (const std::string& name : entry.catalog->closest_names(raw.glass, 3))
-        if (closest.size() < 3) closest.push_back(name);
+      const auto names = entry.catalog->closest_names(raw.glass, 3);
+      for (std::size_t k = 0; k < names.size(); ++k) by_name.emplace_back(k, names[k]);
+      if (raw.model_nd > 0.0)
+        for (const Glass* g : entry.catalog->closest_by_index(raw.model_nd, raw.model_vd, 3)) {
+          const double dn = 100.0 * (g->nd - raw.model_nd);
+          const double dv = g->vd - raw.model_vd;
+          by_index.emplace_back(
+              std::sqrt(dn * dn + dv * dv),
+              fmt::format("{} {} ({}, {})", entry.catalog->name, g->name, g->nd, g->vd));
+        }
     } else {
       searched.push_back(fmt::format("{} ({})", entry.requested, entry.failure));
     }
   }
-  fail_at(raw.glas_line, raw.glas_column,
-          fmt::format("surface {}: unknown glass '{}': not in the catalogs searched: {}{}",
-                      raw.number, raw.glass,
-                      searched.empty() ? std::string("none (the file has no GCAT line)")
-                                       : fmt::format("{}", fmt::join(searched, "; ")),
-                      closest.empty() ? std::string()
-                                      : fmt::format("; closest: {}", fmt::join(closest, ", "))));
+  std::stable_sort(by_name.begin(), by_name.end(),
+                   [](const auto& a, const auto& b) { return a.first < b.first; });
+  std::stable_sort(by_index.begin(), by_index.end(),
+                   [](const auto& a, const auto& b) { return a.first < b.first; });
+  std::vector<std::string> closest;
+  for (std::size_t k = 0; k < by_name.size() && k < 3; ++k) closest.push_back(by_name[k].second);
+  std::vector<std::string> nearest;
+  for (std::size_t k = 0; k < by_index.size() && k < 3; ++k) nearest.push_back(by_index[k].second);
+  fail_at(
+      raw.glas_line, raw.glas_column,
+      fmt::format("surface {}: unknown glass '{}': not in the catalogs searched: {}{}{}",
+                  raw.number, raw.glass,
+                  searched.empty() ? std::string("none (the file has no GCAT line)")
+                                   : fmt::format("{}", fmt::join(searched, "; ")),
+                  closest.empty() ? std::string()
+                                  : fmt::format("; closest by name: {}", fmt::join(closest, ", ")),
+                  nearest.empty() ? std::string()
+                                  : fmt::format("; nearest to nd = {}, vd = {}: {}", raw.model_nd,
+                                                raw.model_vd, fmt::join(nearest, ", "))));
 }
 
 void ZmxParser::report_ignored() {

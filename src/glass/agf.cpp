@@ -258,7 +258,7 @@ class AgfReader {
 Catalog parse_agf(std::string_view bytes, const std::string& source_name) {
   Catalog catalog;
   catalog.path = source_name;
-  catalog.name = std::filesystem::path(source_name).stem().string();
+  catalog.name = catalog_family_name(std::filesystem::path(source_name).stem().string());
   const std::string text = decode_text(bytes);
   AgfReader reader(source_name, catalog);
   // Lines end in LF, CRLF or a lone CR.

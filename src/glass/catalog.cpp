@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cctype>
+#include <cmath>
 #include <cstdlib>
 #include <map>
 #include <memory>
@@ -63,7 +64,8 @@ std::filesystem::path executable_dir() {
   return exe.parent_path();
 }
 
-// The .agf file in `dir` whose stem equals `stem` (case-insensitive), if any.
+// The .agf file in `dir` whose stem equals `stem` (case-insensitive), if any; else the vendor
+// file of that family (stem "<stem>_<digits>", case-insensitive) with the largest date.
 std::optional<std::filesystem::path> find_in_dir(const std::filesystem::path& dir,
                                                  std::string_view stem) {
   std::error_code ec;
@@ -74,14 +76,22 @@ std::optional<std::filesystem::path> find_in_dir(const std::filesystem::path& di
   }
   std::filesystem::directory_iterator it(dir, ec);
   if (ec) return std::nullopt;
+  std::optional<std::filesystem::path> newest_of_family;
+  std::string newest_stem;
   for (const auto& entry : it) {
     const auto& path = entry.path();
-    if (equals_ignoring_case(path.extension().string(), ".agf") &&
-        equals_ignoring_case(path.stem().string(), stem) && entry.is_regular_file(ec)) {
-      return path;
+    if (!equals_ignoring_case(path.extension().string(), ".agf") || !entry.is_regular_file(ec))
+      continue;
+    const std::string file_stem = path.stem().string();
+    if (equals_ignoring_case(file_stem, stem)) return path;
+    if (file_stem != catalog_family_name(file_stem) &&
+        equals_ignoring_case(catalog_family_name(file_stem), stem) &&
+        (!newest_of_family || to_lower(file_stem) > newest_stem)) {
+      newest_of_family = path;
+      newest_stem = to_lower(file_stem);
     }
   }
-  return std::nullopt;
+  return newest_of_family;
 }
 
 struct CatalogCache {
@@ -144,6 +154,38 @@ std::vector<std::string> Catalog::closest_names(std::string_view glass_name,
   return names;
 }
 
+std::vector<const Glass*> Catalog::closest_by_index(double nd, double vd, std::size_t count) const {
+  std::vector<std::pair<double, std::size_t>> ranked;  // (distance, index in file)
+  for (std::size_t i = 0; i < glasses.size(); ++i) {
+    if (!glasses[i].formula_supported) continue;
+    const double dn = 100.0 * (glasses[i].nd - nd);
+    const double dv = glasses[i].vd - vd;
+    ranked.emplace_back(std::sqrt(dn * dn + dv * dv), i);
+  }
+  std::sort(ranked.begin(), ranked.end());
+  std::vector<const Glass*> out;
+  for (std::size_t k = 0; k < ranked.size() && k < count; ++k)
+    out.push_back(&glasses[ranked[k].second]);
+  return out;
+}
+
+std::string catalog_family_name(std::string_view stem) {
+  // "<family>_<digits>" -> "<family>"; a stem that is all date, or has no such suffix, stays.
+  const std::size_t underscore = stem.rfind('_');
+  if (underscore == std::string_view::npos || underscore == 0 || underscore + 1 == stem.size())
+    return std::string(stem);
+  const std::string_view suffix = stem.substr(underscore + 1);
+  const bool all_digits = std::all_of(suffix.begin(), suffix.end(), [](char ch) {
+    return std::isdigit(static_cast<unsigned char>(ch)) != 0;
+  });
+  return all_digits ? std::string(stem.substr(0, underscore)) : std::string(stem);
+}
+
+const std::vector<std::string>& shipped_catalog_names() {
+  static const std::vector<std::string> names = {"SCHOTT", "OHARA", "HOYA", "CDGM"};
+  return names;
+}
+
 std::vector<std::filesystem::path> catalog_search_path() {
   std::vector<std::filesystem::path> folders;
   const auto add = [&](const std::filesystem::path& folder) {
@@ -179,8 +221,10 @@ std::shared_ptr<const Catalog> load_catalog(std::string_view name_or_path) {
   if (as_path.has_parent_path()) {
     throw Error(SourceLocation{as_path.string()}, "glass catalog file not found");
   }
-  // A name: "ohara" is the built-in ohara65.agf; any other name X is X.agf in the search path.
-  const bool is_ohara = equals_ignoring_case(name_or_path, kOharaAlias);
+  // A name: "ohara" is the built-in ohara65.agf; any other name X is X.agf in the search path
+  // (or X_<date>.agf). Only the lower-case spelling is the alias: "OHARA", as Zemax files name
+  // it, is Ohara's complete catalog.
+  const bool is_ohara = name_or_path == kOharaAlias;
   const std::string stem = is_ohara ? std::filesystem::path(kOharaFile).stem().string()
                                     : std::filesystem::path(as_path).stem().string();
   const auto folders = catalog_search_path();
@@ -189,9 +233,11 @@ std::shared_ptr<const Catalog> load_catalog(std::string_view name_or_path) {
   }
   std::vector<std::string> searched;
   for (const auto& folder : folders) searched.push_back(folder.string());
-  throw Error(fmt::format(
-      "glass catalog '{}' not found: looked for {}.agf in {} (LENSOPT_CATALOG_PATH adds folders)",
-      name_or_path, stem, fmt::join(searched, ", ")));
+  throw Error(
+      fmt::format("glass catalog '{}' not found: looked for {}.agf (or {}_<date>.agf) in {} "
+                  "(LENSOPT_CATALOG_PATH adds folders; shipped: ohara, {})",
+                  name_or_path, stem, stem, fmt::join(searched, ", "),
+                  fmt::join(shipped_catalog_names(), ", ")));
 }
 
 }  // namespace lensopt

@@ -5,8 +5,11 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cctype>
 #include <chrono>
 #include <cmath>
+#include <filesystem>
+#include <limits>
 #include <memory>
 
 #include "lensopt/analysis/analyze.h"
@@ -279,9 +282,49 @@ bool ConstraintReport::all_pass() const {
 
 namespace {
 
+bool is_paper_lens_impl(const Lens& lens);
+
+// The catalog the optimizer picks glasses from: the lens's own; for a lens of model glasses
+// (nd, vd), the paper's for the paper's lenses, else the catalog whose glasses lie nearest to
+// the lens's (the least sum over its glasses of the squared glass-map distance
+// (100 dnd)^2 + dvd^2 to the nearest catalog glass; ties to the first of ohara, SCHOTT, OHARA,
+// HOYA, CDGM), so a start with a vendor's (nd, vd) keeps that vendor's glasses.
+std::string glass_catalog_for(const Lens& lens) {
+  if (!lens.catalog_name.empty()) return lens.catalog_name;
+  if (is_paper_lens_impl(lens)) return "ohara";
+  std::vector<std::string> names = {"ohara"};
+  for (const std::string& n : shipped_catalog_names()) names.push_back(n);
+  std::string best = "ohara";
+  double best_sum = std::numeric_limits<double>::infinity();
+  for (const std::string& name : names) {
+    std::shared_ptr<const Catalog> catalog;
+    try {
+      catalog = load_catalog(name);
+    } catch (const Error&) {
+      continue;
+    }
+    double sum = 0.0;
+    for (const Surface& surface : lens.surfaces) {
+      if (surface.material.is_air()) continue;
+      const auto nearest = catalog->closest_by_index(surface.material.nd, surface.material.vd, 1);
+      if (nearest.empty()) {
+        sum = std::numeric_limits<double>::infinity();
+        break;
+      }
+      const double dn = 100.0 * (nearest[0]->nd - surface.material.nd);
+      const double dv = nearest[0]->vd - surface.material.vd;
+      sum += dn * dn + dv * dv;
+    }
+    if (sum < best_sum) {
+      best_sum = sum;
+      best = name;
+    }
+  }
+  return best;
+}
+
 GlassSpace glass_space_for(const Lens& lens) {
-  const std::string name = lens.catalog_name.empty() ? std::string("ohara") : lens.catalog_name;
-  return GlassSpace(*load_catalog(name));
+  return GlassSpace(*load_catalog(glass_catalog_for(lens)));
 }
 
 }  // namespace
@@ -319,6 +362,66 @@ ConstraintReport check_constraints(const Lens& lens, const DesignLossOptions& lo
   report.rows.push_back({"largest ray angle (deg)", max_angle_deg, loss.max_ray_angle_deg, false,
                          max_angle_deg <= loss.max_ray_angle_deg});
   return report;
+}
+
+bool is_paper_lens(const Lens& lens) {
+  return is_paper_lens_impl(lens);
+}
+
+namespace {
+bool is_paper_lens_impl(const Lens& lens) {
+  std::string extension = std::filesystem::path(lens.source_path).extension().string();
+  for (char& ch : extension) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
+  return extension == ".yml" || extension == ".yaml" || lens.catalog_name == "ohara";
+}
+}  // namespace
+
+DesignLossOptions lens_derived_bounds(const Lens& lens, const DesignLossOptions& paper) {
+  DesignLossOptions out = paper;
+  const double f = std::abs(lens.specs.focal_length_mm());
+  const double s = std::isfinite(f) && f > 0.0 ? f / 50.0 : 1.0;
+  out.min_air_mm = s * paper.min_air_mm;
+  out.min_glass_mm = s * paper.min_glass_mm;
+  out.max_glass_mm = s * paper.max_glass_mm;
+  out.min_image_clearance_mm = s * paper.min_image_clearance_mm;
+  const LensParameterization param(lens, glass_space_for(lens));
+  const std::vector<double> x = param.from_lens(lens);
+  DesignExtremes ext;
+  const DesignLoss<double> l =
+      evaluate_double(param, x, GlassMode::kContinuous, {}, AnalyzeOptions{}.trace, paper, &ext);
+  const int k_count = static_cast<int>(lens.surfaces.size());
+  if (l.failed_rays > 0 || static_cast<int>(ext.min_travel_mm.size()) < k_count) return out;
+  double min_air = std::numeric_limits<double>::infinity(), min_glass = min_air;
+  double max_glass = 0.0;
+  for (int k = 0; k + 1 < k_count; ++k) {
+    if (lens.surfaces[k].material.is_air()) {
+      // A zero-thickness air space (a stop at a vertex) bounds nothing.
+      if (ext.max_travel_mm[k] > 0.0) min_air = std::min(min_air, ext.min_travel_mm[k]);
+    } else {
+      min_glass = std::min(min_glass, ext.min_travel_mm[k]);
+      max_glass = std::max(max_glass, ext.max_travel_mm[k]);
+    }
+  }
+  const double clearance = ext.min_travel_mm[k_count - 1];
+  const double angle_deg =
+      std::acos(std::sqrt(std::clamp(ext.min_cos2_angle, 0.0, 1.0))) * 180.0 / kPi;
+  if (std::isfinite(min_air))
+    out.min_air_mm = std::min(out.min_air_mm, std::max(0.0, 0.5 * min_air));
+  if (std::isfinite(min_glass))
+    out.min_glass_mm = std::min(out.min_glass_mm, std::max(0.0, 0.5 * min_glass));
+  if (max_glass > 0.0) out.max_glass_mm = std::max(out.max_glass_mm, 1.5 * max_glass);
+  if (std::isfinite(clearance))
+    out.min_image_clearance_mm =
+        std::min(out.min_image_clearance_mm, std::max(0.0, 0.75 * clearance));
+  if (std::isfinite(angle_deg))
+    out.max_ray_angle_deg = std::min(85.0, std::max(paper.max_ray_angle_deg, angle_deg + 2.0));
+  return out;
+}
+
+DesignLossOptions bounds_for(const Lens& lens, const DesignLossOptions& paper, BoundsMode mode) {
+  const bool use_paper =
+      mode == BoundsMode::kPaper || (mode == BoundsMode::kAuto && is_paper_lens(lens));
+  return use_paper ? paper : lens_derived_bounds(lens, paper);
 }
 
 double design_spot_mm(const LensParameterization& param, const std::vector<double>& x,
@@ -508,6 +611,9 @@ OptimizeResult optimize_lens(const Lens& start, const OptimizeOptions& options) 
   result.lens = param.to_lens(x.data(), GlassMode::kFixed, fixed);
   result.lens.name = start.name;
   result.lens.source_path = start.source_path;
+  // The glasses are the glass space's catalog glasses: name that catalog, so the lens reads back
+  // (a start with model glasses has none).
+  if (!glass_indices.empty()) result.lens.catalog_name = glass_catalog_for(start);
   const AnalysisReport final_report = analyze_lens(result.lens, full);
   result.final_spot_um =
       final_report.mean_rms_spot_um.value_or(std::numeric_limits<double>::infinity());
@@ -515,19 +621,15 @@ OptimizeResult optimize_lens(const Lens& start, const OptimizeOptions& options) 
     result.final_field_spot_um.push_back(f.rms_spot_um.value_or(0.0));
   result.final_constraints = check_constraints(result.lens, options.loss, full.trace);
   // Never return a worse lens than the start: designs are ordered by (every constraint met at
-  // full sampling, then mean spot at full sampling); a start with catalog glasses that is not
-  // behind the result in this order is returned instead (a feasible start is never traded for
-  // an infeasible result; an infeasible start only for a feasible result or a smaller spot).
-  const bool start_catalog =
-      std::all_of(start.surfaces.begin(), start.surfaces.end(), [](const Surface& s) {
-        return s.material.is_air() || s.material.kind == Material::Kind::kCatalog;
-      });
+  // full sampling, then mean spot at full sampling); a start that is not behind the result in
+  // this order is returned instead (a feasible start is never traded for an infeasible result;
+  // an infeasible start only for a feasible result or a smaller spot), whatever its glasses.
   const bool start_ok = result.start_constraints.all_pass();
   const bool final_ok = result.final_constraints.all_pass();
   const bool start_not_behind =
       (start_ok && !final_ok) ||
       (start_ok == final_ok && !(result.final_spot_um < result.start_spot_um));
-  if (start_catalog && start_not_behind) {
+  if (start_not_behind || !std::isfinite(result.final_spot_um)) {
     result.lens = start;
     result.final_spot_um = result.start_spot_um;
     result.final_field_spot_um = result.start_field_spot_um;

@@ -57,10 +57,13 @@ std::vector<std::filesystem::path> expand_lens_path(const std::string& pattern) 
   return out;
 }
 
-void apply_specs(Lens& lens, const SearchOptions& options) {
-  lens.specs.f_number = options.f_number;
-  lens.specs.half_field_deg = options.half_field_deg;
-  lens.specs.sensor_diagonal_mm = options.sensor_diagonal_mm;
+// The search's specs on a candidate: all of them on a generated start (`own_specs` false), only
+// the explicitly given ones on a start read from a lens file.
+void apply_specs(Lens& lens, const SearchOptions& options, bool own_specs) {
+  if (!own_specs || options.f_number_given) lens.specs.f_number = options.f_number;
+  if (!own_specs || options.half_field_given) lens.specs.half_field_deg = options.half_field_deg;
+  if (!own_specs || options.sensor_diagonal_given)
+    lens.specs.sensor_diagonal_mm = options.sensor_diagonal_mm;
 }
 
 }  // namespace
@@ -225,14 +228,17 @@ void read_search_description(const std::filesystem::path& path, SearchOptions& o
     }
   }
   for_each("specs", [&](const std::string& k, const toml::node& n, const SourceLocation& w) {
-    options.specs_given = true;
-    if (k == "f_number")
+    if (k == "f_number") {
       options.f_number = number(k, n, w);
-    else if (k == "half_field_deg")
+      options.f_number_given = true;
+    } else if (k == "half_field_deg") {
       options.half_field_deg = number(k, n, w);
-    else if (k == "sensor_diagonal_mm")
+      options.half_field_given = true;
+    } else if (k == "sensor_diagonal_mm") {
       options.sensor_diagonal_mm = number(k, n, w);
-    else if (k == "focal_length_mm") {
+      options.sensor_diagonal_given = true;
+    } else if (k == "focal_length_mm") {
+      options.sensor_diagonal_given = true;
       // d = 2 f tan(hfov), with the half field given in this table or the default.
       const double f = number(k, n, w);
       const toml::table* specs = file["specs"].as_table();
@@ -270,8 +276,8 @@ std::vector<SearchCandidate> make_candidates(const SearchOptions& options) {
       if (labels.insert(l).second) return l;
     }
   };
-  auto push = [&](const std::string& source, const std::string& layout, int seed,
-                  const std::function<Lens()>& build, bool own_specs = false) {
+  auto push = [&](const std::string& source, const std::string& layout, int seed, bool own_specs,
+                  const std::function<Lens()>& build) {
     SearchCandidate c;
     c.index = static_cast<int>(out.size());
     c.source = source;
@@ -281,7 +287,7 @@ std::vector<SearchCandidate> make_candidates(const SearchOptions& options) {
     try {
       c.start = build();
       c.start.name = c.id;
-      if (options.specs_given || !own_specs) apply_specs(c.start, options);
+      apply_specs(c.start, options, own_specs);
       c.start.validate();
     } catch (const Error& e) {
       c.error = e.message();
@@ -304,14 +310,10 @@ std::vector<SearchCandidate> make_candidates(const SearchOptions& options) {
         if (!form) {
           // Only the lens as given; seeds and layouts need its elements.
           for (int seed = 0; seed < g.glass_seeds; ++seed) {
-            push(
-                label, "as-given", seed,
-                [&]() -> Lens {
-                  if (seed == 0) return lens;
-                  throw Error("glass seeds need a lens of elements and one stop in air: " +
-                              form_error);
-                },
-                true);
+            push(label, "as-given", seed, true, [&]() -> Lens {
+              if (seed == 0) return lens;
+              throw Error("glass seeds need a lens of elements and one stop in air: " + form_error);
+            });
           }
           continue;
         }
@@ -321,18 +323,15 @@ std::vector<SearchCandidate> make_candidates(const SearchOptions& options) {
         for (const LensLayout& layout :
              layout_variants(form->layout, g.vary_stop, g.vary_cement, g.stops)) {
           for (int seed = 0; seed < g.glass_seeds; ++seed) {
-            push(
-                label, layout.code(), seed,
-                [&]() -> Lens {
-                  if (seed == 0 && layout == form->layout) return lens;
-                  LensForm f = with_layout(*form, layout);
-                  seed_glasses(f, seed, *load_catalog(catalog_name));
-                  Lens l = compose_lens(f, lens);
-                  if (l.catalog_name.empty() && seed > 0) l.catalog_name = catalog_name;
-                  l.surfaces.back().thickness_mm = detail::rebuilt_image_mm(l, defocus_mm);
-                  return l;
-                },
-                true);
+            push(label, layout.code(), seed, true, [&]() -> Lens {
+              if (seed == 0 && layout == form->layout) return lens;
+              LensForm f = with_layout(*form, layout);
+              seed_glasses(f, seed, *load_catalog(catalog_name));
+              Lens l = compose_lens(f, lens);
+              if (l.catalog_name.empty() && seed > 0) l.catalog_name = catalog_name;
+              l.surfaces.back().thickness_mm = detail::rebuilt_image_mm(l, defocus_mm);
+              return l;
+            });
           }
         }
       }
@@ -342,12 +341,12 @@ std::vector<SearchCandidate> make_candidates(const SearchOptions& options) {
       Lens like;
       like.catalog_name = options.catalog;
       like.source_path = label;
-      apply_specs(like, options);
+      apply_specs(like, options, false);
       const double f = like.specs.focal_length_mm();
       for (const LensLayout& layout :
            layout_variants(default_layout(n), g.vary_stop, g.vary_cement, g.stops)) {
         for (int seed = 0; seed < g.glass_seeds; ++seed) {
-          push(label, layout.code(), seed, [&]() -> Lens {
+          push(label, layout.code(), seed, false, [&]() -> Lens {
             const std::shared_ptr<const Catalog> catalog = load_catalog(options.catalog);
             LensForm form = generated_form(layout, *catalog, f);
             seed_glasses(form, seed, *catalog);

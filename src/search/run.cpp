@@ -79,9 +79,15 @@ std::string search_json_text(const std::vector<SearchCandidate>& candidates,
   j["candidates_total"] = candidates.size();
   j["candidates"] = ids;
   j["optimize"] = detail::optimize_settings_json(options.optimize, options.paper_then_strict);
+  // Given specs apply to every candidate; the others are each lens file's own (generated starts:
+  // these values).
   j["specs"] = {{"f_number", options.f_number},
                 {"half_field_deg", options.half_field_deg},
-                {"sensor_diagonal_mm", options.sensor_diagonal_mm}};
+                {"sensor_diagonal_mm", options.sensor_diagonal_mm},
+                {"given",
+                 {{"f_number", options.f_number_given},
+                  {"half_field_deg", options.half_field_given},
+                  {"sensor_diagonal_mm", options.sensor_diagonal_given}}}};
   return j.dump(2) + "\n";
 }
 

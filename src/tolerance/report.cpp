@@ -48,19 +48,20 @@ std::string tolerance_line(const Tolerances& t) {
 std::string format_trials_csv(const ToleranceReport& report) {
   std::string out =
       "trial,valid,mean_spot_um,efl_mm,max_abs_distortion_pct,ray_failures,"
-      "image_distance_mm";
+      "image_distance_mm,elements_intersect,min_edge_gap_mm";
   for (double f : report.fields_deg) out += fmt::format(",spot_um_{:g}deg", f);
   for (const ToleranceParameter& p : report.parameters) out += "," + p.column;
   out += "\n";
   for (const TrialResult& r : report.trials) {
     out += fmt::format("{},{}", r.index, r.valid ? 1 : 0);
     if (r.valid) {
-      out +=
-          fmt::format(",{},{},{},{},{}", exact(r.mean_spot_um), exact(r.efl_mm),
-                      exact(r.max_abs_distortion_pct), r.ray_failures, exact(r.image_distance_mm));
+      out += fmt::format(",{},{},{},{},{},{},{}", exact(r.mean_spot_um), exact(r.efl_mm),
+                         exact(r.max_abs_distortion_pct), r.ray_failures,
+                         exact(r.image_distance_mm), r.collision ? 1 : 0, exact(r.min_edge_gap_mm));
       for (double s : r.rms_spot_um) out += "," + exact(s);
     } else {
-      out += fmt::format(",,,,{},", r.ray_failures);
+      out += fmt::format(",,,,{},,{},{}", r.ray_failures, r.collision ? 1 : 0,
+                         exact(r.min_edge_gap_mm));
       for (std::size_t h = 0; h < r.rms_spot_um.size(); ++h) out += ",";
     }
     for (double d : r.perturbations) out += "," + exact(d);
@@ -111,6 +112,9 @@ std::string format_tolerance_text(const ToleranceReport& r, int sensitivity_rows
   line(fmt::format("  image distance (mm): nominal {:.4f}", r.nominal.image_distance_mm));
   line(fmt::format("  ray failures: nominal {}; {} trials with failures; {} trials untraceable",
                    r.nominal.ray_failures, r.trials_with_failures, r.invalid_trials));
+  line(fmt::format("  intersecting elements (an edge gap below 0): {} trials{}",
+                   r.trials_with_collisions,
+                   r.trials_with_collisions > 0 ? " (failures in the yield)" : ""));
   if (!r.sensitivity.empty()) {
     line("");
     line("  Sensitivity: each tolerance alone at its limits, change in mean RMS spot (um);");
@@ -188,6 +192,7 @@ std::string format_tolerance_json(const ToleranceReport& r) {
   summary["valid_trials"] = r.spot.count;
   summary["invalid_trials"] = r.invalid_trials;
   summary["trials_with_ray_failures"] = r.trials_with_failures;
+  summary["trials_with_intersecting_elements"] = r.trials_with_collisions;
   summary["nominal_um"] = num(r.nominal.mean_spot_um);
   summary["mean_um"] = num(r.spot.mean);
   summary["std_um"] = num(r.spot.std);

@@ -164,14 +164,12 @@ std::vector<ToleranceParameter> tolerance_parameters(const Lens& lens, const Tol
   std::vector<ToleranceParameter> out;
   const int k_count = static_cast<int>(lens.surfaces.size());
   const int stop = lens.stop_index();
-  // Element number (1-based) of the glass after surface k; 0 for air.
+  // Element number (1-based) of the glass after surface k; 0 for air. Each glass is its own
+  // element: the two halves of a cemented pair are elements 1 and 2, not both element 1.
   std::vector<int> element(k_count, 0);
   int e = 0;
-  for (int k = 0; k < k_count; ++k) {
-    if (lens.surfaces[k].material.is_air()) continue;
-    if (k == 0 || lens.surfaces[k - 1].material.is_air()) ++e;
-    element[k] = e;
-  }
+  for (int k = 0; k < k_count; ++k)
+    if (!lens.surfaces[k].material.is_air()) element[k] = ++e;
   for (int k = 0; k < k_count; ++k) {
     const Surface& s = lens.surfaces[k];
     if (s.is_stop || s.curvature_per_mm == 0.0) continue;
@@ -247,6 +245,21 @@ struct ToleranceModel::Impl {
   double image_distance0_mm = 0;
   std::vector<double> fields_deg;
   int rays = 0;
+  // Edge-gap check: per space k (between surfaces k and k+1, the image space excluded) the
+  // height it is checked at (mm) and whether the nominal's gap there is >= 0 (a space that is
+  // already negative in the nominal, such as a stop at a curved vertex, is not checked).
+  std::vector<double> gap_height_mm;
+  std::vector<char> gap_checked;
+
+  // Axial distance from surface k to k+1 at height h: t_k + sag_{k+1}(h) - sag_k(h), with the
+  // sphere's sag c h^2 / (1 + sqrt(1 - c^2 h^2)) (h is kept inside every sphere).
+  static double edge_gap_mm(const TraceLens<double>& tl, int k, double h) {
+    auto sag = [h](double c) {
+      const double ch = std::min(std::abs(c) * h, 1.0);
+      return c * h * h / (1.0 + std::sqrt(1.0 - ch * ch));
+    };
+    return tl.thickness_mm[k] + sag(tl.curvature_per_mm[k + 1]) - sag(tl.curvature_per_mm[k]);
+  }
 
   TraceLens<double> apply(const std::vector<double>& perturbations) const {
     using Kind = ToleranceParameter::Kind;
@@ -306,6 +319,45 @@ ToleranceModel::ToleranceModel(const Lens& lens, const ToleranceOptions& options
                 "the lens has no finite paraxial stop height or back focal length");
   m.fields_deg = field_angles_deg(lens.specs.half_field_deg, options.fields);
   m.rays = static_cast<int>(paper_pupil_samples(options.rings).size());
+
+  // Clear semi-aperture per surface: its semi-diameter when the lens gives one, else the
+  // paraxial estimate |y_marginal| + |y_chief| (marginal ray at the entrance-pupil edge, chief
+  // ray through the pupil centre at the largest field). An element's rim is at the larger of
+  // its two surfaces' apertures; two surfaces across air meet first at the smaller one.
+  const int k_count = m.nominal.surface_count();
+  const double tan_field = std::tan(lens.specs.half_field_deg * kPi / 180.0);
+  std::vector<double> aperture(k_count, 0.0);
+  for (int k = 0; k < k_count; ++k) {
+    const double given = m.scaled_lens.surfaces[k].semi_diameter_mm;
+    if (given > 0.0) {
+      aperture[k] = given;
+      continue;
+    }
+    const ParaxialRay<double> marginal =
+        paraxial_trace(m.nominal, ParaxialRay<double>{r_ep, 0.0}, k + 1, kWavelengthD_nm);
+    const ParaxialRay<double> chief = paraxial_trace(
+        m.nominal, ParaxialRay<double>{-par.entrance_pupil_z_mm * tan_field, tan_field}, k + 1,
+        kWavelengthD_nm);
+    aperture[k] = std::abs(marginal.y) + std::abs(chief.y);
+  }
+  m.gap_height_mm.assign(std::max(0, k_count - 1), 0.0);
+  m.gap_checked.assign(std::max(0, k_count - 1), 0);
+  for (int k = 0; k + 1 < k_count; ++k) {
+    const bool glass = !m.scaled_lens.surfaces[k].material.is_air();
+    const double h =
+        glass ? std::max(aperture[k], aperture[k + 1]) : std::min(aperture[k], aperture[k + 1]);
+    m.gap_height_mm[k] = std::isfinite(h) ? h : 0.0;
+    // A stop at a lens vertex (0 mm away, as a .zmx stop on a curved surface imports) is that
+    // surface's own aperture, not a part that can collide.
+    const bool stop_at_vertex =
+        (m.scaled_lens.surfaces[k].is_stop || m.scaled_lens.surfaces[k + 1].is_stop) &&
+        m.nominal.thickness_mm[k] == 0.0;
+    m.gap_checked[k] = !stop_at_vertex && std::isfinite(h) &&
+                               Impl::edge_gap_mm(m.nominal, k, m.gap_height_mm[k]) >= 0.0 &&
+                               m.nominal.thickness_mm[k] >= 0.0
+                           ? 1
+                           : 0;
+  }
 }
 
 ToleranceModel::~ToleranceModel() = default;
@@ -350,6 +402,15 @@ TrialResult ToleranceModel::evaluate(const std::vector<double>& perturbations) c
 
   TraceLens<double> tl = m.apply(perturbations);
   const int last = tl.surface_count() - 1;
+  // Elements that intersect (a checked edge gap below 0, or a centre thickness below 0).
+  r.min_edge_gap_mm = std::numeric_limits<double>::infinity();
+  for (int k = 0; k + 1 < tl.surface_count(); ++k) {
+    if (!m.gap_checked[k]) continue;
+    const double gap = std::min(Impl::edge_gap_mm(tl, k, m.gap_height_mm[k]), tl.thickness_mm[k]);
+    r.min_edge_gap_mm = std::min(r.min_edge_gap_mm, gap);
+    if (gap < 0.0) r.collision = true;
+  }
+  if (!std::isfinite(r.min_edge_gap_mm)) r.min_edge_gap_mm = 0.0;
   const ParaxialData<double> par = paraxial_data(tl, tl.reference_nm());
   // Reference image plane: the paraxial solve (also the start of the best-RMS search).
   const double t_ref = m.options.compensator == FocusCompensator::kNone ? m.image_distance0_mm
@@ -507,6 +568,7 @@ ToleranceReport run_tolerance(const Lens& lens, const ToleranceOptions& options)
   int within = 0;
   for (const TrialResult& r : report.trials) {
     if (r.ray_failures > 0) ++report.trials_with_failures;
+    if (r.collision) ++report.trials_with_collisions;
     if (!r.valid) {
       ++report.invalid_trials;
       continue;
@@ -514,7 +576,8 @@ ToleranceReport run_tolerance(const Lens& lens, const ToleranceOptions& options)
     spots.push_back(r.mean_spot_um);
     efl.push_back(r.efl_mm);
     distortion.push_back(r.max_abs_distortion_pct);
-    if (options.max_spot_um && r.mean_spot_um <= *options.max_spot_um) ++within;
+    // A trial whose elements intersect cannot be built: a failure, whatever its spot.
+    if (options.max_spot_um && !r.collision && r.mean_spot_um <= *options.max_spot_um) ++within;
   }
   report.spot = spot_statistics(spots);
   if (options.max_spot_um) report.yield = static_cast<double>(within) / n;

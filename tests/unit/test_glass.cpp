@@ -369,7 +369,10 @@ TEST_CASE("catalog: the built-in Ohara catalog") {
   CHECK(ohara->name == "ohara65");
   CHECK(ohara->glasses.size() == 65);
   CHECK(ohara->warnings.empty());
-  CHECK(load_catalog("OHARA") == ohara);  // case-insensitive, cached
+  CHECK(load_catalog("ohara") == ohara);  // cached
+  // Only the lower-case "ohara" is the paper's subset: "OHARA" is Ohara's complete catalog.
+  CHECK(load_catalog("OHARA") != ohara);
+  CHECK(load_catalog("OHARA")->name == "OHARA");
   CHECK(load_catalog(ohara->path) == ohara);
   double worst = 0.0;
   for (const Glass& g : ohara->glasses) {
@@ -457,8 +460,8 @@ TEST_CASE("agf: every glass of the vendor catalogs in ../shared") {
   LENSOPT_REQUIRE_SHARED(shared);
   // Published indices (vendor data sheets) of a few glasses, beyond the files' own nd.
   const std::map<std::string, std::map<std::string, double>> published = {
-      {"SCHOTT_202002", {{"N-BK7", 1.51680}, {"N-SF6", 1.80518}, {"F2", 1.62004}}},
-      {"OHARA_20200623", {{"S-BAH10", 1.67003}, {"S-LAH65V", 1.80400}}},
+      {"SCHOTT", {{"N-BK7", 1.51680}, {"N-SF6", 1.80518}, {"F2", 1.62004}}},
+      {"OHARA", {{"S-BAH10", 1.67003}, {"S-LAH65V", 1.80400}}},
   };
   for (const char* file : {"OHARA_20200623.AGF", "SCHOTT_202002.AGF"}) {
     const auto path = shared / "data" / "agf" / file;
@@ -507,4 +510,117 @@ TEST_CASE("agf: every glass of the vendor catalogs in ../shared") {
   // The Ohara file really is UTF-16 LE with a BOM, so the decoder ran on a vendor file.
   const std::string bytes = read_file(shared / "data" / "agf" / "OHARA_20200623.AGF");
   CHECK(static_cast<unsigned char>(bytes[0]) == 0xFF);
+}
+
+TEST_CASE("catalog: vendor file names are catalogs of the vendor family") {
+  CHECK(catalog_family_name("SCHOTT_202002") == "SCHOTT");
+  CHECK(catalog_family_name("OHARA_20200623") == "OHARA");
+  CHECK(catalog_family_name("SCHOTT") == "SCHOTT");
+  CHECK(catalog_family_name("ohara65") == "ohara65");
+  CHECK(catalog_family_name("MY_GLASSES") == "MY_GLASSES");
+  CHECK(catalog_family_name("_2020") == "_2020");
+  CHECK(catalog_family_name("X_") == "X_");
+  // A dated vendor file in a LENSOPT_CATALOG_PATH folder is found by its family name, the newest
+  // date first, and comes before the shipped catalog of that name.
+  const auto dir = std::filesystem::temp_directory_path() /
+                   ("lensopt_test_vendor_" + std::to_string(::getpid()));
+  std::filesystem::create_directories(dir);
+  for (const char* file : {"ACME_201901.AGF", "ACME_202002.AGF"}) {
+    std::ofstream out(dir / file, std::ios::binary);
+    out << one_glass(2, kBk7Sellmeier, 1.5168, 64.17);
+  }
+  const char* old = std::getenv("LENSOPT_CATALOG_PATH");
+  const std::string saved = old ? old : "";
+  ::setenv("LENSOPT_CATALOG_PATH", dir.string().c_str(), 1);
+  const auto acme = load_catalog("ACME");
+  CHECK(acme->name == "ACME");
+  CHECK(std::filesystem::path(acme->path).filename() == "ACME_202002.AGF");
+  CHECK(acme->glasses.at(0).catalog == "ACME");
+  CHECK(load_catalog("acme") == acme);
+  CHECK(load_catalog("ACME_201901")->path != acme->path);  // a dated name is that file
+  if (old) {
+    ::setenv("LENSOPT_CATALOG_PATH", saved.c_str(), 1);
+  } else {
+    ::unsetenv("LENSOPT_CATALOG_PATH");
+  }
+  std::filesystem::remove_all(dir);
+}
+
+TEST_CASE("catalog: the shipped vendor catalogs (no ../shared needed)") {
+  // Published d-line indices from the vendors' data sheets, computed from the shipped formulas.
+  const std::map<std::string, std::map<std::string, double>> published = {
+      {"SCHOTT",
+       {{"N-BK7", 1.51680},
+        {"N-SF6", 1.80518},
+        {"F2", 1.62004},
+        {"N-SK16", 1.62041},
+        {"N-LAK9", 1.69100}}},
+      {"OHARA",
+       {{"S-BSL7", 1.51633}, {"S-TIH6", 1.80518}, {"S-LAH66", 1.77250}, {"S-FSL5", 1.48749}}},
+      {"HOYA", {{"BSC7", 1.51680}, {"FD60", 1.80518}, {"TAF1", 1.77250}, {"FC5", 1.48749}}},
+      {"CDGM", {{"H-K9L", 1.51680}, {"H-ZF13", 1.78472}, {"H-FK61", 1.49700}}},
+  };
+  const std::map<std::string, std::size_t> glass_counts = {
+      {"SCHOTT", 356}, {"OHARA", 158}, {"HOYA", 398}, {"CDGM", 256}};
+  CHECK(shipped_catalog_names() == std::vector<std::string>{"SCHOTT", "OHARA", "HOYA", "CDGM"});
+  for (const std::string& name : shipped_catalog_names()) {
+    CAPTURE(name);
+    const auto catalog = load_catalog(name);
+    CHECK(catalog->name == name);
+    CHECK(std::filesystem::path(catalog->path).parent_path().lexically_normal() ==
+          (test::source_dir() / "catalogs").lexically_normal());
+    CHECK(catalog->glasses.size() == glass_counts.at(name));
+    CHECK(catalog->warnings.empty());
+    for (const auto& [glass, nd] : published.at(name)) {
+      CAPTURE(glass);
+      const Glass& g = catalog->at(glass);
+      CHECK(g.catalog == name);
+      CHECK(std::abs(g.index(kD_nm) - nd) < 1e-5);
+      CHECK(std::abs(g.nd - nd) < 1e-5);
+    }
+    // The file is our normalized form: ASCII, our header first.
+    const std::string bytes = read_file(catalog->path);
+    CHECK(bytes.rfind("CC lensopt glass catalog " + name, 0) == 0);
+    CHECK(std::all_of(bytes.begin(), bytes.end(),
+                      [](char ch) { return static_cast<unsigned char>(ch) < 0x80; }));
+  }
+  // Nearest glasses on the glass map: N-BK7's own (nd, vd) finds N-BK7 first.
+  const auto schott = load_catalog("SCHOTT");
+  const auto near = schott->closest_by_index(1.5168, 64.17, 3);
+  REQUIRE(near.size() == 3);
+  CHECK(near[0]->name == "N-BK7");
+}
+
+TEST_CASE("catalog: the shipped catalogs hold every glass of the vendor files, unchanged") {
+  LENSOPT_REQUIRE_SHARED(shared);
+  for (const std::string& name : shipped_catalog_names()) {
+    CAPTURE(name);
+    std::filesystem::path vendor_file;
+    for (const auto& entry : std::filesystem::directory_iterator(shared / "data" / "agf"))
+      if (catalog_family_name(entry.path().stem().string()) == name) vendor_file = entry.path();
+    REQUIRE_FALSE(vendor_file.empty());
+    const Catalog vendor = read_agf(vendor_file);
+    const auto shipped = load_catalog(name);
+    REQUIRE(shipped->glasses.size() == vendor.glasses.size());
+    for (std::size_t i = 0; i < vendor.glasses.size(); ++i) {
+      const Glass& a = vendor.glasses[i];
+      const Glass& b = shipped->glasses[i];
+      CAPTURE(a.name);
+      CHECK(a.name == b.name);
+      CHECK(a.formula == b.formula);
+      CHECK(a.nd == b.nd);
+      CHECK(a.vd == b.vd);
+      CHECK(a.status == b.status);
+      CHECK(a.coefficients == b.coefficients);
+      CHECK(a.min_wavelength_um == b.min_wavelength_um);
+      CHECK(a.max_wavelength_um == b.max_wavelength_um);
+      REQUIRE(a.transmission.size() == b.transmission.size());
+      for (std::size_t k = 0; k < a.transmission.size(); ++k) {
+        CHECK(a.transmission[k].wavelength_um == b.transmission[k].wavelength_um);
+        CHECK(a.transmission[k].transmission == b.transmission[k].transmission);
+        CHECK(a.transmission[k].thickness_mm == b.transmission[k].thickness_mm);
+      }
+      if (a.formula_supported && a.transmits(kD_nm)) CHECK(a.index(kD_nm) == b.index(kD_nm));
+    }
+  }
 }

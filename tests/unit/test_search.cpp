@@ -3,6 +3,7 @@
 // shards, the ranking (infeasible after feasible, errors last), result files, and that a resumed
 // search and merged shards give the leaderboard of one run.
 #include <doctest/doctest.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cmath>
@@ -454,4 +455,42 @@ TEST_CASE("search: paper+strict runs the paper's penalties, then strict bounds f
   CHECK(both.start_spot_um == single.start_spot_um);  // the candidate's own start
   CHECK(both.iterations > single.iterations);         // two optimizations
   CHECK(std::isfinite(both.final_spot_um));
+}
+
+TEST_CASE("search: a lens file keeps its own specs unless the search gives them") {
+  // An f/2.8, 30 deg start (the Cooke with its specs changed).
+  Lens cooke = read_lens(lens_path("cooke"));
+  cooke.specs.f_number = 2.8;
+  cooke.specs.half_field_deg = 30.0;
+  cooke.specs.sensor_diagonal_mm = 20.0;
+  const auto dir = std::filesystem::temp_directory_path() /
+                   ("lensopt_search_specs_" + std::to_string(::getpid()));
+  std::filesystem::create_directories(dir);
+  const auto path = dir / "cooke28.toml";
+  write_lens(cooke, path);
+  SearchOptions o;
+  StartGroup g;
+  g.lens_files = {path.string()};
+  g.generate = {2};
+  o.starts = {g};
+  for (const SearchCandidate& c : make_candidates(o)) {
+    CAPTURE(c.id);
+    if (c.source == "gen2") {
+      CHECK(c.start.specs.f_number == 2.0);  // generated: the paper's defaults
+      CHECK(c.start.specs.half_field_deg == 25.0);
+    } else {
+      CHECK(c.start.specs.f_number == 2.8);  // a file: its own
+      CHECK(c.start.specs.half_field_deg == 30.0);
+      CHECK(c.start.specs.sensor_diagonal_mm == 20.0);
+    }
+  }
+  // Given explicitly, a spec replaces the file's own, and only that one.
+  o.f_number = 4.0;
+  o.f_number_given = true;
+  for (const SearchCandidate& c : make_candidates(o)) {
+    CAPTURE(c.id);
+    CHECK(c.start.specs.f_number == 4.0);
+    if (c.source != "gen2") CHECK(c.start.specs.half_field_deg == 30.0);
+  }
+  std::filesystem::remove_all(dir);
 }

@@ -380,3 +380,52 @@ TEST_CASE("tolerance: the [tolerance] table of a lens file is read with file:lin
   CHECK(message.find("glass_thickness_mm") != std::string::npos);
   std::filesystem::remove_all(dir);
 }
+
+TEST_CASE("tolerance: the halves of a cemented pair are distinct elements") {
+  Lens lens = read_lens(test::source_dir() / "lenses" / "doublet.toml");
+  // Cement a second glass to the first element: surfaces 1-2 S-LAL12, 2-3 S-LAH92.
+  lens.surfaces[1].material = lens.surfaces[3].material;
+  Tolerances tol;
+  const auto params = tolerance_parameters(lens, tol);
+  std::string t1, t2;
+  for (const ToleranceParameter& p : params) {
+    if (p.name == "t1") t1 = p.description;
+    if (p.name == "t2") t2 = p.description;
+  }
+  CAPTURE(t1);
+  CAPTURE(t2);
+  CHECK(t1.find("element 1 ") != std::string::npos);
+  CHECK(t2.find("element 2 ") != std::string::npos);
+}
+
+TEST_CASE("tolerance: a trial whose elements intersect is a failure, not a yield") {
+  Lens lens = read_lens(test::source_dir() / "lenses" / "doublet.toml");
+  REQUIRE(lens.surfaces[2].is_stop);
+  // 0.01 mm from the stop to the convex second element, airspaces toleranced +-0.05 mm: the
+  // element crosses the stop plane in about 40 % of the trials.
+  lens.surfaces[2].thickness_mm = 0.01;
+  ToleranceOptions o = small_options(60);
+  o.max_spot_um = 1e9;  // every traced trial is within the spot limit
+  o.tolerances.air_thickness_mm = 0.05;
+  const ToleranceReport r = run_tolerance(lens, o);
+  CHECK_FALSE(r.nominal.collision);
+  CHECK(r.nominal.min_edge_gap_mm >= 0.0);
+  int collisions = 0;
+  for (const TrialResult& t : r.trials) {
+    collisions += t.collision ? 1 : 0;
+    if (t.collision) CHECK(t.min_edge_gap_mm < 0.0);
+  }
+  MESSAGE("trials with intersecting elements: " << collisions << " of " << r.trials.size());
+  CHECK(collisions > 5);
+  CHECK(collisions < 55);
+  CHECK(r.trials_with_collisions == collisions);
+  REQUIRE(r.yield.has_value());
+  CHECK(*r.yield == doctest::Approx(1.0 - static_cast<double>(collisions) / 60.0));
+  CHECK(format_tolerance_text(r, 0).find("intersecting elements") != std::string::npos);
+  CHECK(format_trials_csv(r).find("elements_intersect") != std::string::npos);
+  // Airspaces held: nothing intersects and every trial is a yield.
+  o.tolerances.air_thickness_mm = 0.0;
+  const ToleranceReport held = run_tolerance(lens, o);
+  CHECK(held.trials_with_collisions == 0);
+  CHECK(*held.yield == 1.0);
+}

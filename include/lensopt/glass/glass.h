@@ -42,7 +42,13 @@ enum class DispersionFormula : int {
 std::string formula_name(DispersionFormula formula);
 
 // Zemax's glass status codes (NM line, 5th field).
-enum class GlassStatus : int { kStandard = 0, kPreferred = 1, kObsolete = 2, kSpecial = 3, kMelt = 4 };
+enum class GlassStatus : int {
+  kStandard = 0,
+  kPreferred = 1,
+  kObsolete = 2,
+  kSpecial = 3,
+  kMelt = 4
+};
 std::string status_name(GlassStatus status);
 
 // One internal-transmission sample (AGF IT line).
@@ -55,7 +61,7 @@ struct TransmissionPoint {
 // One glass of a catalog.
 struct Glass {
   std::string name;
-  std::string catalog;  // the catalog it came from ("OHARA_20200623")
+  std::string catalog;  // the catalog it came from ("OHARA" for OHARA_20200623.AGF)
   DispersionFormula formula = DispersionFormula::kSellmeier1;
   bool formula_supported = true;     // false: index() must not be trusted (reported by the reader)
   double nd = 1.0;                   // d-line index as the file states it
@@ -78,7 +84,8 @@ struct Glass {
 
 // A glass catalog: the glasses of one AGF file (or the project's built-in catalog).
 struct Catalog {
-  std::string name;  // catalog name: the file's stem ("OHARA_20200623") or the built-in's name
+  std::string name;  // catalog name: the file's stem less a date suffix ("OHARA" for
+                     // OHARA_20200623.AGF, see catalog_family_name)
   std::string path;  // where it was read from
   std::vector<Glass> glasses;
   std::vector<std::string> warnings;  // e.g. unsupported formulas, with file:line
@@ -91,7 +98,20 @@ struct Catalog {
 
   // Up to `count` names closest to `glass_name` (edit distance, case-insensitive), best first.
   std::vector<std::string> closest_names(std::string_view glass_name, std::size_t count = 3) const;
+
+  // Up to `count` glasses nearest to (nd, vd) on the glass map, best first, by the distance
+  //   sqrt((100 (nd - nd_g))^2 + (vd - vd_g)^2)
+  // (0.01 in nd weighs as much as 1 in vd); only glasses whose formula lensopt evaluates.
+  std::vector<const Glass*> closest_by_index(double nd, double vd, std::size_t count = 3) const;
 };
+
+// The catalog name of an AGF file's stem: the vendor family without the date suffix that vendor
+// files carry ("SCHOTT_202002" -> "SCHOTT", "OHARA_20200623" -> "OHARA"); other stems as they are.
+std::string catalog_family_name(std::string_view stem);
+
+// The vendor catalogs that ship in catalogs/ (complete, from the vendors' AGF files by
+// tools/make-catalogs.py), in the order a search without a catalog name tries them.
+const std::vector<std::string>& shipped_catalog_names();
 
 // Parses AGF text. `bytes` may be ASCII/UTF-8 or UTF-16 LE with a BOM, CRLF or LF line ends.
 // Throws Error with file:line for malformed lines.
@@ -100,9 +120,14 @@ Catalog parse_agf(std::string_view bytes, const std::string& source_name);
 // Reads an AGF file (parse_agf on its contents; the catalog is named after the file's stem).
 Catalog read_agf(const std::filesystem::path& path);
 
-// Loads a catalog by path (any existing file) or by name: "ohara" (the paper's 65 recommended
-// Ohara glasses that ship in catalogs/), or the stem of any .agf file in the catalog search path
-// (the LENSOPT_CATALOG_PATH environment variable, colon-separated, then the project's catalogs/).
+// Loads a catalog by path (any existing file) or by name:
+//  - "ohara" (exactly, lower case): the paper's 65 recommended Ohara glasses
+//  (catalogs/ohara65.agf);
+//  - any other name X: X.agf in the catalog search path (the LENSOPT_CATALOG_PATH environment
+//    variable, colon-separated, then the project's catalogs/), the stem compared
+//    case-insensitively; failing that, a vendor file of that family, X_<date>.agf (the newest
+//    date). So "SCHOTT", "OHARA", "HOYA" and "CDGM" are the vendors' complete catalogs that ship in
+//    catalogs/, unless a folder of LENSOPT_CATALOG_PATH holds the vendor's own file.
 // Results are cached per resolved path. Throws Error naming what was searched.
 std::shared_ptr<const Catalog> load_catalog(std::string_view name_or_path);
 

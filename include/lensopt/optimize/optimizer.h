@@ -38,7 +38,8 @@ struct OptimizeOptions {
   TraceOptions sampling;   // optimization sampling (default: 8 rings, 11 fields)
   DesignLossOptions loss;  // paper weights and bounds
   // Default none: the start's glasses (snapped to the catalog) are kept. On the perturbed starts
-  // snap and neighbours took 1.5x and 2.7x the CPU time and found no better glasses (BENCHMARKS.md).
+  // snap and neighbours took 1.5x and 2.7x the CPU time and found no better glasses
+  // (BENCHMARKS.md).
   GlassSearch glass_search = GlassSearch::kNone;
   int glass_neighbours = 4;         // catalog glasses tried per element in phase 3
   std::vector<std::string> freeze;  // variable names or groups to hold fixed
@@ -88,7 +89,35 @@ struct OptimizeResult {
   std::vector<std::string> log;  // phase summaries
 };
 
+// Never behind the start: the result is ordered against the start by (every constraint met at
+// full sampling, then mean RMS spot at full sampling), and the start is returned (kept_start)
+// when it is not behind. Glasses come from the lens's own catalog (Lens::catalog_name); a start of
+// model glasses takes the catalog whose glasses lie nearest to its (nd, vd) (the paper's "ohara"
+// for the paper's lenses), and the result names it, so the written lens reads back.
 OptimizeResult optimize_lens(const Lens& start, const OptimizeOptions& options);
+
+// Which bounds a lens is optimized with: the paper's (min glass 1 mm, max glass 3 mm, image
+// clearance 12 mm, ... for the paper's 50 mm lenses), or bounds derived from the lens itself.
+enum class BoundsMode { kAuto, kLens, kPaper };
+
+// The paper's lenses keep the paper's bounds under BoundsMode::kAuto: a lens read from the
+// paper's YAML (.yml / .yaml) or naming the paper's catalog ("ohara").
+bool is_paper_lens(const Lens& lens);
+
+// Bounds derived from a lens's focal length f (the spec focal length) and its own start values,
+// with s = f / 50 mm (the paper's bounds are for 50 mm lenses) and the start's extremes over
+// every traced ray at full sampling (travel per space, largest ray angle):
+//   min air       = min(s * paper, 0.5 * start's thinnest air gap)
+//   min glass     = min(s * paper, 0.5 * start's thinnest glass)
+//   max glass     = max(s * paper, 1.5 * start's thickest glass)
+//   min clearance = min(s * paper, 0.75 * start's image clearance)   (from the start's BFL)
+//   max ray angle = max(paper, start's largest angle + 2 deg), at most 85 deg
+// so the start itself meets them; the weights and the rest of `paper` are kept. A start whose
+// rays fail (no extremes) gets s * paper.
+DesignLossOptions lens_derived_bounds(const Lens& lens, const DesignLossOptions& paper);
+
+// The bounds `mode` selects for a lens (kAuto: the paper's for is_paper_lens, else derived).
+DesignLossOptions bounds_for(const Lens& lens, const DesignLossOptions& paper, BoundsMode mode);
 
 // A plain Adam loop on the paper's l_lens with the same variables, sampling and code path, for
 // the LM comparison. Stops after `max_steps` or when the mean spot (optimization sampling) is at

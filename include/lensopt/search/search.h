@@ -23,7 +23,9 @@
 //           catalog's median vd (crowns), negative ones below it (flints), index
 //           splitmix64(k, element) mod class size: the same on every machine.
 // A modified start keeps its defocus: t_last = BFL_new + (t_last - BFL)_old (paraxial, 587.6 nm).
-// Every candidate gets the search's specs (f-number, half field, sensor diagonal).
+// Specs: a start read from a lens file keeps its own specs (f-number, half field, sensor
+// diagonal) except those the search gives explicitly ([specs] or --f-number ...); generated
+// starts, which have none, get the given specs or else the paper's (f/2, 25 deg, 16 mm).
 //
 // Order and ids. Sources in order (files as given, globs sorted, then generated element counts),
 // for each the given layout first and then the variants (cement patterns in binary order, air
@@ -140,12 +142,13 @@ struct StartGroup {
 struct SearchOptions {
   std::vector<StartGroup> starts;  // in order; a source named twice gets a suffix ("cooke-2")
   std::string catalog = "ohara";   // for generated starts and glass seeds
-  double f_number = 2.0;           // specs of generated candidates (default: the paper's)
+  double f_number = 2.0;           // specs of every candidate (default: the paper's)
   double half_field_deg = 25.0;
   double sensor_diagonal_mm = 16.0;  // f = d / (2 tan hfov) = 17.156 mm
-  // True when [specs] or a --f-number / --half-field-deg / --focal-length-mm option gave specs:
-  // then every candidate gets them. Otherwise a start read from a lens file keeps its own.
-  bool specs_given = false;
+  // Which of the three the search gave explicitly: only those replace a lens file's own specs.
+  bool f_number_given = false;
+  bool half_field_given = false;
+  bool sensor_diagonal_given = false;
   OptimizeOptions optimize;  // each candidate's optimizer settings
   // Constraints "paper+strict": two optimizations per candidate, the paper's soft penalties first
   // (they reach the basins of the paper's own designs, which cross the bounds slightly), then

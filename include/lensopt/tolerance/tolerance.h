@@ -39,7 +39,14 @@
 // ranked by max(|d+|, |d-|), the first row is what to tighten first.
 // Statistics: sample mean and standard deviation (n - 1), percentiles by linear interpolation
 // between order statistics (p = (n - 1) q), worst = largest mean spot; the yield is the fraction
-// of all trials whose mean spot is <= max_spot_um (an untraceable trial counts as a failure).
+// of all trials whose mean spot is <= max_spot_um (an untraceable trial counts as a failure, and
+// so does a trial whose elements intersect).
+// Collisions: each space between two surfaces is checked at the height where it would close
+// first (a glass at its element's rim, the larger clear semi-aperture of its two surfaces; an
+// air space at the smaller), the edge gap t_k + sag_{k+1}(h) - sag_k(h) and the centre thickness
+// t_k; a trial with one below 0 has intersecting elements. Clear semi-apertures are the lens's
+// semi-diameters, or the paraxial |y_marginal| + |y_chief| at the largest field. Spaces whose
+// nominal gap is already below 0 are not checked.
 #pragma once
 
 #include <cstdint>
@@ -155,6 +162,8 @@ struct TrialResult {
   double max_abs_distortion_pct = 0;
   int ray_failures = 0;
   double image_distance_mm = 0;       // the compensated last thickness
+  bool collision = false;             // elements intersect: a checked edge gap below 0
+  double min_edge_gap_mm = 0;         // smallest checked edge gap or centre thickness
   std::vector<double> perturbations;  // per parameter, native units
 };
 
@@ -188,6 +197,7 @@ struct ToleranceReport {
   std::optional<double> yield;  // fraction in [0, 1], when max_spot_um is set
   int invalid_trials = 0;
   int trials_with_failures = 0;
+  int trials_with_collisions = 0;  // elements intersect (counted as failures in the yield)
   double efl_mean_mm = 0, efl_std_mm = 0, efl_min_mm = 0, efl_max_mm = 0;
   double distortion_mean_pct = 0, distortion_worst_pct = 0;
   std::vector<SensitivityRow> sensitivity;  // ranked, largest first

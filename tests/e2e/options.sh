@@ -1,0 +1,26 @@
+#!/usr/bin/env bash
+# Option names are consistent across commands: --threads wherever a command has threads,
+# -q/--quiet wherever it prints progress, --no-relative-illumination for render; the old names
+# (--jobs, --no-ri) still work as aliases.
+set -euo pipefail
+lensopt="$1"
+fail() { echo "FAIL: $*" >&2; exit 1; }
+tmp=$(mktemp -d)
+trap 'rm -rf "$tmp"' EXIT
+for cmd in analyze plot optimize render tolerance export bench search; do
+  "$lensopt" "$cmd" --help > "$tmp/$cmd.txt" || fail "$cmd --help"
+  grep -q -- "--threads" "$tmp/$cmd.txt" || fail "$cmd has no --threads"
+done
+for cmd in optimize render tolerance search; do
+  grep -q -- "-q,--quiet" "$tmp/$cmd.txt" || fail "$cmd has no -q,--quiet"
+done
+grep -q -- "--no-relative-illumination" "$tmp/render.txt" ||
+  fail "render has no --no-relative-illumination"
+grep -q -- "--no-relative-illumination" "$tmp/optimize.txt" ||
+  fail "optimize (--joint) has no --no-relative-illumination"
+# Old names parse (the help of an alias-taking command accepts them without an error).
+"$lensopt" tolerance lenses/doublet.toml --jobs 1 --trials 2 --rings 2 --fields 2 \
+  --no-sensitivity -q > /dev/null || fail "tolerance --jobs (alias)"
+"$lensopt" tolerance lenses/doublet.toml --threads 1 --trials 2 --rings 2 --fields 2 \
+  --no-sensitivity --quiet > /dev/null || fail "tolerance --threads"
+echo "PASS"
