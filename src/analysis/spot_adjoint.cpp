@@ -46,7 +46,10 @@ void SystemAdjoint::add(const SystemAdjoint& other) {
 bool adjoint_supported(const TraceLens<double>& lens) {
   // Spheres without clear apertures: everything the kernel of trace/kernel.h traces. (Surface
   // profiles and clipping apertures, when a lens has them, take the Jet path.)
-  return lens.surface_count() > 0;
+  if (lens.surface_count() == 0) return false;
+  for (double r : lens.semi_diameter_mm)
+    if (r > 0) return false;  // clipping apertures: the backward pass has no step for them
+  return true;
 }
 
 SystemAdjoint mean_spot_adjoint(const TraceSystem<double>& sys, int threads) {
