@@ -39,9 +39,15 @@ fi
 grep -q "opt.toml:.*weight_rayangle" "$tmp/err.txt" || fail "unknown key message: $(cat "$tmp/err.txt")"
 
 # SIGINT: the best lens so far is written, exit status 130.
-"$lensopt" optimize lenses/cooke.toml -o "$tmp/interrupted.toml" -q &
+# The signal is sent once the run reports progress (its handler is installed by then), not after
+# a fixed time, which a loaded machine may not meet.
+"$lensopt" optimize lenses/cooke.toml -o "$tmp/interrupted.toml" 2> "$tmp/progress.txt" &
 pid=$!
-sleep 4
+for _ in $(seq 1 1200); do
+  [ -s "$tmp/progress.txt" ] && break
+  sleep 0.1
+done
+[ -s "$tmp/progress.txt" ] || fail "optimize printed no progress in 120 s"
 kill -INT "$pid"
 status=0
 wait "$pid" || status=$?
