@@ -161,10 +161,7 @@ TraceSystem<T> prepare_system(const TraceLens<T>& lens_in, double focal_length_m
   ParaxialData<T> par = paraxial_data(sys.lens, reference_nm);
   sys.scale = options.scale_to_spec ? K<T>(focal_length_mm) / par.efl_mm : K<T>(1.0);
   if (options.scale_to_spec) {
-    for (int k = 0; k < sys.lens.surface_count(); ++k) {
-      sys.lens.curvature_per_mm[k] = sys.lens.curvature_per_mm[k] / sys.scale;
-      sys.lens.thickness_mm[k] = sys.lens.thickness_mm[k] * sys.scale;
-    }
+    sys.lens.scale_lengths(sys.scale);
     par = paraxial_data(sys.lens, reference_nm);
   }
   sys.efl_mm = par.efl_mm;
