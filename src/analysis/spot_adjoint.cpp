@@ -49,6 +49,8 @@ bool adjoint_supported(const TraceLens<double>& lens) {
   if (lens.surface_count() == 0) return false;
   for (double r : lens.semi_diameter_mm)
     if (r > 0) return false;  // clipping apertures: the backward pass has no step for them
+  for (std::uint8_t kind : lens.profile)
+    if (kind != kProfileSphere) return false;  // conics and aspheres: spheres only
   return true;
 }
 

@@ -38,6 +38,7 @@ struct OptimizeCommand {
   std::string constraints;
   std::string bounds = "auto";
   std::vector<std::string> freeze;
+  std::vector<std::string> vary;
   // Command-line overrides (NaN / -1: not given).
   int rings = -1, fields = -1, max_iterations = -1, neighbours = -1, threads = -1;
   double weight_ray_path = NAN, weight_ray_angle = NAN, weight_glass = NAN;
@@ -135,6 +136,7 @@ void run_optimize(const OptimizeCommand& cmd) {
   if (!cmd.glass_search.empty())
     options.glass_search = parse_glass_search(cmd.glass_search, SourceLocation{"--glass-search"});
   for (const std::string& f : cmd.freeze) options.freeze.push_back(f);
+  if (!cmd.vary.empty()) options.vary = cmd.vary;
   if (cmd.no_soft_start) options.soft_start = false;
   if (cmd.rings > 0) options.sampling.rings = cmd.rings;
   if (cmd.fields > 0) options.sampling.fields = cmd.fields;
@@ -299,6 +301,10 @@ void setup_optimize(CLI::App& app) {
   sub->add_option(
          "--freeze", cmd->freeze,
          "variables or groups to hold (c3, s2, defocus, g1, curvatures, spacings, glasses)")
+      ->delimiter(',');
+  sub->add_option("--vary", cmd->vary,
+                  "surface-profile variables to add: k3 (conic of surface 3), a4_3 (its r^4 "
+                  "term), a2_3 .. a16_3; replaces [optimize] vary")
       ->delimiter(',');
   sub->add_flag("--no-soft-start", cmd->no_soft_start,
                 "strict constraints: skip the first phase on the paper's soft penalties");

@@ -121,6 +121,9 @@ struct RawSurface {
   bool is_stop = false;
   int stop_line = 0;
   double semi_diameter_mm = 0.0;  // a fixed (user) DIAM: a clear aperture
+  bool even_asphere = false;  // TYPE EVENASPH
+  double conic = 0.0;         // CONI
+  double parm[9] = {};        // PARM 1..8 of EVENASPH: a2, a4, ..., a16 (lens units)
 };
 
 struct Wavelength {
@@ -270,12 +273,12 @@ bool ZmxParser::surface_line(const Line& line, const std::string& key) {
   if (key == "TYPE") {
     RawSurface& s = surface(line);
     const std::string type = line.fields.size() > 1 ? upper(line.fields[1]) : "";
-    if (type != "STANDARD")
+    if (type != "STANDARD" && type != "EVENASPH")
       fail(line, 1,
-           fmt::format("surface {} has type {}; lensopt imports spherical STANDARD surfaces only "
-                       "(an asphere, coordinate break, toroid or other surface type changes the "
-                       "optics and cannot be dropped)",
+           fmt::format("surface {} has type {}, which lensopt does not support; it imports "
+                       "STANDARD (sphere or conic) and EVENASPH surfaces only",
                        s.number, type.empty() ? std::string("(none)") : type));
+    s.even_asphere = type == "EVENASPH";
     return true;
   }
   if (key == "CURV") {
@@ -345,16 +348,30 @@ bool ZmxParser::surface_line(const Line& line, const std::string& key) {
   }
   if (key == "CONI") {
     RawSurface& s = surface(line);
-    const double conic = number(line, 1, "CONI (conic constant)");
-    if (conic != 0.0)
-      fail(line, 1,
-           fmt::format("surface {} has conic constant {}; lensopt imports spherical surfaces "
-                       "only (CONI must be 0)",
-                       s.number, line.fields[1]));
+    s.conic = number(line, 1, "CONI (conic constant)");
+    if (!std::isfinite(s.conic)) fail(line, 1, "CONI must be finite");
     return true;
   }
   if (key == "COMM") {
     surface(line);  // a surface comment: nothing to keep
+    return true;
+  }
+  if (key == "PARM" && surface(line).even_asphere) {
+    // EVENASPH: PARM i a_{2i}, i = 1..8 (PARM 1 is the r^2 term).
+    RawSurface& s = surface(line);
+    const int index = integer(line, 1, "the PARM number");
+    const double value = number(line, 2, "the PARM value");
+    if (index >= 1 && index <= 8) {
+      if (!std::isfinite(value)) fail(line, 2, "PARM must be finite");
+      s.parm[index] = value;
+    } else if (value != 0.0) {
+      fail(line, 1,
+           fmt::format("surface {}: EVENASPH has PARM 1..8 (r^2 .. r^16); PARM {} = {} is not "
+                       "supported",
+                       s.number, index, line.fields[2]));
+    } else {
+      ignore(line);
+    }
     return true;
   }
   if (key == "PARM" || key == "XDAT") {
@@ -739,13 +756,23 @@ ZmxImport ZmxParser::parse(std::string_view bytes) {
     surface.curvature_per_mm = raw.curvature_per_mm / unit_mm_;
     surface.thickness_mm = raw.thickness_mm * unit_mm_;
     surface.semi_diameter_mm = raw.semi_diameter_mm * unit_mm_;
+    surface.conic = raw.conic;
+    if (raw.even_asphere) {
+      // a_{2i} in lens units^(1-2i).
+      double unit_power = unit_mm_;  // unit^(2i-1)
+      surface.asphere_r2_per_mm = raw.parm[1] / unit_power;
+      for (int j = 0; j < kAsphereOrders; ++j) {
+        unit_power *= unit_mm_ * unit_mm_;
+        surface.asphere[j] = raw.parm[j + 2] / unit_power;
+      }
+    }
     surface.material = resolve_glass(raw, catalogs, used_catalogs, dispersion);
     if (raw.is_stop) {
       if (++stop_count > 1)
         fail_at(
             raw.stop_line, 1,
             fmt::format("surface {} is a second STOP; a lens has one aperture stop", raw.number));
-      if (surface.curvature_per_mm != 0.0) {
+      if (surface.curvature_per_mm != 0.0 || !surface.is_spherical()) {
         // A flat stop at the vertex of the curved surface, in the medium before it.
         Surface stop;
         stop.is_stop = true;
@@ -766,7 +793,7 @@ ZmxImport ZmxParser::parse(std::string_view bytes) {
   if (stop_count == 0) {
     // OpticStudio's default stop is surface 1.
     warn(surfaces_[1].line, "no STOP line: surface 1 is the stop (OpticStudio's default)");
-    if (lens.surfaces.front().curvature_per_mm == 0.0) {
+    if (lens.surfaces.front().curvature_per_mm == 0.0 && lens.surfaces.front().is_spherical()) {
       lens.surfaces.front().is_stop = true;
     } else {
       Surface stop;
@@ -1161,8 +1188,13 @@ std::string format_zmx(const Lens& lens) {
   int number = 1;
   for (const Surface& s : lens.surfaces) {
     line(fmt::format("SURF {}", number++));
-    line("  TYPE STANDARD");
+    line(s.has_asphere() ? "  TYPE EVENASPH" : "  TYPE STANDARD");
     line(fmt::format("  CURV {}", number_text(s.curvature_per_mm)));
+    if (s.has_asphere()) {
+      line(fmt::format("  PARM 1 {}", number_text(s.asphere_r2_per_mm)));
+      for (int j = 0; j < kAsphereOrders; ++j)
+        line(fmt::format("  PARM {} {}", j + 2, number_text(s.asphere[j])));
+    }
     line(fmt::format("  DISZ {}", number_text(s.thickness_mm)));
     switch (s.material.kind) {
       case Material::Kind::kAir:
@@ -1184,6 +1216,7 @@ std::string format_zmx(const Lens& lens) {
       line(
           fmt::format("  DIAM {} 0", number_text(automatic[static_cast<std::size_t>(number - 2)])));
     }
+    if (s.conic != 0.0) line(fmt::format("  CONI {}", number_text(s.conic)));
   }
   line(fmt::format("SURF {}", number));
   line("  TYPE STANDARD");

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include "lensopt/core/error.h"
 
@@ -111,9 +112,16 @@ void Lens::validate() const {
     if (!std::isfinite(s.curvature_per_mm))
       fail(fmt::format("surface {}: curvature is not finite", n));
     if (!std::isfinite(s.thickness_mm)) fail(fmt::format("surface {}: thickness is not finite", n));
+    if (!std::isfinite(s.conic)) fail(fmt::format("surface {}: conic constant is not finite", n));
+    if (!std::isfinite(s.asphere_r2_per_mm))
+      fail(fmt::format("surface {}: asphere r^2 term is not finite", n));
+    for (std::size_t j = 0; j < s.asphere.size(); ++j)
+      if (!std::isfinite(s.asphere[j]))
+        fail(fmt::format("surface {}: asphere a{} is not finite", n, 2 * j + 4));
     if (s.is_stop) {
       ++stops;
-      if (s.curvature_per_mm != 0.0) fail(fmt::format("surface {}: the stop must be flat", n));
+      if (s.curvature_per_mm != 0.0 || !s.is_spherical())
+        fail(fmt::format("surface {}: the stop must be flat", n));
     }
     if (!s.material.is_air()) {
       if (!(s.material.nd > 1.0) || !std::isfinite(s.material.nd))
@@ -179,12 +187,35 @@ void Lens::validate() const {
         "trace the lens as written (mode = \"as-written\") for an on-axis-only lens");
 }
 
+bool Surface::has_asphere() const {
+  if (asphere_r2_per_mm != 0.0) return true;
+  for (double a : asphere)
+    if (a != 0.0) return true;
+  return false;
+}
+
+double Surface::sag_mm(double r_mm) const {
+  const double rho = r_mm * r_mm;
+  const double q2 = 1.0 - (1.0 + conic) * curvature_per_mm * curvature_per_mm * rho;
+  if (q2 < 0.0) return std::numeric_limits<double>::quiet_NaN();
+  double poly = 0.0;
+  for (int j = kAsphereOrders - 1; j >= 0; --j) poly = (poly + asphere[j]) * rho;
+  poly = (poly * rho + asphere_r2_per_mm * rho);
+  return curvature_per_mm * rho / (1.0 + std::sqrt(q2)) + poly;
+}
+
 Lens scaled(const Lens& lens, double scale) {
   Lens out = lens;
   for (Surface& s : out.surfaces) {
     s.curvature_per_mm /= scale;
     s.thickness_mm *= scale;
     s.semi_diameter_mm *= scale;
+    s.asphere_r2_per_mm /= scale;
+    double power = scale;  // s^(2i-1) for a_{2i}: s^3 for a4
+    for (double& a : s.asphere) {
+      power *= scale * scale;
+      a /= power;
+    }
   }
   return out;
 }

@@ -94,8 +94,9 @@ constexpr std::array<std::string_view, 4> kFieldTypeNames = {
 constexpr std::array<std::string_view, 2> kLensKeys = {"name", "catalog"};
 constexpr std::array<std::string_view, 6> kSpecsKeys = {
     "f_number", "half_field_deg", "sensor_diagonal_mm", "wavelengths_nm", "channels", "dispersion"};
-constexpr std::array<std::string_view, 6> kSurfaceKeys = {
-    "radius_mm", "curvature_per_mm", "thickness_mm", "material", "stop", "semi_diameter_mm"};
+constexpr std::array<std::string_view, 9> kSurfaceKeys = {
+    "radius_mm", "curvature_per_mm", "thickness_mm", "material",  "stop",
+    "semi_diameter_mm", "conic", "asphere", "asphere_r2"};
 constexpr std::array<std::string_view, 2> kModelGlassKeys = {"nd", "vd"};
 constexpr std::array<char, 3> kChannelLetters = {'R', 'G', 'B'};
 
@@ -493,6 +494,26 @@ Surface read_surface(const TomlReader& reader, const toml::table& table, int sur
       reader.fail(*e.node,
                   fmt::format("semi_diameter_mm = {} must be >= 0", surface.semi_diameter_mm));
   }
+  // Profile: conic constant, even-asphere terms a4, a6, ... (mm^(1-2i)) and the r^2 term.
+  if (const Entry e = entry(table, "conic"))
+    surface.conic = reader.finite_number(*e.node, fmt::format("surface {}: conic", surface_number));
+  if (const Entry e = entry(table, "asphere_r2"))
+    surface.asphere_r2_per_mm =
+        reader.finite_number(*e.node, fmt::format("surface {}: asphere_r2", surface_number));
+  if (const Entry e = entry(table, "asphere")) {
+    const toml::array& terms =
+        reader.array(*e.node, fmt::format("surface {}: asphere", surface_number));
+    if (terms.size() > static_cast<std::size_t>(kAsphereOrders))
+      reader.fail(*e.node, fmt::format("surface {}: asphere has {} terms; at most {} (a4 .. a16)",
+                                       surface_number, terms.size(), kAsphereOrders));
+    for (std::size_t j = 0; j < terms.size(); ++j)
+      surface.asphere[j] = reader.finite_number(
+          terms[j], fmt::format("surface {}: asphere a{}", surface_number, 2 * j + 4));
+  }
+  if (surface.is_stop && !surface.is_spherical())
+    reader.fail(table.source(), fmt::format("surface {}: the stop must be flat, but it has a "
+                                            "conic or asphere terms",
+                                            surface_number));
   return surface;
 }
 
@@ -855,6 +876,16 @@ std::string format_lens_toml(const Lens& lens) {
     if (surface.is_stop) line("stop", "true");
     if (surface.semi_diameter_mm != 0.0)
       line("semi_diameter_mm", number_text(surface.semi_diameter_mm));
+    if (surface.conic != 0.0) line("conic", number_text(surface.conic));
+    if (surface.asphere_r2_per_mm != 0.0)
+      line("asphere_r2", number_text(surface.asphere_r2_per_mm));
+    int terms = kAsphereOrders;
+    while (terms > 0 && surface.asphere[terms - 1] == 0.0) --terms;
+    if (terms > 0) {
+      std::vector<std::string> values;
+      for (int j = 0; j < terms; ++j) values.push_back(number_text(surface.asphere[j]));
+      line("asphere", fmt::format("[{}]", fmt::join(values, ", ")));
+    }
   }
 
   if (!lens.extra_toml.empty()) {

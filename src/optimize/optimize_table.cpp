@@ -28,7 +28,7 @@ std::string glass_search_name(GlassSearch search) {
 const char* optimize_table_keys() {
   return "glass_search, constraints, rings, fields, max_iterations, max_rounds, glass_neighbours, "
          "weight_ray_path, weight_ray_angle, weight_glass, min_air_mm, min_glass_mm, "
-         "max_glass_mm, min_image_clearance_mm, max_ray_angle_deg, soft_start, freeze";
+         "max_glass_mm, min_image_clearance_mm, max_ray_angle_deg, soft_start, freeze, vary";
 }
 
 bool apply_optimize_key(const std::string& key, const toml::node& node, const SourceLocation& where,
@@ -95,6 +95,16 @@ bool apply_optimize_key(const std::string& key, const toml::node& node, const So
       const auto v = item.value<std::string>();
       if (!v) throw Error(where, "[optimize] freeze entries must be strings");
       options.freeze.push_back(*v);
+    }
+  } else if (key == "vary") {
+    const toml::array* items = node.as_array();
+    if (!items)
+      throw Error(where, "[optimize] vary must be an array of profile variables (\"k3\", \"a4_3\")");
+    options.vary.clear();
+    for (const auto& item : *items) {
+      const auto v = item.value<std::string>();
+      if (!v) throw Error(where, "[optimize] vary entries must be strings");
+      options.vary.push_back(*v);
     }
   } else {
     return false;

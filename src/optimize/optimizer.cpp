@@ -434,7 +434,7 @@ OptimizeResult optimize_lens(const Lens& start, const OptimizeOptions& options) 
   options.validate();
   const auto clock_start = std::chrono::steady_clock::now();
   OptimizeResult result;
-  const LensParameterization param(start, glass_space_for(start));
+  const LensParameterization param(start, glass_space_for(start), options.vary);
   std::vector<double> x = param.from_lens(start);
   Counters counters;
 

@@ -68,7 +68,8 @@ std::vector<int> GlassSpace::by_distance(const Eigen::Vector2d& g) const {
   return order;
 }
 
-LensParameterization::LensParameterization(const Lens& lens, GlassSpace glasses)
+LensParameterization::LensParameterization(const Lens& lens, GlassSpace glasses,
+                                           const std::vector<std::string>& profile_variables)
     : structure_(lens), glasses_(std::move(glasses)) {
   lens.validate();
   focal_length_mm_ = lens.specs.focal_length_mm();
@@ -124,6 +125,68 @@ LensParameterization::LensParameterization(const Lens& lens, GlassSpace glasses)
       }
     }
   }
+
+  // Profile variables.
+  for (const std::string& name : profile_variables) {
+    if (name.empty()) continue;
+    PrescriptionVariable pv;
+    if (!parse_profile_variable(name, pv))
+      throw Error(SourceLocation{lens.source_path},
+                  fmt::format("unknown profile variable '{}'; write k<surface> (conic) or "
+                              "a<order>_<surface> (asphere term, order 2, 4, ..., 16), e.g. k3, "
+                              "a4_3",
+                              name));
+    if (pv.surface >= k_count)
+      throw Error(SourceLocation{lens.source_path},
+                  fmt::format("profile variable '{}': the lens has {} surfaces", name, k_count));
+    if (lens.surfaces[pv.surface].is_stop)
+      throw Error(SourceLocation{lens.source_path},
+                  fmt::format("profile variable '{}': surface {} is the (flat) stop", name,
+                              pv.surface + 1));
+    const bool conic = pv.kind == PrescriptionVariable::Kind::kConic;
+    const LensVariable v{conic ? Kind::kConic : Kind::kAsphere, pv.surface, pv.name(),
+                         conic ? "conics" : "aspheres", pv.term};
+    bool duplicate = false;
+    for (const LensVariable& u : variables_) duplicate = duplicate || u.name == v.name;
+    if (!duplicate) variables_.push_back(v);
+  }
+  // The structure's profiles, normalized to f = 1 (after scaling to the spec focal length).
+  bool any_profile = false;
+  for (const Surface& s : lens.surfaces) any_profile = any_profile || !s.is_spherical();
+  for (const LensVariable& v : variables_)
+    any_profile = any_profile || v.kind == Kind::kConic || v.kind == Kind::kAsphere;
+  if (any_profile) {
+    has_profiles_ = true;
+    TraceOptions scale_only;
+    scale_only.ray_aiming = false;
+    scale_only.fields = 1;
+    scale_only.rings = 1;
+    const double scale =
+        prepare_system(make_trace_lens(lens), lens.specs, scale_only).scale;
+    const Lens normalized = scaled(lens, scale / focal_length_mm_);
+    profile_kind_.assign(k_count, kProfileSphere);
+    conic0_.assign(k_count, 0.0);
+    asphere0_.assign(static_cast<std::size_t>(k_count) * kAsphereTerms, 0.0);
+    for (int k = 0; k < k_count; ++k) {
+      const Surface& s = normalized.surfaces[k];
+      conic0_[k] = s.conic;
+      asphere0_[static_cast<std::size_t>(k) * kAsphereTerms] = s.asphere_r2_per_mm;
+      for (int j = 0; j < kAsphereOrders; ++j)
+        asphere0_[static_cast<std::size_t>(k) * kAsphereTerms + j + 1] = s.asphere[j];
+      if (s.conic != 0.0) profile_kind_[k] = kProfileConic;
+      if (s.has_asphere()) profile_kind_[k] = kProfileAsphere;
+    }
+    for (const LensVariable& v : variables_) {
+      if (v.kind == Kind::kConic && profile_kind_[v.surface] == kProfileSphere)
+        profile_kind_[v.surface] = kProfileConic;
+      if (v.kind == Kind::kAsphere) profile_kind_[v.surface] = kProfileAsphere;
+    }
+  }
+}
+
+double LensParameterization::profile_scale(int term) const {
+  const double rho = 1.0 / (2.0 * structure_.specs.f_number);
+  return std::pow(rho, 2 * term + 2);
 }
 
 std::vector<double> LensParameterization::from_lens(const Lens& lens_in) const {
@@ -158,8 +221,14 @@ std::vector<double> LensParameterization::from_lens(const Lens& lens_in) const {
         x[i + 1] = g[1];
         break;
       }
-      case LensVariable::Kind::kGlass1:
+      case LensVariable::Kind::kGlass1: break;
+      case LensVariable::Kind::kConic: x[i] = s.conic; break;
+      case LensVariable::Kind::kAsphere: {
+        // a'_{2i} = a_{2i} f^(2i-1) of the f = 1 lens, times rho^(2i).
+        const double a = v.term == 0 ? s.asphere_r2_per_mm : s.asphere[v.term - 1];
+        x[i] = a * std::pow(f, 2 * v.term + 1) * profile_scale(v.term);
         break;
+      }
     }
   }
   return x;
@@ -185,6 +254,11 @@ Lens LensParameterization::to_lens(const double* x, GlassMode mode,
     s.thickness_mm = tl.thickness_mm[k];
     s.written_as_radius = true;
     s.semi_diameter_mm = 0.0;
+    if (tl.has_profiles()) {
+      s.conic = tl.conic[k];
+      s.asphere_r2_per_mm = tl.asphere[k * kAsphereTerms];
+      for (int j = 0; j < kAsphereOrders; ++j) s.asphere[j] = tl.asphere[k * kAsphereTerms + j + 1];
+    }
     if (s.material.is_air()) continue;
     if (mode == GlassMode::kContinuous) {
       s.material = Material::model(tl.nd[k], tl.vd[k]);
@@ -232,8 +306,10 @@ std::vector<int> LensParameterization::select(const std::vector<std::string>& na
     if (!found) {
       std::string known;
       for (const LensVariable& v : variables_) known += (known.empty() ? "" : ", ") + v.name;
-      throw Error(fmt::format("unknown variable '{}'; known: curvatures, spacings, glasses, {}",
-                              raw, known));
+      throw Error(fmt::format("unknown variable '{}'; known: curvatures, spacings, glasses, "
+                              "conics, aspheres, {}",
+                              raw,
+                              known));
     }
   }
   std::sort(out.begin(), out.end());

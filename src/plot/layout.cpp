@@ -15,19 +15,24 @@ namespace {
 constexpr int kProfilePoints = 49;
 constexpr double kSphereLimit = 0.995;  // |c| y stays below this on a drawn sphere
 
-double sag(double c, double y) {
-  const double cy2 = c * y * y;
-  return cy2 / (1.0 + std::sqrt(std::max(0.0, 1.0 - c * cy2)));
+// The profile's sag (lens/lens.h): conic plus even-asphere terms a[0..7] = a2..a16.
+double sag(double c, double k, const std::array<double, 8>& a, double y) {
+  const double rho = y * y;
+  const double cy2 = c * rho;
+  double poly = 0.0;
+  for (int j = 7; j >= 0; --j) poly = (poly + a[j]) * rho;
+  return cy2 / (1.0 + std::sqrt(std::max(0.0, 1.0 - (1.0 + k) * c * cy2))) + poly;
 }
 
-double sphere_limit(double c) {
-  return c == 0.0 ? 1e30 : kSphereLimit / std::abs(c);
+// How far a profile is drawn: short of the conic's domain edge (1 + k) c^2 r^2 = 1.
+double sphere_limit(double c, double k = 0.0) {
+  return c == 0.0 || 1.0 + k <= 0.0 ? 1e30 : kSphereLimit / (std::abs(c) * std::sqrt(1.0 + k));
 }
 
 }  // namespace
 
 double SurfaceDrawing::sag_z(double y) const {
-  return vertex_z_mm + sag(curvature_per_mm, y);
+  return vertex_z_mm + sag(curvature_per_mm, conic, asphere, y);
 }
 
 std::optional<double> SurfaceDrawing::z_at(double y) const {
@@ -101,10 +106,14 @@ LayoutGeometry compute_layout(const PlotContext& ctx, const LayoutOptions& optio
     s.surface = k;
     s.vertex_z_mm = vertex[k];
     s.curvature_per_mm = lens.curvature_per_mm[k];
+    if (lens.has_profiles()) {
+      s.conic = lens.conic[k];
+      for (int j = 0; j < kAsphereTerms; ++j) s.asphere[j] = lens.asphere_term(k, j);
+    }
     s.is_stop = k == lens.stop;
     s.clear_semi_diameter_mm =
         std::min(max_height[k] * (1 + options.margin_fraction) + options.margin_mm,
-                 sphere_limit(s.curvature_per_mm));
+                 sphere_limit(s.curvature_per_mm, s.conic));
     s.drawn_semi_diameter_mm = s.clear_semi_diameter_mm;
     s.edge_semi_diameter_mm = s.clear_semi_diameter_mm;
   }
@@ -166,7 +175,8 @@ LayoutGeometry compute_layout(const PlotContext& ctx, const LayoutOptions& optio
       d.in_element = true;
       d.edge_semi_diameter_mm = edge;
       const bool interior = s != first && s != last + 1;
-      if (interior && edge <= sphere_limit(d.curvature_per_mm)) d.drawn_semi_diameter_mm = edge;
+      if (interior && edge <= sphere_limit(d.curvature_per_mm, d.conic))
+        d.drawn_semi_diameter_mm = edge;
     }
   }
 

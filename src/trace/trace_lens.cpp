@@ -18,6 +18,10 @@ std::string PrescriptionVariable::name() const {
       return fmt::format("nd{}", surface + 1);
     case Kind::kVd:
       return fmt::format("vd{}", surface + 1);
+    case Kind::kConic:
+      return fmt::format("k{}", surface + 1);
+    case Kind::kAsphere:
+      return fmt::format("a{}_{}", 2 * term + 2, surface + 1);
   }
   return "?";
 }
@@ -33,7 +37,42 @@ std::vector<PrescriptionVariable> all_prescription_variables(const Lens& lens) {
     if (!lens.surfaces[k].material.is_air()) out.push_back({Kind::kNd, k});
   for (int k = 0; k < k_count; ++k)
     if (!lens.surfaces[k].material.is_air()) out.push_back({Kind::kVd, k});
+  for (int k = 0; k < k_count; ++k) {
+    const Surface& s = lens.surfaces[k];
+    if (s.is_spherical()) continue;
+    out.push_back({Kind::kConic, k});
+    if (s.asphere_r2_per_mm != 0.0) out.push_back({Kind::kAsphere, k, 0});
+    for (int j = 0; j < kAsphereOrders; ++j)
+      if (s.asphere[j] != 0.0) out.push_back({Kind::kAsphere, k, j + 1});
+  }
   return out;
+}
+
+bool parse_profile_variable(const std::string& name, PrescriptionVariable& out) {
+  auto parse_int = [](const std::string& text, int& value) {
+    if (text.empty() || text.size() > 3) return false;
+    value = 0;
+    for (char ch : text) {
+      if (ch < '0' || ch > '9') return false;
+      value = value * 10 + (ch - '0');
+    }
+    return true;
+  };
+  int surface = 0;
+  if (name.size() >= 2 && name[0] == 'k' && parse_int(name.substr(1), surface) && surface >= 1) {
+    out = {PrescriptionVariable::Kind::kConic, surface - 1, 0};
+    return true;
+  }
+  const std::size_t bar = name.find('_');
+  if (name.size() >= 4 && name[0] == 'a' && bar != std::string::npos) {
+    int order = 0;
+    if (!parse_int(name.substr(1, bar - 1), order) || !parse_int(name.substr(bar + 1), surface))
+      return false;
+    if (order < 2 || order > 16 || order % 2 != 0 || surface < 1) return false;
+    out = {PrescriptionVariable::Kind::kAsphere, surface - 1, order / 2 - 1};
+    return true;
+  }
+  return false;
 }
 
 double variable_value(const Lens& lens, const PrescriptionVariable& v) {
@@ -47,6 +86,10 @@ double variable_value(const Lens& lens, const PrescriptionVariable& v) {
       return s.material.nd;
     case PrescriptionVariable::Kind::kVd:
       return s.material.vd;
+    case PrescriptionVariable::Kind::kConic:
+      return s.conic;
+    case PrescriptionVariable::Kind::kAsphere:
+      return v.term == 0 ? s.asphere_r2_per_mm : s.asphere.at(v.term - 1);
   }
   return 0.0;
 }
@@ -65,6 +108,12 @@ void set_variable_value(Lens& lens, const PrescriptionVariable& v, double value)
       break;
     case PrescriptionVariable::Kind::kVd:
       s.material.vd = value;
+      break;
+    case PrescriptionVariable::Kind::kConic:
+      s.conic = value;
+      break;
+    case PrescriptionVariable::Kind::kAsphere:
+      (v.term == 0 ? s.asphere_r2_per_mm : s.asphere.at(v.term - 1)) = value;
       break;
   }
 }
@@ -112,6 +161,20 @@ TraceLens<double> make_trace_lens(const Lens& lens) {
   if (clips)
     for (const Surface& s : lens.surfaces)
       out.semi_diameter_mm.push_back(s.is_stop ? 0.0 : s.semi_diameter_mm * kEdgeTolerance);
+  bool profiles = false;
+  for (const Surface& s : lens.surfaces) profiles = profiles || !s.is_spherical();
+  if (profiles) {
+    out.ensure_profiles();
+    for (int k = 0; k < k_count; ++k) {
+      const Surface& s = lens.surfaces[k];
+      out.conic[k] = s.conic;
+      out.asphere[static_cast<std::size_t>(k) * kAsphereTerms] = s.asphere_r2_per_mm;
+      for (int j = 0; j < kAsphereOrders; ++j)
+        out.asphere[static_cast<std::size_t>(k) * kAsphereTerms + j + 1] = s.asphere[j];
+      out.profile[k] = s.has_asphere() ? kProfileAsphere
+                                       : (s.conic != 0.0 ? kProfileConic : kProfileSphere);
+    }
+  }
   if (lens.specs.dispersion == DispersionModel::kCatalog) {
     out.catalog_offset.assign(k_count, std::vector<double>(out.wavelengths_nm.size(), 0.0));
     for (int k = 0; k < k_count; ++k) {

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # End-to-end test of `lensopt convert` and .zmx input: tessar.toml -> .zmx -> .toml analyses to
 # the same mean spot as the original; a textbook .zmx analyses directly; writing .yml is refused;
-# a .zmx with an asphere fails with a message naming the file and line.
+# a .zmx with an unsupported surface type (toroidal) fails with one line naming it, file and line.
 # Usage: convert.sh path/to/lensopt (run from the project folder). Exit 0 pass, 1 fail.
 set -u
 lensopt=${1:?usage: convert.sh path/to/lensopt}
@@ -61,7 +61,7 @@ else
 fi
 [ -e "$tmp/tessar.yml" ] && fail "convert to .yml left a file"
 
-# 4. A bad .zmx (an even asphere on line 14) fails naming the file and line.
+# 4. A bad .zmx (a toroidal surface on line 14) fails naming the file, line and type.
 cat >"$tmp/bad.zmx" <<'EOF'
 VERS 190513 80 123457 L123457
 MODE SEQ
@@ -76,7 +76,7 @@ SURF 0
 SURF 1
   STOP
 SURF 2
-  TYPE EVENASPH
+  TYPE TOROIDAL
   CURV 0.02
   DISZ 3
 SURF 3
@@ -85,10 +85,12 @@ EOF
 for command in "convert $tmp/bad.zmx $tmp/bad.toml" "analyze $tmp/bad.zmx"; do
   # shellcheck disable=SC2086
   if "$lensopt" $command >/dev/null 2>"$tmp/bad.err"; then
-    fail "lensopt $command accepted an asphere"
+    fail "lensopt $command accepted a toroidal surface"
   else
     grep -q "bad.zmx:14" "$tmp/bad.err" ||
       fail "lensopt $command: message lacks file:line: $(cat "$tmp/bad.err")"
+    grep -q "TOROIDAL" "$tmp/bad.err" ||
+      fail "lensopt $command: message does not name the type: $(cat "$tmp/bad.err")"
   fi
 done
 [ -e "$tmp/bad.toml" ] && fail "a failed convert left its output"

@@ -40,6 +40,10 @@ inline void check_identical_lenses(const Lens& a, const Lens& b) {
     CHECK(s.material.glass_name == t.material.glass_name);
     CHECK(bits(s.material.nd) == bits(t.material.nd));
     CHECK(bits(s.material.vd) == bits(t.material.vd));
+    CHECK(bits(s.conic) == bits(t.conic));
+    CHECK(bits(s.asphere_r2_per_mm) == bits(t.asphere_r2_per_mm));
+    for (std::size_t j = 0; j < s.asphere.size(); ++j)
+      CHECK(bits(s.asphere[j]) == bits(t.asphere[j]));
   }
 }
 

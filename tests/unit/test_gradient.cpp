@@ -28,6 +28,7 @@ double finite_difference(const Lens& lens, const PrescriptionVariable& v,
     case PrescriptionVariable::Kind::kThickness: scale = 1.0; break;
     case PrescriptionVariable::Kind::kNd: scale = 1.0; break;
     case PrescriptionVariable::Kind::kVd: scale = 40.0; break;
+    default: scale = 1.0; break;
   }
   auto central = [&](double h) {
     Lens plus = lens, minus = lens;

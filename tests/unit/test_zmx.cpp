@@ -198,13 +198,32 @@ TEST_CASE("zmx: textbook designs import and analyse to their stated focal length
   CHECK(stop_warning);
 }
 
-TEST_CASE("zmx: aspheres, coordinate breaks and unknown glasses are errors naming the line") {
+TEST_CASE("zmx: conics and even aspheres round-trip exactly; other types are errors naming the line") {
+  // TOML -> ZMX -> TOML keeps every profile number bit for bit.
+  Lens lens = read_lens(test::source_dir() / "lenses" / "doublet.toml");
+  lens.surfaces[0].conic = -0.637;
+  lens.surfaces[0].asphere_r2_per_mm = 1.0 / 3.0;
+  lens.surfaces[0].asphere = {1.0 / 7.0 * 1e-4, -2e-7, 3.3e-9, 0.0, 1.0 / 9.0 * 1e-14, 0.0, 5e-19};
+  lens.surfaces[1].conic = 2.5;  // a conic on a STANDARD surface
+  lens.surfaces[3].asphere[1] = -1e-6;
+  const Lens back = parse_zmx(format_zmx(lens), "round.zmx").lens;
+  test::check_identical_lenses(lens, back);
+  const Lens toml = parse_lens_toml(format_lens_toml(back), "round.toml");
+  test::check_identical_lenses(lens, toml);
   {
-    const std::string text = small_zmx("", "  TYPE EVENASPH\n  CURV 0.02\n  DISZ 3\n");
+    // EVENASPH has PARM 1..8; a ninth term is refused, naming it.
+    const std::string text = small_zmx(
+        "", "  TYPE EVENASPH\n  CURV 0.02\n  PARM 9 1e-20\n  DISZ 3\n  GLAS ___BLANK 1 0 1.5 60\n");
     const Error e = error_of(text);
     CHECK(e.where().file == "bad.zmx");
-    CHECK(e.where().line == line_of(text, "TYPE EVENASPH"));
-    CHECK(std::string(e.what()).find("EVENASPH") != std::string::npos);
+    CHECK(e.where().line == line_of(text, "PARM 9"));
+    CHECK(std::string(e.what()).find("PARM 9") != std::string::npos);
+  }
+  {
+    const std::string text = small_zmx("", "  TYPE TOROIDAL\n  CURV 0.02\n  DISZ 3\n");
+    const Error e = error_of(text);
+    CHECK(e.where().line == line_of(text, "TYPE TOROIDAL"));
+    CHECK(std::string(e.what()).find("TOROIDAL") != std::string::npos);
   }
   {
     const std::string text = small_zmx("", "  TYPE COORDBRK\n  CURV 0\n  DISZ 0\n");
@@ -213,11 +232,21 @@ TEST_CASE("zmx: aspheres, coordinate breaks and unknown glasses are errors namin
     CHECK(std::string(e.what()).find("COORDBRK") != std::string::npos);
   }
   {
-    const std::string text = small_zmx(
-        "", "  TYPE STANDARD\n  CURV 0.02\n  DISZ 3\n  CONI -1.5\n  GLAS ___BLANK 1 0 1.5 60\n");
-    const Error e = error_of(text);
-    CHECK(e.where().line == line_of(text, "CONI -1.5"));
-    CHECK(std::string(e.what()).find("conic") != std::string::npos);
+    // A conic and an even asphere import (in the file's units: CM here).
+    std::string text = small_zmx(
+        "", "  TYPE EVENASPH\n  CURV 0.02\n  DISZ 3\n  CONI -1.5\n  PARM 1 0.001\n"
+            "  PARM 2 2e-5\n  PARM 8 -3e-17\n  GLAS ___BLANK 1 0 1.5 60\n");
+    const Lens mm = parse_zmx(text, "a.zmx").lens;
+    CHECK(mm.surfaces[1].conic == -1.5);
+    CHECK(mm.surfaces[1].asphere_r2_per_mm == 0.001);
+    CHECK(mm.surfaces[1].asphere[0] == 2e-5);
+    CHECK(mm.surfaces[1].asphere[6] == -3e-17);
+    text.replace(text.find("UNIT MM"), 7, "UNIT CM");
+    const Lens cm = parse_zmx(text, "a.zmx").lens;
+    CHECK(cm.surfaces[1].conic == -1.5);
+    CHECK(cm.surfaces[1].asphere_r2_per_mm == doctest::Approx(0.0001).epsilon(1e-15));
+    CHECK(cm.surfaces[1].asphere[0] == doctest::Approx(2e-8).epsilon(1e-15));
+    CHECK(cm.surfaces[1].sag_mm(30.0) == doctest::Approx(10.0 * mm.surfaces[1].sag_mm(3.0)));
   }
   {
     const std::string text =

@@ -8,8 +8,10 @@
 //   FTYP type flag nf nw   field type (0: angle, degrees), number of fields and wavelengths
 //   XFLN / YFLN x1 x2 ...  field coordinates; GCAT A B ...  glass catalogs searched in order
 //   SURF n                 surface n: 0 the object, the last one the image
-//     TYPE STANDARD, CURV c (1/mm), DISZ t (mm, INFINITY for the object), STOP,
-//     GLAS name ... | GLAS ___BLANK 1 0 nd vd ... (a model glass), DIAM semi-diameter, CONI 0
+//     TYPE STANDARD | EVENASPH, CURV c (1/mm), DISZ t (mm, INFINITY for the object), STOP,
+//     GLAS name ... | GLAS ___BLANK 1 0 nd vd ... (a model glass), DIAM semi-diameter,
+//     CONI k (conic constant), PARM i a (EVENASPH: i = 1..8 the coefficients of r^2, r^4, ...,
+//     r^16 in lens units^(1-2i); lensopt's asphere_r2 and asphere = [a4, ..., a16])
 //
 // Mapping to lensopt's Lens (whose surfaces are the lens surfaces only):
 //   surfaces       SURF 1 .. N-1; surface k's thickness is its DISZ, so the last lens surface's
@@ -27,8 +29,10 @@
 // sensor_diagonal_mm, dispersion, channels, wavelengths_nm, and the extra TOML tables), so
 // TOML -> ZMX -> TOML is exact; a note contradicted by the Zemax data is ignored with a warning.
 //
-// Errors (lensopt::Error at file:line:column): a surface type other than STANDARD, a non-zero
-// CONI, a mirror, a finite object, a curved image, a field type other than angle, an unknown unit,
+// Export writes TYPE EVENASPH with PARM 1..8 for a surface with asphere terms (else STANDARD)
+// and CONI when k != 0.
+// Errors (lensopt::Error at file:line:column, one line naming the feature): a surface type other
+// than STANDARD or EVENASPH, an EVENASPH PARM beyond 8, a mirror, a finite object, a curved image, a field type other than angle, an unknown unit,
 // a glass in none of the GCAT catalogs (naming them). Lines lensopt does not model are warnings
 // with their line numbers, never dropped silently.
 #pragma once

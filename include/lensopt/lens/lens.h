@@ -1,9 +1,17 @@
-// The lens model: a sequence of spherical surfaces, each with the thickness to the next and the
-// medium after it; one flat surface is the aperture stop; the last thickness is the distance from
-// the last surface to the image plane. Lengths in mm, curvatures in 1/mm (flat = 0), angles in
-// degrees unless a name says otherwise.
+// The lens model: a sequence of surfaces, each with the thickness to the next and the medium after
+// it; one flat surface is the aperture stop; the last thickness is the distance from the last
+// surface to the image plane. Lengths in mm, curvatures in 1/mm (flat = 0), angles in degrees
+// unless a name says otherwise.
+//
+// Surface profile (sag z as a function of the height r, z positive towards the image), as
+// OpticStudio's STANDARD and EVENASPH surfaces define it:
+//   z(r) = c r^2 / (1 + sqrt(1 - (1 + k) c^2 r^2)) + a2 r^2 + a4 r^4 + ... + a16 r^16
+// c the curvature (1/mm), k the conic constant (0 sphere, -1 paraboloid, < -1 hyperboloid,
+// (-1, 0) prolate and > 0 oblate ellipsoid), a_{2i} in mm^(1-2i) (a2 in 1/mm is Zemax's EVENASPH
+// PARM 1; a4..a16 are PARM 2..8). k = 0 and every a = 0 is today's sphere.
 #pragma once
 
+#include <array>
 #include <cmath>
 #include <limits>
 #include <memory>
@@ -34,6 +42,9 @@ struct Material {
   std::string label() const;
 };
 
+// Number of even-asphere terms a4, a6, ..., a16.
+inline constexpr int kAsphereOrders = 7;
+
 // One refracting (or stop) surface.
 struct Surface {
   double curvature_per_mm = 0.0;  // c = 1/R; 0 for a flat surface
@@ -42,6 +53,16 @@ struct Surface {
   bool is_stop = false;           // the aperture stop (must be flat)
   double semi_diameter_mm = 0.0;  // clear semi-aperture if known; 0 = not set
   bool written_as_radius = true;  // TOML round trip: written as radius_mm (else curvature_per_mm)
+  double conic = 0.0;             // conic constant k (dimensionless)
+  double asphere_r2_per_mm = 0.0;  // a2, the r^2 term (Zemax EVENASPH PARM 1), 1/mm
+  std::array<double, kAsphereOrders> asphere{};  // a4, a6, ..., a16 in mm^(1-2i) (i = 2..8)
+
+  // Any a2..a16 nonzero.
+  bool has_asphere() const;
+  // k = 0 and no asphere term: the exact sphere (or plane).
+  bool is_spherical() const { return conic == 0.0 && !has_asphere(); }
+  // Sag z(r) of the profile (mm) at height r (mm); NaN outside the conic's domain.
+  double sag_mm(double r_mm) const;
 };
 
 // How a lens's specs are applied when it is traced.
@@ -144,7 +165,8 @@ struct Lens {
   void validate() const;
 };
 
-// Uniformly scales a lens: curvatures / s, thicknesses and semi-diameters * s.
+// Uniformly scales a lens: curvatures / s, thicknesses and semi-diameters * s, a_{2i} * s^(1-2i)
+// (k unchanged), so every sag scales by s.
 Lens scaled(const Lens& lens, double scale);
 
 }  // namespace lensopt

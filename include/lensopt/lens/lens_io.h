@@ -6,7 +6,10 @@
 //              channels = ["R", ...] (optional), dispersion = "abbe" | "catalog"
 //   [[surfaces]] radius_mm = 9.1 (or "inf" / inf for flat; or curvature_per_mm = 0.11),
 //              thickness_mm = 2.4, material = "S-LAH64" | { nd = 1.7, vd = 48 } (absent = air),
-//              stop = true, semi_diameter_mm = 5 (optional)
+//              stop = true, semi_diameter_mm = 5 (optional),
+//              conic = -1.0 (k, optional), asphere = [a4, a6, ..., a16] (optional, up to 7 terms;
+//              a_{2i} in mm^(1-2i): a4 in mm^-3, a6 in mm^-5, ...), asphere_r2 = a2 (optional,
+//              1/mm: Zemax EVENASPH PARM 1, adds paraxial power 2 a2). Sag in lens/lens.h.
 // Other tables (e.g. [optimize], [tolerance]) are kept verbatim on a round trip.
 // The paper's YAML (stop_idx, sequence of G/A, hfov, f_number, c, t, nd, v) is read as is:
 // model glasses, the paper's specs.

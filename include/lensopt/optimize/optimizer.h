@@ -43,6 +43,9 @@ struct OptimizeOptions {
   GlassSearch glass_search = GlassSearch::kNone;
   int glass_neighbours = 4;         // catalog glasses tried per element in phase 3
   std::vector<std::string> freeze;  // variable names or groups to hold fixed
+  // Surface-profile variables added to the lens's own ("k3", "a4_3": conic of surface 3, its a4);
+  // variables.h normalizes them. Profile terms not named keep the start's values.
+  std::vector<std::string> vary;
   int max_iterations = 50;          // LM iterations per round
   int max_rounds = 4;               // reweighting rounds per phase
   bool soft_start = true;           // strict constraints: run the paper's soft penalties first

@@ -13,7 +13,13 @@
 //   2. the normalized lens (f = 1): curvatures c', spacings s', the last curvature solved so the
 //      paraxial focal length at 587.6 nm is exactly 1 (paraxial.h: solve_last_curvature);
 //   3. the paraxial image solve: s_{K-1} = BFL' + s'_{K-1} (or, without it, s_{K-1} = s'_{K-1});
-//   4. scale: c = c' / f, t = s' f.
+//   4. scale: c = c' / f, t = s' f, a_{2i} = a'_{2i} / f^(2i-1).
+// Surface profiles (optional variables, named in the constructor's `profile_variables`):
+//   k_k  = the conic constant of surface k as it is (dimensionless, O(1));
+//   x    = a'_{2i} rho^(2i) for an asphere term, rho = 1 / (2 N) the normalized entrance-pupil
+//          radius: the term's sag at the pupil's edge height in units of f, so a4 .. a16 are all
+//          O(sag / f) for LM and Adam. a'_{2i} = a_{2i} f^(2i-1) is the term of the f = 1 lens.
+// Profile terms that are not variables keep the structure's values (scaled with the lens).
 #pragma once
 
 #include <Eigen/Core>
@@ -67,11 +73,12 @@ class GlassSpace {
 
 // What a variable is.
 struct LensVariable {
-  enum class Kind { kCurvature, kSpacing, kDefocus, kGlass0, kGlass1 };
+  enum class Kind { kCurvature, kSpacing, kDefocus, kGlass0, kGlass1, kConic, kAsphere };
   Kind kind;
-  int surface;        // 0-based surface index
-  std::string name;   // "c1", "s3", "defocus", "g2.0", "g2.1" (1-based surface numbers)
-  std::string group;  // "curvatures", "spacings", "glasses"
+  int surface;          // 0-based surface index
+  std::string name;     // "c1", "s3", "defocus", "g2.0", "g2.1", "k3", "a4_3" (1-based surfaces)
+  std::string group;    // "curvatures", "spacings", "glasses", "conics", "aspheres"
+  int term = 0;         // kAsphere: 0 = a2, 1 = a4, ..., 7 = a16
 };
 
 // How glass variables enter the forward pass.
@@ -87,7 +94,10 @@ class LensParameterization {
   // `lens` fixes the structure (surfaces, stop, which spaces are glass) and the specs;
   // `glasses` is the catalog's whitened space. Throws Error if the last surface's medium before
   // it is air (the last curvature cannot be solved) or the lens has no glass.
-  LensParameterization(const Lens& lens, GlassSpace glasses);
+  // `profile_variables` adds conic and asphere variables: "k3", "a4_3" (a4 of surface 3), ... (1-based
+  // surfaces, TraceLens naming); throws Error for an unknown name or the stop.
+  LensParameterization(const Lens& lens, GlassSpace glasses,
+                       const std::vector<std::string>& profile_variables = {});
 
   const std::vector<LensVariable>& variables() const { return variables_; }
   int size() const { return static_cast<int>(variables_.size()); }
@@ -173,6 +183,20 @@ class LensParameterization {
           break;  // handled with kGlass0
       }
     }
+    // Surface profiles: the structure's (normalized) terms, then the profile variables.
+    if (has_profiles_) {
+      lens.ensure_profiles();
+      lens.profile = profile_kind_;
+      for (int k = 0; k < k_count; ++k) lens.conic[k] = K<T>(conic0_[k]);
+      for (std::size_t j = 0; j < asphere0_.size(); ++j) lens.asphere[j] = K<T>(asphere0_[j]);
+      for (int i = 0; i < size(); ++i) {
+        const LensVariable& v = variables_[i];
+        if (v.kind == LensVariable::Kind::kConic) lens.conic[v.surface] = x[i];
+        if (v.kind == LensVariable::Kind::kAsphere)
+          lens.asphere[static_cast<std::size_t>(v.surface) * kAsphereTerms + v.term] =
+              x[i] * K<T>(1.0 / profile_scale(v.term));
+      }
+    }
     // Fixed (frozen by structure) values: the stop is flat; frozen variables are still variables.
     const int last = k_count - 1;
     lens.curvature_per_mm[last] = solve_last_curvature(lens, K<T>(1.0), reference_nm);
@@ -182,11 +206,7 @@ class LensParameterization {
     } else {
       lens.thickness_mm[last] = x[defocus_index_];  // ablation: s_{K-1} = s'_{K-1} f
     }
-    const T f = K<T>(focal_length_mm_);
-    for (int k = 0; k < k_count; ++k) {
-      lens.curvature_per_mm[k] = lens.curvature_per_mm[k] / f;
-      lens.thickness_mm[k] = lens.thickness_mm[k] * f;
-    }
+    lens.scale_lengths(K<T>(focal_length_mm_));
     return lens;
   }
 
@@ -211,6 +231,9 @@ class LensParameterization {
   void set_paraxial_image_solve(bool on) { paraxial_image_solve_ = on; }
   bool paraxial_image_solve() const { return paraxial_image_solve_; }
 
+  // x / a'_{2i} of asphere term j (0 = a2): rho^(2i), rho = 1 / (2 N).
+  double profile_scale(int term) const;
+
   // Indices of the variables whose name or group is in `names` ("curvatures", "c3", "g2", ...).
   // Throws Error naming an unknown entry.
   std::vector<int> select(const std::vector<std::string>& names) const;
@@ -223,6 +246,10 @@ class LensParameterization {
   std::vector<std::vector<double>> glass_offsets_;
   double focal_length_mm_ = 1.0;
   int defocus_index_ = -1;
+  // Profiles of the normalized (f = 1) structure: kind per surface, k and a'_{2i} constants.
+  bool has_profiles_ = false;
+  std::vector<std::uint8_t> profile_kind_;
+  std::vector<double> conic0_, asphere0_;
   bool paraxial_image_solve_ = true;
 };
 

@@ -4,6 +4,9 @@
 // curvature c_k between media n (before) and n' (after):
 //   refraction  w' = w - y c_k (n' - n)
 //   transfer    y' = y + t_k w' / n'
+// c_k is the paraxial curvature of the profile, c + 2 a2 (TraceLens::paraxial_curvature): the
+// conic constant and the r^4..r^16 terms add no paraxial power (their sag is O(r^4) beyond the
+// vertex sphere's), the r^2 term a2 (Zemax EVENASPH PARM 1) does, as a curvature 2 a2.
 // Equivalently each surface is the ABCD matrix [[1, 0], [-c (n'-n), 1]] followed by
 // [[1, t/n'], [0, 1]] acting on (y, w).
 //   EFL = -y_0 / w_K for a ray entering parallel (y_0 = 1, w_0 = 0), w_K after the last surface;
@@ -40,7 +43,7 @@ ParaxialRay<T> paraxial_trace(const TraceLens<T>& lens, ParaxialRay<T> ray, int 
     }
     const T n_before = lens.index_at_nm(k - 1, wavelength_nm);
     const T n_after = lens.index_at_nm(k, wavelength_nm);
-    ray.w = ray.w - ray.y * lens.curvature_per_mm[k] * (n_after - n_before);
+    ray.w = ray.w - ray.y * lens.paraxial_curvature(k) * (n_after - n_before);
   }
   return ray;
 }
@@ -87,7 +90,8 @@ T paraxial_image_height(const TraceLens<T>& lens, const T& entrance_pupil_z_mm, 
 
 // Curvature of the last surface that gives focal length `efl_mm` with all else fixed:
 // w_K = w - y c (1 - n) must equal -1/f for the ray (1, 0), so c = (w + 1/f) / (y (1 - n)).
-// Needs a glass before the last surface (n != 1) and y != 0.
+// Needs a glass before the last surface (n != 1) and y != 0. With an r^2 term a2 on the last
+// surface the solved paraxial curvature is c + 2 a2, and c = solved - 2 a2 is returned.
 template <typename T>
 T solve_last_curvature(const TraceLens<T>& lens, const T& efl_mm, double wavelength_nm) {
   const int k_count = lens.surface_count();
@@ -96,7 +100,8 @@ T solve_last_curvature(const TraceLens<T>& lens, const T& efl_mm, double wavelen
   const int last = k_count - 1;
   ray.y = ray.y + lens.thickness_mm[last - 1] * ray.w / lens.index_at_nm(last - 1, wavelength_nm);
   const T n_before = lens.index_at_nm(last - 1, wavelength_nm);
-  return (ray.w + K<T>(1.0) / efl_mm) / (ray.y * (K<T>(1.0) - n_before));
+  const T paraxial = (ray.w + K<T>(1.0) / efl_mm) / (ray.y * (K<T>(1.0) - n_before));
+  return lens.asphere.empty() ? paraxial : paraxial - K<T>(2.0) * lens.asphere_term(last, 0);
 }
 
 }  // namespace lensopt

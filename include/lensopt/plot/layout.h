@@ -43,6 +43,8 @@ struct SurfaceDrawing {
   int surface = 0;  // 0-based
   double vertex_z_mm = 0;
   double curvature_per_mm = 0;
+  double conic = 0;                   // profile (lens/lens.h): conic constant k
+  std::array<double, 8> asphere{};    // a2, a4, ..., a16 (mm^(1-2i))
   double clear_semi_diameter_mm = 0;  // largest ray height (+ margin)
   double drawn_semi_diameter_mm = 0;  // how far the sphere is drawn
   double edge_semi_diameter_mm = 0;   // how far the drawn curve reaches (annulus included)
@@ -53,7 +55,7 @@ struct SurfaceDrawing {
 
   // z of the drawn curve at height y (|y| <= edge), from the sag formula; nullopt outside.
   std::optional<double> z_at(double y) const;
-  // z of the sphere at height y (|y| < 1/|c|).
+  // z of the profile (sphere, conic or even asphere) at height y (inside the conic's domain).
   double sag_z(double y) const;
 };
 

@@ -15,6 +15,9 @@
 //        d' = mu d + (sqrt(zeta') - mu sqrt(zeta)) N
 //   5. Clear aperture (only at a surface with a semi-diameter r_k > 0): a ray whose intersection
 //      has x2^2 + y2^2 > r_k^2 is vignetted (kRayVignetted; a select, not a jump).
+// Steps 3-4 are those of a sphere; a conic or even-asphere surface (TraceLens::profile) runs the
+// loops of trace/profile.h instead (closed-form conic, Newton for the asphere), one loop per
+// surface, so an all-spherical lens runs exactly this sphere loop.
 // After the last surface the ray is transferred to the image plane at t_{K-1}.
 // Per ray and surface the kernel can record what the design losses need: the axial travel
 // dz_k = t_k + z_{k+1} - z_k in every space k (after surface k, the last one up to the image),
@@ -38,6 +41,12 @@ enum RayStatus : std::uint8_t {
   kRayBackwards = 3,                // direction with n <= 0 (cannot reach the next surface)
   kRayVignetted = 4,                // outside a surface's clear semi-diameter (x^2 + y^2 > r^2)
 };
+
+}  // namespace lensopt
+
+#include "lensopt/trace/profile.h"  // needs RayStatus
+
+namespace lensopt {
 
 // A batch of rays, structure of arrays. All arrays have size() entries.
 template <typename T>
@@ -171,7 +180,29 @@ void trace_bundle(const TraceLens<T>& lens, int w, int end, bool to_image, RayBu
     const T c = lens.curvature_per_mm[k];
     const T shift = k > 0 ? lens.thickness_mm[k - 1] : zero;
     const T mu = lens.index(k - 1, w) / lens.index(k, w);
-    if constexpr (std::is_same_v<T, double>) {
+    const std::uint8_t profile = lens.has_profiles() ? lens.profile[k] : kProfileSphere;
+    if (profile != kProfileSphere) {
+      // Conic or even asphere (trace/profile.h).
+      T* travel = record && k > 0 ? record->axial_travel_mm[k - 1].data() : nullptr;
+      T* zeta_rec = record ? record->cos2_incidence[k].data() : nullptr;
+      T* zeta_prime_rec = record ? record->cos2_refraction[k].data() : nullptr;
+      const T& conic = lens.conic[k];
+      const T* a = lens.asphere.data() + static_cast<std::size_t>(k) * kAsphereTerms;
+      if (profile == kProfileConic) {
+        if (record)
+          detail::trace_surface_conic<T, true>(c, conic, shift, mu, count, x, y, z, l, m, n,
+                                               failure, travel, zeta_rec, zeta_prime_rec);
+        else
+          detail::trace_surface_conic<T, false>(c, conic, shift, mu, count, x, y, z, l, m, n,
+                                                failure, nullptr, nullptr, nullptr);
+      } else if (record) {
+        detail::trace_surface_asphere<T, true>(c, conic, a, shift, mu, count, x, y, z, l, m, n,
+                                               failure, travel, zeta_rec, zeta_prime_rec);
+      } else {
+        detail::trace_surface_asphere<T, false>(c, conic, a, shift, mu, count, x, y, z, l, m, n,
+                                                failure, nullptr, nullptr, nullptr);
+      }
+    } else if constexpr (std::is_same_v<T, double>) {
       detail::trace_surface_double(
           c, shift, mu, count, x, y, z, l, m, n, failure,
           record && k > 0 ? record->axial_travel_mm[k - 1].data() : nullptr,

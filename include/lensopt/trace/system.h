@@ -223,10 +223,7 @@ TraceSystem<T> prepare_system(const TraceLens<T>& lens_in, const SystemSetup& se
   ParaxialData<T> par = paraxial_data(sys.lens, reference_nm);
   sys.scale = setup.scale ? K<T>(setup.focal_length_mm) / par.efl_mm : K<T>(1.0);
   if (setup.scale) {
-    for (int k = 0; k < sys.lens.surface_count(); ++k) {
-      sys.lens.curvature_per_mm[k] = sys.lens.curvature_per_mm[k] / sys.scale;
-      sys.lens.thickness_mm[k] = sys.lens.thickness_mm[k] * sys.scale;
-    }
+    sys.lens.scale_lengths(sys.scale);
     for (double& r : sys.lens.semi_diameter_mm) r *= value_of(sys.scale);
     par = paraxial_data(sys.lens, reference_nm);
   }

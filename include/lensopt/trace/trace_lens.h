@@ -1,7 +1,8 @@
 // TraceLens<T>: the numbers the tracer needs, on scalar type T (double or a ceres::Jet), built
 // from a Lens once. Prescription variables can be seeded as Jet derivative directions.
 //
-// Surfaces k = 0..K-1: curvature c_k (1/mm), thickness t_k (mm, to surface k+1; t_{K-1} is the
+// Surfaces k = 0..K-1: curvature c_k (1/mm), profile (trace/profile.h: sphere, conic k_k, even
+// asphere a_{2i,k}; `profile` empty = every surface a sphere), thickness t_k (mm, to surface k+1; t_{K-1} is the
 // distance to the image plane), medium after surface k with (nd_k, vd_k) (air: 1, 0).
 // Refractive index of medium k at wavelength l:
 //   abbe model:     n_k(l) = A_k + B_k / l^2 (glass/dispersion.h)
@@ -15,6 +16,7 @@
 // catalog_offsets, so every consumer traces with one dispersion model.
 #pragma once
 
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -24,19 +26,32 @@
 
 namespace lensopt {
 
+// Surface profile kinds of a TraceLens (the kernel picks one loop per surface, trace/profile.h).
+inline constexpr std::uint8_t kProfileSphere = 0;
+inline constexpr std::uint8_t kProfileConic = 1;
+inline constexpr std::uint8_t kProfileAsphere = 2;
+// Asphere terms per surface in a TraceLens: a2, a4, ..., a16.
+inline constexpr int kAsphereTerms = 8;
+
 // One prescription variable: which number of the lens.
 struct PrescriptionVariable {
-  enum class Kind { kCurvature, kThickness, kNd, kVd };
+  enum class Kind { kCurvature, kThickness, kNd, kVd, kConic, kAsphere };
   Kind kind = Kind::kCurvature;
   int surface = 0;  // 0-based surface index (for kNd/kVd: the surface the glass follows)
+  int term = 0;     // kAsphere: 0 = a2, 1 = a4, ..., 7 = a16
 
-  // "c3", "t5", "nd2", "vd2" (1-based surface numbers, as in the user's view).
+  // "c3", "t5", "nd2", "vd2", "k3", "a4_3" (1-based surface numbers, as in the user's view).
   std::string name() const;
 };
 
 // Every curvature but the stop's, every thickness, nd and vd of every glass: the 23 variables of
-// the Tessar (7 + 8 + 4 + 4).
+// the Tessar (7 + 8 + 4 + 4); then the conic constant of every non-spherical surface and each
+// of its nonzero asphere terms.
 std::vector<PrescriptionVariable> all_prescription_variables(const Lens& lens);
+
+// Parses "k3" (conic of surface 3) or "a4_3" / "a2_3" (asphere term of surface 3): returns false
+// for any other name.
+bool parse_profile_variable(const std::string& name, PrescriptionVariable& out);
 
 // The value of a variable in a lens.
 double variable_value(const Lens& lens, const PrescriptionVariable& variable);
@@ -51,6 +66,10 @@ struct TraceLens {
   std::vector<T> nd;                // K, medium after each surface (1 for air)
   std::vector<T> vd;                // K (0 for air)
   std::vector<char> is_glass;       // K
+  // Surface profiles (trace/profile.h); all three empty when every surface is a sphere.
+  std::vector<std::uint8_t> profile;  // K: kProfileSphere, kProfileConic or kProfileAsphere
+  std::vector<T> conic;               // K: conic constant k
+  std::vector<T> asphere;             // K * kAsphereTerms: a2, a4, ..., a16 (mm^(1-2i))
   // Catalog-model correction per surface and wavelength (see header); empty for the abbe model.
   std::vector<std::vector<double>> catalog_offset;
   std::vector<double> wavelengths_nm;
@@ -59,6 +78,40 @@ struct TraceLens {
   int stop = 0;
 
   int surface_count() const { return static_cast<int>(curvature_per_mm.size()); }
+  bool has_profiles() const { return !profile.empty(); }
+  // Asphere term j (0 = a2, 1 = a4, ...) of surface k; 0 when the lens has no profiles.
+  T asphere_term(int k, int j) const {
+    return asphere.empty() ? K<T>(0.0) : asphere[static_cast<std::size_t>(k) * kAsphereTerms + j];
+  }
+  // The paraxial curvature c + 2 a2 (conic and a4+ add no paraxial power).
+  T paraxial_curvature(int k) const {
+    return asphere.empty() ? curvature_per_mm[k]
+                           : curvature_per_mm[k] + K<T>(2.0) * asphere_term(k, 0);
+  }
+  // Gives every surface a profile record (spheres), so profile terms can be set.
+  void ensure_profiles() {
+    if (has_profiles()) return;
+    const std::size_t k_count = curvature_per_mm.size();
+    profile.assign(k_count, kProfileSphere);
+    conic.assign(k_count, K<T>(0.0));
+    asphere.assign(k_count * kAsphereTerms, K<T>(0.0));
+  }
+  // Multiplies every length of the prescription by s: c / s, t s, a_{2i} s^(1-2i).
+  void scale_lengths(const T& s) {
+    for (int k = 0; k < surface_count(); ++k) {
+      curvature_per_mm[k] = curvature_per_mm[k] / s;
+      thickness_mm[k] = thickness_mm[k] * s;
+    }
+    if (asphere.empty()) return;
+    for (int k = 0; k < surface_count(); ++k) {
+      T power = s;  // s^(2i-1) for a_{2i}
+      for (int j = 0; j < kAsphereTerms; ++j) {
+        T& a = asphere[static_cast<std::size_t>(k) * kAsphereTerms + j];
+        a = a / power;
+        power = power * s * s;
+      }
+    }
+  }
 
   // Index of medium k at wavelength number w (k = -1 is object space: 1).
   T index(int k, int w) const {
@@ -112,6 +165,9 @@ TraceLens<U> convert_trace_lens(const TraceLens<T>& in,
   out.nd = cvt(in.nd);
   out.vd = cvt(in.vd);
   out.is_glass = in.is_glass;
+  out.profile = in.profile;
+  out.conic = cvt(in.conic);
+  out.asphere = cvt(in.asphere);
   out.catalog_offset = in.catalog_offset;
   out.wavelengths_nm = in.wavelengths_nm;
   out.semi_diameter_mm = in.semi_diameter_mm;
@@ -120,21 +176,29 @@ TraceLens<U> convert_trace_lens(const TraceLens<T>& in,
   for (int j = 0; j < count; ++j) {
     const PrescriptionVariable& v = variables[first + j];
     std::vector<U>* target = nullptr;
+    int index = v.surface;
     switch (v.kind) {
-      case PrescriptionVariable::Kind::kCurvature:
-        target = &out.curvature_per_mm;
+      case PrescriptionVariable::Kind::kCurvature: target = &out.curvature_per_mm; break;
+      case PrescriptionVariable::Kind::kThickness: target = &out.thickness_mm; break;
+      case PrescriptionVariable::Kind::kNd: target = &out.nd; break;
+      case PrescriptionVariable::Kind::kVd: target = &out.vd; break;
+      case PrescriptionVariable::Kind::kConic:
+      case PrescriptionVariable::Kind::kAsphere: {
+        // A seeded profile term needs the profile's own loop even at the value 0.
+        out.ensure_profiles();
+        std::uint8_t& kind = out.profile[v.surface];
+        if (v.kind == PrescriptionVariable::Kind::kConic) {
+          target = &out.conic;
+          if (kind == kProfileSphere) kind = kProfileConic;
+        } else {
+          target = &out.asphere;
+          index = v.surface * kAsphereTerms + v.term;
+          kind = kProfileAsphere;
+        }
         break;
-      case PrescriptionVariable::Kind::kThickness:
-        target = &out.thickness_mm;
-        break;
-      case PrescriptionVariable::Kind::kNd:
-        target = &out.nd;
-        break;
-      case PrescriptionVariable::Kind::kVd:
-        target = &out.vd;
-        break;
+      }
     }
-    (*target)[v.surface] = seed(value_of((*target)[v.surface]), j);
+    (*target)[index] = seed(value_of((*target)[index]), j);
   }
   return out;
 }
