@@ -10,6 +10,7 @@ packages=(
   libfftw3-dev
   libtorch-dev
   python3
+  python3-dev pybind11-dev python3-numpy python3-torch python3-pytest
   ccache
 )
 missing=()
