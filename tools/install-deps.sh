@@ -8,6 +8,7 @@ packages=(
   libopenimageio-dev doctest-dev libyaml-cpp-dev nlohmann-json3-dev
   fonts-dejavu-core
   libfftw3-dev
+  openimageio-tools
   libtorch-dev
   python3
   python3-dev pybind11-dev python3-numpy python3-torch python3-pytest
