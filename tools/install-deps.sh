@@ -11,6 +11,7 @@ packages=(
   openimageio-tools
   libtorch-dev
   python3
+  python3-dev pybind11-dev python3-numpy python3-torch python3-pytest
   ccache
 )
 missing=()

@@ -81,19 +81,7 @@ double seconds_since(Clock::time_point start) {
 // Jet widths compiled (one derivative per variable; the smallest that holds param.size()).
 constexpr int kJetWidths[] = {8, 12, 16, 24, 32};
 
-// The optics of one x: values, and derivative rows (N = variable count per entry).
-struct Optics {
-  int variables = 0;
-  std::vector<double> fields_deg;
-  std::vector<double> reference_y_mm, centroid_y_mm, illumination;    // [h]
-  std::vector<double> d_reference, d_centroid, d_illumination;        // [h * variables + j]
-  std::vector<std::array<std::vector<double>, kColourChannels>> psf;  // [h][c] G x G
-  // [h][c]: the derivatives of the bins inside the PSF's support box (FieldPsf::support), row by
-  // row, [(r - r0) (c1 - c0) + (i - c0)] * n + j; every bin outside is 0 with derivative 0.
-  std::vector<std::array<std::vector<double>, kColourChannels>> d_psf;
-  std::vector<std::array<std::array<int, 4>, kColourChannels>> support;  // [h][c]
-  int ray_failures = 0;
-};
+using Optics = ImagingOptics;
 
 // The value and derivative parts of a double (no derivatives) or a Jet.
 inline double value_part(double v) {
@@ -705,9 +693,20 @@ std::vector<double> DifferentiableImaging::render_values(const FloatImage& scene
   return out;
 }
 
+const ImagingOptics& DifferentiableImaging::optics() const {
+  if (!state_->prepared) throw Error("DifferentiableImaging: call prepare(x) before optics()");
+  return state_->optics;
+}
+
 void DifferentiableImaging::backward(const FloatImage& scene, const CropWindow& crop,
                                      const FloatImage& grad_image,
                                      std::vector<double>& grad_x) const {
+  backward(scene, crop, grad_image, grad_x, nullptr);
+}
+
+void DifferentiableImaging::backward(const FloatImage& scene, const CropWindow& crop,
+                                     const FloatImage& grad_image, std::vector<double>& grad_x,
+                                     std::vector<double>* grad_scene) const {
   const auto start = Clock::now();
   check_inputs(scene, crop);
   const State& s = *state_;
@@ -841,6 +840,8 @@ void DifferentiableImaging::backward(const FloatImage& scene, const CropWindow& 
   const std::size_t cells =
       static_cast<std::size_t>(s.options.psf.grid_size) * s.options.psf.grid_size;
   std::vector<std::vector<double>> g_mixed(tasks * kColourChannels);
+  // dL/dS of each task's reflected scene block [x0 - r, x1 + r) x [y0 - r, y1 + r) (grad_scene).
+  std::vector<std::vector<double>> g_blocks(grad_scene ? tasks : 0);
 #pragma omp parallel num_threads(nthreads)
   {
     std::vector<double> g_kernel;
@@ -863,6 +864,30 @@ void DifferentiableImaging::backward(const FloatImage& scene, const CropWindow& 
         for (int i = t.x0; i < t.x1; ++i) row[i - t.x0] = wy[j] * wx[i] * src[i - t.x0];
       }
       fftw_execute_dft_r2c(plans.forward, real.data, spectrum.data);
+      if (grad_scene) {
+        // The blur block is K * S_b (valid part, no wrap-around); its adjoint is the correlation
+        // dL/dS_b(m) = sum_p G_b(p) K(p - m): the inverse FFT of FFT(G_b) conj(FFT(K)).
+        RealBuffer work(static_cast<std::size_t>(ny) * nx);
+        ComplexBuffer kspec(spectrum_size), product(spectrum_size);
+        place_kernel(task_kernel(*g, p, t).data(), r, ny, nx, work.data);
+        fftw_execute_dft_r2c(plans.forward, work.data, kspec.data);
+        const double scale = 1.0 / (static_cast<double>(nx) * ny);
+        for (std::size_t i = 0; i < spectrum_size; ++i) {
+          const std::complex<double> v =
+              std::complex<double>(spectrum.data[i][0], spectrum.data[i][1]) *
+              std::conj(std::complex<double>(kspec.data[i][0], kspec.data[i][1])) * scale;
+          product.data[i][0] = v.real();
+          product.data[i][1] = v.imag();
+        }
+        fftw_execute_dft_c2r(plans.backward, product.data, work.data);
+        const int cols = t.x1 - t.x0 + 2 * r, rows = t.y1 - t.y0 + 2 * r;
+        std::vector<double>& block = g_blocks[ti];
+        block.resize(static_cast<std::size_t>(rows) * cols);
+        for (int j = 0; j < rows; ++j)
+          for (int i = 0; i < cols; ++i)
+            block[static_cast<std::size_t>(j) * cols + i] =
+                work.data[static_cast<std::size_t>(j) * nx + i];
+      }
       const std::vector<std::complex<double>>& scene_spectrum = spectra[ti];
       const double scale = 1.0 / (static_cast<double>(nx) * ny);
       for (std::size_t i = 0; i < spectrum_size; ++i) {
@@ -897,6 +922,31 @@ void DifferentiableImaging::backward(const FloatImage& scene, const CropWindow& 
       }
     }
   }
+  if (grad_scene) {
+    std::vector<double>& gs = *grad_scene;
+    if (gs.empty()) gs.assign(scene.pixels.size(), 0.0);
+    if (gs.size() != scene.pixels.size())
+      throw Error("joint imaging: grad_scene does not have the scene's size");
+    // In task order (reproducible): each block folded back through the border reflection.
+    for (int ti = 0; ti < tasks; ++ti) {
+      const BlurTask& t = p.tasks[ti];
+      const int r = t.radius, cols = t.x1 - t.x0 + 2 * r, rows = t.y1 - t.y0 + 2 * r;
+      const std::vector<double>& block = g_blocks[ti];
+      for (int j = 0; j < rows; ++j) {
+        const int sy = reflect_index(t.y0 - r + j, scene.height);
+        for (int i = 0; i < cols; ++i)
+          gs[scene.index(reflect_index(t.x0 - r + i, scene.width), sy, t.c)] +=
+              block[static_cast<std::size_t>(j) * cols + i];
+      }
+    }
+    // Channels that are not blurred (alpha) were copied.
+    for (int c = p.colours; c < channels; ++c)
+      for (int j = 0; j < p.rh; ++j)
+        for (int i = 0; i < p.rw; ++i)
+          gs[scene.index(p.rx0 + i, p.ry0 + j, c)] +=
+              gb[plane * c + static_cast<std::size_t>(j) * p.rw + i];
+  }
+
   // dL/dP_h[c] = sum_q a_qh dL/dmixed_q[c].
   std::vector<std::array<std::vector<double>, kColourChannels>> g_psf(fields);
   for (int ti = 0; ti < tasks; ++ti) {

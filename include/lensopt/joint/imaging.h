@@ -21,6 +21,7 @@
 // dybar_h/dx_j. src/joint/imaging.cpp states the adjoint of each step.
 #pragma once
 
+#include <array>
 #include <vector>
 
 #include "lensopt/optimize/variables.h"
@@ -83,6 +84,21 @@ struct ImagingTimings {
   double adjoint_s = 0;  // backward pass
 };
 
+// The optics of one prepare(x): per field h the values and, after a prepare with derivatives,
+// their derivative rows (n = `variables` per entry, d/dx_j at [h * n + j]).
+struct ImagingOptics {
+  int variables = 0;  // n; 0 after a prepare without derivatives
+  std::vector<double> fields_deg;
+  std::vector<double> reference_y_mm, centroid_y_mm, illumination;    // [h]
+  std::vector<double> d_reference, d_centroid, d_illumination;        // [h * variables + j]
+  std::vector<std::array<std::vector<double>, kColourChannels>> psf;  // [h][c] G x G
+  // [h][c]: the derivatives of the bins inside the PSF's support box (FieldPsf::support), row by
+  // row, [(r - r0) (c1 - c0) + (i - c0)] * n + j; every bin outside is 0 with derivative 0.
+  std::vector<std::array<std::vector<double>, kColourChannels>> d_psf;
+  std::vector<std::array<std::array<int, 4>, kColourChannels>> support;  // [h][c]
+  int ray_failures = 0;
+};
+
 class DifferentiableImaging {
  public:
   // `param` must outlive this object. `fixed_glasses` is used with GlassMode::kFixed.
@@ -110,6 +126,15 @@ class DifferentiableImaging {
   // (same shape as render's output).
   void backward(const FloatImage& scene, const CropWindow& crop, const FloatImage& grad_image,
                 std::vector<double>& grad_x) const;
+  // The same, and, when grad_scene is given, adds dL/d(scene) to it (resized to the scene's
+  // pixel count if empty; interleaved as FloatImage). The rendering is linear in the scene,
+  // R = A(x) S, so this is A^T G: the adjoint of the warp and the RI as above, then per blur task
+  // the correlation of (w_q . dL/dB) with K_q, folded back through the border reflection.
+  void backward(const FloatImage& scene, const CropWindow& crop, const FloatImage& grad_image,
+                std::vector<double>& grad_x, std::vector<double>* grad_scene) const;
+
+  // The optics of the last prepare() (throws Error before the first).
+  const ImagingOptics& optics() const;
 
   // Of the last calls. render() and backward() may run from several threads at once (the patch
   // kernels of an image size are made once, under a lock); prepare() may not overlap them.

@@ -1,0 +1,66 @@
+"""lensopt in Python: differentiable lens design with exact ray tracing.
+
+The C++ core (lensopt._lensopt) does the optics; this package re-exports it:
+
+Lenses
+    load_lens(path), parse_lens(text, format), save_lens(lens, path): .toml, the paper's .yml
+    (read), Zemax .zmx. Lens, Surface, Material, Specs are edited in place
+    (lens.surfaces[1].thickness_mm = 2.0; lens.specs.f_number = 2.8).
+Analysis
+    analyze(lens) -> AnalysisReport (report.to_dict() equals `lensopt analyze --json`),
+    trace_rays / trace_pupil (numpy in and out), spots, psfs, field_data.
+Rendering
+    Renderer(lens).render(image) (H x W x C float32), Renderer.maps(width, height) (per-pixel
+    distortion and relative illumination), read_image / write_image.
+Optimization
+    optimize(lens), tolerance(lens), Parameterization (the paper's lens variables, design loss and
+    its exact gradient), Imaging (differentiable image formation).
+PyTorch
+    lensopt.torch (imported separately; needs python3-torch): ImageFormation (an nn.Module whose
+    parameters are the lens variables), spot_loss and the lens-loss terms.
+
+Errors are lensopt.LensoptError (a ValueError) with the CLI's "file:line:column: message".
+Long calls release the GIL; optimize() stops on Ctrl-C (KeyboardInterrupt).
+"""
+
+from ._lensopt import (  # noqa: F401
+    AnalysisReport,
+    FieldReport,
+    Imaging,
+    Lens,
+    LensoptError,
+    Material,
+    OptimizeResult,
+    Parameterization,
+    Renderer,
+    Specs,
+    Surface,
+    SurfaceList,
+    ToleranceReport,
+    analyze,
+    catalog_glasses,
+    field_data,
+    glass_index,
+    load_lens,
+    optimize,
+    parse_lens,
+    psfs,
+    read_image,
+    save_lens,
+    spots,
+    tolerance,
+    trace_pupil,
+    trace_rays,
+    write_image,
+)
+
+__version__ = "0.1.0"
+
+
+def render(lens, image, **options):
+    """Renders an H x W x C (or H x W) linear-light image through `lens` (`lensopt render`).
+
+    Options are Renderer's (rings, fields, res_factor, distortion, relative_illumination,
+    threads). Returns H x W x C float32. For several images build one Renderer and reuse it.
+    """
+    return Renderer(lens, **options).render(image)

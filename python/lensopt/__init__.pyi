@@ -1,0 +1,39 @@
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from ._lensopt import (
+    AnalysisReport as AnalysisReport,
+    FieldReport as FieldReport,
+    Imaging as Imaging,
+    Lens as Lens,
+    LensoptError as LensoptError,
+    Material as Material,
+    OptimizeResult as OptimizeResult,
+    Parameterization as Parameterization,
+    Renderer as Renderer,
+    Specs as Specs,
+    Surface as Surface,
+    SurfaceList as SurfaceList,
+    ToleranceReport as ToleranceReport,
+    analyze as analyze,
+    catalog_glasses as catalog_glasses,
+    field_data as field_data,
+    glass_index as glass_index,
+    load_lens as load_lens,
+    optimize as optimize,
+    parse_lens as parse_lens,
+    psfs as psfs,
+    read_image as read_image,
+    save_lens as save_lens,
+    spots as spots,
+    tolerance as tolerance,
+    trace_pupil as trace_pupil,
+    trace_rays as trace_rays,
+    write_image as write_image,
+)
+
+__version__: str
+
+def render(lens: Lens, image: npt.ArrayLike, **options: Any) -> np.ndarray: ...

@@ -1,0 +1,225 @@
+"""Type stubs of lensopt's C++ extension module (python/src)."""
+
+from typing import Any, Dict, List, Optional, Sequence, Tuple, overload
+
+import numpy as np
+import numpy.typing as npt
+
+class LensoptError(ValueError):
+    file: str
+    line: int
+    column: int
+    message: str
+
+class Material:
+    def __init__(self) -> None: ...
+    @property
+    def kind(self) -> str: ...
+    @property
+    def glass_name(self) -> str: ...
+    @property
+    def nd(self) -> float: ...
+    @property
+    def vd(self) -> float: ...
+    @property
+    def label(self) -> str: ...
+    def is_air(self) -> bool: ...
+    @staticmethod
+    def air() -> Material: ...
+    @staticmethod
+    def model(nd: float, vd: float) -> Material: ...
+    @staticmethod
+    def catalog(name: str, catalog: str = "ohara") -> Material: ...
+
+class Surface:
+    curvature_per_mm: float
+    radius_mm: float
+    thickness_mm: float
+    material: Material
+    is_stop: bool
+    semi_diameter_mm: float
+    def __init__(self, radius_mm: float = ..., thickness_mm: float = 0.0,
+                 material: Material = ..., stop: bool = False,
+                 semi_diameter_mm: float = 0.0) -> None: ...
+
+class SurfaceList:
+    def __len__(self) -> int: ...
+    def __getitem__(self, i: int) -> Surface: ...
+    def __setitem__(self, i: int, s: Surface) -> None: ...
+    def __delitem__(self, i: int) -> None: ...
+    def append(self, s: Surface) -> None: ...
+    def insert(self, i: int, s: Surface) -> None: ...
+    def pop(self, i: int = -1) -> Surface: ...
+
+class Specs:
+    f_number: float
+    half_field_deg: float
+    sensor_diagonal_mm: float
+    wavelengths_nm: List[float]
+    wavelength_channels: List[int]
+    dispersion: str
+    def __init__(self) -> None: ...
+    def focal_length_mm(self) -> float: ...
+
+class Lens:
+    name: str
+    catalog_name: str
+    specs: Specs
+    surfaces: SurfaceList
+    source_path: str
+    extra_toml: str
+    def __init__(self) -> None: ...
+    def stop_index(self) -> int: ...
+    def element_count(self) -> int: ...
+    def track_length_mm(self) -> float: ...
+    def total_track_mm(self) -> float: ...
+    def validate(self) -> None: ...
+    def scaled(self, scale: float) -> Lens: ...
+    def to_toml(self) -> str: ...
+    def to_zmx(self) -> str: ...
+    def copy(self) -> Lens: ...
+
+def load_lens(path: str) -> Lens: ...
+def parse_lens(text: str, format: str = "toml", source_name: str = "<string>") -> Lens: ...
+def save_lens(lens: Lens, path: str) -> None: ...
+def catalog_glasses(catalog: str = "ohara") -> List[Tuple[str, float, float]]: ...
+def glass_index(glass: str, wavelength_nm: float, catalog: str = "ohara") -> float: ...
+
+class FieldReport:
+    field_deg: float
+    rms_spot_um: Optional[float]
+    centroid_y_mm: float
+    reference_y_mm: float
+    distortion_percent: float
+    relative_illumination: float
+    traced_rays: int
+    failed_rays: int
+    aiming_error: float
+
+class AnalysisReport:
+    lens_name: str
+    source_path: str
+    scale: float
+    efl_mm: float
+    bfl_mm: float
+    f_number: float
+    epd_mm: float
+    entrance_pupil_z_mm: float
+    stop_radius_mm: float
+    total_track_mm: float
+    rings: int
+    rays_per_field_wavelength: int
+    wavelength_count: int
+    ray_aiming: bool
+    dispersion: str
+    fields: List[FieldReport]
+    mean_rms_spot_um: Optional[float]
+    ray_failures: int
+    failures_by_surface: List[int]
+    max_aiming_error: float
+    def to_json(self) -> str: ...
+    def to_text(self) -> str: ...
+    def to_dict(self) -> Dict[str, Any]: ...
+
+def analyze(lens: Lens, *, rings: int = 32, fields: int = 21, ray_aiming: bool = True,
+            scale_to_spec: bool = True, dispersion: str = "", threads: int = 0) -> AnalysisReport: ...
+def trace_rays(lens: Lens, positions: npt.ArrayLike, directions: npt.ArrayLike, *,
+               wavelength: int = -1, scale_to_spec: bool = True,
+               dispersion: str = "") -> Dict[str, np.ndarray]: ...
+def trace_pupil(lens: Lens, field_deg: float, pupil: npt.ArrayLike, *, wavelength: int = -1,
+                ray_aiming: bool = True, scale_to_spec: bool = True,
+                dispersion: str = "") -> Dict[str, np.ndarray]: ...
+def spots(lens: Lens, *, rings: int = 32, fields: int = 21, ray_aiming: bool = True,
+          scale_to_spec: bool = True, dispersion: str = "", threads: int = 0) -> Dict[str, Any]: ...
+def psfs(lens: Lens, *, rings: int = 32, fields: int = 21, grid_size: int = 65,
+         bin_um: float = 4.0, sigma_bins: float = 0.5, support_bins: int = 2,
+         ray_aiming: bool = True, threads: int = 0) -> Dict[str, Any]: ...
+def field_data(lens: Lens, *, rings: int = 32, fields: int = 21, ray_aiming: bool = True,
+               threads: int = 0) -> Dict[str, List[float]]: ...
+
+class Renderer:
+    def __init__(self, lens: Lens, *, rings: int = 32, fields: int = 21, res_factor: int = 1,
+                 distortion: bool = True, relative_illumination: bool = True,
+                 threads: int = 0) -> None: ...
+    def render(self, image: npt.ArrayLike) -> np.ndarray: ...
+    def maps(self, width: int, height: int) -> Dict[str, Any]: ...
+    fields_deg: List[float]
+    reference_y_mm: List[float]
+    centroid_y_mm: List[float]
+    distortion: List[float]
+    relative_illumination: List[float]
+
+def read_image(path: str) -> np.ndarray: ...
+def write_image(path: str, image: npt.ArrayLike) -> None: ...
+
+class Parameterization:
+    def __init__(self, lens: Lens, *, catalog: str = "", paraxial_image_solve: bool = True) -> None: ...
+    size: int
+    names: List[str]
+    groups: List[str]
+    focal_length_mm: float
+    def __len__(self) -> int: ...
+    def from_lens(self, lens: Lens) -> np.ndarray: ...
+    def to_lens(self, x: npt.ArrayLike, glass_mode: str = "quantized") -> Lens: ...
+    def glasses(self, x: npt.ArrayLike) -> List[str]: ...
+    def select(self, names: Sequence[str]) -> List[int]: ...
+    def design_loss(self, x: npt.ArrayLike, *, weight_spot: float = 1.0,
+                    weight_ray_path: float = 100.0, weight_ray_angle: float = 100.0,
+                    weight_glass: float = 0.01, rings: int = 8, fields: int = 11,
+                    glass_mode: str = "quantized", paper_penalties: bool = False,
+                    gradient: bool = True) -> Dict[str, Any]: ...
+
+class OptimizeResult:
+    lens: Lens
+    start_spot_um: float
+    final_spot_um: float
+    start_field_spot_um: List[float]
+    final_field_spot_um: List[float]
+    glasses: List[str]
+    iterations: int
+    loss_evaluations: int
+    seconds: float
+    termination: str
+    interrupted: bool
+    kept_start: bool
+    log: List[str]
+    constraints_pass: bool
+
+def optimize(lens: Lens, *, max_iterations: int = 50, max_rounds: int = 4,
+             freeze: Sequence[str] = ..., glass_search: str = "none", rings: int = 8,
+             fields: int = 11, paper_penalties: bool = False,
+             verbose: bool = False) -> OptimizeResult: ...
+
+class ToleranceReport:
+    lens_name: str
+    nominal_spot_um: float
+    trial_spots_um: List[float]
+    spot_p90_um: float
+    spot_mean_um: float
+    yield_fraction: Optional[float]
+    invalid_trials: int
+    def to_json(self) -> str: ...
+    def to_text(self) -> str: ...
+    def trials_csv(self) -> str: ...
+    def to_dict(self) -> Dict[str, Any]: ...
+
+def tolerance(lens: Lens, *, trials: int = 1000, seed: int = 1, rings: int = 16, fields: int = 11,
+              distribution: str = "uniform", compensator: str = "paraxial",
+              sensitivity: bool = True, max_spot_um: Optional[float] = None,
+              jobs: int = 0) -> ToleranceReport: ...
+
+class Imaging:
+    def __init__(self, param: Parameterization, *, glass_mode: str = "quantized",
+                 fixed_glasses: Sequence[int] = ..., rings: int = 8, fields: int = 21,
+                 grid_size: int = 65, bin_um: float = 4.0, sigma_bins: float = 0.5,
+                 support_bins: int = 3, res_factor: int = 1, relative_illumination: bool = True,
+                 distortion: bool = True, ray_aiming: bool = True, threads: int = 0) -> None: ...
+    variables: int
+    timings: Dict[str, float]
+    def prepare(self, x: npt.ArrayLike, derivatives: bool = True) -> None: ...
+    def render(self, scene: npt.ArrayLike,
+               crop: Optional[Tuple[int, int, int, int]] = None) -> np.ndarray: ...
+    def backward(self, scene: npt.ArrayLike, crop: Optional[Tuple[int, int, int, int]],
+                 grad: npt.ArrayLike,
+                 scene_gradient: bool = True) -> Tuple[np.ndarray, Optional[np.ndarray]]: ...
+    def optics(self) -> Dict[str, Any]: ...

@@ -1,0 +1,310 @@
+// Analysis in Python: analyze (the CLI's report and JSON), ray tracing with numpy arrays, spots,
+// PSFs and the per-field distortion / relative-illumination data.
+#include "bindings.h"
+#include "lensopt/analysis/analyze.h"
+#include "lensopt/analysis/field_maps.h"
+#include "lensopt/analysis/spot.h"
+#include "lensopt/core/error.h"
+#include "lensopt/render/psf.h"
+
+namespace lensopt::python {
+namespace {
+
+// The lens with an optional dispersion override, traced and prepared.
+TraceSystem<double> system_of(const Lens& lens_in, const TraceOptions& options,
+                              const std::string& dispersion, double half_field_deg = -1) {
+  Lens lens = lens_in;
+  if (dispersion == "abbe")
+    lens.specs.dispersion = DispersionModel::kAbbe;
+  else if (dispersion == "catalog")
+    lens.specs.dispersion = DispersionModel::kCatalog;
+  else if (!dispersion.empty())
+    throw Error("dispersion must be 'abbe' or 'catalog', not '" + dispersion + "'");
+  lens.validate();
+  return prepare_system(make_trace_lens(lens), lens.specs.focal_length_mm(), lens.specs.f_number,
+                        half_field_deg >= 0 ? half_field_deg : lens.specs.half_field_deg, options);
+}
+
+// Wavelength index of the system: -1 the reference (587.6 nm), else 0..W-1.
+int wavelength_index(const TraceSystem<double>& sys, int w) {
+  const int count = static_cast<int>(sys.lens.wavelengths_nm.size());
+  if (w < 0) w += count;
+  if (w < 0 || w >= count)
+    throw Error("wavelength index " + std::to_string(w) + " out of range (the lens has " +
+                std::to_string(count - 1) + " wavelengths and the reference)");
+  return w;
+}
+
+py::dict traced_arrays(RayBundle<double>& rays) {
+  const std::size_t n = rays.size();
+  std::vector<double> pos(n * 3), dir(n * 3);
+  for (std::size_t i = 0; i < n; ++i) {
+    pos[3 * i] = rays.x[i];
+    pos[3 * i + 1] = rays.y[i];
+    pos[3 * i + 2] = rays.z[i];
+    dir[3 * i] = rays.l[i];
+    dir[3 * i + 1] = rays.m[i];
+    dir[3 * i + 2] = rays.n[i];
+  }
+  std::vector<std::uint8_t> status(rays.status.begin(), rays.status.end());
+  std::vector<std::int32_t> surface(rays.failed_surface.begin(), rays.failed_surface.end());
+  py::dict d;
+  const auto rows = static_cast<py::ssize_t>(n);
+  d["positions"] = to_numpy(std::move(pos), {rows, 3});
+  d["directions"] = to_numpy(std::move(dir), {rows, 3});
+  d["status"] = to_numpy(std::move(status), {rows});
+  d["failed_surface"] = to_numpy(std::move(surface), {rows});
+  return d;
+}
+
+}  // namespace
+
+void bind_analysis(py::module_& m) {
+  py::class_<FieldReport>(m, "FieldReport", "One field of an analysis.")
+      .def_readonly("field_deg", &FieldReport::field_deg)
+      .def_readonly("rms_spot_um", &FieldReport::rms_spot_um, "None if no ray reached the image")
+      .def_readonly("centroid_y_mm", &FieldReport::centroid_y_mm)
+      .def_readonly("reference_y_mm", &FieldReport::reference_y_mm)
+      .def_readonly("distortion_percent", &FieldReport::distortion_percent)
+      .def_readonly("relative_illumination", &FieldReport::relative_illumination)
+      .def_readonly("traced_rays", &FieldReport::traced_rays)
+      .def_readonly("failed_rays", &FieldReport::failed_rays)
+      .def_readonly("aiming_error", &FieldReport::aiming_error);
+
+  py::class_<AnalysisReport>(
+      m, "AnalysisReport",
+      "The result of analyze(): first-order data and per-field spots, distortion, relative "
+      "illumination and failures. to_json() is the text `lensopt analyze --json` prints (the same "
+      "serializer); to_dict() parses it.")
+      .def_readonly("lens_name", &AnalysisReport::lens_name)
+      .def_readonly("source_path", &AnalysisReport::source_path)
+      .def_readonly("scale", &AnalysisReport::scale)
+      .def_readonly("efl_mm", &AnalysisReport::efl_mm)
+      .def_readonly("bfl_mm", &AnalysisReport::bfl_mm)
+      .def_readonly("f_number", &AnalysisReport::f_number)
+      .def_readonly("epd_mm", &AnalysisReport::epd_mm)
+      .def_readonly("entrance_pupil_z_mm", &AnalysisReport::entrance_pupil_z_mm)
+      .def_readonly("stop_radius_mm", &AnalysisReport::stop_radius_mm)
+      .def_readonly("total_track_mm", &AnalysisReport::total_track_mm)
+      .def_readonly("rings", &AnalysisReport::rings)
+      .def_readonly("rays_per_field_wavelength", &AnalysisReport::rays_per_field_wavelength)
+      .def_readonly("wavelength_count", &AnalysisReport::wavelength_count)
+      .def_readonly("ray_aiming", &AnalysisReport::ray_aiming)
+      .def_readonly("dispersion", &AnalysisReport::dispersion)
+      .def_readonly("fields", &AnalysisReport::fields)
+      .def_readonly("mean_rms_spot_um", &AnalysisReport::mean_rms_spot_um)
+      .def_readonly("ray_failures", &AnalysisReport::ray_failures)
+      .def_readonly("failures_by_surface", &AnalysisReport::failures_by_surface)
+      .def_readonly("max_aiming_error", &AnalysisReport::max_aiming_error)
+      .def("to_json", &format_report_json, "The JSON text of `lensopt analyze --json`.")
+      .def("to_text", &format_report_text, "The table `lensopt analyze` prints.")
+      .def("to_dict",
+           [](const AnalysisReport& r) {
+             return py::module_::import("json").attr("loads")(format_report_json(r));
+           })
+      .def("__str__", &format_report_text);
+
+  m.def(
+      "analyze",
+      [](const Lens& lens, int rings, int fields, bool ray_aiming, bool scale_to_spec,
+         const std::string& dispersion, int threads) {
+        AnalyzeOptions o;
+        o.trace = trace_options(rings, fields, ray_aiming, scale_to_spec, threads);
+        if (dispersion == "abbe")
+          o.dispersion = DispersionModel::kAbbe;
+        else if (dispersion == "catalog")
+          o.dispersion = DispersionModel::kCatalog;
+        else if (!dispersion.empty())
+          throw Error("dispersion must be 'abbe' or 'catalog', not '" + dispersion + "'");
+        py::gil_scoped_release release;
+        return analyze_lens(lens, o);
+      },
+      py::arg("lens"), py::kw_only(), py::arg("rings") = 32, py::arg("fields") = 21,
+      py::arg("ray_aiming") = true, py::arg("scale_to_spec") = true, py::arg("dispersion") = "",
+      py::arg("threads") = 0,
+      "`lensopt analyze`: EFL, BFL, pupil, RMS spot per field, distortion, relative illumination, "
+      "ray failures and ray-aiming error, at the paper's sampling by default.");
+
+  m.def(
+      "trace_rays",
+      [](const Lens& lens, py::array_t<double, py::array::c_style | py::array::forcecast> positions,
+         py::array_t<double, py::array::c_style | py::array::forcecast> directions, int wavelength,
+         bool scale_to_spec, const std::string& dispersion) {
+        if (positions.ndim() != 2 || positions.shape(1) != 3 || directions.ndim() != 2 ||
+            directions.shape(1) != 3 || directions.shape(0) != positions.shape(0))
+          throw Error("positions and directions must be N x 3 arrays of the same N");
+        TraceOptions o;
+        o.ray_aiming = false;
+        o.fields = 1;
+        o.rings = 1;
+        o.scale_to_spec = scale_to_spec;
+        const TraceSystem<double> sys = system_of(lens, o, dispersion);
+        const int w = wavelength_index(sys, wavelength);
+        RayBundle<double> rays;
+        const auto n = static_cast<std::size_t>(positions.shape(0));
+        rays.resize(n);
+        auto p = positions.unchecked<2>();
+        auto d = directions.unchecked<2>();
+        for (std::size_t i = 0; i < n; ++i) {
+          const auto k = static_cast<py::ssize_t>(i);
+          rays.x[i] = p(k, 0);
+          rays.y[i] = p(k, 1);
+          rays.z[i] = p(k, 2);
+          const double norm = std::sqrt(d(k, 0) * d(k, 0) + d(k, 1) * d(k, 1) + d(k, 2) * d(k, 2));
+          rays.l[i] = d(k, 0) / norm;
+          rays.m[i] = d(k, 1) / norm;
+          rays.n[i] = d(k, 2) / norm;
+        }
+        {
+          py::gil_scoped_release release;
+          trace_bundle(sys.lens, w, sys.lens.surface_count(), true, rays,
+                       static_cast<RayRecord<double>*>(nullptr));
+        }
+        return traced_arrays(rays);
+      },
+      py::arg("lens"), py::arg("positions"), py::arg("directions"), py::kw_only(),
+      py::arg("wavelength") = -1, py::arg("scale_to_spec") = true, py::arg("dispersion") = "",
+      "Traces rays through the lens to the image plane. positions (N x 3, mm, relative to the "
+      "first vertex; z < 0 is in front of it) and directions (N x 3, normalized here) are the "
+      "rays in object space; wavelength indexes Specs.wavelengths_nm (-1: 587.6 nm). Returns a "
+      "dict of numpy arrays: positions (N x 3, on the image plane, z = 0), directions (N x 3), "
+      "status (N, uint8: 0 ok, 1 missed a surface, 2 total internal reflection, 3 backwards) and "
+      "failed_surface (N, -1: none). With scale_to_spec the lens is first scaled to the spec "
+      "focal length (as analyze).");
+
+  m.def(
+      "trace_pupil",
+      [](const Lens& lens, double field_deg,
+         py::array_t<double, py::array::c_style | py::array::forcecast> pupil, int wavelength,
+         bool ray_aiming, bool scale_to_spec, const std::string& dispersion) {
+        if (pupil.ndim() != 2 || pupil.shape(1) != 2)
+          throw Error("pupil must be an N x 2 array of normalized pupil coordinates");
+        if (!(field_deg >= 0) || field_deg > 89) throw Error("field_deg must be in [0, 89]");
+        TraceOptions o;
+        o.rings = 1;
+        o.fields = 2;  // fields 0 and field_deg: the pupil map of index 1
+        o.ray_aiming = ray_aiming;
+        o.scale_to_spec = scale_to_spec;
+        const TraceSystem<double> sys = system_of(lens, o, dispersion, field_deg);
+        const int w = wavelength_index(sys, wavelength);
+        PupilSamples samples;
+        auto p = pupil.unchecked<2>();
+        for (py::ssize_t i = 0; i < pupil.shape(0); ++i) {
+          samples.x.push_back(p(i, 0));
+          samples.y.push_back(p(i, 1));
+        }
+        RayBundle<double> rays;
+        {
+          py::gil_scoped_release release;
+          start_rays(sys, 1, w, rays, &samples);
+          trace_bundle(sys.lens, w, sys.lens.surface_count(), true, rays,
+                       static_cast<RayRecord<double>*>(nullptr));
+        }
+        return traced_arrays(rays);
+      },
+      py::arg("lens"), py::arg("field_deg"), py::arg("pupil"), py::kw_only(),
+      py::arg("wavelength") = -1, py::arg("ray_aiming") = true, py::arg("scale_to_spec") = true,
+      py::arg("dispersion") = "",
+      "Traces rays of one field angle (deg, in the y-z plane) through normalized entrance-pupil "
+      "coordinates (N x 2, x and y in [-1, 1]) under the aimed pupil, to the image plane. "
+      "Returns the dict of trace_rays.");
+
+  m.def(
+      "spots",
+      [](const Lens& lens, int rings, int fields, bool ray_aiming, bool scale_to_spec,
+         const std::string& dispersion, int threads) {
+        const TraceOptions o = trace_options(rings, fields, ray_aiming, scale_to_spec, threads);
+        const TraceSystem<double> sys = system_of(lens, o, dispersion);
+        SpotResult<double> s;
+        {
+          py::gil_scoped_release release;
+          s = evaluate_spots(sys, threads);
+        }
+        py::dict d;
+        std::vector<double> um;
+        for (double v : s.rms_spot_mm) um.push_back(v * 1000.0);
+        d["fields_deg"] = sys.fields_deg;
+        d["rms_spot_um"] = um;
+        d["mean_rms_spot_um"] = s.mean_rms_spot_mm * 1000.0;
+        d["centroid_y_mm"] = s.centroid_y_mm;
+        d["traced_rays"] = s.traced_rays;
+        d["failed_rays"] = s.failed_rays;
+        return d;
+      },
+      py::arg("lens"), py::kw_only(), py::arg("rings") = 32, py::arg("fields") = 21,
+      py::arg("ray_aiming") = true, py::arg("scale_to_spec") = true, py::arg("dispersion") = "",
+      py::arg("threads") = 0,
+      "RMS spot radius per field (um), centroids, traced and failed rays (a dict).");
+
+  m.def(
+      "psfs",
+      [](const Lens& lens, int rings, int fields, int grid_size, double bin_um, double sigma_bins,
+         int support_bins, bool ray_aiming, int threads) {
+        const TraceOptions o = trace_options(rings, fields, ray_aiming, true, threads);
+        PsfOptions po;
+        po.grid_size = grid_size;
+        po.bin_um = bin_um;
+        po.sigma_bins = sigma_bins;
+        po.support_bins = support_bins;
+        po.validate();
+        const TraceSystem<double> sys = system_of(lens, o, "");
+        PsfSet<double> set;
+        {
+          py::gil_scoped_release release;
+          set = compute_psfs(sys, lens.specs.wavelength_channels, po, threads);
+        }
+        const int f = static_cast<int>(set.fields.size());
+        const std::size_t cells = static_cast<std::size_t>(grid_size) * grid_size;
+        std::vector<double> grid(static_cast<std::size_t>(f) * kColourChannels * cells);
+        std::vector<double> centroid;
+        for (int h = 0; h < f; ++h) {
+          for (int c = 0; c < kColourChannels; ++c)
+            std::copy(set.fields[h].psf[c].begin(), set.fields[h].psf[c].end(),
+                      grid.begin() + (static_cast<std::size_t>(h) * kColourChannels + c) * cells);
+          centroid.push_back(set.fields[h].centroid_y_mm);
+        }
+        py::dict d;
+        d["fields_deg"] = set.fields_deg;
+        d["centroid_y_mm"] = centroid;
+        d["psf"] = to_numpy(std::move(grid), {f, kColourChannels, grid_size, grid_size});
+        d["bin_um"] = bin_um;
+        return d;
+      },
+      py::arg("lens"), py::kw_only(), py::arg("rings") = 32, py::arg("fields") = 21,
+      py::arg("grid_size") = 65, py::arg("bin_um") = 4.0, py::arg("sigma_bins") = 0.5,
+      py::arg("support_bins") = 2, py::arg("ray_aiming") = true, py::arg("threads") = 0,
+      "The geometric PSFs the renderer uses: psf[field, channel (R, G, B), row, column], a "
+      "grid_size^2 grid of bin_um bins centred on each field's centroid (rows along -y), each "
+      "channel summing to 1; with fields_deg and centroid_y_mm.");
+
+  m.def(
+      "field_data",
+      [](const Lens& lens, int rings, int fields, bool ray_aiming, int threads) {
+        const TraceOptions o = trace_options(rings, fields, ray_aiming, true, threads);
+        const TraceSystem<double> sys = system_of(lens, o, "");
+        std::vector<double> yref, ri;
+        SpotResult<double> s;
+        {
+          py::gil_scoped_release release;
+          yref = reference_heights(sys);
+          ri = relative_illuminations(sys);
+          s = evaluate_spots(sys, threads);
+        }
+        std::vector<double> distortion;
+        for (std::size_t h = 0; h < yref.size(); ++h)
+          distortion.push_back(field_distortion(s.centroid_y_mm[h], yref[h], yref.back()));
+        py::dict d;
+        d["fields_deg"] = sys.fields_deg;
+        d["reference_y_mm"] = yref;
+        d["centroid_y_mm"] = s.centroid_y_mm;
+        d["distortion"] = distortion;
+        d["relative_illumination"] = ri;
+        return d;
+      },
+      py::arg("lens"), py::kw_only(), py::arg("rings") = 32, py::arg("fields") = 21,
+      py::arg("ray_aiming") = true, py::arg("threads") = 0,
+      "Per field: paraxial chief-ray height y_ref, polychromatic centroid ybar, distortion "
+      "D = (ybar - y_ref) / y_ref,last (a fraction) and relative illumination (a dict).");
+}
+
+}  // namespace lensopt::python

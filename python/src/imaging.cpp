@@ -1,0 +1,216 @@
+// Differentiable image formation in Python (joint/imaging.h): the sampled optics with their
+// exact Jet derivatives, and the rendering with its adjoints with respect to the lens variables
+// and the scene (for lensopt.torch's autograd.Function).
+//
+// Scenes come in as float64. The core renders float images, and the rendering is linear in the
+// scene, so a float64 scene S is split into S_hi = float(S) and S_lo = float(S - S_hi) and
+// R(S) = R(S_hi) + R(S_lo) (likewise the lens gradient, linear in S): double precision for
+// gradient checks at the cost of a second pass, taken only when S_lo is not zero.
+#include "lensopt/joint/imaging.h"
+
+#include "bindings.h"
+#include "lensopt/core/error.h"
+
+namespace lensopt::python {
+
+GlassMode parse_glass_mode(const std::string& s);
+std::vector<double> vector_of(
+    const py::array_t<double, py::array::c_style | py::array::forcecast>& x, int size);
+
+namespace {
+
+using DoubleArray = py::array_t<double, py::array::c_style | py::array::forcecast>;
+
+// The hi and lo float parts of an H x W x C float64 scene; lo is empty when it is all zero.
+struct SplitScene {
+  FloatImage hi, lo;
+};
+
+SplitScene split_scene(const DoubleArray& a) {
+  if (a.ndim() != 3) throw Error("the scene must be an H x W x C array");
+  const int h = static_cast<int>(a.shape(0)), w = static_cast<int>(a.shape(1)),
+            c = static_cast<int>(a.shape(2));
+  SplitScene s{FloatImage(w, h, c), FloatImage(w, h, c)};
+  bool any = false;
+  const double* d = a.data();
+  for (std::size_t i = 0; i < s.hi.pixels.size(); ++i) {
+    s.hi.pixels[i] = static_cast<float>(d[i]);
+    s.lo.pixels[i] = static_cast<float>(d[i] - static_cast<double>(s.hi.pixels[i]));
+    any = any || s.lo.pixels[i] != 0.0f;
+  }
+  if (!any) s.lo = FloatImage();
+  return s;
+}
+
+CropWindow crop_of(const std::optional<std::array<int, 4>>& crop, const SplitScene& s) {
+  if (!crop) return CropWindow{0, 0, s.hi.width, s.hi.height};
+  return CropWindow{(*crop)[0], (*crop)[1], (*crop)[2], (*crop)[3]};
+}
+
+struct PyImaging {
+  py::object param_ref;  // keeps the Parameterization alive
+  std::unique_ptr<DifferentiableImaging> imaging;
+  int variables = 0;
+  int grid_size = 0;
+};
+
+}  // namespace
+
+void bind_imaging(py::module_& m) {
+  py::class_<PyImaging>(
+      m, "Imaging",
+      "Differentiable image formation of a parameterized lens (the joint optimization's): "
+      "prepare(x) samples the optics with exact derivatives; render() and backward() form an "
+      "image crop and its adjoints. The full scene spans the sensor diagonal.")
+      .def(py::init([](py::object param_obj, const std::string& glass_mode,
+                       std::vector<int> fixed_glasses, int rings, int fields, int grid_size,
+                       double bin_um, double sigma_bins, int support_bins, int res_factor,
+                       bool relative_illumination, bool distortion, bool ray_aiming, int threads) {
+             const auto& param = param_obj.cast<const LensParameterization&>();
+             DifferentiableImagingOptions o;
+             o.sampling.rings = rings;
+             o.sampling.fields = fields;
+             o.sampling.ray_aiming = ray_aiming;
+             o.psf.grid_size = grid_size;
+             o.psf.bin_um = bin_um;
+             o.psf.sigma_bins = sigma_bins;
+             o.psf.support_bins = support_bins;
+             o.res_factor = res_factor;
+             o.relative_illumination = relative_illumination;
+             o.distortion = distortion;
+             o.threads = threads;
+             o.validate();
+             const GlassMode mode = parse_glass_mode(glass_mode);
+             if (mode == GlassMode::kFixed && fixed_glasses.empty()) {
+               const std::vector<double> x = param.from_lens(param.structure());
+               fixed_glasses = param.nearest_glasses(x.data());
+             }
+             PyImaging p;
+             p.param_ref = param_obj;
+             p.imaging = std::make_unique<DifferentiableImaging>(param, mode, fixed_glasses, o);
+             p.variables = param.size();
+             p.grid_size = grid_size;
+             return p;
+           }),
+           py::arg("param"), py::kw_only(), py::arg("glass_mode") = "quantized",
+           py::arg("fixed_glasses") = std::vector<int>{}, py::arg("rings") = 8,
+           py::arg("fields") = 21, py::arg("grid_size") = 65, py::arg("bin_um") = 4.0,
+           py::arg("sigma_bins") = 0.5, py::arg("support_bins") = 3, py::arg("res_factor") = 1,
+           py::arg("relative_illumination") = true, py::arg("distortion") = true,
+           py::arg("ray_aiming") = true, py::arg("threads") = 0,
+           "glass_mode: 'quantized' (nearest catalog glass, straight-through gradient; the "
+           "paper's), 'continuous' or 'fixed'. The defaults are the joint optimization's "
+           "(8 rings, 21 fields, KDE support 3); rings=32, support_bins=2 give `lensopt "
+           "render`'s PSFs.")
+      .def_property_readonly("variables", [](const PyImaging& p) { return p.variables; })
+      .def(
+          "prepare",
+          [](PyImaging& p, const DoubleArray& x, bool derivatives) {
+            const std::vector<double> v = vector_of(x, p.variables);
+            py::gil_scoped_release release;
+            p.imaging->prepare(v, derivatives);
+          },
+          py::arg("x"), py::arg("derivatives") = true,
+          "Samples the optics of variables x (with derivatives unless told otherwise).")
+      .def(
+          "render",
+          [](const PyImaging& p, const DoubleArray& scene, std::optional<std::array<int, 4>> crop) {
+            const SplitScene s = split_scene(scene);
+            const CropWindow c = crop_of(crop, s);
+            std::vector<double> out;
+            {
+              py::gil_scoped_release release;
+              out = p.imaging->render_values(s.hi, c);
+              if (!s.lo.empty()) {
+                const std::vector<double> lo = p.imaging->render_values(s.lo, c);
+                for (std::size_t i = 0; i < out.size(); ++i) out[i] += lo[i];
+              }
+            }
+            return to_numpy(std::move(out), {c.height, c.width, s.hi.channels});
+          },
+          py::arg("scene"), py::arg("crop") = py::none(),
+          "The rendered crop (h x w x C float64) of an H x W x C float64 scene; crop = (x0, y0, "
+          "w, h) in pixels (None: the whole scene).")
+      .def(
+          "backward",
+          [](const PyImaging& p, const DoubleArray& scene, std::optional<std::array<int, 4>> crop,
+             const DoubleArray& grad, bool scene_gradient) {
+            const SplitScene s = split_scene(scene);
+            const CropWindow c = crop_of(crop, s);
+            if (grad.ndim() != 3 || grad.shape(0) != c.height || grad.shape(1) != c.width ||
+                grad.shape(2) != s.hi.channels)
+              throw Error("the gradient must have the rendered crop's shape h x w x C");
+            FloatImage g(c.width, c.height, s.hi.channels);
+            for (std::size_t i = 0; i < g.pixels.size(); ++i)
+              g.pixels[i] = static_cast<float>(grad.data()[i]);
+            std::vector<double> gx(p.variables, 0.0), gs;
+            {
+              py::gil_scoped_release release;
+              p.imaging->backward(s.hi, c, g, gx, scene_gradient ? &gs : nullptr);
+              if (!s.lo.empty()) p.imaging->backward(s.lo, c, g, gx, nullptr);
+            }
+            py::object scene_grad = py::none();
+            if (scene_gradient)
+              scene_grad = to_numpy(std::move(gs), {s.hi.height, s.hi.width, s.hi.channels});
+            return py::make_tuple(to_numpy(std::move(gx), {p.variables}), scene_grad);
+          },
+          py::arg("scene"), py::arg("crop"), py::arg("grad"), py::arg("scene_gradient") = true,
+          "(dL/dx, dL/dscene) for dL/d(rendered crop) = grad (h x w x C; used in float32 "
+          "precision). dL/dscene is None unless scene_gradient.")
+      .def(
+          "optics",
+          [](const PyImaging& p) {
+            const ImagingOptics& o = p.imaging->optics();
+            const int f = static_cast<int>(o.fields_deg.size()), n = o.variables, g = p.grid_size;
+            const std::size_t cells = static_cast<std::size_t>(g) * g;
+            std::vector<double> psf(f * kColourChannels * cells, 0.0);
+            std::vector<double> d_psf(n > 0 ? psf.size() * n : 0, 0.0);
+            for (int h = 0; h < f; ++h)
+              for (int c = 0; c < kColourChannels; ++c) {
+                const std::size_t base =
+                    (static_cast<std::size_t>(h) * kColourChannels + c) * cells;
+                std::copy(o.psf[h][c].begin(), o.psf[h][c].end(), psf.begin() + base);
+                if (n == 0) continue;
+                const auto& box = o.support[h][c];
+                const double* d = o.d_psf[h][c].data();
+                for (int r = box[0]; r < box[1]; ++r)
+                  for (int i = box[2]; i < box[3]; ++i, d += n)
+                    std::copy(d, d + n,
+                              d_psf.begin() + (base + static_cast<std::size_t>(r) * g + i) * n);
+              }
+            py::dict out;
+            out["fields_deg"] = o.fields_deg;
+            auto vec = [](std::vector<double> v) {
+              const auto size = static_cast<py::ssize_t>(v.size());
+              return to_numpy(std::move(v), {size});
+            };
+            out["reference_y_mm"] = vec(o.reference_y_mm);
+            out["centroid_y_mm"] = vec(o.centroid_y_mm);
+            out["relative_illumination"] = vec(o.illumination);
+            out["psf"] = to_numpy(std::move(psf), {f, kColourChannels, g, g});
+            if (n > 0) {
+              auto mat = [f, n](std::vector<double> v) { return to_numpy(std::move(v), {f, n}); };
+              out["d_reference_y_mm"] = mat(o.d_reference);
+              out["d_centroid_y_mm"] = mat(o.d_centroid);
+              out["d_relative_illumination"] = mat(o.d_illumination);
+              out["d_psf"] = to_numpy(std::move(d_psf), {f, kColourChannels, g, g, n});
+            }
+            out["ray_failures"] = o.ray_failures;
+            return out;
+          },
+          "The optics of the last prepare(): per field the PSFs (F x 3 x G x G), y_ref, ybar and "
+          "relative illumination, with their Jacobians wrt the lens variables (d_psf F x 3 x G x "
+          "G x n, the others F x n) after a prepare with derivatives.")
+      .def_property_readonly("timings", [](const PyImaging& p) {
+        const ImagingTimings& t = p.imaging->timings();
+        py::dict d;
+        d["trace_s"] = t.trace_s;
+        d["psf_s"] = t.psf_s;
+        d["kernels_s"] = t.kernels_s;
+        d["render_s"] = t.render_s;
+        d["adjoint_s"] = t.adjoint_s;
+        return d;
+      });
+}
+
+}  // namespace lensopt::python

@@ -1,0 +1,71 @@
+// lensopt._lensopt: registers each area's bindings and translates lensopt::Error.
+#include <csignal>
+
+#include "bindings.h"
+#include "lensopt/core/error.h"
+
+namespace lensopt::python {
+namespace {
+
+std::atomic<bool> g_interrupted{false};
+extern "C" void on_sigint(int) {
+  g_interrupted.store(true);
+}
+
+}  // namespace
+
+InterruptScope::InterruptScope() {
+  g_interrupted.store(false);
+  previous_ = std::signal(SIGINT, on_sigint);
+}
+InterruptScope::~InterruptScope() {
+  std::signal(SIGINT, previous_);
+}
+const std::atomic<bool>* InterruptScope::flag() const {
+  return &g_interrupted;
+}
+bool InterruptScope::interrupted() const {
+  return g_interrupted.load();
+}
+
+TraceOptions trace_options(int rings, int fields, bool ray_aiming, bool scale_to_spec,
+                           int threads) {
+  TraceOptions o;
+  o.rings = rings;
+  o.fields = fields;
+  o.ray_aiming = ray_aiming;
+  o.scale_to_spec = scale_to_spec;
+  o.threads = threads;
+  o.validate();
+  return o;
+}
+
+}  // namespace lensopt::python
+
+PYBIND11_MODULE(_lensopt, m) {
+  namespace py = pybind11;
+  using namespace lensopt::python;
+  m.doc() = "lensopt's C++ core (the Python API is the package lensopt; see its __init__).";
+  static py::exception<lensopt::Error> error(m, "LensoptError", PyExc_ValueError);
+  error.doc() =
+      "Bad input or an I/O failure; str() reads 'file:line:column: message' as the CLI prints it. "
+      "Attributes: file, line, column (0: unknown), message.";
+  py::register_exception_translator([](std::exception_ptr p) {
+    try {
+      if (p) std::rethrow_exception(p);
+    } catch (const lensopt::Error& e) {
+      py::object type = error;
+      py::object instance = type(e.what());
+      instance.attr("file") = e.where().file;
+      instance.attr("line") = e.where().line;
+      instance.attr("column") = e.where().column;
+      instance.attr("message") = e.message();
+      PyErr_SetObject(error.ptr(), instance.ptr());
+    }
+  });
+  bind_lens(m);
+  bind_analysis(m);
+  bind_render(m);
+  bind_optimize(m);
+  bind_imaging(m);
+}

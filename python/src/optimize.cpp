@@ -1,0 +1,262 @@
+// Optimization in Python: the paper's lens variables (Parameterization), the design loss with
+// its exact gradient, Levenberg-Marquardt optimization and Monte-Carlo tolerancing.
+#include "bindings.h"
+#include "lensopt/core/error.h"
+#include "lensopt/optimize/design_gradient.h"
+#include "lensopt/optimize/optimizer.h"
+#include "lensopt/tolerance/tolerance.h"
+
+namespace lensopt::python {
+namespace {
+
+using DoubleArray = py::array_t<double, py::array::c_style | py::array::forcecast>;
+
+std::string group_catalog(const Lens& lens, const std::string& catalog) {
+  if (!catalog.empty()) return catalog;
+  return lens.catalog_name.empty() ? "ohara" : lens.catalog_name;
+}
+
+}  // namespace
+
+GlassMode parse_glass_mode(const std::string& s) {
+  if (s == "quantized") return GlassMode::kQuantized;
+  if (s == "continuous") return GlassMode::kContinuous;
+  if (s == "fixed") return GlassMode::kFixed;
+  throw Error("glass mode must be 'quantized', 'continuous' or 'fixed', not '" + s + "'");
+}
+
+std::vector<double> vector_of(const DoubleArray& x, int size) {
+  if (x.ndim() != 1 || x.shape(0) != size)
+    throw Error("expected " + std::to_string(size) + " lens variables, got an array of shape (" +
+                std::to_string(x.ndim() ? x.shape(0) : 0) + (x.ndim() > 1 ? ", ...)" : ")"));
+  return std::vector<double>(x.data(), x.data() + size);
+}
+
+void bind_optimize(py::module_& m) {
+  py::class_<LensParameterization>(
+      m, "Parameterization",
+      "The paper's lens variables x of a lens structure: normalized curvatures c' = c f, "
+      "spacings s' = t / f (the last one the defocus from the paraxial image), and whitened "
+      "glass variables g (two per glass) of the catalog; the last curvature is solved for the "
+      "focal length.")
+      .def(py::init([](const Lens& lens, const std::string& catalog, bool paraxial_image_solve) {
+             auto p = std::make_unique<LensParameterization>(
+                 lens, GlassSpace(*load_catalog(group_catalog(lens, catalog))));
+             p->set_paraxial_image_solve(paraxial_image_solve);
+             return p;
+           }),
+           py::arg("lens"), py::kw_only(), py::arg("catalog") = "",
+           py::arg("paraxial_image_solve") = true)
+      .def_property_readonly("size", &LensParameterization::size)
+      .def("__len__", &LensParameterization::size)
+      .def_property_readonly(
+          "names",
+          [](const LensParameterization& p) {
+            std::vector<std::string> out;
+            for (const LensVariable& v : p.variables()) out.push_back(v.name);
+            return out;
+          },
+          "'c1', 's3', 'defocus', 'g2.0', ... (1-based surfaces)")
+      .def_property_readonly(
+          "groups",
+          [](const LensParameterization& p) {
+            std::vector<std::string> out;
+            for (const LensVariable& v : p.variables()) out.push_back(v.group);
+            return out;
+          },
+          "'curvatures', 'spacings' or 'glasses' per variable")
+      .def_property_readonly("focal_length_mm", &LensParameterization::focal_length_mm)
+      .def(
+          "from_lens",
+          [](const LensParameterization& p, const Lens& lens) {
+            std::vector<double> x = p.from_lens(lens);
+            const auto n = static_cast<py::ssize_t>(x.size());
+            return to_numpy(std::move(x), {n});
+          },
+          py::arg("lens"), "The variables of a lens of this structure (numpy float64).")
+      .def(
+          "to_lens",
+          [](const LensParameterization& p, const DoubleArray& x, const std::string& mode) {
+            const std::vector<double> v = vector_of(x, p.size());
+            return p.to_lens(v.data(), parse_glass_mode(mode), p.nearest_glasses(v.data()));
+          },
+          py::arg("x"), py::arg("glass_mode") = "quantized",
+          "The lens of variables x (catalog glasses when quantized, model glasses when "
+          "continuous).")
+      .def(
+          "glasses",
+          [](const LensParameterization& p, const DoubleArray& x) {
+            const std::vector<double> v = vector_of(x, p.size());
+            std::vector<std::string> out;
+            for (int j : p.nearest_glasses(v.data())) out.push_back(p.glass_space().name(j));
+            return out;
+          },
+          py::arg("x"), "The nearest catalog glass of each glass variable pair.")
+      .def(
+          "select",
+          [](const LensParameterization& p, const std::vector<std::string>& names) {
+            return p.select(names);
+          },
+          py::arg("names"), "Indices of the variables named (or of the groups named).")
+      .def(
+          "design_loss",
+          [](const LensParameterization& p, const DoubleArray& x, double weight_spot,
+             double weight_ray_path, double weight_ray_angle, double weight_glass, int rings,
+             int fields, const std::string& mode, bool paper_penalties, bool gradient) {
+            const std::vector<double> v = vector_of(x, p.size());
+            const TraceOptions sampling = trace_options(rings, fields, true, false, 0);
+            DesignLossOptions o;
+            o.weight_spot = weight_spot;
+            o.weight_ray_path = weight_ray_path;
+            o.weight_ray_angle = weight_ray_angle;
+            o.weight_glass = weight_glass;
+            o.paper_penalties = paper_penalties;
+            o.validate();
+            const GlassMode gm = parse_glass_mode(mode);
+            const std::vector<int> fixed = p.nearest_glasses(v.data());
+            DesignValueGradient r;
+            {
+              py::gil_scoped_release release;
+              if (gradient) {
+                r = design_loss_gradient(p, v, gm, fixed, sampling, o);
+              } else {
+                r.finite = evaluate_design<double>(p, v.data(), gm, fixed, sampling, o, nullptr,
+                                                   nullptr, &r.loss);
+              }
+            }
+            py::dict d;
+            d["spot_mm"] = r.loss.spot_mm;
+            d["ray_path_mm"] = r.loss.ray_path_mm;
+            d["ray_angle"] = r.loss.ray_angle;
+            d["glass"] = r.loss.glass;
+            d["total"] = r.loss.total;
+            d["field_rms_mm"] = r.loss.field_rms_mm;
+            d["failed_rays"] = r.loss.failed_rays;
+            d["finite"] = r.finite;
+            if (gradient) {
+              const auto n = static_cast<py::ssize_t>(r.gradient.size());
+              d["gradient"] = to_numpy(std::move(r.gradient), {n});
+            }
+            return d;
+          },
+          py::arg("x"), py::kw_only(), py::arg("weight_spot") = 1.0,
+          py::arg("weight_ray_path") = 100.0, py::arg("weight_ray_angle") = 100.0,
+          py::arg("weight_glass") = 0.01, py::arg("rings") = 8, py::arg("fields") = 11,
+          py::arg("glass_mode") = "quantized", py::arg("paper_penalties") = false,
+          py::arg("gradient") = true,
+          "The paper's l_lens = w_S l_S + w_RP l_RP + w_RA l_RA + w_GV l_GV at x (a dict of the "
+          "terms: spot_mm, ray_path_mm, ray_angle, glass, total) and, with gradient, d total / dx "
+          "exactly (forward-mode Jets). Weights must be >= 0.");
+
+  py::class_<OptimizeResult>(m, "OptimizeResult", "The result of optimize().")
+      .def_readonly("lens", &OptimizeResult::lens)
+      .def_readonly("start_spot_um", &OptimizeResult::start_spot_um)
+      .def_readonly("final_spot_um", &OptimizeResult::final_spot_um)
+      .def_readonly("start_field_spot_um", &OptimizeResult::start_field_spot_um)
+      .def_readonly("final_field_spot_um", &OptimizeResult::final_field_spot_um)
+      .def_readonly("glasses", &OptimizeResult::glasses)
+      .def_readonly("iterations", &OptimizeResult::iterations)
+      .def_readonly("loss_evaluations", &OptimizeResult::loss_evaluations)
+      .def_readonly("seconds", &OptimizeResult::seconds)
+      .def_readonly("termination", &OptimizeResult::termination)
+      .def_readonly("interrupted", &OptimizeResult::interrupted)
+      .def_readonly("kept_start", &OptimizeResult::kept_start)
+      .def_readonly("log", &OptimizeResult::log)
+      .def_property_readonly("constraints_pass", [](const OptimizeResult& r) {
+        return r.final_constraints.all_pass();
+      });
+
+  m.def(
+      "optimize",
+      [](const Lens& lens, int max_iterations, int max_rounds,
+         const std::vector<std::string>& freeze, const std::string& glass_search, int rings,
+         int fields, bool paper_penalties, bool verbose) {
+        OptimizeOptions o;
+        o.max_iterations = max_iterations;
+        o.max_rounds = max_rounds;
+        o.freeze = freeze;
+        if (glass_search == "none")
+          o.glass_search = GlassSearch::kNone;
+        else if (glass_search == "snap")
+          o.glass_search = GlassSearch::kSnap;
+        else if (glass_search == "neighbours")
+          o.glass_search = GlassSearch::kNeighbours;
+        else
+          throw Error("glass_search must be 'none', 'snap' or 'neighbours'");
+        o.sampling.rings = rings;
+        o.sampling.fields = fields;
+        o.loss.paper_penalties = paper_penalties;
+        o.verbose = verbose;
+        o.validate();
+        OptimizeResult r;
+        {
+          InterruptScope interrupt;
+          o.interrupt = interrupt.flag();
+          {
+            py::gil_scoped_release release;
+            r = optimize_lens(lens, o);
+          }
+          if (interrupt.interrupted()) {
+            PyErr_SetNone(PyExc_KeyboardInterrupt);
+            throw py::error_already_set();
+          }
+        }
+        return r;
+      },
+      py::arg("lens"), py::kw_only(), py::arg("max_iterations") = 50, py::arg("max_rounds") = 4,
+      py::arg("freeze") = std::vector<std::string>{}, py::arg("glass_search") = "none",
+      py::arg("rings") = 8, py::arg("fields") = 11, py::arg("paper_penalties") = false,
+      py::arg("verbose") = false,
+      "`lensopt optimize`: Levenberg-Marquardt on the paper's design loss. Ctrl-C stops it "
+      "(KeyboardInterrupt).");
+
+  py::class_<ToleranceReport>(m, "ToleranceReport", "The result of tolerance().")
+      .def_readonly("lens_name", &ToleranceReport::lens_name)
+      .def_property_readonly("nominal_spot_um",
+                             [](const ToleranceReport& r) { return r.nominal.mean_spot_um; })
+      .def_property_readonly("trial_spots_um",
+                             [](const ToleranceReport& r) {
+                               std::vector<double> out;
+                               for (const TrialResult& t : r.trials) out.push_back(t.mean_spot_um);
+                               return out;
+                             })
+      .def_property_readonly("spot_p90_um", [](const ToleranceReport& r) { return r.spot.p90; })
+      .def_property_readonly("spot_mean_um", [](const ToleranceReport& r) { return r.spot.mean; })
+      .def_readonly("yield_fraction", &ToleranceReport::yield)
+      .def_readonly("invalid_trials", &ToleranceReport::invalid_trials)
+      .def("to_json", &format_tolerance_json, "The JSON of `lensopt tolerance --json`.")
+      .def("to_text", [](const ToleranceReport& r) { return format_tolerance_text(r); })
+      .def("trials_csv", &format_trials_csv)
+      .def("to_dict", [](const ToleranceReport& r) {
+        return py::module_::import("json").attr("loads")(format_tolerance_json(r));
+      });
+
+  m.def(
+      "tolerance",
+      [](const Lens& lens, int trials, std::uint64_t seed, int rings, int fields,
+         const std::string& distribution, const std::string& compensator, bool sensitivity,
+         std::optional<double> max_spot_um, int jobs) {
+        ToleranceOptions o;
+        tolerance_settings_of(lens).apply_to(o.tolerances);
+        o.trials = trials;
+        o.seed = seed;
+        o.rings = rings;
+        o.fields = fields;
+        o.distribution = parse_tolerance_distribution(distribution);
+        o.compensator = parse_focus_compensator(compensator);
+        o.sensitivity = sensitivity;
+        o.max_spot_um = max_spot_um;
+        o.jobs = jobs;
+        o.validate();
+        py::gil_scoped_release release;
+        return run_tolerance(lens, o);
+      },
+      py::arg("lens"), py::kw_only(), py::arg("trials") = 1000, py::arg("seed") = 1,
+      py::arg("rings") = 16, py::arg("fields") = 11, py::arg("distribution") = "uniform",
+      py::arg("compensator") = "paraxial", py::arg("sensitivity") = true,
+      py::arg("max_spot_um") = py::none(), py::arg("jobs") = 0,
+      "`lensopt tolerance`: Monte-Carlo trials of manufacturing errors (the lens's [tolerance] "
+      "table over the defaults), with the sensitivity table.");
+}
+
+}  // namespace lensopt::python

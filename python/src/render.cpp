@@ -1,0 +1,127 @@
+// Rendering in Python: the imaging model (PSFs, distortion, relative illumination), per-pixel
+// distortion and relative-illumination maps, and the renderer on numpy H x W x C images.
+#include "lensopt/render/render.h"
+
+#include <cmath>
+#include <memory>
+
+#include "bindings.h"
+#include "lensopt/core/error.h"
+#include "lensopt/render/image.h"
+
+namespace lensopt::python {
+namespace {
+
+using FloatArray = py::array_t<float, py::array::c_style | py::array::forcecast>;
+
+// H x W or H x W x C numpy -> FloatImage (one copy, the same interleaved layout).
+FloatImage image_of(const FloatArray& a) {
+  if (a.ndim() != 2 && a.ndim() != 3) throw Error("an image must be an H x W or H x W x C array");
+  const int h = static_cast<int>(a.shape(0)), w = static_cast<int>(a.shape(1));
+  const int c = a.ndim() == 3 ? static_cast<int>(a.shape(2)) : 1;
+  FloatImage img(w, h, c);
+  std::copy(a.data(), a.data() + img.pixels.size(), img.pixels.begin());
+  return img;
+}
+
+py::array_t<float> numpy_of(FloatImage&& img) {
+  return to_numpy(std::move(img.pixels), {img.height, img.width, img.channels});
+}
+
+struct PyRenderer {
+  std::unique_ptr<Renderer> renderer;
+};
+
+}  // namespace
+
+void bind_render(py::module_& m) {
+  py::class_<PyRenderer>(
+      m, "Renderer",
+      "Renders images through a lens (`lensopt render`): spatially varying PSF blur on 9 x 9 "
+      "patches, relative illumination and distortion. The PSFs are sampled once here.")
+      .def(py::init([](const Lens& lens, int rings, int fields, int res_factor, bool distortion,
+                       bool relative_illumination, int threads) {
+             const TraceOptions t = trace_options(rings, fields, true, true, threads);
+             RenderOptions o;
+             o.res_factor = res_factor;
+             o.distortion = distortion;
+             o.relative_illumination = relative_illumination;
+             o.threads = threads;
+             o.validate();
+             lens.validate();
+             py::gil_scoped_release release;
+             return PyRenderer{std::make_unique<Renderer>(build_imaging_model(lens, t), o)};
+           }),
+           py::arg("lens"), py::kw_only(), py::arg("rings") = 32, py::arg("fields") = 21,
+           py::arg("res_factor") = 1, py::arg("distortion") = true,
+           py::arg("relative_illumination") = true, py::arg("threads") = 0)
+      .def(
+          "render",
+          [](const PyRenderer& r, const FloatArray& image) {
+            FloatImage input = image_of(image);
+            RenderResult result;
+            {
+              py::gil_scoped_release release;
+              result = r.renderer->render(input);
+            }
+            return numpy_of(std::move(result.image));
+          },
+          py::arg("image"),
+          "The rendered image (H x W x C float32) of a linear-light H x W x C (or H x W) image; "
+          "channels 0-2 are R, G, B, further ones are copied.")
+      .def(
+          "maps",
+          [](const PyRenderer& r, int width, int height) {
+            const ImagingModel& model = r.renderer->model();
+            const SensorGeometry geo = SensorGeometry::make(
+                width, height, r.renderer->options().res_factor, model.sensor_diagonal_mm);
+            std::vector<double> ri(static_cast<std::size_t>(width) * height), distortion(ri.size()),
+                radius(ri.size());
+            for (int j = 0; j < height; ++j)
+              for (int i = 0; i < width; ++i) {
+                const std::size_t k = static_cast<std::size_t>(j) * width + i;
+                radius[k] = geo.radius_mm(i, j);
+                ri[k] = relative_illumination_at(model, radius[k]);
+                distortion[k] = distortion_at(model, radius[k]);
+              }
+            py::dict d;
+            d["radius_mm"] = to_numpy(std::move(radius), {height, width});
+            d["relative_illumination"] = to_numpy(std::move(ri), {height, width});
+            d["distortion"] = to_numpy(std::move(distortion), {height, width});
+            d["pitch_mm"] = geo.pitch_mm;
+            return d;
+          },
+          py::arg("width"), py::arg("height"),
+          "Per pixel of a W x H image (H x W arrays): its image height radius_mm, the relative "
+          "illumination and the distortion D(r) (a fraction) the renderer applies.")
+      .def_property_readonly("fields_deg",
+                             [](const PyRenderer& r) { return r.renderer->model().fields_deg; })
+      .def_property_readonly("reference_y_mm",
+                             [](const PyRenderer& r) { return r.renderer->model().reference_y_mm; })
+      .def_property_readonly("centroid_y_mm",
+                             [](const PyRenderer& r) { return r.renderer->model().centroid_y_mm; })
+      .def_property_readonly("distortion",
+                             [](const PyRenderer& r) { return r.renderer->model().distortion; })
+      .def_property_readonly("relative_illumination", [](const PyRenderer& r) {
+        return r.renderer->model().relative_illumination;
+      });
+
+  m.def(
+      "read_image",
+      [](const std::string& path) { return numpy_of(std::move(read_image(path).image)); },
+      py::arg("path"), "Reads a PNG, JPEG, TIFF or EXR image as H x W x C float32 (0..1).");
+  m.def(
+      "write_image",
+      [](const std::string& path, const FloatArray& image) {
+        const FloatImage img = image_of(image);
+        const std::string ext = std::filesystem::path(path).extension().string();
+        if (ext == ".exr" || ext == ".EXR")
+          write_float_image(path, img);
+        else
+          write_image(path, img);
+      },
+      py::arg("path"), py::arg("image"),
+      "Writes an H x W x C image atomically (format by extension; EXR as 32-bit float).");
+}
+
+}  // namespace lensopt::python

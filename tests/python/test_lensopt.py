@@ -1,0 +1,181 @@
+"""The Python package against the CLI and against closed forms (no torch needed)."""
+
+import json
+import math
+import subprocess
+import tempfile
+import unittest
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from support import BASELINES, EXECUTABLE, LENSES, ZMX, lensopt
+
+
+def load(path):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return lensopt.load_lens(str(path))
+
+
+def cli(*args):
+    return subprocess.run([EXECUTABLE, *map(str, args)], check=True, capture_output=True,
+                          text=True).stdout
+
+
+class AnalyzeMatchesCli(unittest.TestCase):
+    def test_baselines_and_zmx(self):
+        lenses = BASELINES + ZMX
+        self.assertGreaterEqual(len(lenses), 6)
+        for path in lenses:
+            with self.subTest(lens=path.name):
+                expected = json.loads(cli("analyze", "--json", path))
+                report = lensopt.analyze(load(path))
+                self.assertEqual(report.to_dict(), expected)
+                # The attributes are the same numbers as the JSON fields.
+                self.assertEqual(report.efl_mm, expected["efl_mm"])
+                self.assertEqual([f.field_deg for f in report.fields], expected["fields_deg"])
+                self.assertEqual(report.mean_rms_spot_um, expected["mean_rms_spot_um"])
+
+
+class Lenses(unittest.TestCase):
+    def test_round_trip_every_writable_format(self):
+        lens = load(LENSES / "cooke.toml")
+        with tempfile.TemporaryDirectory() as tmp:
+            for ext in (".toml", ".zmx"):
+                out = Path(tmp) / f"cooke{ext}"
+                lensopt.save_lens(lens, str(out))
+                back = load(out)
+                self.assertEqual(len(back.surfaces), len(lens.surfaces))
+                for a, b in zip(lens.surfaces, back.surfaces):
+                    self.assertEqual(a.curvature_per_mm, b.curvature_per_mm)
+                    self.assertEqual(a.thickness_mm, b.thickness_mm)
+                    self.assertEqual(a.material.label, b.material.label)
+            self.assertEqual(lensopt.parse_lens(lens.to_toml()).to_toml(), lens.to_toml())
+
+    def test_edit_in_place(self):
+        lens = load(LENSES / "doublet.toml")
+        before = lensopt.analyze(lens, rings=4, fields=3).mean_rms_spot_um
+        lens.surfaces[-1].thickness_mm += 0.5  # defocus
+        lens.specs.f_number = 2.8
+        lens.surfaces[0].material = lensopt.Material.model(1.7, 50.0)
+        self.assertEqual(lens.surfaces[-1].material.kind, "air")
+        self.assertEqual(lens.surfaces[0].material.kind, "model")
+        after = lensopt.analyze(lens, rings=4, fields=3)
+        self.assertNotEqual(after.mean_rms_spot_um, before)
+        self.assertAlmostEqual(after.f_number, 2.8, places=9)
+        glass = lensopt.Material.catalog("S-LAL12")
+        self.assertEqual(glass.kind, "catalog")
+        self.assertAlmostEqual(glass.nd, 1.6779, places=4)
+
+    def test_errors_carry_file_and_line(self):
+        text = '[lens]\nname = "x"\n\n[[surfaces]]\nradius_mm = "oops"\n'
+        with self.assertRaises(lensopt.LensoptError) as caught:
+            lensopt.parse_lens(text, "toml", "bad.toml")
+        self.assertTrue(str(caught.exception).startswith("bad.toml:"), str(caught.exception))
+        self.assertGreater(caught.exception.line, 0)
+        self.assertIsInstance(caught.exception, ValueError)
+        with self.assertRaises(lensopt.LensoptError) as caught:
+            lensopt.Material.catalog("S-LAL1Z")
+        self.assertIn("S-LAL12", str(caught.exception))  # the closest names
+        with self.assertRaises(lensopt.LensoptError):
+            lensopt.load_lens(str(LENSES / "missing.toml"))
+
+
+class Tracing(unittest.TestCase):
+    def setUp(self):
+        self.lens = load(LENSES / "doublet.toml")
+        self.report = lensopt.analyze(self.lens, rings=4, fields=3, ray_aiming=False)
+
+    def test_pupil_rays_equal_explicit_rays(self):
+        theta = math.radians(10.0)
+        pupil = np.array([[0.0, 0.0], [0.3, -0.5], [0.0, 1.0]])
+        via_pupil = lensopt.trace_pupil(self.lens, 10.0, pupil, ray_aiming=False)
+        r_ep = self.report.epd_mm / 2
+        z_ep = self.report.entrance_pupil_z_mm
+        positions = np.column_stack([pupil[:, 0] * r_ep, pupil[:, 1] * r_ep, np.full(3, z_ep)])
+        directions = np.tile([0.0, math.sin(theta), math.cos(theta)], (3, 1))
+        explicit = lensopt.trace_rays(self.lens, positions, directions)
+        np.testing.assert_allclose(explicit["positions"], via_pupil["positions"], rtol=0,
+                                   atol=1e-12)
+        self.assertTrue((explicit["status"] == 0).all())
+        self.assertEqual(explicit["positions"].shape, (3, 3))
+
+    def test_on_axis_chief_ray_stays_on_axis(self):
+        out = lensopt.trace_rays(self.lens, np.array([[0.0, 0.0, -5.0]]),
+                                 np.array([[0.0, 0.0, 2.0]]))
+        np.testing.assert_array_equal(out["positions"][0, :2], [0.0, 0.0])
+        np.testing.assert_allclose(out["directions"][0], [0.0, 0.0, 1.0])
+
+    def test_spots_psfs_and_field_data_agree_with_analyze(self):
+        report = lensopt.analyze(self.lens, rings=8, fields=5)
+        spots = lensopt.spots(self.lens, rings=8, fields=5)
+        self.assertEqual(spots["rms_spot_um"], [f.rms_spot_um for f in report.fields])
+        data = lensopt.field_data(self.lens, rings=8, fields=5)
+        np.testing.assert_allclose(np.array(data["distortion"]) * 100,
+                                   [f.distortion_percent for f in report.fields], atol=1e-12)
+        self.assertEqual(data["relative_illumination"],
+                         [f.relative_illumination for f in report.fields])
+        p = lensopt.psfs(self.lens, rings=8, fields=5, grid_size=33)
+        self.assertEqual(p["psf"].shape, (5, 3, 33, 33))
+        np.testing.assert_allclose(p["psf"].sum(axis=(2, 3)), 1.0, atol=1e-12)
+
+
+class Rendering(unittest.TestCase):
+    def test_maps_on_axis(self):
+        r = lensopt.Renderer(load(LENSES / "doublet.toml"), rings=4, fields=5)
+        maps = r.maps(41, 31)
+        self.assertEqual(maps["relative_illumination"].shape, (31, 41))
+        # The centre pixel lies on the axis: no dimming, no distortion.
+        self.assertAlmostEqual(maps["relative_illumination"][15, 20], 1.0, places=12)
+        self.assertAlmostEqual(maps["distortion"][15, 20], 0.0, places=12)
+        self.assertLess(maps["relative_illumination"][0, 0], 1.0)
+
+    def test_render_matches_cli(self):
+        rng = np.random.default_rng(3)
+        image = rng.random((36, 48, 3), dtype=np.float32)
+        lens_path = LENSES / "doublet.toml"
+        with tempfile.TemporaryDirectory() as tmp:
+            src = Path(tmp) / "in" / "scene.exr"
+            src.parent.mkdir()
+            lensopt.write_image(str(src), image)
+            cli("render", lens_path, src, "-o", Path(tmp) / "out", "-q")
+            expected = lensopt.read_image(str(Path(tmp) / "out" / "scene.exr"))
+        ours = lensopt.render(load(lens_path), image)
+        self.assertEqual(ours.dtype, np.float32)
+        np.testing.assert_allclose(ours, expected, rtol=0, atol=1e-6)
+
+
+class Optimization(unittest.TestCase):
+    def test_design_loss_gradient_matches_finite_differences(self):
+        lens = load(LENSES / "doublet.toml")
+        param = lensopt.Parameterization(lens)
+        x = param.from_lens(lens)
+        opts = dict(rings=4, fields=3, glass_mode="continuous")
+        g = param.design_loss(x, **opts)["gradient"]
+        for j in range(param.size):
+            h = 1e-6
+            xp, xm = x.copy(), x.copy()
+            xp[j] += h
+            xm[j] -= h
+            fd = (param.design_loss(xp, gradient=False, **opts)["total"]
+                  - param.design_loss(xm, gradient=False, **opts)["total"]) / (2 * h)
+            self.assertAlmostEqual(g[j], fd, delta=1e-5 * max(1.0, abs(fd)), msg=param.names[j])
+        # The parameterization round-trips the lens.
+        np.testing.assert_allclose(param.from_lens(param.to_lens(x)), x, atol=1e-9)
+
+    def test_optimize_and_tolerance_run(self):
+        lens = load(LENSES / "doublet.toml")
+        lens.surfaces[-1].thickness_mm += 0.3
+        result = lensopt.optimize(lens, max_iterations=3, max_rounds=1, rings=4, fields=3)
+        self.assertLessEqual(result.final_spot_um, result.start_spot_um)
+        self.assertEqual(len(result.lens.surfaces), len(lens.surfaces))
+        report = lensopt.tolerance(lens, trials=8, rings=4, fields=3, sensitivity=False, jobs=2)
+        self.assertEqual(len(report.trial_spots_um), 8)
+        self.assertGreater(report.nominal_spot_um, 0)
+        self.assertEqual(report.to_dict()["lens"], report.lens_name)
+
+
+if __name__ == "__main__":
+    unittest.main()

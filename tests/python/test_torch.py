@@ -1,0 +1,122 @@
+"""lensopt.torch: gradients (torch.autograd.gradcheck in double precision) and agreement with
+`lensopt render`. Skipped with a message when python3-torch is not installed."""
+
+import tempfile
+import unittest
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from support import EXECUTABLE, HAVE_TORCH, LENSES, lensopt
+
+if HAVE_TORCH:
+    import torch
+
+    import lensopt.torch as lt
+
+
+def doublet():
+    return lensopt.load_lens(str(LENSES / "doublet.toml"))
+
+
+@unittest.skipUnless(HAVE_TORCH, "python3-torch is not installed: the torch tests are skipped")
+class ImageFormationGradients(unittest.TestCase):
+    def setUp(self):
+        torch.manual_seed(0)
+        # continuous glasses: the quantized forward pass is piecewise constant in g, so finite
+        # differences only see the straight-through gradient with continuous glasses.
+        self.module = lt.ImageFormation(doublet(), glass_mode="continuous", rings=4, fields=5,
+                                        grid_size=33, threads=2)
+
+    def test_gradcheck_lens_variables(self):
+        images = torch.rand(1, 3, 18, 24, dtype=torch.float64)
+        x = self.module.x
+
+        def f(x_):
+            # The function of x alone: the module's Function with the module's state.
+            return lt._ImageFormationFunction.apply(x_, images, self.module)
+
+        self.module._derivatives = True
+        # fast_mode: J u against v^T J for random u, v over every output (a few passes instead
+        # of one backward per output pixel), in double precision.
+        self.assertTrue(torch.autograd.gradcheck(f, (x,), eps=1e-6, atol=1e-6, rtol=1e-4,
+                                                 fast_mode=True))
+
+    def test_gradcheck_image(self):
+        images = torch.rand(2, 3, 18, 24, dtype=torch.float64, requires_grad=True)
+        self.module.x.requires_grad_(False)
+        try:
+            self.assertTrue(torch.autograd.gradcheck(self.module, (images,), eps=1e-6, atol=1e-7,
+                                                     fast_mode=True))
+        finally:
+            self.module.x.requires_grad_(True)
+
+    def test_gradcheck_grey_image_with_alpha(self):
+        images = torch.rand(1, 2, 18, 20, dtype=torch.float64, requires_grad=True)
+        self.assertTrue(torch.autograd.gradcheck(self.module, (images,), eps=1e-6, atol=1e-7,
+                                                 fast_mode=True))
+
+    def test_lens_losses_gradcheck(self):
+        param = self.module.param
+        x = self.module.x.detach().clone().requires_grad_(True)
+        opts = dict(rings=4, fields=3, glass_mode="continuous")
+        self.assertTrue(torch.autograd.gradcheck(lambda v: lt.spot_loss(v, param, **opts), (x,),
+                                                 eps=1e-6, atol=1e-7, rtol=1e-4))
+        self.assertTrue(torch.autograd.gradcheck(
+            lambda v: lt.lens_loss_terms(v, param, **opts), (x,), eps=1e-6, atol=1e-7, rtol=1e-4))
+        total = lt.lens_loss(x, param, **opts)
+        terms = lt.lens_loss_terms(x, param, **opts)
+        self.assertAlmostEqual(total.item(), (terms[0] + 100 * terms[1] + 100 * terms[2]
+                                              + 0.01 * terms[3]).item(), places=12)
+        self.assertGreater(lt.l_GV(x, param, **opts).item(), -1e-300)
+
+    def test_jacobians_exposed(self):
+        optics = self.module.optics(derivatives=True)
+        n = self.module.param.size
+        self.assertEqual(optics["d_psf"].shape[-1], n)
+        self.assertEqual(optics["d_relative_illumination"].shape, (5, n))
+        np.testing.assert_allclose(optics["psf"].sum(axis=(2, 3)), 1.0, atol=1e-12)
+
+
+@unittest.skipUnless(HAVE_TORCH, "python3-torch is not installed: the torch tests are skipped")
+class ImageFormationMatchesCli(unittest.TestCase):
+    def test_forward_equals_lensopt_render(self):
+        import subprocess
+
+        rng = np.random.default_rng(5)
+        image = rng.random((36, 48, 3), dtype=np.float32)
+        with tempfile.TemporaryDirectory() as tmp:
+            src = Path(tmp) / "in" / "scene.exr"
+            src.parent.mkdir()
+            lensopt.write_image(str(src), image)
+            subprocess.run([EXECUTABLE, "render", str(LENSES / "doublet.toml"), str(src), "-o",
+                            str(Path(tmp) / "out"), "-q"], check=True, capture_output=True)
+            expected = lensopt.read_image(str(Path(tmp) / "out" / "scene.exr"))
+        # `lensopt render`'s sampling: 32 rings, 21 fields, KDE support 2.
+        module = lt.ImageFormation(doublet(), rings=32, support_bins=2)
+        with torch.no_grad():
+            out = module(torch.from_numpy(image).permute(2, 0, 1)[None])
+        ours = out[0].permute(1, 2, 0).numpy()
+        self.assertEqual(out.dtype, torch.float32)
+        np.testing.assert_allclose(ours, expected, rtol=0, atol=1e-5)
+
+    def test_training_step_moves_the_lens(self):
+        module = lt.ImageFormation(doublet(), rings=4, fields=5, grid_size=33, threads=2,
+                                   freeze=["glasses"])
+        optimizer = torch.optim.Adam(module.parameters(), lr=1e-3)
+        images = torch.rand(2, 3, 18, 24)
+        x0 = module.x.detach().clone()
+        loss = ((module(images) - images) ** 2).mean() + 0.1 * module.lens_loss(rings=4, fields=3)
+        loss.backward()
+        glass = [i for i, g in enumerate(module.param.groups) if g == "glasses"]
+        self.assertTrue((module.x.grad[glass] == 0).all())
+        optimizer.step()
+        self.assertFalse(torch.equal(module.x.detach(), x0))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            self.assertEqual(len(module.lens().surfaces), len(doublet().surfaces))
+
+
+if __name__ == "__main__":
+    unittest.main()
