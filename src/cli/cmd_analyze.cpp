@@ -4,7 +4,9 @@
 #include <memory>
 
 #include "commands.h"
+#include "lens_checks.h"
 #include "lensopt/analysis/analyze.h"
+#include "lensopt/analysis/forms_image.h"
 #include "lensopt/core/error.h"
 #include "lensopt/lens/lens_io.h"
 
@@ -28,7 +30,9 @@ void run_analyze(const AnalyzeCommand& cmd) {
   if (cmd.dispersion == "abbe") options.dispersion = DispersionModel::kAbbe;
   if (cmd.dispersion == "catalog") options.dispersion = DispersionModel::kCatalog;
   const Lens lens = read_lens(cmd.lens_path);
+  check_glass_ranges(lens, "analyze", cmd.strict);
   const AnalysisReport report = analyze_lens(lens, options);
+  check_forms_image(report);  // a lens without an image is an error (exit 1), not nulls
   if (cmd.json) {
     fmt::print("{}\n", format_report_json(report));
   } else {
@@ -59,7 +63,8 @@ void setup_analyze(CLI::App& app) {
   sub->add_flag("--no-scale", cmd->no_scale, "trace the prescription as written");
   sub->add_option("--dispersion", cmd->dispersion, "abbe (the paper's) or catalog")
       ->check(CLI::IsMember({"abbe", "catalog"}));
-  sub->add_flag("--strict", cmd->strict, "exit with status 3 if any ray fails");
+  sub->add_flag("--strict", cmd->strict,
+                "exit with status 3 if any ray fails; refuse a wavelength outside a glass's range");
   sub->callback([cmd] { run_analyze(*cmd); });
 }
 

@@ -5,7 +5,9 @@
 #include <string>
 
 #include "commands.h"
+#include "lensopt/core/atomic_file.h"
 #include "lensopt/core/error.h"
+#include "lensopt/core/output_checks.h"
 #include "lensopt/render/chart.h"
 #include "lensopt/render/image.h"
 
@@ -25,6 +27,7 @@ void run_chart(const ChartCommand& cmd) {
     throw Error(fmt::format("--size '{}' must be WIDTHxHEIGHT, e.g. 1280x720", cmd.size));
   }
   options.text = !cmd.no_text;
+  check_output_file(cmd.output);
   const Chart chart = make_test_chart(options);
   write_image(cmd.output, chart.image);
   if (!chart.text_drawn && !cmd.no_text)

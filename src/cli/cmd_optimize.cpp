@@ -9,7 +9,10 @@
 #include <nlohmann/json.hpp>
 
 #include "commands.h"
+#include "lens_checks.h"
+#include "lensopt/core/atomic_file.h"
 #include "lensopt/core/error.h"
+#include "lensopt/core/output_checks.h"
 #include "lensopt/lens/lens_io.h"
 #include "lensopt/optimize/optimize_table.h"
 #include "lensopt/optimize/optimizer.h"
@@ -91,6 +94,7 @@ nlohmann::json constraints_json(const ConstraintReport& c) {
 
 void run_optimize(const OptimizeCommand& cmd) {
   const Lens lens = read_lens(cmd.lens_path);
+  check_glass_ranges(lens, "optimize", false);
   OptimizeOptions options;
   apply_optimize_table(lens, options);
   if (!cmd.constraints.empty()) options.loss.paper_penalties = cmd.constraints == "paper";
@@ -127,6 +131,7 @@ void run_optimize(const OptimizeCommand& cmd) {
                 "refusing to overwrite the input lens; use --in-place to do that");
   if (out_path.extension() != ".toml")
     throw Error(SourceLocation{out_path.string()}, "the optimized lens is written as .toml");
+  check_output_file(out_path);  // before the work: the folder exists and is writable
 
   g_interrupted.store(false);
   auto previous = std::signal(SIGINT, on_sigint);
@@ -156,7 +161,7 @@ void run_optimize(const OptimizeCommand& cmd) {
     j["kept_start"] = result.kept_start;
     j["log"] = result.log;
     j["sampling"] = {{"rings", options.sampling.rings}, {"fields", options.sampling.fields}};
-    fmt::print("{}\n", j.dump(2));
+    fmt::print("{}\n", j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace));
   } else {
     fmt::print("lensopt optimize: {} -> {}\n", cmd.lens_path, out_path.string());
     fmt::print("  mean RMS spot (full sampling): {:.3f} um -> {:.3f} um{}\n", result.start_spot_um,

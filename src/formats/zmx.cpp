@@ -24,6 +24,7 @@
 #include "lensopt/core/text.h"
 #include "lensopt/glass/dispersion.h"
 #include "lensopt/glass/glass.h"
+#include "lensopt/lens/validate.h"
 #include "lensopt/paraxial/paraxial.h"
 #include "lensopt/trace/trace_lens.h"
 
@@ -662,6 +663,7 @@ ZmxImport ZmxParser::parse(std::string_view bytes) {
   lens.name = has_name_ && !name_.empty() ? name_ : std::filesystem::path(file_).stem().string();
   lens.specs.dispersion = dispersion;
 
+  LensSourceLines source_lines;
   std::vector<std::string> used_catalogs;
   int stop_count = 0;
   for (std::size_t k = 1; k + 1 < surfaces_.size(); ++k) {
@@ -686,6 +688,7 @@ ZmxImport ZmxParser::parse(std::string_view bytes) {
         stop.material = lens.surfaces.empty() ? Material::air() : lens.surfaces.back().material;
         stop.semi_diameter_mm = surface.semi_diameter_mm;
         lens.surfaces.push_back(stop);
+        source_lines.surfaces.push_back(raw.line);
         warn(raw.stop_line,
              fmt::format("the stop is on curved surface {}; lensopt's stop is flat, so a flat "
                          "stop surface is inserted at its vertex (0 mm before it)",
@@ -695,6 +698,7 @@ ZmxImport ZmxParser::parse(std::string_view bytes) {
       }
     }
     lens.surfaces.push_back(surface);
+    source_lines.surfaces.push_back(raw.line);
   }
   if (stop_count == 0) {
     // OpticStudio's default stop is surface 1.
@@ -804,15 +808,19 @@ ZmxImport ZmxParser::parse(std::string_view bytes) {
     fail_at(yfln_line_ > 0 ? yfln_line_ : last_line, 1,
             fmt::format("the largest field is {} deg; lensopt needs less than 89", half_field_deg));
   lens.specs.half_field_deg = half_field_deg;
+  if (!(half_field_deg > 0.0))
+    fail_at(yfln_line_ > 0 ? yfln_line_ : last_line, 1,
+            "no field of view: the largest field angle is 0 (no XFLN / YFLN lines, or all 0); "
+            "lensopt designs lenses that form an image over a field");
 
   // Aperture.
   if (!fnum_ && !enpd_)
     fail_at(last_line, 1, "no aperture: the file needs ENPD (entrance pupil diameter) or FNUM");
   lens.specs.f_number = fnum_ ? *fnum_ : 2.0;
   try {
-    lens.validate();
+    validate_lens(lens, source_lines);
   } catch (const Error& error) {
-    throw Error(SourceLocation{file_}, error.message());
+    throw Error(SourceLocation{file_, error.where().line}, error.message());
   }
   const double efl_mm = paraxial_data(make_trace_lens(lens), kWavelengthD_nm).efl_mm;
   if (!fnum_) {
@@ -836,9 +844,9 @@ ZmxImport ZmxParser::parse(std::string_view bytes) {
   }
   lens.extra_toml = note_toml_;
   try {
-    lens.validate();
+    validate_lens(lens, source_lines);
   } catch (const Error& error) {
-    throw Error(SourceLocation{file_}, error.message());
+    throw Error(SourceLocation{file_, error.where().line}, error.message());
   }
 
   report_ignored();
