@@ -1,18 +1,22 @@
 // The output layer (include/lensopt/core/atomic_file.h).
 #include "lensopt/core/atomic_file.h"
 
+#include <OpenImageIO/imageio.h>
 #include <fcntl.h>
 #include <fmt/format.h>
 #include <signal.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
+#include <cctype>
 #include <cerrno>
 #include <cstring>
 #include <fstream>
 #include <regex>
 #include <sstream>
+#include <vector>
 
 #include "lensopt/core/error.h"
 #include "lensopt/core/output_checks.h"
@@ -55,6 +59,38 @@ void sync_dir(const fs::path& dir) {
   ::close(fd);
 }
 
+// Image encoders do not all report a short write (a full disk can leave a truncated PNG that was
+// "written" without error), so an image is decoded again before it replaces the target.
+bool is_image_path(const fs::path& path) {
+  std::string ext = path.extension().string();
+  for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return ext == ".png" || ext == ".jpg" || ext == ".jpeg" || ext == ".tif" || ext == ".tiff" ||
+         ext == ".exr";
+}
+
+void verify_image(const fs::path& temp, const fs::path& target) {
+  auto first_line = [](std::string m) {
+    const std::size_t end = m.find('\n');
+    if (end != std::string::npos) m.resize(end);
+    return m.empty() ? std::string("unknown error") : m;
+  };
+  auto in = OIIO::ImageInput::open(temp.string());
+  if (!in)
+    fail(target, fmt::format("the written image does not decode ({}); is the disk full?",
+                             first_line(OIIO::geterror())));
+  const OIIO::ImageSpec spec = in->spec();
+  std::vector<unsigned char> row(static_cast<std::size_t>(std::max(spec.width, 1)) *
+                                 std::max(spec.nchannels, 1) * 4);
+  bool ok = spec.width > 0 && spec.height > 0;
+  // Scanline by scanline: a whole large image need not be held twice.
+  for (int y = spec.y; ok && y < spec.y + spec.height; ++y)
+    ok = in->read_scanline(y, 0, OIIO::TypeDesc::UINT8, row.data());
+  const std::string error = ok ? std::string() : first_line(in->geterror());
+  in->close();
+  if (!ok)
+    fail(target, fmt::format("the written image is incomplete ({}); is the disk full?", error));
+}
+
 fs::path folder_of(const fs::path& path) {
   return path.has_parent_path() ? path.parent_path() : fs::path(".");
 }
@@ -75,6 +111,7 @@ void write_file_atomic_with(const fs::path& path,
     const auto size = fs::file_size(temp, ec);
     if (ec) fail(path, fmt::format("the writer left no file ({})", ec.message()));
     if (size == 0) fail(path, "the writer produced an empty file");
+    if (is_image_path(path)) verify_image(temp, path);
     sync_file(temp, path);
   } catch (...) {
     std::error_code ignored;

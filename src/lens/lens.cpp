@@ -146,8 +146,8 @@ void validate_lens(const Lens& lens, const LensSourceLines& lines) {
       if (!(s.material.vd >= kMinAbbe && s.material.vd <= kMaxAbbe))
         fail_at(line, fmt::format("surface {}: glass {} has vd = {} (must be in [{:g}, {:g}])", n,
                                   s.material.label(), s.material.vd, kMinAbbe, kMaxAbbe));
-      if (i + 1 < surfaces.size() && !(s.thickness_mm > 0))
-        fail_at(line, fmt::format("surface {}: a glass thickness of {:g} mm must be > 0", n,
+      if (i + 1 < surfaces.size() && !(s.thickness_mm >= 0))
+        fail_at(line, fmt::format("surface {}: a glass thickness of {:g} mm must be >= 0", n,
                                   s.thickness_mm));
     }
   }

@@ -24,7 +24,8 @@ struct LensSourceLines {
 //   glass nd in (1, kMaxIndex], vd in [kMinAbbe, kMaxAbbe];
 //   relative to the lens's length L = sum of |thickness| but the last (or the largest |R|
 //   for a lens of zero length): |R| >= kMinRadiusOfLength * L, each thickness
-//   |t| <= kMaxThicknessOfLength * L, glass thicknesses > 0.
+//   |t| <= kMaxThicknessOfLength * L, glass thicknesses >= 0 (0: a stop at a
+//   curved surface's vertex).
 // Messages read "file:line: surface N: ..." when `lines` has the line.
 void validate_lens(const Lens& lens, const LensSourceLines& lines = {});
 
