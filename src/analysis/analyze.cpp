@@ -7,7 +7,9 @@
 #include <nlohmann/json.hpp>
 
 #include "lensopt/analysis/field_maps.h"
+#include "lensopt/analysis/forms_image.h"
 #include "lensopt/analysis/spot.h"
+#include "lensopt/core/error.h"
 #include "lensopt/paraxial/paraxial.h"
 
 namespace lensopt {
@@ -106,6 +108,46 @@ AnalysisReport analyze_lens(const Lens& lens_in, const AnalyzeOptions& options) 
   if (all_fields_traced && weight_sum > 0.0 && std::isfinite(spot_sum))
     r.mean_rms_spot_um = spot_sum / weight_sum;
   return r;
+}
+
+void check_forms_image(const AnalysisReport& r) {
+  std::vector<std::string> problems;
+  auto need = [&](double v, const char* what, bool positive) {
+    if (!std::isfinite(v) || (positive && !(v > 0)))
+      problems.push_back(fmt::format("{} is {}", what, v));
+  };
+  if (r.fields.empty()) problems.push_back("it has no field");
+  need(r.efl_mm, "the focal length (mm)", false);
+  if (std::isfinite(r.efl_mm) && r.efl_mm == 0) problems.push_back("the focal length is 0");
+  need(r.bfl_mm, "the back focal length (mm)", false);
+  need(r.epd_mm, "the entrance pupil diameter (mm)", true);
+  need(r.f_number, "the f-number", false);
+  need(r.scale, "the scale to the spec focal length", true);
+  need(r.entrance_pupil_z_mm, "the entrance pupil position (mm)", false);
+  need(r.stop_radius_mm, "the stop radius (mm)", true);
+  need(r.total_track_mm, "the total track (mm)", false);
+  for (const FieldReport& f : r.fields) {
+    if (f.traced_rays == 0) {
+      problems.push_back(fmt::format("no ray of field {:g} deg reaches the image", f.field_deg));
+      continue;
+    }
+    if (!f.rms_spot_um || !std::isfinite(*f.rms_spot_um) || !std::isfinite(f.distortion_percent) ||
+        !std::isfinite(f.relative_illumination) || !std::isfinite(f.centroid_y_mm))
+      problems.push_back(
+          fmt::format("field {:g} deg has a non-finite spot, distortion or "
+                      "illumination",
+                      f.field_deg));
+  }
+  if (problems.empty()) return;
+  if (problems.size() > 4) {
+    const std::size_t more = problems.size() - 3;
+    problems.resize(3);
+    problems.push_back(fmt::format("{} more", more));
+  }
+  std::string text;
+  for (const std::string& p : problems) text += (text.empty() ? "" : "; ") + p;
+  throw Error(SourceLocation{r.source_path.empty() ? r.lens_name : r.source_path},
+              "the lens does not form an image: " + text);
 }
 
 std::string format_report_text(const AnalysisReport& r) {
@@ -237,7 +279,7 @@ std::string format_report_json(const AnalysisReport& r) {
   j["ray_failures"] = r.ray_failures;
   j["ray_failures_per_field"] = failed;
   j["ray_failures_per_surface"] = r.failures_by_surface;
-  return j.dump(2);
+  return j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace);
 }
 
 }  // namespace lensopt

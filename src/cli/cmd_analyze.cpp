@@ -5,7 +5,9 @@
 #include <memory>
 
 #include "commands.h"
+#include "lens_checks.h"
 #include "lensopt/analysis/analyze.h"
+#include "lensopt/analysis/forms_image.h"
 #include "lensopt/core/error.h"
 #include "lensopt/lens/lens_io.h"
 
@@ -32,7 +34,9 @@ void run_analyze(const AnalyzeCommand& cmd) {
   Lens lens = read_lens(cmd.lens_path);
   if (cmd.mode == "paper") lens.specs.mode = SpecMode::kPaper;
   if (cmd.mode == "as-written") lens.specs.mode = SpecMode::kAsWritten;
+  check_glass_ranges(lens, "analyze", cmd.strict);
   const AnalysisReport report = analyze_lens(lens, options);
+  check_forms_image(report);  // a lens without an image is an error (exit 1), not nulls
   if (cmd.json) {
     fmt::print("{}\n", format_report_json(report));
   } else {
@@ -79,7 +83,8 @@ void setup_analyze(CLI::App& app) {
                   "spec mode: paper (scale to f = d / (2 tan hfov), EPD = f / N, fields 0..hfov) "
                   "or as-written (the lens's own aperture, fields and object distance)")
       ->check(CLI::IsMember({"paper", "as-written"}));
-  sub->add_flag("--strict", cmd->strict, "exit with status 3 if any ray fails");
+  sub->add_flag("--strict", cmd->strict,
+                "exit with status 3 if any ray fails; refuse a wavelength outside a glass's range");
   sub->footer(
       "System model: a lens is traced in its spec mode. The paper's lenses (lenses/*.toml, the "
       "paper's YAML) use the paper's mode; a .zmx import or a TOML with a [system] table is "

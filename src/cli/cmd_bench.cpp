@@ -148,7 +148,7 @@ void run_bench(const BenchCommand& cmd) {
     j["spot_grad_adjoint_cpu_ms"] = adjoint_cpu_ms;
     j["adjoint_max_relative_difference"] = adjoint_difference;
     j["ray_surfaces_per_s"] = ray_surfaces_per_s;
-    fmt::print("{}\n", j.dump(2));
+    fmt::print("{}\n", j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace));
   } else {
     fmt::print(
         "lensopt bench: {}{} ({} surfaces), {} fields x {} wavelengths x {} rays, ray aiming "
@@ -247,7 +247,7 @@ void run_joint_imaging_bench(const BenchCommand& cmd) {
     j["backward_4_crops_ms"] = median(backward_ms);
     j["step_ms"] = median(step_ms);
     j["step_cpu_ms"] = median(cpu_ms);
-    fmt::print("{}\n", j.dump(2));
+    fmt::print("{}\n", j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace));
   } else {
     fmt::print(
         "lensopt bench --joint-imaging: {} ({} variables), 21 fields x {} rings ({} rays "

@@ -1,5 +1,6 @@
 // lensopt catalog FILE: list a glass catalog's glasses with their indices at chosen wavelengths.
 #include <fmt/core.h>
+#include <fmt/ranges.h>
 
 #include <algorithm>
 #include <cmath>
@@ -11,6 +12,7 @@
 
 #include "commands.h"
 #include "lensopt/glass/glass.h"
+#include "lensopt/glass/glass_range.h"
 
 namespace lensopt::cli {
 namespace {
@@ -34,6 +36,30 @@ std::vector<std::optional<double>> indices(const Glass& glass, const std::vector
   return n;
 }
 
+// Why a value is missing or extrapolated ("" when it is a plain catalog value).
+std::string note_of(const Glass& glass, double wavelength_nm) {
+  const std::string missing = missing_index_reason(glass, wavelength_nm);
+  if (!missing.empty()) return missing;
+  if (!glass_in_range(glass, wavelength_nm))
+    return fmt::format("extrapolated: {} nm is outside the formula's range {}-{} nm (AGF LD line)",
+                       wavelength_nm, glass.min_wavelength_um * 1000.0,
+                       glass.max_wavelength_um * 1000.0);
+  return "";
+}
+
+// One line on stderr per glass with a missing or extrapolated value.
+void print_notes(const Catalog& catalog, const std::vector<double>& wavelengths_nm) {
+  for (const Glass& glass : catalog.glasses) {
+    std::vector<std::string> notes;
+    for (const double w : wavelengths_nm) {
+      const std::string note = note_of(glass, w);
+      if (!note.empty()) notes.push_back(fmt::format("n({} nm): {}", w, note));
+    }
+    if (!notes.empty())
+      fmt::print(stderr, "lensopt catalog: warning: {}: {}\n", glass.name, fmt::join(notes, "; "));
+  }
+}
+
 std::string formula_label(const Glass& glass) {
   const std::string name = formula_name(glass.formula);
   return glass.formula_supported ? name : name + " (unsupported)";
@@ -43,18 +69,32 @@ void print_json(const Catalog& catalog, const std::vector<double>& wavelengths_n
   auto list = nlohmann::ordered_json::array();
   for (const Glass& glass : catalog.glasses) {
     auto n = nlohmann::ordered_json::array();
+    auto notes = nlohmann::ordered_json::array();
     for (const auto& value : indices(glass, wavelengths_nm)) {
       n.push_back(value ? nlohmann::ordered_json(*value) : nlohmann::ordered_json(nullptr));
     }
-    list.push_back({{"name", glass.name},
-                    {"formula", formula_name(glass.formula)},
-                    {"supported", glass.formula_supported},
-                    {"status", status_name(glass.status)},
-                    {"nd", glass.nd},
-                    {"vd", glass.vd},
-                    {"n", std::move(n)}});
+    bool any_note = false;
+    for (const double w : wavelengths_nm) {
+      const std::string note = note_of(glass, w);
+      any_note |= !note.empty();
+      notes.push_back(note.empty() ? nlohmann::ordered_json(nullptr)
+                                   : nlohmann::ordered_json(note));
+    }
+    list.push_back(
+        {{"name", glass.name},
+         {"formula", formula_name(glass.formula)},
+         {"supported", glass.formula_supported},
+         {"status", status_name(glass.status)},
+         {"nd", glass.nd},
+         {"vd", glass.vd},
+         {"n", std::move(n)},
+         {"range_nm", glass.max_wavelength_um > glass.min_wavelength_um
+                          ? nlohmann::ordered_json::array({glass.min_wavelength_um * 1000.0,
+                                                           glass.max_wavelength_um * 1000.0})
+                          : nlohmann::ordered_json(nullptr)}});
+    if (any_note) list.back()["n_notes"] = std::move(notes);
   }
-  fmt::print("{}\n", list.dump(2));
+  fmt::print("{}\n", list.dump(2, ' ', false, nlohmann::json::error_handler_t::replace));
 }
 
 void print_table(const Catalog& catalog, const std::vector<double>& wavelengths_nm) {
@@ -69,6 +109,8 @@ void print_table(const Catalog& catalog, const std::vector<double>& wavelengths_
     for (const auto& value : indices(glass, wavelengths_nm)) {
       row.push_back(value ? fmt::format("{:.6f}", *value) : std::string("-"));
     }
+    for (std::size_t k = 0; k < wavelengths_nm.size(); ++k)
+      if (row[5 + k] != "-" && !glass_in_range(glass, wavelengths_nm[k])) row[5 + k] += "*";
     rows.push_back(std::move(row));
   }
   std::vector<std::size_t> width(header.size());
@@ -90,6 +132,10 @@ void print_table(const Catalog& catalog, const std::vector<double>& wavelengths_
   fmt::print("catalog {} ({}): {} glasses\n", catalog.name, catalog.path, catalog.glasses.size());
   print_row(header);
   for (const auto& row : rows) print_row(row);
+  bool starred = false;
+  for (const auto& row : rows)
+    for (std::size_t k = 5; k < row.size(); ++k) starred |= row[k].back() == '*';
+  if (starred) fmt::print("* outside the glass's formula range (AGF LD line): extrapolated\n");
 }
 
 void run_catalog(const CatalogCommand& cmd) {
@@ -97,6 +143,7 @@ void run_catalog(const CatalogCommand& cmd) {
   for (const auto& warning : catalog->warnings) {
     fmt::print(stderr, "lensopt catalog: warning: {}\n", warning);
   }
+  print_notes(*catalog, cmd.wavelengths_nm);
   if (cmd.json) {
     print_json(*catalog, cmd.wavelengths_nm);
   } else {

@@ -6,8 +6,10 @@
 #include <string>
 
 #include "commands.h"
+#include "lensopt/core/atomic_file.h"
 #include "lensopt/core/error.h"
 #include "lensopt/detection/scenes.h"
+#include "lensopt/core/output_checks.h"
 #include "lensopt/render/chart.h"
 #include "lensopt/render/image.h"
 
@@ -43,6 +45,7 @@ void run_chart(const ChartCommand& cmd) {
     return;
   }
   options.text = !cmd.no_text;
+  check_output_file(cmd.output);
   const Chart chart = make_test_chart(options);
   write_image(cmd.output, chart.image);
   if (!chart.text_drawn && !cmd.no_text)

@@ -12,6 +12,7 @@
 #include "commands.h"
 #include "lensopt/core/atomic_file.h"
 #include "lensopt/core/error.h"
+#include "lensopt/core/output_checks.h"
 #include "lensopt/formats/zmx.h"
 #include "lensopt/lens/lens_io.h"
 
@@ -58,6 +59,7 @@ void run_convert(const ConvertCommand& cmd) {
     throw Error(SourceLocation{output.string()},
                 fmt::format("cannot write '{}' files; convert writes .toml and Zemax .zmx",
                             output.extension().string()));
+  check_output_file(output, {cmd.input_path});
   const Lens lens = read_input(cmd.input_path);
   if (out_extension == ".zmx") {
     write_zmx(lens, output);

@@ -5,7 +5,9 @@
 #include <string>
 
 #include "commands.h"
+#include "lensopt/core/atomic_file.h"
 #include "lensopt/core/error.h"
+#include "lensopt/core/output_checks.h"
 #include "lensopt/lens/lens_io.h"
 #include "lensopt/render/export.h"
 
@@ -30,6 +32,7 @@ void run_export(const ExportCommand& cmd) {
         fmt::format("--image-size '{}' must be WIDTHxHEIGHT, e.g. 1280x720", cmd.image_size));
   }
   options.validate();
+  check_output_dir(options.output_dir, {cmd.lens_path});
   const Lens lens = read_lens(cmd.lens_path);
   TraceOptions trace;
   trace.threads = cmd.jobs;

@@ -10,7 +10,10 @@
 #include <nlohmann/json.hpp>
 
 #include "commands.h"
+#include "lens_checks.h"
+#include "lensopt/core/atomic_file.h"
 #include "lensopt/core/error.h"
+#include "lensopt/core/output_checks.h"
 #include "lensopt/lens/lens_io.h"
 #include "lensopt/optimize/optimize_table.h"
 #include "lensopt/optimize/optimizer.h"
@@ -104,15 +107,7 @@ std::filesystem::path checked_output_path(const OptimizeCommand& cmd) {
                 "refusing to overwrite the input lens; use --in-place to do that");
   if (out_path.extension() != ".toml")
     throw Error(SourceLocation{out_path.string()}, "the optimized lens is written as .toml");
-  const std::filesystem::path folder =
-      out_path.has_parent_path() ? out_path.parent_path() : std::filesystem::path(".");
-  std::error_code ec;
-  if (!std::filesystem::is_directory(folder, ec))
-    throw Error(SourceLocation{out_path.string()},
-                fmt::format("the output folder {} does not exist", folder.string()));
-  if (::access(folder.c_str(), W_OK) != 0)
-    throw Error(SourceLocation{out_path.string()},
-                fmt::format("the output folder {} is not writable", folder.string()));
+  check_output_file(out_path);  // the output layer's check: folder exists and is writable
   return out_path;
 }
 
@@ -125,6 +120,7 @@ BoundsMode parse_bounds(const std::string& name) {
 void run_optimize(const OptimizeCommand& cmd) {
   const std::filesystem::path out_path = checked_output_path(cmd);
   const Lens lens = read_lens(cmd.lens_path);
+  check_glass_ranges(lens, "optimize", false);
   OptimizeOptions options;
   // Bounds first (the paper's for the paper's lenses, else from the lens itself), then the lens
   // file's [optimize] table and the command line override single values.
@@ -157,6 +153,7 @@ void run_optimize(const OptimizeCommand& cmd) {
   options.verbose = !cmd.quiet;
   options.interrupt = &g_interrupted;
   options.validate();
+
   if (!cmd.quiet && !cmd.json)
     fmt::print(stderr,
                "lensopt optimize: {} bounds: air >= {:.4g} mm, glass {:.4g}..{:.4g} mm, image "
@@ -199,7 +196,7 @@ void run_optimize(const OptimizeCommand& cmd) {
                    {"max_ray_angle_deg", options.loss.max_ray_angle_deg}};
     j["log"] = result.log;
     j["sampling"] = {{"rings", options.sampling.rings}, {"fields", options.sampling.fields}};
-    fmt::print("{}\n", j.dump(2));
+    fmt::print("{}\n", j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace));
   } else {
     fmt::print("lensopt optimize: {} -> {}\n", cmd.lens_path, out_path.string());
     fmt::print("  mean RMS spot (full sampling): {:.3f} um -> {:.3f} um{}\n", result.start_spot_um,

@@ -197,7 +197,7 @@ void run_joint(const JointCommand& cmd, const OptimizeShared& shared) {
                          {"total", t.step_s},      {"total_cpu", t.step_cpu_s},
                          {"steps", t.steps}};
     j["notes"] = result.notes;
-    fmt::print("{}\n", j.dump(2));
+    fmt::print("{}\n", j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace));
     return;
   }
   fmt::print("lensopt optimize --joint: {} -> {} (task {}, {} steps)\n", shared.lens_path,

@@ -4,7 +4,10 @@
 #include <memory>
 
 #include "commands.h"
+#include "lens_checks.h"
+#include "lensopt/core/atomic_file.h"
 #include "lensopt/core/error.h"
+#include "lensopt/core/output_checks.h"
 #include "lensopt/lens/lens_io.h"
 #include "lensopt/plot/plot.h"
 
@@ -24,7 +27,9 @@ void run_plot(const PlotCommand& cmd) {
   options.kind = plot::parse_plot_kind(cmd.kind);
   plot::output_format_for(cmd.output);  // a bad extension fails before any tracing
   options.validate();
+  check_output_file(cmd.output, {cmd.lens_path, cmd.compare_path});
   const Lens lens = read_lens(cmd.lens_path);
+  check_glass_ranges(lens, "plot", false);
   std::unique_ptr<Lens> compare;
   if (!cmd.compare_path.empty()) compare = std::make_unique<Lens>(read_lens(cmd.compare_path));
   const plot::PlotSummary summary = plot::write_plot(lens, compare.get(), options, cmd.output);

@@ -3,14 +3,19 @@
 #include <malloc.h>
 #include <unistd.h>
 
+#include <atomic>
 #include <chrono>
+#include <csignal>
 #include <filesystem>
 #include <memory>
 #include <string>
 #include <vector>
 
 #include "commands.h"
+#include "lens_checks.h"
+#include "lensopt/core/atomic_file.h"
 #include "lensopt/core/error.h"
+#include "lensopt/core/output_checks.h"
 #include "lensopt/lens/lens_io.h"
 #include "lensopt/render/chart.h"
 #include "lensopt/render/dataset.h"
@@ -20,6 +25,12 @@ namespace {
 
 namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
+
+std::atomic<bool> g_render_interrupted{false};
+
+extern "C" void on_render_signal(int) {
+  g_render_interrupted.store(true);
+}
 
 struct RenderCommand {
   std::string lens_path;
@@ -90,6 +101,17 @@ class Progress {
 };
 
 void run_render(const RenderCommand& cmd) {
+  // SIGINT / SIGTERM: start no further image, write the metrics of what is done, exit 130.
+  g_render_interrupted.store(false);
+  auto previous_int = std::signal(SIGINT, on_render_signal);
+  auto previous_term = std::signal(SIGTERM, on_render_signal);
+  struct RestoreSignals {
+    decltype(previous_int) i, t;
+    ~RestoreSignals() {
+      std::signal(SIGINT, i);
+      std::signal(SIGTERM, t);
+    }
+  } restore{previous_int, previous_term};
   // Every image allocates and frees buffers of tens of megabytes; by default glibc maps each
   // with mmap and unmaps it when freed, so every image faults its pages in again (about a tenth
   // of the CPU time of a dataset run). Keep freed memory in the heap for reuse instead.
@@ -105,6 +127,7 @@ void run_render(const RenderCommand& cmd) {
   dataset.output_dir = cmd.output_dir;
   dataset.force = cmd.force;
   dataset.jobs = cmd.jobs;
+  dataset.interrupt = &g_render_interrupted;
   for (const std::string& in : cmd.inputs) dataset.inputs.emplace_back(in);
 
   // No input: render the built-in test chart (written to a temporary folder first).
@@ -126,9 +149,13 @@ void run_render(const RenderCommand& cmd) {
       fmt::print(stderr, "lensopt render: no input given: rendering the built-in test chart\n");
   }
   dataset.validate();
-  ensure_writable_directory(dataset.output_dir);
+  // Before any work: the output folder is writable and is none of the inputs.
+  std::vector<fs::path> run_inputs = dataset.inputs;
+  run_inputs.emplace_back(cmd.lens_path);
+  check_output_dir(dataset.output_dir, run_inputs);
 
   const Lens lens = read_lens(cmd.lens_path);
+  check_glass_ranges(lens, "render", false);
   const auto t0 = Clock::now();
   TraceOptions trace;
   trace.threads = cmd.jobs;
@@ -158,6 +185,13 @@ void run_render(const RenderCommand& cmd) {
         summary.mean_ssim ? fmt::format("{:.4f}", *summary.mean_ssim) : "n/a");
   }
   fmt::print("metrics: {} and {}\n", summary.csv_path.string(), summary.json_path.string());
+  if (summary.was_interrupted) {
+    fmt::print(stderr,
+               "lensopt render: interrupted with {} image(s) not rendered; run the same command "
+               "again to resume\n",
+               summary.interrupted);
+    throw ExitCode{130};
+  }
   if (summary.failed > 0) {
     fmt::print(stderr, "lensopt render: {} input{} could not be rendered:\n", summary.failed,
                summary.failed == 1 ? "" : "s");

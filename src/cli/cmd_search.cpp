@@ -10,7 +10,9 @@
 #include <memory>
 
 #include "commands.h"
+#include "lensopt/core/atomic_file.h"
 #include "lensopt/core/error.h"
+#include "lensopt/core/output_checks.h"
 #include "lensopt/optimize/optimize_table.h"
 #include "lensopt/search/search.h"
 
@@ -137,6 +139,10 @@ void run_search_command(const SearchCommand& cmd) {
       out += fmt::format("-shard{}of{}", options.shard_index, options.shard_count);
   }
 
+  {
+    std::vector<std::filesystem::path> ins(cmd.inputs.begin(), cmd.inputs.end());
+    check_output_dir(out, ins);
+  }
   g_search_interrupted.store(false);
   auto previous_int = std::signal(SIGINT, on_search_signal);
   auto previous_term = std::signal(SIGTERM, on_search_signal);
@@ -167,6 +173,7 @@ void run_search_command(const SearchCommand& cmd) {
 void run_merge_command(const MergeCommand& cmd) {
   if (cmd.output.empty()) throw Error("merge: give -o OUT (the merged folder)");
   std::vector<std::filesystem::path> dirs(cmd.dirs.begin(), cmd.dirs.end());
+  check_output_dir(cmd.output, dirs);
   const SearchSummary s = merge_searches(dirs, cmd.output, cmd.top);
   fmt::print(
       "lensopt search merge: {} folders, {} of {} candidates -> {}/ (fingerprint {}); {} meet "

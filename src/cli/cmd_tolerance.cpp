@@ -9,8 +9,10 @@
 #include <memory>
 
 #include "commands.h"
+#include "lens_checks.h"
 #include "lensopt/core/atomic_file.h"
 #include "lensopt/core/error.h"
+#include "lensopt/core/output_checks.h"
 #include "lensopt/lens/lens_io.h"
 #include "lensopt/tolerance/tolerance.h"
 
@@ -59,7 +61,13 @@ void run_tolerance_command(const ToleranceCommand& cmd) {
                                 cmd.tolerances.vd_pct};
   for (int i = 0; i < 5; ++i) check_cli_tolerance(cmd.tolerance_opts[i], cli_values[i]);
 
+  // The outputs are checked before the (long) run; none may replace the lens.
+  for (const std::string& out : {cmd.csv_path, cmd.histogram_path})
+    if (!out.empty())
+      check_output_file(out,
+                        {cmd.lens_path, cmd.csv_path == out ? cmd.histogram_path : cmd.csv_path});
   const Lens lens = read_lens(cmd.lens_path);
+  check_glass_ranges(lens, "tolerance", false);
   const ToleranceSettings table = tolerance_settings_of(lens);
 
   ToleranceOptions options;
@@ -92,6 +100,18 @@ void run_tolerance_command(const ToleranceCommand& cmd) {
       *last_line_s = elapsed_s;
       const double eta = done > 0 ? elapsed_s * (total - done) / done : 0.0;
       fmt::print(stderr, "{}lensopt tolerance: {}/{} trials ({:.0f} %), {:.1f} s, ETA {:.1f} s{}",
+                 tty ? "\r" : "", done, total, 100.0 * done / total, elapsed_s, eta,
+                 tty && done < total ? "   " : "\n");
+      std::fflush(stderr);
+    };
+    auto last_sens_s = std::make_shared<double>(-1e9);
+    options.sensitivity_progress = [tty, last_sens_s](int done, int total, double elapsed_s) {
+      if (!tty && done < total && elapsed_s - *last_sens_s < 5.0) return;
+      *last_sens_s = elapsed_s;
+      const double eta = done > 0 ? elapsed_s * (total - done) / done : 0.0;
+      fmt::print(stderr,
+                 "{}lensopt tolerance: sensitivity {}/{} evaluations ({:.0f} %), {:.1f} s, ETA "
+                 "{:.1f} s{}",
                  tty ? "\r" : "", done, total, 100.0 * done / total, elapsed_s, eta,
                  tty && done < total ? "   " : "\n");
       std::fflush(stderr);

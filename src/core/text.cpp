@@ -68,8 +68,51 @@ std::string decode_text(std::string_view bytes) {
   };
   if (starts_with({0xFF, 0xFE})) return utf16_to_utf8(bytes.substr(2), true);
   if (starts_with({0xFE, 0xFF})) return utf16_to_utf8(bytes.substr(2), false);
-  if (starts_with({0xEF, 0xBB, 0xBF})) return std::string(bytes.substr(3));
-  return std::string(bytes);
+  if (starts_with({0xEF, 0xBB, 0xBF})) return to_valid_utf8(bytes.substr(3));
+  return to_valid_utf8(bytes);
+}
+
+bool is_valid_utf8(std::string_view bytes) {
+  std::size_t i = 0;
+  const std::size_t n = bytes.size();
+  while (i < n) {
+    const auto b0 = static_cast<unsigned char>(bytes[i]);
+    if (b0 < 0x80) {
+      ++i;
+      continue;
+    }
+    int length = 0;
+    std::uint32_t cp = 0, min_cp = 0;
+    if ((b0 & 0xE0) == 0xC0) {
+      length = 2, cp = b0 & 0x1F, min_cp = 0x80;
+    } else if ((b0 & 0xF0) == 0xE0) {
+      length = 3, cp = b0 & 0x0F, min_cp = 0x800;
+    } else if ((b0 & 0xF8) == 0xF0) {
+      length = 4, cp = b0 & 0x07, min_cp = 0x10000;
+    } else {
+      return false;
+    }
+    if (i + length > n) return false;
+    for (int k = 1; k < length; ++k) {
+      const auto b = static_cast<unsigned char>(bytes[i + k]);
+      if ((b & 0xC0) != 0x80) return false;
+      cp = (cp << 6) | (b & 0x3F);
+    }
+    if (cp < min_cp || cp > 0x10FFFF || (cp >= 0xD800 && cp <= 0xDFFF)) return false;
+    i += length;
+  }
+  return true;
+}
+
+std::string latin1_to_utf8(std::string_view bytes) {
+  std::string out;
+  out.reserve(bytes.size() + bytes.size() / 8);
+  for (char c : bytes) append_utf8(out, static_cast<unsigned char>(c));
+  return out;
+}
+
+std::string to_valid_utf8(std::string_view bytes) {
+  return is_valid_utf8(bytes) ? std::string(bytes) : latin1_to_utf8(bytes);
 }
 
 }  // namespace lensopt

@@ -25,6 +25,7 @@
 #include "lensopt/core/text.h"
 #include "lensopt/glass/dispersion.h"
 #include "lensopt/glass/glass.h"
+#include "lensopt/lens/validate.h"
 #include "lensopt/paraxial/paraxial.h"
 #include "lensopt/trace/system.h"
 #include "lensopt/trace/trace_lens.h"
@@ -746,6 +747,7 @@ ZmxImport ZmxParser::parse(std::string_view bytes) {
   lens.name = has_name_ && !name_.empty() ? name_ : std::filesystem::path(file_).stem().string();
   lens.specs.dispersion = dispersion;
 
+  LensSourceLines source_lines;
   std::vector<std::string> used_catalogs;
   int stop_count = 0;
   for (std::size_t k = 1; k + 1 < surfaces_.size(); ++k) {
@@ -780,6 +782,7 @@ ZmxImport ZmxParser::parse(std::string_view bytes) {
         stop.material = lens.surfaces.empty() ? Material::air() : lens.surfaces.back().material;
         stop.semi_diameter_mm = surface.semi_diameter_mm;
         lens.surfaces.push_back(stop);
+        source_lines.surfaces.push_back(raw.line);
         warn(raw.stop_line,
              fmt::format("the stop is on curved surface {}; lensopt's stop is flat, so a flat "
                          "stop surface is inserted at its vertex (0 mm before it)",
@@ -789,6 +792,7 @@ ZmxImport ZmxParser::parse(std::string_view bytes) {
       }
     }
     lens.surfaces.push_back(surface);
+    source_lines.surfaces.push_back(raw.line);
   }
   if (stop_count == 0) {
     // OpticStudio's default stop is surface 1.
@@ -961,9 +965,9 @@ ZmxImport ZmxParser::parse(std::string_view bytes) {
   lens.specs.half_field_deg =
       lens.specs.field_type == FieldType::kAngle ? lens.specs.max_field_value() : 0.0;
   try {
-    lens.validate();
+    validate_lens(lens, source_lines);
   } catch (const Error& error) {
-    throw Error(SourceLocation{file_}, error.message());
+    throw Error(SourceLocation{file_, error.where().line}, error.message());
   }
   // The summary specs the paper's machinery uses (optimize, tolerance): the chief-ray half field,
   // the image-space F/# and the sensor whose spec focal length is the lens's EFL.
@@ -999,9 +1003,9 @@ ZmxImport ZmxParser::parse(std::string_view bytes) {
   }
   lens.extra_toml = note_toml_;
   try {
-    lens.validate();
+    validate_lens(lens, source_lines);
   } catch (const Error& error) {
-    throw Error(SourceLocation{file_}, error.message());
+    throw Error(SourceLocation{file_, error.where().line}, error.message());
   }
 
   report_ignored();

@@ -26,6 +26,8 @@
 #include <cmath>
 #include <limits>
 
+#include "lensopt/glass/glass_range.h"
+
 namespace lensopt {
 namespace {
 
@@ -96,6 +98,30 @@ std::string status_name(GlassStatus status) {
       return "melt";
   }
   return fmt::format("unknown ({})", static_cast<int>(status));
+}
+
+bool glass_in_range(const Glass& glass, double wavelength_nm) {
+  const double min_wavelength_um = glass.min_wavelength_um;
+  const double max_wavelength_um = glass.max_wavelength_um;
+  if (!(max_wavelength_um > min_wavelength_um) || !(max_wavelength_um > 0)) return true;
+  const double l_um = wavelength_nm / kNanometresPerMicrometre;
+  // A relative slack of 1e-9 keeps the range's own end points inside.
+  return l_um >= min_wavelength_um * (1 - 1e-9) && l_um <= max_wavelength_um * (1 + 1e-9);
+}
+
+std::string missing_index_reason(const Glass& glass, double wavelength_nm) {
+  if (!glass.formula_supported)
+    return fmt::format("unsupported dispersion formula {}", formula_name(glass.formula));
+  const double n = glass.index(wavelength_nm);
+  if (std::isfinite(n) && n > 0) return "";
+  const std::string range =
+      glass_in_range(glass, wavelength_nm)
+          ? std::string()
+          : fmt::format(" ({} nm is outside the formula's range {}-{} nm)", wavelength_nm,
+                        glass.min_wavelength_um * kNanometresPerMicrometre,
+                        glass.max_wavelength_um * kNanometresPerMicrometre);
+  return fmt::format("the {} formula gives no real index at {} nm{}", formula_name(glass.formula),
+                     wavelength_nm, range);
 }
 
 double Glass::index(double wavelength_nm) const {

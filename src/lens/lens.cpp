@@ -7,6 +7,8 @@
 #include <limits>
 
 #include "lensopt/core/error.h"
+#include "lensopt/glass/glass_range.h"
+#include "lensopt/lens/validate.h"
 
 namespace lensopt {
 
@@ -102,45 +104,97 @@ double Lens::total_track_mm() const {
 }
 
 void Lens::validate() const {
-  const std::string where = source_path.empty() ? name : source_path;
-  auto fail = [&](const std::string& message) { throw Error(SourceLocation{where}, message); };
+  validate_lens(*this);
+}
+
+void validate_lens(const Lens& lens, const LensSourceLines& lines) {
+  const std::vector<Surface>& surfaces = lens.surfaces;
+  const Specs& specs = lens.specs;
+  const std::string where = lens.source_path.empty() ? lens.name : lens.source_path;
+  auto fail_at = [&](int line, const std::string& message) {
+    throw Error(SourceLocation{where, line}, message);
+  };
+  auto fail = [&](const std::string& message) { fail_at(0, message); };
+  auto surface_line = [&](std::size_t i) {
+    return i < lines.surfaces.size() ? lines.surfaces[i] : 0;
+  };
   if (surfaces.size() < 2) fail("a lens needs at least two surfaces");
+  // The lens's own length scale: the bounds on radii and thicknesses are relative to it, so a
+  // prescription normalized to f = 1 and one in mm are judged alike.
+  double length = 0;
+  for (std::size_t i = 0; i + 1 < surfaces.size(); ++i)
+    length += std::abs(surfaces[i].thickness_mm);
+  if (!(length > 0) || !std::isfinite(length)) {
+    length = 0;
+    for (const Surface& s : surfaces)
+      if (s.curvature_per_mm != 0 && std::isfinite(s.curvature_per_mm))
+        length = std::max(length, std::abs(1.0 / s.curvature_per_mm));
+  }
   int stops = 0;
   for (std::size_t i = 0; i < surfaces.size(); ++i) {
     const Surface& s = surfaces[i];
     const int n = static_cast<int>(i) + 1;
+    const int line = surface_line(i);
     if (!std::isfinite(s.curvature_per_mm))
-      fail(fmt::format("surface {}: curvature is not finite", n));
-    if (!std::isfinite(s.thickness_mm)) fail(fmt::format("surface {}: thickness is not finite", n));
-    if (!std::isfinite(s.conic)) fail(fmt::format("surface {}: conic constant is not finite", n));
+      fail_at(line, fmt::format("surface {}: curvature is not finite (radius too small)", n));
+    if (!std::isfinite(s.thickness_mm))
+      fail_at(line, fmt::format("surface {}: thickness is not finite", n));
+    if (!std::isfinite(s.conic)) fail_at(line, fmt::format("surface {}: conic constant is not finite", n));
     if (!std::isfinite(s.asphere_r2_per_mm))
-      fail(fmt::format("surface {}: asphere r^2 term is not finite", n));
+      fail_at(line, fmt::format("surface {}: asphere r^2 term is not finite", n));
     for (std::size_t j = 0; j < s.asphere.size(); ++j)
       if (!std::isfinite(s.asphere[j]))
-        fail(fmt::format("surface {}: asphere a{} is not finite", n, 2 * j + 4));
+        fail_at(line, fmt::format("surface {}: asphere a{} is not finite", n, 2 * j + 4));
+    if (length > 0 && s.curvature_per_mm != 0 &&
+        std::abs(1.0 / s.curvature_per_mm) < kMinRadiusOfLength * length)
+      fail_at(line, fmt::format("surface {}: radius {:g} mm is below {:g} of the lens length "
+                                "{:g} mm; no real lens has such a surface",
+                                n, 1.0 / s.curvature_per_mm, kMinRadiusOfLength, length));
+    if (length > 0 && std::abs(s.thickness_mm) > kMaxThicknessOfLength * length)
+      fail_at(line, fmt::format("surface {}: thickness {:g} mm is more than {:g} times the lens "
+                                "length {:g} mm",
+                                n, s.thickness_mm, kMaxThicknessOfLength, length));
     if (s.is_stop) {
       ++stops;
       if (s.curvature_per_mm != 0.0 || !s.is_spherical())
-        fail(fmt::format("surface {}: the stop must be flat", n));
+        fail_at(line, fmt::format("surface {}: the stop must be flat", n));
     }
     if (!s.material.is_air()) {
-      if (!(s.material.nd > 1.0) || !std::isfinite(s.material.nd))
-        fail(fmt::format("surface {}: glass {} has nd = {} (must be > 1)", n, s.material.label(),
-                         s.material.nd));
-      if (!(s.material.vd > 0.0) || !std::isfinite(s.material.vd))
-        fail(fmt::format("surface {}: glass {} has vd = {} (must be > 0)", n, s.material.label(),
-                         s.material.vd));
+      if (!(s.material.nd > 1.0 && s.material.nd <= kMaxIndex))
+        fail_at(line, fmt::format("surface {}: glass {} has nd = {} (must be in (1, {:g}])", n,
+                                  s.material.label(), s.material.nd, kMaxIndex));
+      if (!(s.material.vd >= kMinAbbe && s.material.vd <= kMaxAbbe))
+        fail_at(line, fmt::format("surface {}: glass {} has vd = {} (must be in [{:g}, {:g}])", n,
+                                  s.material.label(), s.material.vd, kMinAbbe, kMaxAbbe));
+      if (i + 1 < surfaces.size() && !(s.thickness_mm >= 0))
+        fail_at(line, fmt::format("surface {}: a glass thickness of {:g} mm must be >= 0", n,
+                                  s.thickness_mm));
     }
   }
+  if (!(length > 0)) fail("the lens has no length: every thickness is 0 and every surface flat");
   if (stops == 0) fail("no surface is marked as the aperture stop");
   if (stops > 1)
     fail(fmt::format("{} surfaces are marked as the aperture stop; one must be", stops));
   if (!surfaces.back().material.is_air()) fail("the last surface must be followed by air");
-  if (!(specs.f_number > 0.0)) fail(fmt::format("f_number = {} must be > 0", specs.f_number));
-  if (!(specs.half_field_deg >= 0.0 && specs.half_field_deg < 89.0))
-    fail(fmt::format("half_field_deg = {} must be in [0, 89)", specs.half_field_deg));
-  if (!(specs.sensor_diagonal_mm > 0.0))
-    fail(fmt::format("sensor_diagonal_mm = {} must be > 0", specs.sensor_diagonal_mm));
+  if (!(specs.f_number >= kMinFNumber && specs.f_number <= kMaxFNumber))
+    fail_at(lines.f_number, fmt::format("f_number = {} must be in [{:g}, {:g}]", specs.f_number,
+                                        kMinFNumber, kMaxFNumber));
+  if (!(specs.half_field_deg >= kMinHalfFieldDeg && specs.half_field_deg < 89.0))
+    fail_at(lines.half_field_deg,
+            fmt::format("half_field_deg = {} must be in [{:g}, 89): a lens needs a field of view "
+                        "(it sets the focal length f = d / (2 tan hfov))",
+                        specs.half_field_deg, kMinHalfFieldDeg));
+  if (!(specs.sensor_diagonal_mm >= kMinSensorDiagonalMm &&
+        specs.sensor_diagonal_mm <= kMaxSensorDiagonalMm))
+    fail_at(lines.sensor_diagonal_mm,
+            fmt::format("sensor_diagonal_mm = {} must be in [{:g}, {:g}]", specs.sensor_diagonal_mm,
+                        kMinSensorDiagonalMm, kMaxSensorDiagonalMm));
+  const double f = specs.focal_length_mm();
+  if (!(f >= kMinFocalLengthMm && f <= kMaxFocalLengthMm))
+    fail_at(lines.sensor_diagonal_mm,
+            fmt::format("the focal length from sensor_diagonal_mm and half_field_deg, {:g} mm, "
+                        "must be in [{:g}, {:g}] mm",
+                        f, kMinFocalLengthMm, kMaxFocalLengthMm));
   if (specs.wavelengths_nm.empty()) fail("no wavelengths");
   for (double w : specs.wavelengths_nm)
     if (!(w > 200.0 && w < 20000.0)) fail(fmt::format("wavelength {} nm is out of range", w));
@@ -202,6 +256,36 @@ double Surface::sag_mm(double r_mm) const {
   for (int j = kAsphereOrders - 1; j >= 0; --j) poly = (poly + asphere[j]) * rho;
   poly = (poly * rho + asphere_r2_per_mm * rho);
   return curvature_per_mm * rho / (1.0 + std::sqrt(q2)) + poly;
+}
+
+std::vector<std::string> glass_range_warnings(const Lens& lens) {
+  std::vector<std::string> out;
+  std::vector<std::string> seen;
+  for (std::size_t i = 0; i < lens.surfaces.size(); ++i) {
+    const Material& m = lens.surfaces[i].material;
+    if (m.kind != Material::Kind::kCatalog || !m.glass) continue;
+    if (std::find(seen.begin(), seen.end(), m.glass->name) != seen.end()) continue;
+    seen.push_back(m.glass->name);
+    std::vector<std::string> outside;
+    for (double w : lens.specs.wavelengths_nm)
+      if (!glass_in_range(*m.glass, w)) outside.push_back(fmt::format("{:g}", w));
+    if (outside.empty()) continue;
+    std::vector<std::string> surfaces;
+    for (std::size_t k = 0; k < lens.surfaces.size(); ++k) {
+      const Material& mk = lens.surfaces[k].material;
+      if (mk.kind == Material::Kind::kCatalog && mk.glass && mk.glass->name == m.glass->name)
+        surfaces.push_back(std::to_string(k + 1));
+    }
+    std::string list, where;
+    for (const std::string& w : outside) list += (list.empty() ? "" : ", ") + w;
+    for (const std::string& s : surfaces) where += (where.empty() ? "" : ", ") + s;
+    out.push_back(fmt::format(
+        "glass {} (surface {}): {} nm outside its formula's range {:g}-{:g} nm (AGF LD line); "
+        "its index there is extrapolated",
+        m.glass->name, where, list, m.glass->min_wavelength_um * 1000.0,
+        m.glass->max_wavelength_um * 1000.0));
+  }
+  return out;
 }
 
 Lens scaled(const Lens& lens, double scale) {

@@ -29,6 +29,7 @@
 #include "lensopt/formats/zmx.h"
 #include "lensopt/glass/glass.h"
 #include "lensopt/lens/lens_io.h"
+#include "lensopt/lens/validate.h"
 
 static_assert(TOML_EXCEPTIONS, "lens_toml.cpp expects toml++ to report errors by exception");
 
@@ -716,6 +717,7 @@ Lens parse_lens_toml(std::string_view text, const std::string& source_name) {
     lens.extra_toml = ExtraTomlWriter().write(extra);
   }
 
+  LensSourceLines lines;
   std::shared_ptr<const Catalog> catalog;
   if (const toml::node* node = root.get("lens")) {
     const toml::table& table = reader.table(*node, "[lens]");
@@ -732,8 +734,17 @@ Lens parse_lens_toml(std::string_view text, const std::string& source_name) {
     }
   }
 
-  if (const toml::node* node = root.get("specs"))
-    lens.specs = read_specs(reader, reader.table(*node, "[specs]"));
+  if (const toml::node* node = root.get("specs")) {
+    const toml::table& specs_table = reader.table(*node, "[specs]");
+    lens.specs = read_specs(reader, specs_table);
+    auto line_of = [&](std::string_view key) {
+      const Entry e = entry(specs_table, key);
+      return e ? static_cast<int>(e.node->source().begin.line) : 0;
+    };
+    lines.f_number = line_of("f_number");
+    lines.half_field_deg = line_of("half_field_deg");
+    lines.sensor_diagonal_mm = line_of("sensor_diagonal_mm");
+  }
   if (const toml::node* node = root.get("system"))
     read_system(reader, reader.table(*node, "[system]"), lens.specs);
 
@@ -744,6 +755,7 @@ Lens parse_lens_toml(std::string_view text, const std::string& source_name) {
     const int number = static_cast<int>(i) + 1;
     const toml::table& table = reader.table(surfaces[i], fmt::format("surface {}", number));
     lens.surfaces.push_back(read_surface(reader, table, number, lens, catalog.get()));
+    lines.surfaces.push_back(static_cast<int>(table.source().begin.line));
   }
 
   // Whole-lens checks, placed at the surface they concern.
@@ -770,7 +782,7 @@ Lens parse_lens_toml(std::string_view text, const std::string& source_name) {
                                surfaces.size(), lens.surfaces.back().material.label()));
   }
 
-  lens.validate();
+  validate_lens(lens, lines);
   return lens;
 }
 

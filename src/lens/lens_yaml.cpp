@@ -18,12 +18,14 @@
 #include <cctype>
 #include <cmath>
 #include <filesystem>
+#include <map>
 #include <string>
 #include <vector>
 
 #include "lens_io_detail.h"
 #include "lensopt/core/error.h"
 #include "lensopt/lens/lens_io.h"
+#include "lensopt/lens/validate.h"
 
 namespace lensopt {
 
@@ -119,6 +121,28 @@ class YamlReader {
   YAML::Node root_;
 };
 
+// Duplicate keys in any map (yaml-cpp keeps both and its lookup takes the first): an Error at the
+// second naming the first's line.
+void check_duplicate_keys(const YamlReader& reader, const YAML::Node& node, int depth = 0) {
+  if (depth > 64) return;
+  if (node.IsMap()) {
+    std::map<std::string, int> first_line;
+    for (const auto& item : node) {
+      if (item.first.IsScalar()) {
+        const std::string key = item.first.Scalar();
+        const int line = item.first.Mark().line + 1;
+        const auto [it, fresh] = first_line.emplace(key, line);
+        if (!fresh)
+          reader.fail(item.first,
+                      fmt::format("duplicate key '{}' (first given at line {})", key, it->second));
+      }
+      check_duplicate_keys(reader, item.second, depth + 1);
+    }
+  } else if (node.IsSequence()) {
+    for (const auto& item : node) check_duplicate_keys(reader, item, depth + 1);
+  }
+}
+
 }  // namespace
 
 Lens parse_lens_yaml(std::string_view text, const std::string& source_name) {
@@ -132,6 +156,7 @@ Lens parse_lens_yaml(std::string_view text, const std::string& source_name) {
     throw Error(where, fmt::format("YAML syntax error: {}", e.msg));
   }
   const YamlReader reader(source_name, root);
+  check_duplicate_keys(reader, root);
   if (!root.IsMap())
     reader.fail(root,
                 "expected a map with the keys stop_idx, sequence, hfov, f_number, c, t, "
@@ -210,6 +235,9 @@ Lens parse_lens_yaml(std::string_view text, const std::string& source_name) {
   const YAML::Node f_number_node = reader.single(reader.required("f_number"), "f_number");
   lens.specs.half_field_deg = reader.number(hfov_node, "hfov");
   lens.specs.f_number = reader.number(f_number_node, "f_number");
+  LensSourceLines lines;
+  lines.half_field_deg = hfov_node.Mark().line + 1;
+  lines.f_number = f_number_node.Mark().line + 1;
   if (!(lens.specs.half_field_deg >= 0.0 && lens.specs.half_field_deg < 89.0))
     reader.fail(hfov_node,
                 fmt::format("hfov = {} must be in [0, 89) degrees", lens.specs.half_field_deg));
@@ -233,7 +261,7 @@ Lens parse_lens_yaml(std::string_view text, const std::string& source_name) {
     }
     lens.surfaces.push_back(surface);
   }
-  lens.validate();
+  validate_lens(lens, lines);
   return lens;
 }
 

@@ -1,11 +1,15 @@
 #include "lensopt/render/dataset.h"
 
+#include <fcntl.h>
 #include <fmt/format.h>
 #include <omp.h>
+#include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <map>
 #include <mutex>
@@ -14,6 +18,8 @@
 
 #include "lensopt/core/atomic_file.h"
 #include "lensopt/core/error.h"
+#include "lensopt/core/output_checks.h"
+#include "lensopt/render/image.h"
 
 namespace lensopt {
 namespace {
@@ -23,6 +29,9 @@ using Clock = std::chrono::steady_clock;
 
 constexpr const char* kCsvName = "render_metrics.csv";
 constexpr const char* kJsonName = "render_metrics.json";
+// The completion records: one JSON line appended (and flushed to the kernel) after each image's
+// rename, so a run killed by SIGKILL loses no metric; removed once the CSV/JSON are written.
+constexpr const char* kJournalName = ".render_metrics.journal";
 
 bool is_hidden(const fs::path& p) {
   const std::string name = p.filename().string();
@@ -109,31 +118,91 @@ std::vector<ImageRecord> collect_inputs(const DatasetOptions& options) {
   return records;
 }
 
-struct PreviousMetrics {
-  std::map<std::string, std::pair<std::optional<double>, std::optional<double>>> by_path;
+struct PreviousRecord {
+  std::optional<double> psnr_db, ssim;
+  int width = 0, height = 0;
   nlohmann::json settings;
 };
 
-PreviousMetrics load_previous(const fs::path& json_path) {
+struct PreviousMetrics {
+  std::map<std::string, PreviousRecord> by_path;
+};
+
+// One image of render_metrics.json or of a journal line; false if it records no finished image.
+bool parse_record(const nlohmann::json& img, const nlohmann::json& settings, PreviousRecord& r,
+                  std::string& path) {
+  if (!img.is_object() || !img.contains("path") || !img["path"].is_string()) return false;
+  const std::string status = img.value("status", std::string("rendered"));
+  if (status != "rendered" && status != "skipped") return false;
+  path = img["path"].get<std::string>();
+  if (img.contains("psnr_db") && img["psnr_db"].is_number())
+    r.psnr_db = img["psnr_db"].get<double>();
+  if (img.contains("psnr_identical") && img["psnr_identical"].is_boolean() &&
+      img["psnr_identical"].get<bool>())
+    r.psnr_db = std::numeric_limits<double>::infinity();
+  if (img.contains("ssim") && img["ssim"].is_number()) r.ssim = img["ssim"].get<double>();
+  if (img.contains("width") && img["width"].is_number_integer()) r.width = img["width"].get<int>();
+  if (img.contains("height") && img["height"].is_number_integer())
+    r.height = img["height"].get<int>();
+  r.settings = img.contains("settings") ? img["settings"] : settings;
+  return r.width > 0 && r.height > 0 && r.psnr_db && r.ssim;
+}
+
+// The records of the previous run: render_metrics.json, then the journal of a run that was
+// killed before it wrote the JSON (a torn last line is ignored).
+PreviousMetrics load_previous(const fs::path& json_path, const fs::path& journal_path) {
   PreviousMetrics prev;
   std::error_code ec;
-  if (!fs::exists(json_path, ec)) return prev;
-  try {
-    const nlohmann::json j = nlohmann::json::parse(read_file(json_path));
-    prev.settings = j.value("settings", nlohmann::json::object());
-    for (const auto& img : j.at("images")) {
-      std::optional<double> psnr, ssim;
-      if (img.contains("psnr_db") && img["psnr_db"].is_number())
-        psnr = img["psnr_db"].get<double>();
-      if (img.contains("psnr_identical") && img["psnr_identical"].get<bool>())
-        psnr = std::numeric_limits<double>::infinity();
-      if (img.contains("ssim") && img["ssim"].is_number()) ssim = img["ssim"].get<double>();
-      prev.by_path[img.at("path").get<std::string>()] = {psnr, ssim};
+  if (fs::exists(json_path, ec)) {
+    try {
+      const nlohmann::json j = nlohmann::json::parse(read_file(json_path));
+      const nlohmann::json settings = j.value("settings", nlohmann::json::object());
+      for (const auto& img : j.at("images")) {
+        PreviousRecord r;
+        std::string path;
+        if (parse_record(img, settings, r, path)) prev.by_path[path] = r;
+      }
+    } catch (const std::exception&) {
+      prev.by_path.clear();  // unreadable: those images are rendered again
     }
-  } catch (const std::exception&) {
-    prev.by_path.clear();  // unreadable: metrics of skipped images stay empty
+  }
+  if (fs::exists(journal_path, ec)) {
+    std::string text;
+    try {
+      text = read_file(journal_path);
+    } catch (const Error&) {
+    }
+    std::size_t start = 0;
+    while (start < text.size()) {
+      const std::size_t end = text.find('\n', start);
+      if (end == std::string::npos) break;  // torn last line
+      try {
+        const nlohmann::json img = nlohmann::json::parse(text.substr(start, end - start));
+        PreviousRecord r;
+        std::string path;
+        if (parse_record(img, nlohmann::json(), r, path)) prev.by_path[path] = r;
+      } catch (const std::exception&) {
+      }
+      start = end + 1;
+    }
   }
   return prev;
+}
+
+// Whether an existing output can be trusted: a completion record says it was written with this
+// size, and the file opens as an image of that size.
+bool output_is_complete(const fs::path& output, const PreviousRecord& record) {
+  std::error_code ec;
+  if (!fs::is_regular_file(output, ec) || fs::file_size(output, ec) == 0 || ec) return false;
+  auto in = OIIO::ImageInput::open(output.string());
+  if (!in) {
+    (void)OIIO::geterror();
+    return false;
+  }
+  const OIIO::ImageSpec& spec = in->spec();
+  const bool ok = spec.width == record.width && spec.height == record.height;
+  in->close();
+  return ok;
 }
 
 nlohmann::json settings_json(const Renderer& renderer) {
@@ -145,7 +214,7 @@ nlohmann::json settings_json(const Renderer& renderer) {
 }
 
 void summarize(DatasetSummary& s) {
-  s.rendered = s.skipped = s.failed = 0;
+  s.rendered = s.skipped = s.failed = s.interrupted = 0;
   double psnr_sum = 0, ssim_sum = 0;
   int psnr_count = 0, ssim_count = 0;
   for (const ImageRecord& r : s.records) {
@@ -159,8 +228,12 @@ void summarize(DatasetSummary& s) {
       case ImageRecord::Status::kFailed:
         ++s.failed;
         break;
+      case ImageRecord::Status::kInterrupted:
+        ++s.interrupted;
+        break;
     }
-    if (r.status == ImageRecord::Status::kFailed) continue;
+    if (r.status == ImageRecord::Status::kFailed || r.status == ImageRecord::Status::kInterrupted)
+      continue;
     if (r.psnr_db && std::isfinite(*r.psnr_db)) {
       psnr_sum += *r.psnr_db;
       ++psnr_count;
@@ -206,6 +279,7 @@ void write_metrics(const Renderer& renderer, DatasetSummary s) {
                       {"rendered", s.rendered},
                       {"skipped", s.skipped},
                       {"failed", s.failed},
+                      {"interrupted", s.interrupted},
                       {"failed_inputs", failed},
                       {"mean_psnr_db", number_or_null(s.mean_psnr_db)},
                       {"mean_ssim", number_or_null(s.mean_ssim)},
@@ -214,7 +288,8 @@ void write_metrics(const Renderer& renderer, DatasetSummary s) {
                        "between each input and its blurred image, before relative "
                        "illumination and distortion"}};
   write_file_atomic(s.csv_path, csv);
-  write_file_atomic(s.json_path, j.dump(2) + "\n");
+  write_file_atomic(s.json_path,
+                    j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n");
 }
 
 }  // namespace
@@ -227,6 +302,8 @@ const char* status_name(ImageRecord::Status status) {
       return "skipped";
     case ImageRecord::Status::kFailed:
       return "failed";
+    case ImageRecord::Status::kInterrupted:
+      return "interrupted";
   }
   return "?";
 }
@@ -238,19 +315,7 @@ void DatasetOptions::validate() const {
 }
 
 void ensure_writable_directory(const fs::path& dir) {
-  const SourceLocation where{dir.string()};
-  std::error_code ec;
-  if (fs::exists(dir, ec) && !fs::is_directory(dir, ec))
-    throw Error(where, "cannot write output: it exists and is not a directory");
-  fs::create_directories(dir, ec);
-  if (ec) throw Error(where, fmt::format("cannot create the output directory: {}", ec.message()));
-  const fs::path probe = dir / ".lensopt-write-test";
-  try {
-    write_file_atomic(probe, "");
-  } catch (const Error& e) {
-    throw Error(where, fmt::format("cannot write in the output directory: {}", e.message()));
-  }
-  fs::remove(probe, ec);
+  check_output_dir(dir);
 }
 
 RenderResult render_file(const Renderer& renderer, const fs::path& input, const fs::path& output,
@@ -258,6 +323,9 @@ RenderResult render_file(const Renderer& renderer, const fs::path& input, const 
   if (!image_format_name(input).empty() && image_format_name(input) != image_format_name(output)) {
     throw Error(SourceLocation{output.string()}, "the output must have the input's format");
   }
+  if (same_file(input, output))
+    throw Error(SourceLocation{output.string()},
+                "refusing to write the rendered image over its input");
   const LoadedImage loaded = read_image(input);
   RenderResult result;
   try {
@@ -277,17 +345,79 @@ RenderResult render_file(const Renderer& renderer, const fs::path& input, const 
   return result;
 }
 
+namespace {
+
+// The append-only completion records (kJournalName). Appends are serialized by the caller.
+class Journal {
+ public:
+  explicit Journal(fs::path path) : path_(std::move(path)) {}
+  ~Journal() { close(); }
+  Journal(const Journal&) = delete;
+  Journal& operator=(const Journal&) = delete;
+
+  // Appends one line; on failure remembers the first error (the final metrics write reports
+  // the run's outcome) and returns false.
+  bool append(const nlohmann::json& record) {
+    if (fd_ < 0 && !failed_) {
+      fd_ = ::open(path_.c_str(), O_WRONLY | O_CREAT | O_APPEND | O_CLOEXEC, 0666);
+      if (fd_ < 0) fail(std::strerror(errno));
+    }
+    if (fd_ < 0) return false;
+    const std::string line =
+        record.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace) + "\n";
+    std::size_t done = 0;
+    while (done < line.size()) {
+      const ssize_t n = ::write(fd_, line.data() + done, line.size() - done);
+      if (n < 0 && errno == EINTR) continue;
+      if (n <= 0) {
+        fail(n < 0 ? std::strerror(errno) : "short write");
+        return false;
+      }
+      done += static_cast<std::size_t>(n);
+    }
+    return true;
+  }
+  void close() {
+    if (fd_ >= 0) ::close(fd_);
+    fd_ = -1;
+  }
+  // Removes the journal (after the metrics files hold everything it says).
+  void remove() {
+    close();
+    std::error_code ec;
+    fs::remove(path_, ec);
+  }
+  const std::string& error() const { return error_; }
+
+ private:
+  void fail(const std::string& why) {
+    if (error_.empty()) error_ = fmt::format("{}: cannot write: {}", path_.string(), why);
+    failed_ = true;
+    close();
+  }
+  fs::path path_;
+  int fd_ = -1;
+  bool failed_ = false;
+  std::string error_;
+};
+
+}  // namespace
+
 DatasetSummary render_dataset(const Renderer& renderer, const DatasetOptions& options,
                               const DatasetProgress& progress) {
   options.validate();
   const auto start = Clock::now();
-  ensure_writable_directory(options.output_dir);
+  // Checks before any work: the output folder is writable and none of the inputs.
+  check_output_dir(options.output_dir, options.inputs);
   DatasetSummary summary;
   summary.csv_path = options.output_dir / kCsvName;
   summary.json_path = options.output_dir / kJsonName;
+  const fs::path journal_path = options.output_dir / kJournalName;
+  for (const fs::path& metrics : {summary.csv_path, summary.json_path})
+    check_output_file(metrics, options.inputs);
   summary.records = collect_inputs(options);
 
-  // Two inputs must not write the same output.
+  // Two inputs must not write the same output, and no output may replace an input.
   std::map<std::string, fs::path> seen;
   for (const ImageRecord& r : summary.records) {
     if (r.relative_path.empty()) continue;
@@ -300,24 +430,41 @@ DatasetSummary render_dataset(const Renderer& renderer, const DatasetOptions& op
     }
     if (r.relative_path == kCsvName || r.relative_path == kJsonName)
       throw Error(fmt::format("input {} would overwrite the metrics file", r.input.string()));
+    if (same_file(options.output_dir / r.relative_path, r.input))
+      throw Error(SourceLocation{(options.output_dir / r.relative_path).string()},
+                  fmt::format("refusing to write the rendered image over its input {}; choose "
+                              "another output folder",
+                              r.input.string()));
   }
 
-  const PreviousMetrics previous = load_previous(summary.json_path);
+  // Temporaries of a killed earlier run.
+  summary.stale_temp_files_removed = remove_stale_temp_files(options.output_dir);
+
+  const PreviousMetrics previous = load_previous(summary.json_path, journal_path);
+  const nlohmann::json settings = settings_json(renderer);
   bool kept_other_settings = false;
-  // Decide what to do with each record.
+  nlohmann::json other_settings;
+  // Decide what to do with each record: an existing output is trusted only with a completion
+  // record of the same size; anything else is rendered (again).
   std::vector<int> todo;
   for (int i = 0; i < static_cast<int>(summary.records.size()); ++i) {
     ImageRecord& r = summary.records[i];
     if (r.relative_path.empty()) continue;  // failed while listing
-    std::error_code ec;
-    if (!options.force && fs::exists(options.output_dir / r.relative_path, ec)) {
-      r.status = ImageRecord::Status::kSkipped;
+    if (!options.force) {
       auto it = previous.by_path.find(r.relative_path);
-      if (it != previous.by_path.end()) {
-        std::tie(r.psnr_db, r.ssim) = it->second;
-        kept_other_settings |= previous.settings != settings_json(renderer);
+      if (it != previous.by_path.end() &&
+          output_is_complete(options.output_dir / r.relative_path, it->second)) {
+        r.status = ImageRecord::Status::kSkipped;
+        r.psnr_db = it->second.psnr_db;
+        r.ssim = it->second.ssim;
+        r.width = it->second.width;
+        r.height = it->second.height;
+        if (it->second.settings != settings) {
+          kept_other_settings = true;
+          other_settings = it->second.settings;
+        }
+        continue;
       }
-      continue;
     }
     todo.push_back(i);
   }
@@ -326,12 +473,16 @@ DatasetSummary render_dataset(const Renderer& renderer, const DatasetOptions& op
     summary.notes.push_back(fmt::format(
         "some existing outputs were rendered with other settings ({}); they are kept (use "
         "--force to render them again)",
-        previous.settings.dump()));
+        other_settings.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace)));
   }
+  if (summary.stale_temp_files_removed > 0)
+    summary.notes.push_back(fmt::format("removed {} temporary file(s) of an interrupted run",
+                                        summary.stale_temp_files_removed));
   const int total = static_cast<int>(summary.records.size());
   int done = 0;
   std::mutex mutex;
   auto last_write = Clock::now();
+  Journal journal(journal_path);
   auto report = [&](const ImageRecord& r) {  // caller holds the mutex
     ++done;
     if (progress) progress(r, done, total);
@@ -339,12 +490,19 @@ DatasetSummary render_dataset(const Renderer& renderer, const DatasetOptions& op
   for (const ImageRecord& r : summary.records)
     if (r.status == ImageRecord::Status::kSkipped || r.relative_path.empty()) report(r);
 
+  auto interrupted = [&] { return options.interrupt && options.interrupt->load(); };
   const int threads = options.jobs > 0 ? options.jobs : omp_get_max_threads();
   const int outer = std::max(1, std::min<int>(threads, static_cast<int>(todo.size())));
   const int inner = std::max(1, threads / outer);
   auto work = [&](int k) {
     // The record is filled in a copy and stored under the mutex (the metrics writer reads all).
     ImageRecord r = summary.records[todo[k]];
+    if (interrupted()) {
+      r.status = ImageRecord::Status::kInterrupted;
+      std::lock_guard<std::mutex> lock(mutex);
+      summary.records[todo[k]] = r;
+      return;
+    }
     const auto t0 = Clock::now();
     try {
       const RenderResult result =
@@ -356,7 +514,9 @@ DatasetSummary render_dataset(const Renderer& renderer, const DatasetOptions& op
       r.height = result.image.height;
     } catch (const Error& e) {
       r.status = ImageRecord::Status::kFailed;
-      r.error = e.message();
+      // A write error names the output; a read or render error the input (listed beside it).
+      r.error =
+          e.where().file.empty() || e.where().file == r.input.string() ? e.message() : e.what();
     } catch (const std::exception& e) {
       r.status = ImageRecord::Status::kFailed;
       r.error = e.what();
@@ -364,6 +524,17 @@ DatasetSummary render_dataset(const Renderer& renderer, const DatasetOptions& op
     r.seconds = std::chrono::duration<double>(Clock::now() - t0).count();
     std::lock_guard<std::mutex> lock(mutex);
     summary.records[todo[k]] = r;
+    if (r.status == ImageRecord::Status::kRendered) {
+      nlohmann::json line = {{"path", r.relative_path},
+                             {"status", "rendered"},
+                             {"width", r.width},
+                             {"height", r.height},
+                             {"psnr_db", number_or_null(r.psnr_db)},
+                             {"ssim", number_or_null(r.ssim)},
+                             {"settings", settings}};
+      if (r.psnr_db && std::isinf(*r.psnr_db)) line["psnr_identical"] = true;
+      journal.append(line);
+    }
     report(r);
     if (Clock::now() - last_write > std::chrono::seconds(10)) {
       try {
@@ -381,7 +552,13 @@ DatasetSummary render_dataset(const Renderer& renderer, const DatasetOptions& op
     for (int k = 0; k < static_cast<int>(todo.size()); ++k) work(k);
   }
   summarize(summary);
-  write_metrics(renderer, summary);
+  summary.was_interrupted = summary.interrupted > 0 || interrupted();
+  write_metrics(renderer, summary);  // throws Error naming the file if it cannot
+  // The metrics files now hold every completion record.
+  journal.remove();
+  if (!journal.error().empty())
+    summary.notes.push_back("the completion records could not be written (" + journal.error() +
+                            "); the metrics files are complete");
   summary.seconds = std::chrono::duration<double>(Clock::now() - start).count();
   return summary;
 }

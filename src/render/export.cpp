@@ -204,7 +204,8 @@ ExportSummary export_imaging_model(const ImagingModel& model, const ExportOption
                     {"psf_grid_tile_px", k},
                     {"distortion_invertible", invertible}}},
                   {"patches", patches}};
-  write_file_atomic(dir / "fields.json", j.dump(2) + "\n");
+  write_file_atomic(dir / "fields.json",
+                    j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n");
   wrote(dir / "fields.json");
   return summary;
 }

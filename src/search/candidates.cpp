@@ -400,8 +400,9 @@ nlohmann::json optimize_settings_json(const OptimizeOptions& o, bool paper_then_
 
 std::string search_fingerprint(const std::vector<SearchCandidate>& candidates,
                                const SearchOptions& options) {
-  uint64_t h = detail::fnv1a64(
-      detail::optimize_settings_json(options.optimize, options.paper_then_strict).dump());
+  uint64_t h =
+      detail::fnv1a64(detail::optimize_settings_json(options.optimize, options.paper_then_strict)
+                          .dump(-1, ' ', false, nlohmann::json::error_handler_t::replace));
   for (const SearchCandidate& c : candidates) {
     h = detail::fnv1a64(c.id + "\n", h);
     h = detail::fnv1a64(c.error.empty() ? format_lens_toml(c.start) : "error: " + c.error, h);

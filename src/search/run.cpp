@@ -88,7 +88,7 @@ std::string search_json_text(const std::vector<SearchCandidate>& candidates,
                  {{"f_number", options.f_number_given},
                   {"half_field_deg", options.half_field_given},
                   {"sensor_diagonal_mm", options.sensor_diagonal_given}}}};
-  return j.dump(2) + "\n";
+  return j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n";
 }
 
 nlohmann::json read_json_file(const fs::path& path) {
@@ -238,7 +238,7 @@ std::string result_to_json(const CandidateResult& r, const std::string& fingerpr
   j["kept_start"] = r.kept_start;
   j["seconds"] = r.seconds;
   j["lens_toml"] = r.lens_toml;
-  return j.dump(2) + "\n";
+  return j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n";
 }
 
 CandidateResult result_from_json(const std::string& text, const std::string& source_name,
@@ -327,7 +327,7 @@ std::string leaderboard_json(const std::vector<CandidateResult>& ranked,
   j["finished"] = ranked.size();
   j["complete"] = static_cast<int>(ranked.size()) == candidates_in_run;
   j["leaderboard"] = rows;
-  return j.dump(2) + "\n";
+  return j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n";
 }
 
 SearchSummary run_search(const SearchOptions& options, const fs::path& dir,

@@ -234,12 +234,13 @@ std::string format_tolerance_json(const ToleranceReport& r) {
                  {"ms_per_trial", num(r.ms_per_trial)},
                  {"sensitivity_s", num(r.sensitivity_s)}};
   // The trials last, one compact object per line (10,000 trials stay a few MB and greppable).
-  std::string out = j.dump(2);
+  std::string out = j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace);
   out.erase(out.find_last_of('}'));
   while (!out.empty() && (out.back() == '\n' || out.back() == ' ')) out.pop_back();
   out += ",\n  \"trial_results\": [";
   for (std::size_t i = 0; i < r.trials.size(); ++i)
-    out += (i == 0 ? "\n    " : ",\n    ") + trial_json(r.trials[i]).dump();
+    out += (i == 0 ? "\n    " : ",\n    ") +
+           trial_json(r.trials[i]).dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
   out += r.trials.empty() ? "]\n}" : "\n  ]\n}";
   return out;
 }

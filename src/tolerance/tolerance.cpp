@@ -523,6 +523,7 @@ ToleranceReport run_tolerance(const Lens& lens, const ToleranceOptions& options)
   report.spec_focal_length_mm = lens.specs.focal_length_mm();
   report.options = options;
   report.options.progress = nullptr;
+  report.options.sensitivity_progress = nullptr;
   report.threads = options.jobs > 0 ? options.jobs : omp_get_max_threads();
   report.wavelength_count = model.wavelength_count();
   report.rays_per_field_wavelength = model.rays_per_field_wavelength();
@@ -600,13 +601,26 @@ ToleranceReport run_tolerance(const Lens& lens, const ToleranceOptions& options)
       if (report.parameters[p].limit > 0) active.push_back(static_cast<int>(p));
     const int jobs = static_cast<int>(active.size()) * 2;
     std::vector<TrialResult> results(jobs);
+    std::atomic<int> sens_done{0};
+    std::mutex sens_mutex;
 #pragma omp parallel for schedule(dynamic, 1) num_threads(report.threads)
     for (int j = 0; j < jobs; ++j) {
       const int p = active[j / 2];
       std::vector<double> d(parameter_count, 0.0);
       d[p] = (j % 2 == 0 ? 1.0 : -1.0) * report.parameters[p].limit;
       results[j] = model.evaluate(d);
+      const int now_done = ++sens_done;
+      if (options.sensitivity_progress && now_done < jobs && sens_mutex.try_lock()) {
+        options.sensitivity_progress(
+            now_done, jobs,
+            std::chrono::duration<double>(std::chrono::steady_clock::now() - sens_start).count());
+        sens_mutex.unlock();
+      }
     }
+    if (options.sensitivity_progress)
+      options.sensitivity_progress(
+          jobs, jobs,
+          std::chrono::duration<double>(std::chrono::steady_clock::now() - sens_start).count());
     const double nan = std::numeric_limits<double>::quiet_NaN();
     for (std::size_t a = 0; a < active.size(); ++a) {
       SensitivityRow row;

@@ -4,14 +4,20 @@
 // case; hidden files and folders and anything inside OUT are left out). A file inside a directory
 // input D keeps its path relative to D under OUT; a file input goes to OUT/<name>. Each output has
 // the input's format and pixel type and is written atomically. An output that already exists is
-// skipped unless `force` (resume); its metrics are taken from the previous run's
-// render_metrics.json if there is one. An input that cannot be read or rendered (missing,
-// corrupt, empty, unsupported, smaller than the PSF) is recorded as failed and the run goes on.
-// OUT/render_metrics.csv and OUT/render_metrics.json list every image with its status, PSNR and
-// SSIM (input vs blurred, before relative illumination and distortion) and their means; they are
-// rewritten atomically at least every 10 s and at the end.
+// skipped unless `force` (resume) if it is complete: a completion record of the previous run
+// (render_metrics.json, or the journal .render_metrics.journal that gets one line per image right
+// after its rename) names it with its size and the file opens as an image of that size; any other
+// existing output is rendered again. Temporaries of a killed earlier run are removed. No output
+// may replace an input (refused before any work). `interrupt` (set by SIGINT/SIGTERM) stops the
+// run after the images in flight; the metrics of what is done are written. An input that cannot be
+// read or rendered (missing, corrupt, empty, unsupported, smaller than the PSF) is recorded as
+// failed and the run goes on. OUT/render_metrics.csv and OUT/render_metrics.json list every image
+// with its status, PSNR and SSIM (input vs blurred, before relative illumination and distortion)
+// and their means; they are rewritten atomically at least every 10 s and at the end (the journal
+// covers the time between).
 #pragma once
 
+#include <atomic>
 #include <filesystem>
 #include <functional>
 #include <optional>
@@ -27,13 +33,14 @@ struct DatasetOptions {
   std::filesystem::path output_dir;
   bool force = false;  // render even if the output exists
   int jobs = 0;        // threads in all (images in parallel, and inside an image); 0: all cores
+  const std::atomic<bool>* interrupt = nullptr;  // set: start no further image
 
   // Throws Error if there is no input, no output directory or jobs < 0.
   void validate() const;
 };
 
 struct ImageRecord {
-  enum class Status { kRendered, kSkipped, kFailed };
+  enum class Status { kRendered, kSkipped, kFailed, kInterrupted };
   std::filesystem::path input;
   std::string relative_path;  // output path relative to OUT ("" if it has none)
   Status status = Status::kFailed;
@@ -48,7 +55,9 @@ const char* status_name(ImageRecord::Status status);
 
 struct DatasetSummary {
   std::vector<ImageRecord> records;  // input order
-  int rendered = 0, skipped = 0, failed = 0;
+  int rendered = 0, skipped = 0, failed = 0, interrupted = 0;
+  bool was_interrupted = false;        // `interrupt` was set during the run
+  int stale_temp_files_removed = 0;    // temporaries of an earlier run
   std::optional<double> mean_psnr_db;  // over images with a finite PSNR
   std::optional<double> mean_ssim;
   double seconds = 0;

@@ -19,11 +19,15 @@
 // tap; bins with m <= 0 are skipped (a bin outside the radius must have m = 0).
 #pragma once
 
+#include <fmt/format.h>
+
 #include <algorithm>
 #include <cmath>
 #include <cstddef>
+#include <string>
 #include <vector>
 
+#include "lensopt/core/error.h"
 #include "lensopt/core/scalar.h"
 #include "lensopt/render/psf.h"
 
@@ -69,6 +73,9 @@ struct PsfResampling {
   }
 };
 
+// The largest PSF kernel radius in pixels (a kernel holds (2 r + 1)^2 values).
+inline constexpr int kMaxPsfKernelRadiusPx = 4096;
+
 // The radius that holds every bin of `grid` with positive mass (see the header).
 inline int psf_kernel_radius(const std::vector<double>& grid, const PsfOptions& options,
                              double azimuth_rad, double pitch_um) {
@@ -86,6 +93,13 @@ inline int psf_kernel_radius(const std::vector<double>& grid, const PsfOptions& 
       reach = std::max({reach, std::abs(u * etx + v * erx), std::abs(u * ety + v * ery)});
     }
   }
+  // Checked before the int conversion and any allocation of (2 radius + 1)^2 values.
+  if (!(reach < kMaxPsfKernelRadiusPx))
+    throw Error(
+        fmt::format("the PSF would be {:g} pixels wide (PSF bin {:g} um over a pixel "
+                    "pitch of {:g} um); at most {} are supported: the sensor diagonal is "
+                    "too small for the image size",
+                    2 * reach + 1, options.bin_um, pitch_um, 2 * kMaxPsfKernelRadiusPx + 1));
   return static_cast<int>(std::floor(reach)) + 1;
 }
 

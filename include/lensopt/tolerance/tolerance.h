@@ -130,6 +130,9 @@ struct ToleranceOptions {
   std::optional<double> max_spot_um;
   // Called now and then from worker threads (serialized): trials done, total, seconds elapsed.
   std::function<void(int done, int total, double elapsed_s)> progress;
+  // The same for the sensitivity table (two evaluations per toleranced parameter), which takes
+  // minutes on a lens of hundreds of surfaces.
+  std::function<void(int done, int total, double elapsed_s)> sensitivity_progress;
 
   // Throws Error for out-of-range values (names the option).
   void validate() const;

@@ -1,0 +1,12 @@
+// Checks of a lens that the commands share (lens_checks.cpp).
+#pragma once
+
+#include "lensopt/lens/lens.h"
+
+namespace lensopt::cli {
+
+// Prints glass_range_warnings(lens) as "lensopt <command>: warning: ..."; with `strict` a
+// wavelength outside a glass's range is an Error instead.
+void check_glass_ranges(const Lens& lens, const char* command, bool strict);
+
+}  // namespace lensopt::cli
