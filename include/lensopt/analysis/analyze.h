@@ -13,6 +13,7 @@
 #include <string>
 #include <vector>
 
+#include "lensopt/analysis/wave.h"
 #include "lensopt/lens/lens.h"
 #include "lensopt/trace/system.h"
 
@@ -21,6 +22,10 @@ namespace lensopt {
 struct AnalyzeOptions {
   TraceOptions trace;
   std::optional<DispersionModel> dispersion;  // overrides the lens's [specs] dispersion
+  // Wave optics (analysis/wave.h): RMS wavefront, Strehl ratio and MTF at these frequencies.
+  bool wave = false;
+  WaveOptions wave_options;
+  std::vector<double> mtf_frequencies_cyc_mm{10, 30, 50};
 };
 
 struct FieldReport {
@@ -56,6 +61,7 @@ struct AnalysisReport {
   int ray_failures = 0;
   std::vector<int> failures_by_surface;  // 0-based surface index
   double max_aiming_error = 0;           // fraction of the stop radius
+  std::optional<WaveReport> wave;        // with AnalyzeOptions::wave
 };
 
 AnalysisReport analyze_lens(const Lens& lens, const AnalyzeOptions& options);
