@@ -107,6 +107,8 @@ AnalysisReport analyze_lens(const Lens& lens_in, const AnalyzeOptions& options) 
   }
   if (all_fields_traced && weight_sum > 0.0 && std::isfinite(spot_sum))
     r.mean_rms_spot_um = spot_sum / weight_sum;
+  if (options.wave)
+    r.wave = analyze_wave(sys, options.wave_options, options.mtf_frequencies_cyc_mm);
   return r;
 }
 
@@ -217,6 +219,7 @@ std::string format_report_text(const AnalysisReport& r) {
   }
   line(fmt::format("  largest ray-aiming error: {:.4f} % of the stop radius",
                    100.0 * r.max_aiming_error));
+  if (r.wave) out += format_wave_text(*r.wave);
   return out;
 }
 
@@ -279,6 +282,7 @@ std::string format_report_json(const AnalysisReport& r) {
   j["ray_failures"] = r.ray_failures;
   j["ray_failures_per_field"] = failed;
   j["ray_failures_per_surface"] = r.failures_by_surface;
+  if (r.wave) j["wave"] = nlohmann::json::parse(format_wave_json(*r.wave));
   return j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace);
 }
 

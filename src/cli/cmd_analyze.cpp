@@ -29,6 +29,7 @@ void run_analyze(const AnalyzeCommand& cmd) {
   AnalyzeOptions options = cmd.options;
   options.trace.ray_aiming = !cmd.no_ray_aiming;
   options.trace.scale_to_spec = !cmd.no_scale;
+  options.wave_options.threads = options.trace.threads;
   if (cmd.dispersion == "abbe") options.dispersion = DispersionModel::kAbbe;
   if (cmd.dispersion == "catalog") options.dispersion = DispersionModel::kCatalog;
   Lens lens = read_lens(cmd.lens_path);
@@ -83,6 +84,17 @@ void setup_analyze(CLI::App& app) {
                   "spec mode: paper (scale to f = d / (2 tan hfov), EPD = f / N, fields 0..hfov) "
                   "or as-written (the lens's own aperture, fields and object distance)")
       ->check(CLI::IsMember({"paper", "as-written"}));
+  sub->add_flag("--wave", cmd->options.wave,
+                "wave optics: RMS wavefront, Strehl ratio, diffraction and geometric MTF");
+  sub->add_option("--mtf-freqs", cmd->options.mtf_frequencies_cyc_mm,
+                  "MTF frequencies in cycles/mm for --wave (default 10,30,50)")
+      ->delimiter(',');
+  sub->add_option("--pupil-samples", cmd->options.wave_options.pupil_samples,
+                  "pupil grid cells across the diameter for --wave (default 64)")
+      ->check(CLI::Range(8, 1024));
+  sub->add_option("--wavelength-weights", cmd->options.wave_options.wavelength_weights,
+                  "weights of the spec wavelengths for --wave (default equal)")
+      ->delimiter(',');
   sub->add_flag("--strict", cmd->strict,
                 "exit with status 3 if any ray fails; refuse a wavelength outside a glass's range");
   sub->footer(

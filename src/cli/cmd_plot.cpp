@@ -48,7 +48,10 @@ void setup_plot(CLI::App& app) {
   CLI::App* sub = app.add_subcommand(
       "plot", "Lens layout with rays, spot diagrams, ray fans, field curves, PSFs (SVG or PNG)");
   sub->add_option("LENS", cmd->lens_path, "lens file (.toml, or the paper's .yml)")->required();
-  sub->add_option("--kind,-k", cmd->kind, "layout, spot, fan, field, psf or report (default)");
+  sub->add_option(
+      "--kind,-k", cmd->kind,
+      "layout, spot, fan, field, psf, report (default), mtf, through-focus, wavefront or "
+      "psf-diffraction (the wave-optics kinds draw one lens)");
   sub->add_option("-o,--output", cmd->output, "output file: .svg or .png")->required();
   sub->add_option(
       "--compare", cmd->compare_path,
@@ -57,6 +60,11 @@ void setup_plot(CLI::App& app) {
                   "width of every spot-diagram box in um (0: fit the largest spot); give the same "
                   "value to compare lenses across pages");
   sub->add_option("--width", cmd->options.width_px, "page width in px (0: the kind's default)");
+  sub->add_option("--pupil-samples", cmd->options.pupil_samples,
+                  "wave-optics kinds: pupil grid across the diameter (default 64)")
+      ->check(CLI::Range(8, 1024));
+  sub->add_option("--mtf-freq", cmd->options.mtf_frequency_cyc_mm,
+                  "through-focus: the frequency in cycles/mm (default 30)");
   sub->add_option("--threads", cmd->options.trace.threads, "threads (0: all cores)")
       ->check(CLI::Range(0, 1024));
   sub->callback([cmd] { run_plot(*cmd); });

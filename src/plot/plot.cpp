@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <optional>
 
 #include "lensopt/core/error.h"
@@ -11,6 +12,7 @@
 #include "lensopt/plot/layout.h"
 #include "lensopt/plot/psf_strip.h"
 #include "lensopt/plot/style.h"
+#include "lensopt/plot/wave_charts.h"
 
 namespace lensopt::plot {
 namespace {
@@ -31,6 +33,14 @@ std::string kind_title(PlotKind kind) {
       return "sampled PSFs";
     case PlotKind::kReport:
       return "report";
+    case PlotKind::kMtf:
+      return "diffraction MTF";
+    case PlotKind::kThroughFocus:
+      return "through-focus MTF";
+    case PlotKind::kWavefront:
+      return "wavefront error";
+    case PlotKind::kPsfDiffraction:
+      return "diffraction PSFs";
   }
   return "";
 }
@@ -91,8 +101,101 @@ double default_width(PlotKind kind) {
       return 1150;
     case PlotKind::kReport:
       return 1500;
+    case PlotKind::kMtf:
+    case PlotKind::kThroughFocus:
+      return 1100;
+    case PlotKind::kWavefront:
+    case PlotKind::kPsfDiffraction:
+      return 1150;
   }
   return 1200;
+}
+
+// The wave-optics page of one lens, drawn into `area` (no compare lens: one lens per page).
+void draw_wave_page(Canvas& c, Rect area, const PlotContext& ctx, const PlotOptions& options,
+                    double font_px) {
+  const TraceSystem<double>& sys = ctx.sys;
+  const std::vector<int> fields = field_indices(ctx, {0.0, 0.7, 1.0});
+  WaveOptions wave;
+  wave.pupil_samples = options.pupil_samples;
+  wave.threads = options.trace.threads;
+  const double f_number = sys.efl_mm / sys.epd_mm;
+  double lambda_min = 1e9;
+  for (int w = 0; w < sys.wavelength_count; ++w)
+    lambda_min = std::min(lambda_min, sys.lens.wavelengths_nm[w]);
+  const double lambda_ref_mm = kWavelengthD_nm * 1e-6;
+  switch (options.kind) {
+    case PlotKind::kMtf: {
+      const double cutoff = 1.0 / (lambda_min * 1e-6 * f_number);
+      std::vector<double> freqs;
+      for (int k = 0; k <= 60; ++k) freqs.push_back(cutoff * k / 60.0);
+      wave.geometric = false;
+      const WaveReport r = analyze_wave(sys, wave, freqs, fields);
+      draw_mtf_curves(c, area, r,
+                      fmt::format("polychromatic diffraction MTF ({} x {} pupil, FFT {})",
+                                  r.pupil_samples, r.pupil_samples, r.fft_n),
+                      font_px);
+      break;
+    }
+    case PlotKind::kThroughFocus: {
+      const double range = 8.0 * lambda_ref_mm * f_number * f_number;
+      std::vector<double> shifts;
+      for (int k = -15; k <= 15; ++k) shifts.push_back(range * k / 15.0);
+      const ThroughFocus tf =
+          through_focus_mtf(sys, wave, options.mtf_frequency_cyc_mm, shifts, fields);
+      draw_through_focus(c, area, tf, font_px);
+      break;
+    }
+    case PlotKind::kWavefront: {
+      const PupilGrid grid = make_pupil_grid(options.pupil_samples);
+      const int w = std::max(0, ctx.channel_wavelength[1]);  // the green channel's middle
+      std::vector<WavefrontPanel> panels;
+      RayBundle<double> rays;
+      RayRecord<double> record;
+      for (int h : fields) {
+        const ReferenceSphere<double> sphere = reference_sphere(sys, h);
+        const Wavefront<double> wf = compute_wavefront(sys, h, w, grid, sphere, 0.0, rays, record);
+        WavefrontPanel p;
+        p.label = fmt::format("{:.1f}°, {:.1f} nm", sys.fields_deg[h], wf.wavelength_nm);
+        p.n = grid.n;
+        p.opd_waves.assign(static_cast<std::size_t>(grid.n) * grid.n,
+                           std::numeric_limits<double>::quiet_NaN());
+        for (std::size_t i = 0; i < grid.size(); ++i)
+          if (wf.ok[i])
+            p.opd_waves[static_cast<std::size_t>(grid.n - 1 - grid.row[i]) * grid.n +
+                        grid.column[i]] = wf.opd_waves[i];
+        p.rms_waves = wf.rms_waves;
+        p.pv_waves = wf.pv_waves;
+        panels.push_back(std::move(p));
+      }
+      draw_wavefront_maps(c, area, panels, font_px);
+      break;
+    }
+    case PlotKind::kPsfDiffraction: {
+      wave.keep_psf = true;
+      wave.geometric = false;
+      const WaveReport r = analyze_wave(sys, wave, {}, fields);
+      // One tile spans the shortest wavelength's FFT window, 128 pixels.
+      const int pixels = 128;
+      double window_um = 1e9;
+      for (const MonoWave& m : r.fields[0].mono)
+        if (m.ok) window_um = std::min(window_um, m.fft_n * std::abs(m.psf_dy_um));
+      if (!(window_um < 1e9)) window_um = 100;
+      const double spacing = window_um / pixels;
+      std::vector<PsfPanel> panels;
+      for (const WaveField& f : r.fields) {
+        PsfPanel p;
+        p.label = fmt::format("{:.1f}°  Strehl {:.3f}", f.field_deg, f.strehl);
+        p.pixels = pixels;
+        p.psf = polychromatic_psf(f, pixels, spacing);
+        panels.push_back(std::move(p));
+      }
+      draw_diffraction_psfs(c, area, panels, spacing, font_px);
+      break;
+    }
+    default:
+      break;
+  }
 }
 
 // Height (px) a layout needs at a width, from its aspect ratio.
@@ -106,7 +209,9 @@ double layout_height(const LayoutGeometry& g, const LayoutGeometry* cmp, double 
 }  // namespace
 
 const std::vector<std::string>& plot_kind_names() {
-  static const std::vector<std::string> names = {"layout", "spot", "fan", "field", "psf", "report"};
+  static const std::vector<std::string> names = {
+      "layout", "spot", "fan",           "field",     "psf",
+      "report", "mtf",  "through-focus", "wavefront", "psf-diffraction"};
   return names;
 }
 
@@ -114,8 +219,10 @@ PlotKind parse_plot_kind(const std::string& name) {
   const auto& names = plot_kind_names();
   for (std::size_t i = 0; i < names.size(); ++i)
     if (names[i] == name) return static_cast<PlotKind>(i);
-  throw Error(fmt::format(
-      "unknown plot kind '{}': use one of layout, spot, fan, field, psf, report", name));
+  throw Error(
+      fmt::format("unknown plot kind '{}': use one of layout, spot, fan, field, psf, report, mtf, "
+                  "through-focus, wavefront, psf-diffraction",
+                  name));
 }
 
 std::string plot_kind_name(PlotKind kind) {
@@ -128,6 +235,10 @@ void PlotOptions::validate() const {
     throw Error(fmt::format("spot box {} um must be in [0, 100000] (0: automatic)", spot_box_um));
   if (width_px != 0 && !(width_px >= 300 && width_px <= 8000))
     throw Error(fmt::format("page width {} px must be in [300, 8000] (0: default)", width_px));
+  if (pupil_samples < 8 || pupil_samples > 1024)
+    throw Error(fmt::format("pupil samples {} must be in [8, 1024]", pupil_samples));
+  if (!(mtf_frequency_cyc_mm > 0) || !std::isfinite(mtf_frequency_cyc_mm))
+    throw Error(fmt::format("MTF frequency {} cycles/mm must be > 0", mtf_frequency_cyc_mm));
 }
 
 std::unique_ptr<Canvas> draw_plot(const PlotContext& ctx, const PlotContext* cmp,
@@ -202,6 +313,14 @@ std::unique_ptr<Canvas> draw_plot(const PlotContext& ctx, const PlotContext* cmp
       break;
     case PlotKind::kReport:
       break;
+    case PlotKind::kMtf:
+    case PlotKind::kThroughFocus:
+      height = header_h + 0.55 * width;
+      break;
+    case PlotKind::kWavefront:
+    case PlotKind::kPsfDiffraction:
+      height = header_h + (width - 60) / 3.0 + font_px * 6;
+      break;
   }
   double layout_h = 0, top_row_h = 0, fan_h = 0;
   if (report) {
@@ -259,6 +378,12 @@ std::unique_ptr<Canvas> draw_plot(const PlotContext& ctx, const PlotContext* cmp
                       font_px);
       break;
     }
+    case PlotKind::kMtf:
+    case PlotKind::kThroughFocus:
+    case PlotKind::kWavefront:
+    case PlotKind::kPsfDiffraction:
+      draw_wave_page(c, body.inset(10, 4, 10, 4), ctx, options, font_px);
+      break;
   }
   if (summary) {
     summary->width_px = c.width();

@@ -16,6 +16,7 @@
 #include <string>
 #include <vector>
 
+#include "lensopt/analysis/wave.h"
 #include "lensopt/lens/lens.h"
 #include "lensopt/trace/system.h"
 
@@ -24,6 +25,10 @@ namespace lensopt {
 struct AnalyzeOptions {
   TraceOptions trace;
   std::optional<DispersionModel> dispersion;  // overrides the lens's [specs] dispersion
+  // Wave optics (analysis/wave.h): RMS wavefront, Strehl ratio and MTF at these frequencies.
+  bool wave = false;
+  WaveOptions wave_options;
+  std::vector<double> mtf_frequencies_cyc_mm{10, 30, 50};
 };
 
 struct FieldReport {
@@ -70,6 +75,7 @@ struct AnalysisReport {
   double object_distance_mm = 0;  // 0: at infinity
   double primary_wavelength_nm = 0;
   double max_aiming_error = 0;  // fraction of the stop radius
+  std::optional<WaveReport> wave;  // with AnalyzeOptions::wave
 };
 
 AnalysisReport analyze_lens(const Lens& lens, const AnalyzeOptions& options);

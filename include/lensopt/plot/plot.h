@@ -15,9 +15,21 @@
 
 namespace lensopt::plot {
 
-enum class PlotKind { kLayout, kSpot, kFan, kField, kPsf, kReport };
+enum class PlotKind {
+  kLayout,
+  kSpot,
+  kFan,
+  kField,
+  kPsf,
+  kReport,
+  kMtf,             // diffraction MTF against frequency (wave optics, analysis/wave.h)
+  kThroughFocus,    // MTF at one frequency against focus
+  kWavefront,       // OPD maps
+  kPsfDiffraction,  // polychromatic diffraction PSFs
+};
 
-// "layout", "spot", "fan", "field", "psf", "report".
+// "layout", "spot", "fan", "field", "psf", "report", "mtf", "through-focus", "wavefront",
+// "psf-diffraction".
 const std::vector<std::string>& plot_kind_names();
 // Throws Error naming the valid kinds for anything else.
 PlotKind parse_plot_kind(const std::string& name);
@@ -28,6 +40,8 @@ struct PlotOptions {
   double spot_box_um = 0;  // width of each spot-diagram box; 0: fit the largest spot
   double width_px = 0;     // page width; 0: the kind's default
   TraceOptions trace;      // analysis sampling (defaults: 21 fields, 32 rings, ray aiming)
+  int pupil_samples = 64;  // wave-optics kinds: pupil grid across the diameter
+  double mtf_frequency_cyc_mm = 30;  // through-focus: the frequency
 
   // Throws Error for out-of-range values.
   void validate() const;

@@ -21,7 +21,10 @@
 // After the last surface the ray is transferred to the image plane at t_{K-1}.
 // Per ray and surface the kernel can record what the design losses need: the axial travel
 // dz_k = t_k + z_{k+1} - z_k in every space k (after surface k, the last one up to the image),
-// and zeta, zeta' at every surface.
+// and zeta, zeta' at every surface; optionally the optical path (wave optics, analysis/wavefront.h)
+//   OPL += n_{k-1} s_k,  s_k = (z_k - z_{k-1}') / n_dir   (geometric length of the segment that
+// ends on surface k; z_{k-1}' the start point's z in vertex-k coordinates, n_dir the segment's
+// z direction cosine), and n_{K-1} s for the last segment to the image plane.
 #pragma once
 
 #include <cstdint>
@@ -76,11 +79,18 @@ struct RayRecord {
   std::vector<std::vector<T>> axial_travel_mm;  // K spaces: after surface k (the last: to image)
   std::vector<std::vector<T>> cos2_incidence;   // K surfaces: zeta
   std::vector<std::vector<T>> cos2_refraction;  // K surfaces: zeta'
+  // Optical path (mm) per ray, accumulated only when sized to the ray count: the kernel adds
+  // every segment's n s to the value the caller set (the path before the first point).
+  std::vector<T> optical_path_mm;
+  std::vector<T> path_start_z, path_start_n;  // kernel scratch for the optical path
 
-  void resize(int surface_count, std::size_t ray_count) {
+  void resize(int surface_count, std::size_t ray_count, bool optical_path = false) {
     axial_travel_mm.assign(surface_count, std::vector<T>(ray_count));
     cos2_incidence.assign(surface_count, std::vector<T>(ray_count));
     cos2_refraction.assign(surface_count, std::vector<T>(ray_count));
+    optical_path_mm.assign(optical_path ? ray_count : 0, K<T>(0.0));
+    path_start_z.resize(optical_path ? ray_count : 0);
+    path_start_n.resize(optical_path ? ray_count : 0);
   }
 };
 
@@ -166,6 +176,11 @@ void trace_bundle(const TraceLens<T>& lens, int w, int end, bool to_image, RayBu
   std::int8_t* failed_at = rays.failed_surface.data();
   rays.failure_scratch.resize(count);
   std::int32_t* failure = rays.failure_scratch.data();
+  // Optical path: only on the recording path, so the plain trace is untouched.
+  const bool path = record && record->optical_path_mm.size() == count;
+  T* opl = path ? record->optical_path_mm.data() : nullptr;
+  T* start_z = path ? record->path_start_z.data() : nullptr;
+  T* start_n = path ? record->path_start_n.data() : nullptr;
 
   // A ray must travel forwards.
   for (std::size_t i = 0; i < count; ++i) {
@@ -180,6 +195,12 @@ void trace_bundle(const TraceLens<T>& lens, int w, int end, bool to_image, RayBu
     const T c = lens.curvature_per_mm[k];
     const T shift = k > 0 ? lens.thickness_mm[k - 1] : zero;
     const T mu = lens.index(k - 1, w) / lens.index(k, w);
+    if (path) {
+      for (std::size_t i = 0; i < count; ++i) {
+        start_z[i] = z[i] - shift;
+        start_n[i] = n[i] > zero ? n[i] : one;  // a backwards ray is flagged; keep it finite
+      }
+    }
     const std::uint8_t profile = lens.has_profiles() ? lens.profile[k] : kProfileSphere;
     if (profile != kProfileSphere) {
       // Conic or even asphere (trace/profile.h).
@@ -225,6 +246,11 @@ void trace_bundle(const TraceLens<T>& lens, int w, int end, bool to_image, RayBu
         failure[i] = (outside && failure[i] == kRayOk) ? std::int32_t{kRayVignetted} : failure[i];
       }
     }
+    if (path) {
+      const T n_before = lens.index(k - 1, w);
+      for (std::size_t i = 0; i < count; ++i)
+        opl[i] = opl[i] + n_before * (z[i] - start_z[i]) / start_n[i];
+    }
     // The first failure of a ray wins.
     for (std::size_t i = 0; i < count; ++i) {
       if (failure[i] != kRayOk && status[i] == kRayOk) {
@@ -238,6 +264,7 @@ void trace_bundle(const TraceLens<T>& lens, int w, int end, bool to_image, RayBu
     const int last = lens.surface_count() - 1;
     const T t = lens.thickness_mm[last];
     T* travel = record ? record->axial_travel_mm[last].data() : nullptr;
+    const T n_image = path ? lens.index(last, w) : one;
     for (std::size_t i = 0; i < count; ++i) {
       const T z_rel = z[i] - t;
       if (travel) travel[i] = -z_rel;
@@ -249,6 +276,7 @@ void trace_bundle(const TraceLens<T>& lens, int w, int end, bool to_image, RayBu
         continue;
       }
       const T s = -z_rel / n[i];
+      if (path) opl[i] = opl[i] + n_image * s;
       x[i] = x[i] + s * l[i];
       y[i] = y[i] + s * m[i];
       z[i] = zero;

@@ -1,0 +1,129 @@
+// Diffraction PSF, MTF and Strehl ratio from the wavefront (analysis/wavefront.h), and the
+// geometric MTF from the same rays.
+//
+// Pupil function of field h and wavelength lambda on the n x n grid: P(p) = a_p exp(i 2 pi W(p)),
+// a_p = 1 for a cell whose centre lies in the unit circle and whose ray arrived, else 0 (the
+// area-fraction weights of the grid serve the RMS; as amplitudes they would soften the edge and
+// raise the MTF by ~5e-3 at n = 128), W in waves. Near the reference point C the
+// image field is U(x) ~ sum_p P(p) exp(-i 2 pi u(p).x / lambda), u(p) the ray's image-space
+// direction cosines, fitted as u = u0 + (du_x x_p, du_y y_p) (Wavefront::du_x/du_y). With the
+// grid spacing 2/n, one DFT of size M >= Q n (Q = padding) gives the PSF I = |FFT(P)|^2 on
+//   dx = lambda / (M du_x (2/n)),  dy = lambda / (M du_y (2/n))    (~ lambda N / Q on axis)
+// i.e. the sampling follows from the wavelength and the working f-number (du ~ 1/(2N)); Q = 2 is
+// Nyquist for the incoherent cutoff 1/(lambda N). The PSF is normalized so that the
+// aberration-free PSF of the same pupil amplitude peaks at 1: I / (sum_p a_p)^2.
+// Strehl ratio: the peak of that PSF with the tilt removed from W (so a shifted peak counts),
+// taken as the largest of the M x M samples.
+// OTF: the pupil autocorrelation, OTF(s) = sum_p P(p + s) P*(p) / sum_p |P(p)|^2 for a shift of
+// s cells, computed as the FFT of the PSF (no aliasing for M >= 2n). A shift of s cells is the
+// spatial frequency nu = s |du| (2/n) / lambda; the cutoff is s = n: nu_c = 2 |du| / lambda
+// (= 1/(lambda N)). Tangential: frequencies along y (the meridional plane); sagittal: along x.
+// Values at arbitrary frequencies interpolate the complex OTF linearly in s.
+// Polychromatic: OTF = sum_w omega_w OTF_w / sum_w omega_w (each PSF of unit energy), MTF = |OTF|;
+// the polychromatic Strehl is sum_w omega_w S_w / sum_w omega_w.
+// Geometric MTF: the Fourier transform of the ray spot, G(nu) = |sum_p a_p exp(-i 2 pi nu y_p)|
+// / sum_p a_p over the traced rays (y_p relative to C; x_p for sagittal), polychromatic as above.
+#pragma once
+
+#include <complex>
+#include <string>
+#include <vector>
+
+#include "lensopt/analysis/wavefront.h"
+#include "lensopt/trace/system.h"
+
+namespace lensopt {
+
+struct WaveOptions {
+  int pupil_samples = 64;                  // n: grid cells across the pupil diameter
+  int padding = 2;                         // Q: FFT size >= Q n (2 = Nyquist)
+  std::vector<double> wavelength_weights;  // per spec wavelength; empty: equal weights
+  double focus_shift_mm = 0;               // image plane moved away from the lens
+  bool keep_psf = false;                   // keep each monochromatic PSF (plots, export)
+  bool geometric = true;                   // also the geometric MTF
+  int threads = 0;                         // fields in parallel; 0: all cores
+
+  // Throws Error for out-of-range values.
+  void validate(int wavelength_count) const;
+};
+
+// One field at one wavelength.
+struct MonoWave {
+  double wavelength_nm = 0;
+  double weight = 1;
+  double rms_waves = 0;  // piston and tilt removed
+  double pv_waves = 0;
+  double strehl = 0;
+  double du_x = 0, du_y = 0;  // direction cosine per unit pupil coordinate
+  double psf_dx_um = 0;       // PSF sample spacing (signed: negative when the axis is flipped)
+  double psf_dy_um = 0;
+  double psf_shift_x_um = 0;  // the removed tilt's image shift (where the PSF really lies)
+  double psf_shift_y_um = 0;
+  double cutoff_t_cyc_mm = 0;     // 2 |du_y| / lambda
+  double cutoff_s_cyc_mm = 0;     // 2 |du_x| / lambda
+  double max_step_waves = 0;      // largest |W| step between neighbouring cells (> 0.5: aliasing)
+  double vignetted_fraction = 0;  // of the pupil weight that did not arrive
+  bool ok = false;                // the chief ray arrived and some rays did
+  std::vector<std::complex<double>> otf_t, otf_s;  // at the requested frequencies
+  std::vector<std::complex<double>> geo_t, geo_s;
+  int fft_n = 0;
+  std::vector<float> psf;  // fft_n x fft_n, centred (row 0 = most negative y), if kept
+};
+
+struct WaveField {
+  double field_deg = 0;
+  std::vector<MonoWave> mono;        // per spec wavelength
+  double rms_waves = 0;              // sqrt(sum omega RMS^2 / sum omega)
+  double strehl = 0;                 // weighted mean
+  std::vector<double> mtf_t, mtf_s;  // polychromatic diffraction MTF at the frequencies
+  std::vector<double> geo_mtf_t, geo_mtf_s;
+};
+
+struct WaveReport {
+  int pupil_samples = 0;
+  int fft_n = 0;
+  int padding = 0;
+  double focus_shift_mm = 0;
+  std::vector<double> frequencies_cyc_mm;
+  std::vector<double> wavelengths_nm;
+  std::vector<double> weights;
+  double cutoff_cyc_mm = 0;  // 1 / (lambda_min N), lambda_min the shortest spec wavelength
+  std::vector<WaveField> fields;
+  double mean_rms_waves = 0;
+  double mean_strehl = 0;
+  std::vector<std::string> warnings;  // e.g. undersampled wavefronts
+};
+
+// Wavefront, Strehl and MTFs of every field (or only `field_indices`, when not empty).
+WaveReport analyze_wave(const TraceSystem<double>& sys, const WaveOptions& options,
+                        const std::vector<double>& frequencies_cyc_mm,
+                        const std::vector<int>& field_indices = {});
+
+// The wave section of `lensopt analyze --wave`: sampling, then per field the polychromatic RMS
+// wavefront, Strehl ratio and T/S diffraction and geometric MTF at the frequencies.
+std::string format_wave_text(const WaveReport& report);
+// The same as one JSON object (no NaN).
+std::string format_wave_json(const WaveReport& report);
+
+// The aberration-free MTF of a circular pupil: (2/pi)(phi - cos phi sin phi), phi = acos(nu/nu_c).
+double diffraction_limited_mtf(double nu_over_cutoff);
+
+// A polychromatic diffraction PSF of one field resampled (bilinear) onto a common grid of
+// `pixels` x `pixels` samples spaced `spacing_um`, centred on the reference point; row 0 is +y
+// (top). Values are in units of the aberration-free peak (weighted). `field` must hold PSFs
+// (WaveOptions::keep_psf).
+std::vector<float> polychromatic_psf(const WaveField& field, int pixels, double spacing_um);
+
+// Through-focus MTF at one frequency: for each focus shift, the field's tangential and sagittal
+// polychromatic MTF.
+struct ThroughFocus {
+  double frequency_cyc_mm = 0;
+  std::vector<double> focus_shift_mm;
+  std::vector<double> field_deg;
+  std::vector<std::vector<double>> mtf_t, mtf_s;  // [field][focus]
+};
+ThroughFocus through_focus_mtf(const TraceSystem<double>& sys, const WaveOptions& options,
+                               double frequency_cyc_mm, const std::vector<double>& shifts_mm,
+                               const std::vector<int>& field_indices);
+
+}  // namespace lensopt

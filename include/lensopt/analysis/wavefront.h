@@ -1,0 +1,292 @@
+// The wavefront error (optical path difference, OPD) of one field and wavelength, templated on the
+// scalar so the RMS wavefront has exact derivatives (a merit for `optimize --merit wavefront`).
+//
+// Convention (OpticStudio's, for an object at infinity):
+//   * The incoming wavefront of field theta is the plane through the entrance-pupil centre
+//     (0, 0, z_EP) normal to d0 = (0, sin theta, cos theta). A ray starting on the entrance-pupil
+//     plane at (x, y, z_EP) has already travelled OPL_0 = x l0 + y m0 = y sin theta from it.
+//   * The kernel adds n s over every segment up to the image plane (trace/kernel.h, RayRecord).
+//   * The reference sphere is centred on the image point C of the chief ray of the reference
+//     wavelength (587.6 nm; pupil (0, 0) of the aimed pupil, i.e. the stop centre) and passes
+//     through the point where that chief ray crosses the paraxial exit-pupil plane (the stop
+//     imaged by the surfaces after it, at the reference wavelength): its signed radius is
+//     s_c = z_XP / n_c, z_XP the exit pupil's axial position relative to the image plane, n_c
+//     the chief ray's z direction cosine. All wavelengths share this sphere (so lateral colour
+//     appears as tilt, as in OpticStudio).
+//   * A ray reaching the image plane at P with direction d is followed back to the sphere:
+//       |P + t d - C|^2 = s_c^2,  q = P - C:  t = -(q.d) + sign(s_c) sqrt((q.d)^2 - |q|^2 + s_c^2)
+//     and OPL_sphere = OPL_image + n' t (n' the image-space index).
+//   * W(p) = (OPL_sphere(p) - OPL_sphere(chief of the same wavelength)) / lambda, in waves:
+//     positive where the ray's path to the sphere is longer than the chief ray's.
+//   * RMS and P-V are taken after removing piston and tilt: W is fitted by least squares with
+//     a + b x_p + c y_p (weighted by each sample's pupil area) and the residual is reported.
+// A focus shift dz (mm, positive away from the lens) moves the image plane: every ray continues
+// by dz / n_dir (adding n' dz / n_dir), and the sphere's radius grows by dz / n_c.
+//
+// Pupil sampling: an n x n grid of square cells over the normalized entrance pupil [-1, 1]^2
+// (pupil coordinates are aimed per field and wavelength, trace/system.h); cell (i, j) has its
+// centre at (-1 + (i + 1/2) 2/n, -1 + (j + 1/2) 2/n) and takes part when it overlaps the unit
+// circle, with amplitude weight = the cell's area fraction inside the circle (so the pupil edge
+// is anti-aliased). A ray that fails (missed surface, TIR, vignetted) has amplitude 0.
+#pragma once
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <vector>
+
+#include "lensopt/core/scalar.h"
+#include "lensopt/trace/system.h"
+
+namespace lensopt {
+
+// The square pupil grid of the header.
+struct PupilGrid {
+  int n = 0;                   // cells across the pupil diameter
+  std::vector<int> column;     // ix of each sample
+  std::vector<int> row;        // iy of each sample (iy = 0 at y_p = -1)
+  std::vector<double> weight;  // area fraction inside the unit circle, (0, 1]
+  PupilSamples samples;        // normalized pupil coordinates (x_p, y_p)
+  std::size_t size() const { return weight.size(); }
+};
+
+// The grid of n x n cells (n >= 2), edge cells weighted by their area inside the circle.
+PupilGrid make_pupil_grid(int n);
+
+// The exit pupil's axial position relative to the image plane (mm, negative: in front of the
+// image), paraxial at `wavelength_nm`: the stop centre imaged by the surfaces after the stop.
+// A (nearly) telecentric image space returns -1e9 mm (the sphere becomes a plane).
+template <typename T>
+T exit_pupil_from_image_mm(const TraceLens<T>& lens, double wavelength_nm) {
+  using std::abs;
+  const int k_count = lens.surface_count();
+  T y = K<T>(0.0);
+  T w = K<T>(1.0);  // reduced angle after the stop (flat)
+  for (int k = lens.stop + 1; k < k_count; ++k) {
+    y = y + lens.thickness_mm[k - 1] * w / lens.index_at_nm(k - 1, wavelength_nm);
+    w = w - y * lens.curvature_per_mm[k] *
+                (lens.index_at_nm(k, wavelength_nm) - lens.index_at_nm(k - 1, wavelength_nm));
+  }
+  const T u = w / lens.index_at_nm(k_count - 1, wavelength_nm);
+  if (!(abs(value_of(u)) > 1e-12)) return K<T>(-1e9);
+  return -y / u - lens.thickness_mm[k_count - 1];
+}
+
+// The reference sphere of one field: centre on the (focus-shifted) image plane, signed radius.
+template <typename T>
+struct ReferenceSphere {
+  T centre_x_mm, centre_y_mm;  // on the image plane
+  T radius_mm;                 // s_c (negative: the exit pupil is in front of the image)
+  bool ok = false;             // the reference chief ray reached the image
+};
+
+namespace detail {
+
+// Continues rays from the image plane by `focus_shift_mm` along z (no-op for 0).
+template <typename T>
+void shift_focus(RayBundle<T>& rays, std::vector<T>* opl, const T& n_image, double focus_shift_mm) {
+  if (focus_shift_mm == 0.0) return;
+  const T dz = K<T>(focus_shift_mm);
+  for (std::size_t i = 0; i < rays.size(); ++i) {
+    if (rays.status[i] != kRayOk) continue;
+    const T s = dz / rays.n[i];
+    rays.x[i] = rays.x[i] + s * rays.l[i];
+    rays.y[i] = rays.y[i] + s * rays.m[i];
+    if (opl) (*opl)[i] = (*opl)[i] + n_image * s;
+  }
+}
+
+}  // namespace detail
+
+// The reference sphere of field h (see the header), at the reference wavelength.
+template <typename T>
+ReferenceSphere<T> reference_sphere(const TraceSystem<T>& sys, int h, double focus_shift_mm = 0.0) {
+  const int w_ref = sys.wavelength_count;
+  PupilSamples centre;
+  centre.x = {0.0};
+  centre.y = {0.0};
+  RayBundle<T> chief;
+  start_rays(sys, h, w_ref, chief, &centre);
+  trace_bundle(sys.lens, w_ref, sys.lens.surface_count(), true, chief,
+               static_cast<RayRecord<T>*>(nullptr));
+  detail::shift_focus<T>(chief, nullptr, K<T>(1.0), focus_shift_mm);
+  ReferenceSphere<T> out;
+  out.ok = chief.status[0] == kRayOk;
+  out.centre_x_mm = chief.x[0];
+  out.centre_y_mm = chief.y[0];
+  const T z_xp =
+      exit_pupil_from_image_mm(sys.lens, sys.lens.wavelengths_nm[w_ref]) - K<T>(focus_shift_mm);
+  out.radius_mm = z_xp / chief.n[0];
+  return out;
+}
+
+// The wavefront of one field and wavelength on a pupil grid.
+template <typename T>
+struct Wavefront {
+  double wavelength_nm = 0;
+  std::vector<T> opd_waves;      // per grid sample; W of the header (0 where !ok)
+  std::vector<std::uint8_t> ok;  // the ray reached the reference sphere
+  std::vector<T> image_x_mm;     // ray position on the image plane relative to C
+  std::vector<T> image_y_mm;
+  T piston_waves, tilt_x_waves, tilt_y_waves;  // the fitted a, b, c (per unit pupil coordinate)
+  T rms_waves, pv_waves;                       // piston and tilt removed
+  // Image-space direction cosines fitted as l = l0 + du_x x_p, m = m0 + du_y y_p: the scale from
+  // pupil coordinates to the PSF's angular spectrum (du_y < 0 for a positive lens).
+  double du_x = 0, du_y = 0;
+  double valid_weight = 0;  // sum of the weights of the samples that arrived
+  double total_weight = 0;  // sum of all weights (the unvignetted pupil area, in cells)
+  bool chief_ok = false;
+};
+
+// Traces the grid at field h, wavelength w (an index of sys.lens.wavelengths_nm) and returns
+// its wavefront against `sphere` (reference_sphere of the same field and focus shift).
+// `rays` and `record` are scratch (reused between calls).
+template <typename T>
+Wavefront<T> compute_wavefront(const TraceSystem<T>& sys, int h, int w, const PupilGrid& grid,
+                               const ReferenceSphere<T>& sphere, double focus_shift_mm,
+                               RayBundle<T>& rays, RayRecord<T>& record) {
+  using std::sqrt;
+  const std::size_t count = grid.size();
+  const int k_count = sys.lens.surface_count();
+  // Grid samples and, last, the chief ray of this wavelength.
+  PupilSamples samples = grid.samples;
+  samples.x.push_back(0.0);
+  samples.y.push_back(0.0);
+  start_rays(sys, h, w, rays, &samples);
+  record.resize(k_count, count + 1, true);
+  for (std::size_t i = 0; i <= count; ++i)
+    record.optical_path_mm[i] = rays.x[i] * rays.l[i] + rays.y[i] * rays.m[i];
+  trace_bundle(sys.lens, w, k_count, true, rays, &record);
+  const T n_image = sys.lens.index(k_count - 1, w);
+  detail::shift_focus<T>(rays, &record.optical_path_mm, n_image, focus_shift_mm);
+
+  Wavefront<T> out;
+  out.wavelength_nm = sys.lens.wavelengths_nm[w];
+  const T to_waves = K<T>(1e6 / out.wavelength_nm);  // mm -> waves
+  const T zero = K<T>(0.0);
+  out.opd_waves.assign(count, zero);
+  out.ok.assign(count, 0);
+  out.image_x_mm.assign(count, zero);
+  out.image_y_mm.assign(count, zero);
+  const T r = sphere.radius_mm;
+  const T sign = value_of(r) < 0.0 ? K<T>(-1.0) : K<T>(1.0);
+  auto opl_on_sphere = [&](std::size_t i, bool& good) {
+    const T qx = rays.x[i] - sphere.centre_x_mm;
+    const T qy = rays.y[i] - sphere.centre_y_mm;
+    const T b = qx * rays.l[i] + qy * rays.m[i];
+    const T disc = b * b - (qx * qx + qy * qy) + r * r;
+    good = rays.status[i] == kRayOk && value_of(disc) > 0.0;
+    if (!good) return zero;
+    const T t = -b + sign * sqrt(disc);
+    return record.optical_path_mm[i] + n_image * t;
+  };
+  bool chief_good = false;
+  const T chief_opl = opl_on_sphere(count, chief_good);
+  out.chief_ok = chief_good && sphere.ok;
+  // Least squares sums for piston and tilt (weights and coordinates are constants) and for the
+  // direction-cosine scale.
+  double s[3][3] = {{0, 0, 0}, {0, 0, 0}, {0, 0, 0}};
+  T rhs[3] = {zero, zero, zero};
+  double sl[4] = {0, 0, 0, 0}, sm[4] = {0, 0, 0, 0};  // sum a, sum a p, sum a p^2, sum a p d
+  double sum_l = 0, sum_m = 0;
+  for (std::size_t i = 0; i < count; ++i) {
+    out.total_weight += grid.weight[i];
+    if (!out.chief_ok) continue;
+    bool good = false;
+    const T opl = opl_on_sphere(i, good);
+    if (!good) continue;
+    out.ok[i] = 1;
+    const T wv = (opl - chief_opl) * to_waves;
+    out.opd_waves[i] = wv;
+    out.image_x_mm[i] = rays.x[i] - sphere.centre_x_mm;
+    out.image_y_mm[i] = rays.y[i] - sphere.centre_y_mm;
+    const double a = grid.weight[i];
+    const double px = grid.samples.x[i], py = grid.samples.y[i];
+    const double basis[3] = {1.0, px, py};
+    for (int u = 0; u < 3; ++u) {
+      for (int v = 0; v < 3; ++v) s[u][v] += a * basis[u] * basis[v];
+      rhs[u] = rhs[u] + K<T>(a * basis[u]) * wv;
+    }
+    out.valid_weight += a;
+    const double l = value_of(rays.l[i]), m = value_of(rays.m[i]);
+    sl[1] += a * px;
+    sl[2] += a * px * px;
+    sl[3] += a * px * l;
+    sm[1] += a * py;
+    sm[2] += a * py * py;
+    sm[3] += a * py * m;
+    sum_l += a * l;
+    sum_m += a * m;
+  }
+  out.piston_waves = out.tilt_x_waves = out.tilt_y_waves = zero;
+  out.rms_waves = out.pv_waves = zero;
+  if (out.valid_weight <= 0.0) return out;
+  const double sw = out.valid_weight;
+  const double vx = sl[2] - sl[1] * sl[1] / sw, vy = sm[2] - sm[1] * sm[1] / sw;
+  out.du_x = vx > 0 ? (sl[3] - sl[1] * sum_l / sw) / vx : 0.0;
+  out.du_y = vy > 0 ? (sm[3] - sm[1] * sum_m / sw) / vy : 0.0;
+  // Solve the 3 x 3 normal equations (double matrix, T right-hand side) by its inverse.
+  const double det = s[0][0] * (s[1][1] * s[2][2] - s[1][2] * s[2][1]) -
+                     s[0][1] * (s[1][0] * s[2][2] - s[1][2] * s[2][0]) +
+                     s[0][2] * (s[1][0] * s[2][1] - s[1][1] * s[2][0]);
+  T coef[3] = {rhs[0] / K<T>(sw), zero, zero};
+  if (std::abs(det) > 1e-12 * sw * sw * sw) {
+    double inv[3][3];
+    for (int u = 0; u < 3; ++u)
+      for (int v = 0; v < 3; ++v) {
+        const int u1 = (v + 1) % 3, u2 = (v + 2) % 3, v1 = (u + 1) % 3, v2 = (u + 2) % 3;
+        inv[u][v] = (s[u1][v1] * s[u2][v2] - s[u1][v2] * s[u2][v1]) / det;
+      }
+    for (int u = 0; u < 3; ++u)
+      coef[u] = K<T>(inv[u][0]) * rhs[0] + K<T>(inv[u][1]) * rhs[1] + K<T>(inv[u][2]) * rhs[2];
+  }
+  out.piston_waves = coef[0];
+  out.tilt_x_waves = coef[1];
+  out.tilt_y_waves = coef[2];
+  T sum_sq = zero;
+  bool first = true;
+  T lo = zero, hi = zero;
+  for (std::size_t i = 0; i < count; ++i) {
+    if (!out.ok[i]) continue;
+    const T res = out.opd_waves[i] - coef[0] - coef[1] * K<T>(grid.samples.x[i]) -
+                  coef[2] * K<T>(grid.samples.y[i]);
+    sum_sq = sum_sq + K<T>(grid.weight[i]) * res * res;
+    if (first || value_of(res) < value_of(lo)) lo = res;
+    if (first || value_of(res) > value_of(hi)) hi = res;
+    first = false;
+  }
+  const T var = sum_sq / K<T>(sw);
+  out.rms_waves = value_of(var) > 0.0 ? sqrt(var) : zero;
+  out.pv_waves = hi - lo;
+  return out;
+}
+
+// The wavefront merit: mean over fields of the polychromatic RMS wavefront
+//   W_h = sqrt( sum_w omega_w RMS_{h,w}^2 / sum_w omega_w )  (waves, piston and tilt removed)
+// over the spec wavelengths (omega: `weights`, empty = equal). A field or wavelength whose
+// chief ray fails counts as 0 (the optimizer's failure handling sees the failed rays).
+template <typename T>
+T mean_rms_wavefront(const TraceSystem<T>& sys, const PupilGrid& grid,
+                     const std::vector<double>& weights = {}) {
+  using std::sqrt;
+  const int field_count = static_cast<int>(sys.fields_deg.size());
+  RayBundle<T> rays;
+  RayRecord<T> record;
+  T total = K<T>(0.0);
+  for (int h = 0; h < field_count; ++h) {
+    const ReferenceSphere<T> sphere = reference_sphere(sys, h);
+    T sum = K<T>(0.0);
+    double wsum = 0;
+    for (int w = 0; w < sys.wavelength_count; ++w) {
+      const double omega = weights.empty() ? 1.0 : weights[w];
+      const Wavefront<T> wf = compute_wavefront(sys, h, w, grid, sphere, 0.0, rays, record);
+      sum = sum + K<T>(omega) * wf.rms_waves * wf.rms_waves;
+      wsum += omega;
+    }
+    const T mean = sum / K<T>(wsum);
+    if (value_of(mean) > 0.0) total = total + sqrt(mean);
+  }
+  return total / K<T>(field_count);
+}
+
+}  // namespace lensopt
