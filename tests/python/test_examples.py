@@ -7,7 +7,7 @@ import tempfile
 import unittest
 from pathlib import Path
 
-from support import HAVE_TORCH, LENSES, ROOT, lensopt
+from support import FULL, FULL_REASON, HAVE_TORCH, LENSES, ROOT, lensopt
 
 EXAMPLES = ROOT / "examples"
 
@@ -21,6 +21,7 @@ def run(script, *args):
 
 
 class Examples(unittest.TestCase):
+    @unittest.skipUnless(FULL, FULL_REASON)
     def test_analyze_lens(self):
         with tempfile.TemporaryDirectory() as tmp:
             svg = Path(tmp) / "cooke.svg"
@@ -30,6 +31,7 @@ class Examples(unittest.TestCase):
             self.assertIn("<polyline", svg.read_text())
 
     @unittest.skipUnless(HAVE_TORCH, "python3-torch is not installed: the torch example is skipped")
+    @unittest.skipUnless(FULL, FULL_REASON)
     def test_joint_doublet(self):
         out = run("joint_doublet.py", "--steps", "2", "--batch", "1", "--scene-width", "160",
                   "--scene-height", "96", "--crop", "32", "--held-out", "1", "--rings", "3",

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from support import EXECUTABLE, HAVE_TORCH, LENSES, lensopt
+from support import EXECUTABLE, FULL, FULL_REASON, HAVE_TORCH, LENSES, lensopt
 
 if HAVE_TORCH:
     import torch
@@ -29,6 +29,7 @@ class ImageFormationGradients(unittest.TestCase):
         self.module = lt.ImageFormation(doublet(), glass_mode="continuous", rings=4, fields=5,
                                         grid_size=33, threads=2)
 
+    @unittest.skipUnless(FULL, FULL_REASON)
     def test_gradcheck_lens_variables(self):
         images = torch.rand(1, 3, 18, 24, dtype=torch.float64)
         x = self.module.x
@@ -57,6 +58,7 @@ class ImageFormationGradients(unittest.TestCase):
         self.assertTrue(torch.autograd.gradcheck(self.module, (images,), eps=1e-6, atol=1e-7,
                                                  fast_mode=True))
 
+    @unittest.skipUnless(FULL, FULL_REASON)
     def test_lens_losses_gradcheck(self):
         param = self.module.param
         x = self.module.x.detach().clone().requires_grad_(True)
@@ -71,6 +73,7 @@ class ImageFormationGradients(unittest.TestCase):
                                               + 0.01 * terms[3]).item(), places=12)
         self.assertGreater(lt.l_GV(x, param, **opts).item(), -1e-300)
 
+    @unittest.skipUnless(FULL, FULL_REASON)
     def test_jacobians_exposed(self):
         optics = self.module.optics(derivatives=True)
         n = self.module.param.size
@@ -81,6 +84,7 @@ class ImageFormationGradients(unittest.TestCase):
 
 @unittest.skipUnless(HAVE_TORCH, "python3-torch is not installed: the torch tests are skipped")
 class ImageFormationMatchesCli(unittest.TestCase):
+    @unittest.skipUnless(FULL, FULL_REASON)
     def test_forward_equals_lensopt_render(self):
         import subprocess
 
@@ -101,6 +105,7 @@ class ImageFormationMatchesCli(unittest.TestCase):
         self.assertEqual(out.dtype, torch.float32)
         np.testing.assert_allclose(ours, expected, rtol=0, atol=1e-5)
 
+    @unittest.skipUnless(FULL, FULL_REASON)
     def test_training_step_moves_the_lens(self):
         module = lt.ImageFormation(doublet(), rings=4, fields=5, grid_size=33, threads=2,
                                    freeze=["glasses"])
