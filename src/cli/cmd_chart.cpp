@@ -8,8 +8,8 @@
 #include "commands.h"
 #include "lensopt/core/atomic_file.h"
 #include "lensopt/core/error.h"
-#include "lensopt/detection/scenes.h"
 #include "lensopt/core/output_checks.h"
+#include "lensopt/detection/scenes.h"
 #include "lensopt/render/chart.h"
 #include "lensopt/render/image.h"
 

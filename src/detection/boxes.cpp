@@ -8,7 +8,9 @@
 
 namespace lensopt {
 
-double Box::area() const { return empty() ? 0.0 : (x1 - x0) * (y1 - y0); }
+double Box::area() const {
+  return empty() ? 0.0 : (x1 - x0) * (y1 - y0);
+}
 
 namespace {
 
@@ -35,8 +37,10 @@ std::optional<Box> crop_box(const Box& box, double crop_x0, double crop_y0, doub
                             double crop_height, const CropRule& rule) {
   const double full = box.area();
   if (full <= 0) return std::nullopt;
-  Box c{std::clamp(box.x0 - crop_x0, 0.0, crop_width), std::clamp(box.y0 - crop_y0, 0.0, crop_height),
-        std::clamp(box.x1 - crop_x0, 0.0, crop_width), std::clamp(box.y1 - crop_y0, 0.0, crop_height)};
+  Box c{std::clamp(box.x0 - crop_x0, 0.0, crop_width),
+        std::clamp(box.y0 - crop_y0, 0.0, crop_height),
+        std::clamp(box.x1 - crop_x0, 0.0, crop_width),
+        std::clamp(box.y1 - crop_y0, 0.0, crop_height)};
   if (c.width() < rule.min_side_px || c.height() < rule.min_side_px) return std::nullopt;
   if (c.area() < rule.min_visible_fraction * full) return std::nullopt;
   return c;
@@ -93,7 +97,11 @@ Box BoxDistortion::map_box(const Box& box, bool forward) const {
   return out;
 }
 
-Box BoxDistortion::distort_box(const Box& box) const { return map_box(box, true); }
-Box BoxDistortion::undistort_box(const Box& box) const { return map_box(box, false); }
+Box BoxDistortion::distort_box(const Box& box) const {
+  return map_box(box, true);
+}
+Box BoxDistortion::undistort_box(const Box& box) const {
+  return map_box(box, false);
+}
 
 }  // namespace lensopt

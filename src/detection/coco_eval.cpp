@@ -24,14 +24,16 @@ constexpr AreaRange kAreaSmall{0.0, 32.0 * 32.0};
 constexpr AreaRange kAreaMedium{32.0 * 32.0, 96.0 * 96.0};
 constexpr AreaRange kAreaLarge{96.0 * 96.0, 1e10};
 
-double gt_area(const GroundTruth& g) { return g.area >= 0 ? g.area : g.box.area(); }
+double gt_area(const GroundTruth& g) {
+  return g.area >= 0 ? g.area : g.box.area();
+}
 
 // The matching result of one image and category at one area range and detection limit, for
 // every IoU threshold.
 struct ImageResult {
-  std::vector<double> scores;                 // kept detections, score order
-  std::vector<std::vector<char>> matched;     // [t][d]
-  std::vector<std::vector<char>> ignored;     // [t][d]
+  std::vector<double> scores;              // kept detections, score order
+  std::vector<std::vector<char>> matched;  // [t][d]
+  std::vector<std::vector<char>> ignored;  // [t][d]
   int non_ignored_gt = 0;
 };
 
@@ -146,8 +148,7 @@ Curve accumulate(const std::map<int, std::vector<ImageResult>>& per_category, st
 }  // namespace
 
 CocoStats evaluate_coco(const std::vector<GroundTruth>& ground_truths,
-                        const std::vector<Detection>& detections,
-                        const CocoEvalOptions& options) {
+                        const std::vector<Detection>& detections, const CocoEvalOptions& options) {
   std::vector<double> thresholds = options.iou_thresholds;
   if (thresholds.empty())
     for (int k = 0; k < 10; ++k) thresholds.push_back(0.5 + 0.05 * k);

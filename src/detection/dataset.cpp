@@ -2,12 +2,12 @@
 #include "lensopt/detection/dataset.h"
 
 #include <fmt/format.h>
+#include <toml++/toml.h>
 
 #include <algorithm>
 #include <cctype>
 #include <cmath>
 #include <nlohmann/json.hpp>
-#include <toml++/toml.h>
 
 #include "lensopt/core/atomic_file.h"
 #include "lensopt/core/error.h"
@@ -40,8 +40,8 @@ double number(const json& j, const char* key) {
 }
 
 bool valid_box(const Box& b) {
-  return std::isfinite(b.x0) && std::isfinite(b.y0) && std::isfinite(b.x1) &&
-         std::isfinite(b.y1) && b.x1 > b.x0 && b.y1 > b.y0;
+  return std::isfinite(b.x0) && std::isfinite(b.y0) && std::isfinite(b.x1) && std::isfinite(b.y1) &&
+         b.x1 > b.x0 && b.y1 > b.y0;
 }
 
 }  // namespace
@@ -93,7 +93,8 @@ ClassMap read_class_map(const std::filesystem::path& path) {
   }
   const toml::table* classes = t["classes"].as_table();
   if (!classes || classes->empty())
-    throw Error(SourceLocation{path.string(), 0, 0}, "needs a [classes] table with one entry per class");
+    throw Error(SourceLocation{path.string(), 0, 0},
+                "needs a [classes] table with one entry per class");
   // toml++ keeps a table's keys sorted; the classes take their ids in the file's order.
   std::vector<std::pair<std::string, const toml::node*>> entries;
   for (const auto& [name, value] : *classes) entries.push_back({std::string(name.str()), &value});

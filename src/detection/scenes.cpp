@@ -24,10 +24,11 @@ struct Canvas {
   int w = 0, h = 0;
   std::vector<Rgb> rgb;
   std::vector<int> owner;
-  int current = -1;  // the object being painted, -1 for the background
+  int current = -1;           // the object being painted, -1 for the background
   std::vector<long> painted;  // per object: pixels painted (visible or not)
 
-  Canvas(int width, int height) : w(width), h(height), rgb(width * height), owner(width * height, -1) {}
+  Canvas(int width, int height)
+      : w(width), h(height), rgb(width * height), owner(width * height, -1) {}
 
   void put(int x, int y, Rgb c) {
     if (x < 0 || y < 0 || x >= w || y >= h) return;
@@ -135,8 +136,9 @@ void paint_background(Canvas& cv, std::mt19937_64& rng, double horizon) {
   for (int b = 0; b < buildings; ++b) {
     const bool left = u(rng) < 0.5;
     const double bw = cv.w * (0.04 + 0.1 * u(rng)), bh = cv.h * (0.08 + 0.3 * u(rng));
-    const double x0 = left ? u(rng) * (vanish_x - bw) * 0.8 : vanish_x + 0.2 * (cv.w - vanish_x) +
-                                                                  u(rng) * 0.8 * (cv.w - vanish_x - bw);
+    const double x0 =
+        left ? u(rng) * (vanish_x - bw) * 0.8
+             : vanish_x + 0.2 * (cv.w - vanish_x) + u(rng) * 0.8 * (cv.w - vanish_x - bw);
     const Rgb wall = scale(random_colour(rng), 0.8);
     cv.rect(x0, horizon - bh, x0 + bw, horizon + 2, wall);
     // Windows.
@@ -226,8 +228,8 @@ void paint_object(Canvas& cv, std::mt19937_64& rng, int category, double fx, dou
       } else {
         for (int y = int(cy - r); y <= int(cy + r); ++y) {
           const double half = r * (y - (cy - r)) / (2 * r);
-          cv.rect(fx - half, y, fx + half, y + 1, y > cy + 0.8 * r ? Rgb{0.8f, 0.1f, 0.1f}
-                                                                  : Rgb{0.95f, 0.85f, 0.1f});
+          cv.rect(fx - half, y, fx + half, y + 1,
+                  y > cy + 0.8 * r ? Rgb{0.8f, 0.1f, 0.1f} : Rgb{0.95f, 0.85f, 0.1f});
         }
       }
       break;
@@ -238,14 +240,17 @@ void paint_object(Canvas& cv, std::mt19937_64& rng, int category, double fx, dou
 }  // namespace
 
 void SceneSetOptions::validate() const {
-  if (count < 1 || count > 1000000) throw Error(fmt::format("--count {} must be in [1, 1000000]", count));
+  if (count < 1 || count > 1000000)
+    throw Error(fmt::format("--count {} must be in [1, 1000000]", count));
   if (width < 64 || height < 64 || width > 8192 || height > 8192)
-    throw Error(fmt::format("scene size {}x{} must be within 64 .. 8192 pixels a side", width, height));
+    throw Error(
+        fmt::format("scene size {}x{} must be within 64 .. 8192 pixels a side", width, height));
 }
 
 DetectionScene make_detection_scene(int width, int height, std::uint64_t seed) {
   if (width < 64 || height < 64 || width > 8192 || height > 8192)
-    throw Error(fmt::format("scene size {}x{} must be within 64 .. 8192 pixels a side", width, height));
+    throw Error(
+        fmt::format("scene size {}x{} must be within 64 .. 8192 pixels a side", width, height));
   std::mt19937_64 rng(seed * 0x9E3779B97F4A7C15ull + 777);
   std::uniform_real_distribution<double> u(0.0, 1.0);
   Canvas cv(width * kSuper, height * kSuper);
@@ -269,7 +274,8 @@ DetectionScene make_detection_scene(int width, int height, std::uint64_t seed) {
     const bool on_road = o.category <= 3;
     o.x_ground = on_road ? (u(rng) - 0.5) * 1.2 : (u(rng) < 0.5 ? -1 : 1) * (0.7 + 0.5 * u(rng));
   }
-  std::sort(objects.begin(), objects.end(), [](const Object& a, const Object& b) { return a.z > b.z; });
+  std::sort(objects.begin(), objects.end(),
+            [](const Object& a, const Object& b) { return a.z > b.z; });
   cv.painted.assign(objects.size(), 0);
   const double unit = 0.16 * cv.h;  // image size of one unit at depth 1
   const double ground = cv.h - horizon;
@@ -329,7 +335,8 @@ DetectionDataset write_detection_scenes(const std::filesystem::path& dir,
   DetectionDataset d;
   d.categories = paper_class_map().classes;
   for (int i = 0; i < options.count; ++i) {
-    DetectionScene s = make_detection_scene(options.width, options.height, options.seed * 100003 + i);
+    DetectionScene s =
+        make_detection_scene(options.width, options.height, options.seed * 100003 + i);
     DetectionImage image;
     image.id = i + 1;
     image.file_name = fmt::format("scene_{:04d}.png", i);

@@ -179,22 +179,26 @@ void validate_lens(const Lens& lens, const LensSourceLines& lines) {
   if (!(specs.f_number >= kMinFNumber && specs.f_number <= kMaxFNumber))
     fail_at(lines.f_number, fmt::format("f_number = {} must be in [{:g}, {:g}]", specs.f_number,
                                         kMinFNumber, kMaxFNumber));
-  if (!(specs.half_field_deg >= kMinHalfFieldDeg && specs.half_field_deg < 89.0))
-    fail_at(lines.half_field_deg,
-            fmt::format("half_field_deg = {} must be in [{:g}, 89): a lens needs a field of view "
-                        "(it sets the focal length f = d / (2 tan hfov))",
-                        specs.half_field_deg, kMinHalfFieldDeg));
-  if (!(specs.sensor_diagonal_mm >= kMinSensorDiagonalMm &&
-        specs.sensor_diagonal_mm <= kMaxSensorDiagonalMm))
-    fail_at(lines.sensor_diagonal_mm,
-            fmt::format("sensor_diagonal_mm = {} must be in [{:g}, {:g}]", specs.sensor_diagonal_mm,
-                        kMinSensorDiagonalMm, kMaxSensorDiagonalMm));
-  const double f = specs.focal_length_mm();
-  if (!(f >= kMinFocalLengthMm && f <= kMaxFocalLengthMm))
-    fail_at(lines.sensor_diagonal_mm,
-            fmt::format("the focal length from sensor_diagonal_mm and half_field_deg, {:g} mm, "
-                        "must be in [{:g}, {:g}] mm",
-                        f, kMinFocalLengthMm, kMaxFocalLengthMm));
+  // The paper's spec mode derives the focal length from the field; a lens traced as written
+  // (its own fields, possibly one on axis) needs neither.
+  if (specs.mode == SpecMode::kPaper) {
+    if (!(specs.half_field_deg >= kMinHalfFieldDeg && specs.half_field_deg < 89.0))
+      fail_at(lines.half_field_deg,
+              fmt::format("half_field_deg = {} must be in [{:g}, 89): a lens needs a field of view "
+                          "(it sets the focal length f = d / (2 tan hfov))",
+                          specs.half_field_deg, kMinHalfFieldDeg));
+    if (!(specs.sensor_diagonal_mm >= kMinSensorDiagonalMm &&
+          specs.sensor_diagonal_mm <= kMaxSensorDiagonalMm))
+      fail_at(lines.sensor_diagonal_mm,
+              fmt::format("sensor_diagonal_mm = {} must be in [{:g}, {:g}]", specs.sensor_diagonal_mm,
+                          kMinSensorDiagonalMm, kMaxSensorDiagonalMm));
+    const double f = specs.focal_length_mm();
+    if (!(f >= kMinFocalLengthMm && f <= kMaxFocalLengthMm))
+      fail_at(lines.sensor_diagonal_mm,
+              fmt::format("the focal length from sensor_diagonal_mm and half_field_deg, {:g} mm, "
+                          "must be in [{:g}, {:g}] mm",
+                          f, kMinFocalLengthMm, kMaxFocalLengthMm));
+  }
   if (specs.wavelengths_nm.empty()) fail("no wavelengths");
   for (double w : specs.wavelengths_nm)
     if (!(w > 200.0 && w < 20000.0)) fail(fmt::format("wavelength {} nm is out of range", w));
@@ -231,7 +235,7 @@ void validate_lens(const Lens& lens, const LensSourceLines& lines) {
   if (specs.aperture_type == ApertureType::kObjectNA && !(specs.aperture_value < 1.0))
     fail(fmt::format("object-space NA {} must be < 1", specs.aperture_value));
   if (specs.aperture_type == ApertureType::kFloatByStop) {
-    const int s = stop_index();
+    const int s = lens.stop_index();
     if (s < 0 || !(surfaces[s].semi_diameter_mm > 0.0))
       fail("aperture 'float by stop size' needs the stop's semi-diameter");
   }

@@ -1,12 +1,12 @@
 // Detection: COCO average precision against hand-computed worked examples, boxes through crops and
 // the lens's distortion (checked against rendered images), COCO and BDD100K annotation files.
 #include <doctest/doctest.h>
+#include <unistd.h>
 
 #include <cmath>
 #include <fstream>
 #include <random>
 #include <set>
-#include <unistd.h>
 
 #include "lensopt/core/error.h"
 #include "lensopt/detection/boxes.h"
@@ -65,8 +65,7 @@ TEST_CASE("coco ap: perfect predictions give 1") {
 
 TEST_CASE("coco ap: a box at IoU 0.62 counts at 3 of the 10 thresholds") {
   // Ground truth 10 x 10; the detection covers 6.2 of its 10 rows: IoU 62/100.
-  const CocoStats s =
-      evaluate_coco({gt(1, 1, {0, 0, 10, 10})}, {det(1, 1, {0, 0, 10, 6.2}, 0.9)});
+  const CocoStats s = evaluate_coco({gt(1, 1, {0, 0, 10, 10})}, {det(1, 1, {0, 0, 10, 6.2}, 0.9)});
   // Matched at 0.50, 0.55, 0.60: AP 1 there, 0 above.
   CHECK(s.ap == doctest::Approx(0.3).epsilon(1e-12));
   CHECK(s.ap50 == doctest::Approx(1.0));
@@ -189,9 +188,9 @@ TEST_CASE("boxes: distorted ground truth contains the rendered squares' centroid
         }
       REQUIRE(sum > 0);
       const double cx = sx / sum, cy = sy / sum;
-      INFO("res " << res << " square at " << sq.x0 << "," << sq.y0 << " -> box " << moved.x0
-                  << "," << moved.y0 << "," << moved.x1 << "," << moved.y1 << " centroid " << cx
-                  << "," << cy);
+      INFO("res " << res << " square at " << sq.x0 << "," << sq.y0 << " -> box " << moved.x0 << ","
+                  << moved.y0 << "," << moved.x1 << "," << moved.y1 << " centroid " << cx << ","
+                  << cy);
       CHECK(cx >= moved.x0 - 1.0);
       CHECK(cx <= moved.x1 + 1.0);
       CHECK(cy >= moved.y0 - 1.0);
@@ -264,8 +263,7 @@ TEST_CASE("dataset: COCO round trip, bad annotations reported and skipped") {
   CHECK(again.notes.empty());
   // Not JSON: an error naming the file.
   std::ofstream(temp_file("bad.json")) << "{\"images\": [";
-  CHECK_THROWS_WITH_AS(read_coco(temp_file("bad.json")),
-                       doctest::Contains("bad.json"), Error);
+  CHECK_THROWS_WITH_AS(read_coco(temp_file("bad.json")), doctest::Contains("bad.json"), Error);
 }
 
 TEST_CASE("dataset: BDD100K labels through the paper's six classes") {
@@ -318,7 +316,8 @@ TEST_CASE("scenes: deterministic, boxes inside the image and on painted objects"
 }
 
 TEST_CASE("dataset: the shipped class map file is the built-in one; bad maps are refused") {
-  const ClassMap file = read_class_map(test::source_dir() / "examples" / "bdd100k-six-classes.toml");
+  const ClassMap file =
+      read_class_map(test::source_dir() / "examples" / "bdd100k-six-classes.toml");
   const ClassMap built_in = paper_class_map();
   REQUIRE(file.classes.size() == built_in.classes.size());
   for (std::size_t k = 0; k < file.classes.size(); ++k) {

@@ -68,7 +68,7 @@ TEST_CASE("detector: the built-in detector learns the generated scenes") {
   const double loss1 = task->step(batch, false, false).loss;
   const double ap1 = task->metric(batch);
   MESSAGE("built-in detector on 4 crops, 150 steps: loss " << loss0 << " -> " << loss1 << ", AP "
-                                                          << ap0 << " -> " << ap1);
+                                                           << ap0 << " -> " << ap1);
   CHECK(loss1 < 0.5 * loss0);
   CHECK(ap1 > ap0 + 0.1);
   // The image gradient has the batch's layout and is not zero.

@@ -60,8 +60,8 @@ struct CocoStats {
   double ar_small = -1;
   double ar_medium = -1;
   double ar_large = -1;
-  std::vector<int> categories;           // the categories evaluated (sorted)
-  std::vector<double> ap_per_category;   // IoU 0.50:0.95, all areas; -1 without ground truth
+  std::vector<int> categories;          // the categories evaluated (sorted)
+  std::vector<double> ap_per_category;  // IoU 0.50:0.95, all areas; -1 without ground truth
   int images = 0;
   int ground_truths = 0;
   int detections = 0;

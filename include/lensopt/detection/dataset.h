@@ -55,7 +55,7 @@ struct DetectionDataset {
 
 // Source category name -> (class id, class name).
 struct ClassMap {
-  std::vector<DetectionCategory> classes;     // the output categories, ids 1..K
+  std::vector<DetectionCategory> classes;    // the output categories, ids 1..K
   std::map<std::string, int> class_of_name;  // lower-case source name -> class id
 };
 

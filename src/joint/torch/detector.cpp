@@ -105,8 +105,7 @@ Targets make_targets(const TaskBatch& batch, int classes, int h, int w, torch::D
   t.objects = static_cast<int>(index.size());
   t.heat = torch::from_blob(heat.data(), {b, classes, h, w}, torch::kFloat32).to(dtype).clone();
   t.index = torch::tensor(index, torch::kInt64);
-  t.log_size =
-      torch::from_blob(log_size.data(), {t.objects, 2}, torch::kFloat32).to(dtype).clone();
+  t.log_size = torch::from_blob(log_size.data(), {t.objects, 2}, torch::kFloat32).to(dtype).clone();
   t.offset = torch::from_blob(offset.data(), {t.objects, 2}, torch::kFloat32).to(dtype).clone();
   return t;
 }
@@ -267,9 +266,10 @@ class DetectionTask : public Task {
  private:
   static void check_head_size(const torch::Tensor& x, const Targets& t) {
     if (x.size(2) % 16 != 0 || x.size(3) % 16 != 0)
-      throw Error(fmt::format("the built-in detector needs image sides that are multiples of 16 "
-                              "(got {}x{})",
-                              x.size(3), x.size(2)));
+      throw Error(
+          fmt::format("the built-in detector needs image sides that are multiples of 16 "
+                      "(got {}x{})",
+                      x.size(3), x.size(2)));
     (void)t;
   }
 
@@ -327,9 +327,10 @@ class TorchScriptDetectionTask : public Task {
       const torch::Tensor p = module_.forward({x, boxes, labels}).toTensor();
       module_.train();
       if (p.dim() != 3 || p.size(0) != x.size(0) || p.size(2) != 6)
-        throw Error(fmt::format("{}: in evaluation mode forward must return B x M x 6 "
-                                "(x0, y0, x1, y1, score, label); got {}",
-                                name(), fmt::join(p.sizes(), " x ")));
+        throw Error(
+            fmt::format("{}: in evaluation mode forward must return B x M x 6 "
+                        "(x0, y0, x1, y1, score, label); got {}",
+                        name(), fmt::join(p.sizes(), " x ")));
       const torch::Tensor d = p.to(torch::kFloat64).contiguous();
       const auto a = d.accessor<double, 3>();
       std::vector<std::vector<Detection>> result(d.size(0));
@@ -337,8 +338,7 @@ class TorchScriptDetectionTask : public Task {
         for (int64_t j = 0; j < d.size(1); ++j)
           if (a[i][j][4] > 0 && std::isfinite(a[i][j][4]))
             result[i].push_back({static_cast<int>(i), static_cast<int>(std::lround(a[i][j][5])),
-                                 Box{a[i][j][0], a[i][j][1], a[i][j][2], a[i][j][3]},
-                                 a[i][j][4]});
+                                 Box{a[i][j][0], a[i][j][1], a[i][j][2], a[i][j][3]}, a[i][j][4]});
       return result;
     });
   }
@@ -350,47 +350,22 @@ class TorchScriptDetectionTask : public Task {
   }
 
   void save(const std::filesystem::path& path) const override {
-    guarded(fmt::format("saving {}", path.string()), [&] {
-      torch::serialize::OutputArchive archive, optimizer;
-      for (std::size_t i = 0; i < parameters_.size(); ++i)
-        archive.write(fmt::format("p{}", i), parameters_[i]);
-      adam_->save(optimizer);
-      archive.write("optimizer", optimizer);
-      save_archive(path, archive);
-      return 0;
-    });
+    save_parameters_and_adam(path, parameters_, *adam_);
   }
-
   void load(const std::filesystem::path& path) override {
-    guarded(fmt::format("loading {}", path.string()), [&] {
-      torch::serialize::InputArchive archive, optimizer;
-      archive.load_from(path.string());
-      torch::NoGradGuard no_grad;
-      for (std::size_t i = 0; i < parameters_.size(); ++i) {
-        torch::Tensor value;
-        archive.read(fmt::format("p{}", i), value);
-        parameters_[i].copy_(value);
-      }
-      archive.read("optimizer", optimizer);
-      adam_->load(optimizer);
-      return 0;
-    });
+    load_parameters_and_adam(path, parameters_, *adam_);
   }
-
   void save_network(const std::filesystem::path& path) const override {
-    guarded(fmt::format("saving {}", path.string()), [&] {
-      write_file_atomic_with(path,
-                             [&](const std::filesystem::path& tmp) { module_.save(tmp.string()); });
-      return 0;
-    });
+    save_torchscript_module(path, module_);
   }
 
  private:
   torch::Tensor scalar(const torch::Tensor& loss) const {
     if (loss.numel() != 1)
-      throw Error(fmt::format("{}: in training mode forward must return the scalar loss; got {} "
-                              "values",
-                              name(), loss.numel()));
+      throw Error(
+          fmt::format("{}: in training mode forward must return the scalar loss; got {} "
+                      "values",
+                      name(), loss.numel()));
     return loss.reshape({});
   }
 

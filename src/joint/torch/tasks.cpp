@@ -200,41 +200,13 @@ class TorchScriptTask : public Task {
   }
 
   void save(const std::filesystem::path& path) const override {
-    guarded(fmt::format("saving {}", path.string()), [&] {
-      torch::serialize::OutputArchive archive, optimizer;
-      for (std::size_t i = 0; i < parameters_.size(); ++i)
-        archive.write(fmt::format("p{}", i), parameters_[i]);
-      adam_->save(optimizer);
-      archive.write("optimizer", optimizer);
-      write_file_atomic_with(
-          path, [&](const std::filesystem::path& tmp) { archive.save_to(tmp.string()); });
-      return 0;
-    });
+    save_parameters_and_adam(path, parameters_, *adam_);
   }
-
   void load(const std::filesystem::path& path) override {
-    guarded(fmt::format("loading {}", path.string()), [&] {
-      torch::serialize::InputArchive archive, optimizer;
-      archive.load_from(path.string());
-      torch::NoGradGuard no_grad;
-      for (std::size_t i = 0; i < parameters_.size(); ++i) {
-        torch::Tensor value;
-        archive.read(fmt::format("p{}", i), value);
-        parameters_[i].copy_(value);
-      }
-      archive.read("optimizer", optimizer);
-      adam_->load(optimizer);
-      return 0;
-    });
+    load_parameters_and_adam(path, parameters_, *adam_);
   }
-
-  // The trained module itself, loadable by torch.jit.load.
   void save_network(const std::filesystem::path& path) const override {
-    guarded(fmt::format("saving {}", path.string()), [&] {
-      write_file_atomic_with(path,
-                             [&](const std::filesystem::path& tmp) { module_.save(tmp.string()); });
-      return 0;
-    });
+    save_torchscript_module(path, module_);
   }
 
  private:

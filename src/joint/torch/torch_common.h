@@ -6,10 +6,10 @@
 #include <torch/torch.h>
 
 #include <filesystem>
-
 #include <string>
 #include <vector>
 
+#include "lensopt/core/atomic_file.h"
 #include "lensopt/core/error.h"
 #include "lensopt/joint/task.h"
 
@@ -20,7 +20,8 @@ inline torch::Dtype dtype_of(const TaskOptions& options) {
 }
 
 // B x C x H x W tensor (a copy) of a batch of interleaved images.
-inline torch::Tensor to_tensor(const std::vector<FloatImage>& images, int channels, torch::Dtype dtype) {
+inline torch::Tensor to_tensor(const std::vector<FloatImage>& images, int channels,
+                               torch::Dtype dtype) {
   if (images.empty()) throw Error("a task batch must hold at least one image");
   std::vector<torch::Tensor> list;
   for (const FloatImage& im : images) {
@@ -97,8 +98,54 @@ inline std::vector<torch::Tensor> trainable_parameters(const torch::jit::Module&
   if (parameters.empty())
     for (torch::Tensor p : module.parameters()) parameters.push_back(p.requires_grad_(true));
   if (parameters.empty())
-    throw Error(SourceLocation{path.string()}, "the TorchScript module has no trainable parameters");
+    throw Error(SourceLocation{path.string()},
+                "the TorchScript module has no trainable parameters");
   return parameters;
+}
+
+// A TorchScript task's state: its trained parameters and its Adam state, written atomically to
+// one libtorch archive ("p0", "p1", ..., "optimizer") and read back exactly.
+inline void save_parameters_and_adam(const std::filesystem::path& path,
+                                     const std::vector<torch::Tensor>& parameters,
+                                     torch::optim::Adam& adam) {
+  guarded(fmt::format("saving {}", path.string()), [&] {
+    torch::serialize::OutputArchive archive, optimizer;
+    for (std::size_t i = 0; i < parameters.size(); ++i)
+      archive.write(fmt::format("p{}", i), parameters[i]);
+    adam.save(optimizer);
+    archive.write("optimizer", optimizer);
+    write_file_atomic_with(
+        path, [&](const std::filesystem::path& tmp) { archive.save_to(tmp.string()); });
+    return 0;
+  });
+}
+
+inline void load_parameters_and_adam(const std::filesystem::path& path,
+                                     std::vector<torch::Tensor>& parameters,
+                                     torch::optim::Adam& adam) {
+  guarded(fmt::format("loading {}", path.string()), [&] {
+    torch::serialize::InputArchive archive, optimizer;
+    archive.load_from(path.string());
+    torch::NoGradGuard no_grad;
+    for (std::size_t i = 0; i < parameters.size(); ++i) {
+      torch::Tensor value;
+      archive.read(fmt::format("p{}", i), value);
+      parameters[i].copy_(value);
+    }
+    archive.read("optimizer", optimizer);
+    adam.load(optimizer);
+    return 0;
+  });
+}
+
+// The TorchScript module itself, loadable by torch.jit.load, written atomically.
+inline void save_torchscript_module(const std::filesystem::path& path,
+                                    const torch::jit::Module& module) {
+  guarded(fmt::format("saving {}", path.string()), [&] {
+    write_file_atomic_with(path,
+                           [&](const std::filesystem::path& tmp) { module.save(tmp.string()); });
+    return 0;
+  });
 }
 
 }  // namespace lensopt
