@@ -51,8 +51,8 @@ cmp -s "$tmp/out.csv" "$tmp/r.csv" || fail "resumed CSV differs: $(diff "$tmp/ou
 
 # Bad input: an unknown task is named.
 if "$lensopt" optimize lenses/doublet.toml --joint -o "$tmp/x.toml" "${tiny[@]}" \
-    --task detection 2> "$tmp/err.txt"; then
+    --task frobnicate 2> "$tmp/err.txt"; then
   fail "unknown task accepted"
 fi
-grep -q "unknown task 'detection'" "$tmp/err.txt" || fail "unknown task message: $(cat "$tmp/err.txt")"
+grep -q "unknown task 'frobnicate'" "$tmp/err.txt" || fail "unknown task message: $(cat "$tmp/err.txt")"
 echo "joint: ok"

@@ -90,7 +90,7 @@ grep -q "rendered 1, skipped 0" "$tmp/stdout3" || fail "force: $(cat "$tmp/stdou
 if "$lensopt" render lenses/cooke.toml "$tmp/in/chart.png" -o "$tmp/in/chart.png" 2> "$tmp/err"; then
   fail "an output folder that is a file was accepted"
 fi
-grep -q "not a directory" "$tmp/err" || fail "message: $(cat "$tmp/err")"
+grep -qE "not a directory|refusing to write into an input" "$tmp/err" || fail "message: $(cat "$tmp/err")"
 if "$lensopt" render lenses/cooke.toml "$tmp/in/chart.png" -o "$tmp/new" --res-factor 3 2> "$tmp/err"; then
   fail "--res-factor 3 accepted"
 fi
