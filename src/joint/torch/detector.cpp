@@ -175,11 +175,6 @@ double batch_ap(const TaskBatch& batch, const std::vector<std::vector<Detection>
   return ap < 0 ? 0.0 : ap;
 }
 
-void save_archive(const std::filesystem::path& path, torch::serialize::OutputArchive& archive) {
-  write_file_atomic_with(path,
-                         [&](const std::filesystem::path& tmp) { archive.save_to(tmp.string()); });
-}
-
 class DetectionTask : public Task {
  public:
   DetectionTask(const TaskOptions& options, int classes) : options_(options), classes_(classes) {
@@ -232,35 +227,13 @@ class DetectionTask : public Task {
   }
 
   void save(const std::filesystem::path& path) const override {
-    guarded(fmt::format("saving {}", path.string()), [&] {
-      torch::serialize::OutputArchive archive, optimizer;
-      net_->save(archive);
-      adam_->save(optimizer);
-      archive.write("optimizer", optimizer);
-      save_archive(path, archive);
-      return 0;
-    });
+    save_network_and_adam(path, *net_, *adam_);
   }
-
   void load(const std::filesystem::path& path) override {
-    guarded(fmt::format("loading {}", path.string()), [&] {
-      torch::serialize::InputArchive archive, optimizer;
-      archive.load_from(path.string());
-      net_->load(archive);
-      net_->to(dtype_of(options_));
-      archive.read("optimizer", optimizer);
-      adam_->load(optimizer);
-      return 0;
-    });
+    load_network_and_adam(path, *net_, *adam_, dtype_of(options_));
   }
-
   void save_network(const std::filesystem::path& path) const override {
-    guarded(fmt::format("saving {}", path.string()), [&] {
-      torch::serialize::OutputArchive archive;
-      net_->save(archive);
-      save_archive(path, archive);
-      return 0;
-    });
+    save_network_weights(path, *net_);
   }
 
  private:

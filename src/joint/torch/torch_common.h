@@ -138,6 +138,45 @@ inline void load_parameters_and_adam(const std::filesystem::path& path,
   });
 }
 
+// A built-in task's state: its network's weights and its Adam state in one libtorch archive
+// (the network's entries and "optimizer"), written atomically and read back exactly.
+inline void save_network_and_adam(const std::filesystem::path& path, const torch::nn::Module& net,
+                                  torch::optim::Adam& adam) {
+  guarded(fmt::format("saving {}", path.string()), [&] {
+    torch::serialize::OutputArchive archive, optimizer;
+    net.save(archive);
+    adam.save(optimizer);
+    archive.write("optimizer", optimizer);
+    write_file_atomic_with(
+        path, [&](const std::filesystem::path& tmp) { archive.save_to(tmp.string()); });
+    return 0;
+  });
+}
+
+inline void load_network_and_adam(const std::filesystem::path& path, torch::nn::Module& net,
+                                  torch::optim::Adam& adam, torch::Dtype dtype) {
+  guarded(fmt::format("loading {}", path.string()), [&] {
+    torch::serialize::InputArchive archive, optimizer;
+    archive.load_from(path.string());
+    net.load(archive);
+    net.to(dtype);
+    archive.read("optimizer", optimizer);
+    adam.load(optimizer);
+    return 0;
+  });
+}
+
+// A built-in task's network weights alone (a libtorch archive), written atomically.
+inline void save_network_weights(const std::filesystem::path& path, const torch::nn::Module& net) {
+  guarded(fmt::format("saving {}", path.string()), [&] {
+    torch::serialize::OutputArchive archive;
+    net.save(archive);
+    write_file_atomic_with(
+        path, [&](const std::filesystem::path& tmp) { archive.save_to(tmp.string()); });
+    return 0;
+  });
+}
+
 // The TorchScript module itself, loadable by torch.jit.load, written atomically.
 inline void save_torchscript_module(const std::filesystem::path& path,
                                     const torch::jit::Module& module) {
