@@ -17,6 +17,7 @@
 #include <atomic>
 #include <vector>
 
+#include "lensopt/core/interrupt.h"
 #include "lensopt/lens/lens.h"
 #include "lensopt/trace/system.h"
 
@@ -29,21 +30,6 @@ void bind_analysis(py::module_& m);
 void bind_render(py::module_& m);
 void bind_optimize(py::module_& m);
 void bind_imaging(py::module_& m);
-
-// While alive, SIGINT sets `flag` instead of raising KeyboardInterrupt (the previous handler is
-// restored on destruction). interrupted() says whether Ctrl-C was pressed.
-class InterruptScope {
- public:
-  InterruptScope();
-  ~InterruptScope();
-  InterruptScope(const InterruptScope&) = delete;
-  InterruptScope& operator=(const InterruptScope&) = delete;
-  const std::atomic<bool>* flag() const;
-  bool interrupted() const;
-
- private:
-  void (*previous_)(int) = nullptr;
-};
 
 // A numpy array that owns `values` (moved), with the given shape (C order).
 template <typename T>

@@ -1,33 +1,8 @@
 // lensopt._lensopt: registers each area's bindings and translates lensopt::Error.
-#include <csignal>
-
 #include "bindings.h"
 #include "lensopt/core/error.h"
 
 namespace lensopt::python {
-namespace {
-
-std::atomic<bool> g_interrupted{false};
-extern "C" void on_sigint(int) {
-  g_interrupted.store(true);
-}
-
-}  // namespace
-
-InterruptScope::InterruptScope() {
-  g_interrupted.store(false);
-  previous_ = std::signal(SIGINT, on_sigint);
-}
-InterruptScope::~InterruptScope() {
-  std::signal(SIGINT, previous_);
-}
-const std::atomic<bool>* InterruptScope::flag() const {
-  return &g_interrupted;
-}
-bool InterruptScope::interrupted() const {
-  return g_interrupted.load();
-}
-
 TraceOptions trace_options(int rings, int fields, bool ray_aiming, bool scale_to_spec,
                            int threads) {
   TraceOptions o;

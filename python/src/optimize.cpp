@@ -190,7 +190,7 @@ void bind_optimize(py::module_& m) {
         o.validate();
         OptimizeResult r;
         {
-          InterruptScope interrupt;
+          InterruptScope interrupt(InterruptScope::Signals::kInterruptOnly);
           o.interrupt = interrupt.flag();
           {
             py::gil_scoped_release release;

@@ -3,6 +3,9 @@
 
 #include <omp.h>
 
+#include "lensopt/core/jet_width.h"
+#include "lensopt/core/threads.h"
+
 namespace lensopt {
 
 void SystemAdjoint::reset(int surfaces, int wavelengths, int fields) {
@@ -61,7 +64,7 @@ SystemAdjoint mean_spot_adjoint(const TraceSystem<double>& sys, int threads) {
   // Per-field results, added in field order afterwards so the sum does not depend on threads.
   std::vector<SystemAdjoint> per_field(field_count);
   std::vector<double> field_rms(field_count, 0.0);
-  const int nthreads = threads > 0 ? threads : omp_get_max_threads();
+  const int nthreads = thread_count(threads);
 #pragma omp parallel num_threads(nthreads)
   {
     RayBundle<double> rays;
@@ -120,10 +123,9 @@ SpotGradient mean_spot_gradient_fast(const TraceLens<double>& lens, const Specs&
                                      const std::vector<PrescriptionVariable>& variables,
                                      const TraceOptions& options) {
   if (!adjoint_supported(lens)) return mean_spot_gradient_auto(lens, specs, variables, options);
-  if (variables.size() <= 8) return mean_spot_gradient_adjoint<8>(lens, specs, variables, options);
-  if (variables.size() <= 16)
-    return mean_spot_gradient_adjoint<16>(lens, specs, variables, options);
-  return mean_spot_gradient_adjoint<24>(lens, specs, variables, options);
+  return with_jet_width<8, 16, 24>(static_cast<int>(variables.size()), [&](auto width) {
+    return mean_spot_gradient_adjoint<decltype(width)::value>(lens, specs, variables, options);
+  });
 }
 
 }  // namespace lensopt

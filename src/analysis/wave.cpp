@@ -12,6 +12,7 @@
 #include <nlohmann/json.hpp>
 
 #include "lensopt/core/error.h"
+#include "lensopt/core/threads.h"
 #include "lensopt/render/fft.h"
 
 namespace lensopt {
@@ -306,7 +307,7 @@ WaveReport analyze_wave(const TraceSystem<double>& sys, const WaveOptions& optio
     report.fields[f].field_deg = sys.fields_deg[fields[f]];
     report.fields[f].mono.resize(wl_count);
   }
-  const int nthreads = options.threads > 0 ? options.threads : omp_get_max_threads();
+  const int nthreads = thread_count(options.threads);
   complex_plan(m);
   fft_plans(m, m);
 #pragma omp parallel num_threads(nthreads)

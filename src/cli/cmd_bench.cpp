@@ -14,6 +14,7 @@
 #include "lensopt/analysis/spot.h"
 #include "lensopt/analysis/spot_adjoint.h"
 #include "lensopt/analysis/wave.h"
+#include "lensopt/core/threads.h"
 #include "lensopt/joint/imaging.h"
 #include "lensopt/lens/lens_io.h"
 #include "lensopt/optimize/design_gradient.h"
@@ -129,7 +130,7 @@ void run_bench(const BenchCommand& cmd) {
   const double rays = static_cast<double>(sys.fields_deg.size()) * sys.wavelength_count *
                       static_cast<double>(sys.pupil.size());
   const double ray_surfaces_per_s = rays * lens.surfaces.size() / (eval_ms / 1000.0);
-  const int threads = cmd.threads > 0 ? cmd.threads : omp_get_max_threads();
+  const int threads = thread_count(cmd.threads);
   if (cmd.json) {
     nlohmann::json j;
     j["lens"] = lens.name;
@@ -156,8 +157,8 @@ void run_bench(const BenchCommand& cmd) {
     fmt::print(
         "lensopt bench: {}{} ({} surfaces), {} fields x {} wavelengths x {} rays, ray aiming "
         "on, {} threads\n",
-        lens.name, cmd.aspherize ? " aspherized" : "", lens.surfaces.size(), sys.fields_deg.size(), sys.wavelength_count,
-        sys.pupil.size(), threads);
+        lens.name, cmd.aspherize ? " aspherized" : "", lens.surfaces.size(), sys.fields_deg.size(),
+        sys.wavelength_count, sys.pupil.size(), threads);
     fmt::print("  mean RMS spot                     {:10.3f} um\n", mean_spot_um);
     fmt::print("  spot evaluation (double)          {:10.2f} ms   (CPU {:.2f} ms; median of {})\n",
                eval_ms, eval_cpu_ms, cmd.repeats);
@@ -234,7 +235,7 @@ void run_joint_imaging_bench(const BenchCommand& cmd) {
     std::sort(v.begin(), v.end());
     return v[v.size() / 2];
   };
-  const int threads = cmd.threads > 0 ? cmd.threads : omp_get_max_threads();
+  const int threads = thread_count(cmd.threads);
   if (cmd.json) {
     nlohmann::json j;
     j["lens"] = lens.name;
@@ -292,7 +293,7 @@ void run_wave_bench(const BenchCommand& cmd) {
   WaveReport report;
   analyze_wave(sys, options, freqs);  // warm-up (FFTW plans)
   const double mtf_ms = median_ms(cmd.repeats, [&] { report = analyze_wave(sys, options, freqs); });
-  const int threads = cmd.threads > 0 ? cmd.threads : omp_get_max_threads();
+  const int threads = thread_count(cmd.threads);
   if (cmd.json) {
     nlohmann::json j;
     j["lens"] = lens.name;

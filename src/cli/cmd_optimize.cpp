@@ -3,8 +3,6 @@
 #include <toml++/toml.h>
 #include <unistd.h>
 
-#include <atomic>
-#include <csignal>
 #include <filesystem>
 #include <memory>
 #include <nlohmann/json.hpp>
@@ -13,6 +11,7 @@
 #include "lens_checks.h"
 #include "lensopt/core/atomic_file.h"
 #include "lensopt/core/error.h"
+#include "lensopt/core/interrupt.h"
 #include "lensopt/core/output_checks.h"
 #include "lensopt/lens/lens_io.h"
 #include "lensopt/optimize/optimize_table.h"
@@ -20,12 +19,6 @@
 
 namespace lensopt::cli {
 namespace {
-
-std::atomic<bool> g_interrupted{false};
-
-extern "C" void on_sigint(int) {
-  g_interrupted.store(true);
-}
 
 struct OptimizeCommand {
   std::string lens_path;
@@ -151,7 +144,6 @@ void run_optimize(const OptimizeCommand& cmd) {
   override(cmd.min_image_clearance_mm, options.loss.min_image_clearance_mm);
   override(cmd.max_ray_angle_deg, options.loss.max_ray_angle_deg);
   options.verbose = !cmd.quiet;
-  options.interrupt = &g_interrupted;
   options.validate();
 
   if (!cmd.quiet && !cmd.json)
@@ -162,10 +154,12 @@ void run_optimize(const OptimizeCommand& cmd) {
                options.loss.min_glass_mm, options.loss.max_glass_mm,
                options.loss.min_image_clearance_mm, options.loss.max_ray_angle_deg);
 
-  g_interrupted.store(false);
-  auto previous = std::signal(SIGINT, on_sigint);
-  OptimizeResult result = optimize_lens(lens, options);
-  std::signal(SIGINT, previous);
+  OptimizeResult result;
+  {
+    const InterruptScope interrupt;  // SIGINT / SIGTERM: stop after the running iteration
+    options.interrupt = interrupt.flag();
+    result = optimize_lens(lens, options);
+  }
 
   // A starting lens without catalog glass names gets the result's names anyway.
   write_lens(result.lens, out_path);

@@ -3,24 +3,18 @@
 // jointly trained network, unless --network), and checkpoints with --checkpoint-every.
 #include <fmt/core.h>
 
-#include <atomic>
-#include <csignal>
 #include <filesystem>
 #include <memory>
 #include <nlohmann/json.hpp>
 
 #include "commands.h"
 #include "lensopt/core/error.h"
+#include "lensopt/core/interrupt.h"
 #include "lensopt/joint/joint.h"
 #include "lensopt/lens/lens_io.h"
 
 namespace lensopt::cli {
 namespace {
-
-std::atomic<bool> g_joint_interrupted{false};
-extern "C" void on_joint_sigint(int) {
-  g_joint_interrupted.store(true);
-}
 
 struct JointCommand {
   std::string task = "restoration";
@@ -59,12 +53,9 @@ std::filesystem::path beside(const std::filesystem::path& out, const std::string
   return out.parent_path() / (out.stem().string() + suffix);
 }
 
-void run_joint(const JointCommand& cmd, const OptimizeShared& shared) {
-  if (!torch_available())
-    throw Error(
-        "--joint needs libtorch, and this lensopt was built without it (LENSOPT_WITH_TORCH=OFF); "
-        "install libtorch-dev and rebuild with -DLENSOPT_WITH_TORCH=ON");
-  const Lens lens = read_lens(shared.lens_path);
+// The output lens path, checked before any work: given, .toml, not the input (unless
+// --in-place).
+std::filesystem::path checked_output_path(const OptimizeShared& shared) {
   std::filesystem::path out_path = shared.output_path;
   if (out_path.empty()) throw Error("give -o OUT.toml (or --in-place to overwrite the input)");
   if (!shared.in_place && std::filesystem::exists(out_path) &&
@@ -73,7 +64,12 @@ void run_joint(const JointCommand& cmd, const OptimizeShared& shared) {
                 "refusing to overwrite the input lens; use --in-place to do that");
   if (out_path.extension() != ".toml")
     throw Error(SourceLocation{out_path.string()}, "the optimized lens is written as .toml");
+  return out_path;
+}
 
+// The run's options from the command line (validated).
+JointOptions joint_options(const JointCommand& cmd, const OptimizeShared& shared,
+                           const std::filesystem::path& out_path) {
   JointOptions options;
   options.task = cmd.task;
   options.task_options.learning_rate = cmd.task_lr;
@@ -130,76 +126,62 @@ void run_joint(const JointCommand& cmd, const OptimizeShared& shared) {
   options.log_csv = cmd.log.empty() ? beside(out_path, ".csv") : std::filesystem::path(cmd.log);
   options.stop_after_steps = cmd.stop_after;
   options.verbose = !shared.quiet;
-  options.interrupt = &g_joint_interrupted;
   options.validate();
-  const std::filesystem::path network =
-      cmd.network.empty() ? beside(out_path, ".network.pt") : std::filesystem::path(cmd.network);
+  return options;
+}
 
-  g_joint_interrupted.store(false);
-  auto previous = std::signal(SIGINT, on_joint_sigint);
-  JointResult result;
-  try {
-    result = optimize_joint(lens, options, network);
-  } catch (...) {
-    std::signal(SIGINT, previous);
-    throw;
-  }
-  std::signal(SIGINT, previous);
-  if (result.interrupted) {
-    fmt::print(
-        stderr,
-        "lensopt optimize --joint: stopped after {} steps{}; nothing written but the log{}\n",
-        result.steps_done,
-        options.checkpoint_every > 0
-            ? fmt::format(" (resume with --resume {})", options.checkpoint_dir.string())
-            : "",
-        options.checkpoint_every > 0 ? " and the checkpoint" : "");
-    throw ExitCode{130};
-  }
-  write_lens(result.lens, out_path);
-
+// joint - fixed/trained of the held-out metric (NaN without both settings).
+double joint_margin(const JointResult& result) {
   const JointSettingResult* joint = nullptr;
   const JointSettingResult* fixed_trained = nullptr;
   for (const auto& s : result.settings) {
     if (s.name == "joint") joint = &s;
     if (s.name == "fixed/trained") fixed_trained = &s;
   }
-  const double margin = joint && fixed_trained ? joint->metric - fixed_trained->metric : NAN;
-  if (shared.json) {
-    nlohmann::json j;
-    j["lens"] = lens.name;
-    j["output"] = out_path.string();
-    j["network"] = network.string();
-    j["log"] = options.log_csv.string();
-    j["task"] = options.task;
-    j["metric"] = result.metric_name;
-    nlohmann::json settings = nlohmann::json::array();
-    for (const auto& s : result.settings)
-      settings.push_back(
-          {{"name", s.name}, {"metric", s.metric}, {"mean_spot_um", s.mean_spot_um}});
-    j["settings"] = settings;
-    if (!std::isnan(margin)) j["joint_minus_fixed_trained"] = margin;
-    j["glasses"] = result.glasses;
-    nlohmann::json changes = nlohmann::json::array();
-    for (const auto& c : result.glass_changes)
-      changes.push_back({{"phase", c.phase},
-                         {"step", c.step},
-                         {"element", c.element + 1},
-                         {"from", c.from},
-                         {"to", c.to}});
-    j["glass_changes"] = changes;
-    j["steps"] = options.total_steps();
-    j["seconds"] = result.seconds;
-    const JointTimings& t = result.timings;
-    j["step_seconds"] = {{"trace", t.trace_s},     {"psf", t.psf_s},
-                         {"render", t.render_s},   {"adjoint", t.adjoint_s},
-                         {"network", t.network_s}, {"design_loss", t.design_loss_s},
-                         {"total", t.step_s},      {"total_cpu", t.step_cpu_s},
-                         {"steps", t.steps}};
-    j["notes"] = result.notes;
-    fmt::print("{}\n", j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace));
-    return;
-  }
+  return joint && fixed_trained ? joint->metric - fixed_trained->metric : NAN;
+}
+
+void print_joint_json(const Lens& lens, const std::filesystem::path& out_path,
+                      const std::filesystem::path& network, const JointOptions& options,
+                      const JointResult& result) {
+  const double margin = joint_margin(result);
+  nlohmann::json j;
+  j["lens"] = lens.name;
+  j["output"] = out_path.string();
+  j["network"] = network.string();
+  j["log"] = options.log_csv.string();
+  j["task"] = options.task;
+  j["metric"] = result.metric_name;
+  nlohmann::json settings = nlohmann::json::array();
+  for (const auto& s : result.settings)
+    settings.push_back({{"name", s.name}, {"metric", s.metric}, {"mean_spot_um", s.mean_spot_um}});
+  j["settings"] = settings;
+  if (!std::isnan(margin)) j["joint_minus_fixed_trained"] = margin;
+  j["glasses"] = result.glasses;
+  nlohmann::json changes = nlohmann::json::array();
+  for (const auto& c : result.glass_changes)
+    changes.push_back({{"phase", c.phase},
+                       {"step", c.step},
+                       {"element", c.element + 1},
+                       {"from", c.from},
+                       {"to", c.to}});
+  j["glass_changes"] = changes;
+  j["steps"] = options.total_steps();
+  j["seconds"] = result.seconds;
+  const JointTimings& t = result.timings;
+  j["step_seconds"] = {{"trace", t.trace_s},     {"psf", t.psf_s},
+                       {"render", t.render_s},   {"adjoint", t.adjoint_s},
+                       {"network", t.network_s}, {"design_loss", t.design_loss_s},
+                       {"total", t.step_s},      {"total_cpu", t.step_cpu_s},
+                       {"steps", t.steps}};
+  j["notes"] = result.notes;
+  fmt::print("{}\n", j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace));
+}
+
+void print_joint_text(const OptimizeShared& shared, const std::filesystem::path& out_path,
+                      const std::filesystem::path& network, const JointOptions& options,
+                      const JointResult& result) {
+  const double margin = joint_margin(result);
   fmt::print("lensopt optimize --joint: {} -> {} (task {}, {} steps)\n", shared.lens_path,
              out_path.string(), options.task, options.total_steps());
   fmt::print("  setting          held-out {:<12} mean spot (um)\n", result.metric_name);
@@ -219,6 +201,41 @@ void run_joint(const JointCommand& cmd, const OptimizeShared& shared) {
       t.design_loss_s);
   fmt::print("  log {}; network {}; {:.1f} s\n", options.log_csv.string(), network.string(),
              result.seconds);
+}
+
+void run_joint(const JointCommand& cmd, const OptimizeShared& shared) {
+  if (!torch_available())
+    throw Error(
+        "--joint needs libtorch, and this lensopt was built without it (LENSOPT_WITH_TORCH=OFF); "
+        "install libtorch-dev and rebuild with -DLENSOPT_WITH_TORCH=ON");
+  const Lens lens = read_lens(shared.lens_path);
+  const std::filesystem::path out_path = checked_output_path(shared);
+  JointOptions options = joint_options(cmd, shared, out_path);
+  const std::filesystem::path network =
+      cmd.network.empty() ? beside(out_path, ".network.pt") : std::filesystem::path(cmd.network);
+
+  JointResult result;
+  {
+    const InterruptScope interrupt;  // SIGINT / SIGTERM: stop at the next step, checkpoint
+    options.interrupt = interrupt.flag();
+    result = optimize_joint(lens, options, network);
+  }
+  if (result.interrupted) {
+    fmt::print(
+        stderr,
+        "lensopt optimize --joint: stopped after {} steps{}; nothing written but the log{}\n",
+        result.steps_done,
+        options.checkpoint_every > 0
+            ? fmt::format(" (resume with --resume {})", options.checkpoint_dir.string())
+            : "",
+        options.checkpoint_every > 0 ? " and the checkpoint" : "");
+    throw ExitCode{130};
+  }
+  write_lens(result.lens, out_path);
+  if (shared.json)
+    print_joint_json(lens, out_path, network, options, result);
+  else
+    print_joint_text(shared, out_path, network, options, result);
 }
 
 }  // namespace

@@ -3,27 +3,21 @@
 // combines the folders of shards.
 #include <fmt/core.h>
 
-#include <atomic>
 #include <cmath>
-#include <csignal>
 #include <filesystem>
 #include <memory>
 
 #include "commands.h"
 #include "lensopt/core/atomic_file.h"
+#include "lensopt/core/constants.h"
 #include "lensopt/core/error.h"
+#include "lensopt/core/interrupt.h"
 #include "lensopt/core/output_checks.h"
 #include "lensopt/optimize/optimize_table.h"
 #include "lensopt/search/search.h"
 
 namespace lensopt::cli {
 namespace {
-
-std::atomic<bool> g_search_interrupted{false};
-
-extern "C" void on_search_signal(int) {
-  g_search_interrupted.store(true);
-}
 
 struct SearchCommand {
   std::vector<std::string> inputs;
@@ -122,7 +116,7 @@ void run_search_command(const SearchCommand& cmd) {
   }
   if (!std::isnan(cmd.focal_length_mm)) {
     options.sensor_diagonal_mm =
-        2.0 * cmd.focal_length_mm * std::tan(options.half_field_deg * M_PI / 180.0);
+        2.0 * cmd.focal_length_mm * std::tan(options.half_field_deg * kPi / 180.0);
     options.sensor_diagonal_given = true;
   }
   options.progress = !cmd.quiet;
@@ -143,12 +137,10 @@ void run_search_command(const SearchCommand& cmd) {
     std::vector<std::filesystem::path> ins(cmd.inputs.begin(), cmd.inputs.end());
     check_output_dir(out, ins);
   }
-  g_search_interrupted.store(false);
-  auto previous_int = std::signal(SIGINT, on_search_signal);
-  auto previous_term = std::signal(SIGTERM, on_search_signal);
-  const SearchSummary s = run_search(options, out, &g_search_interrupted);
-  std::signal(SIGINT, previous_int);
-  std::signal(SIGTERM, previous_term);
+  const SearchSummary s = [&] {
+    const InterruptScope interrupt;  // SIGINT / SIGTERM: finish the running candidates, stop
+    return run_search(options, out, interrupt.flag());
+  }();
 
   fmt::print("lensopt search: {} of {} candidates{} -> {}/ (fingerprint {})\n", s.candidates_in_run,
              s.candidates_total,

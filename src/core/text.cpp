@@ -1,8 +1,11 @@
 // UTF-16 -> UTF-8 and BOM-aware decoding (include/lensopt/core/text.h).
 #include "lensopt/core/text.h"
 
+#include <algorithm>
 #include <cstdint>
 #include <initializer_list>
+#include <numeric>
+#include <vector>
 
 namespace lensopt {
 namespace {
@@ -113,6 +116,23 @@ std::string latin1_to_utf8(std::string_view bytes) {
 
 std::string to_valid_utf8(std::string_view bytes) {
   return is_valid_utf8(bytes) ? std::string(bytes) : latin1_to_utf8(bytes);
+}
+
+std::size_t edit_distance(std::string_view a, std::string_view b) {
+  // d(i, j) kept one row at a time.
+  std::vector<std::size_t> row(b.size() + 1);
+  std::iota(row.begin(), row.end(), std::size_t{0});
+  for (std::size_t i = 1; i <= a.size(); ++i) {
+    std::size_t diagonal = row[0];  // d(i-1, j-1)
+    row[0] = i;
+    for (std::size_t j = 1; j <= b.size(); ++j) {
+      const std::size_t above = row[j];  // d(i-1, j)
+      const std::size_t substitution = diagonal + (a[i - 1] == b[j - 1] ? 0 : 1);
+      row[j] = std::min({above + 1, row[j - 1] + 1, substitution});
+      diagonal = above;
+    }
+  }
+  return row[b.size()];
 }
 
 }  // namespace lensopt

@@ -14,6 +14,7 @@
 #include <system_error>
 
 #include "lensopt/core/error.h"
+#include "lensopt/core/text.h"
 #include "lensopt/glass/glass.h"
 
 namespace lensopt {
@@ -34,26 +35,6 @@ bool equals_ignoring_case(std::string_view a, std::string_view b) {
            return std::tolower(static_cast<unsigned char>(x)) ==
                   std::tolower(static_cast<unsigned char>(y));
          });
-}
-
-// Levenshtein distance d(a, b): the fewest single-character insertions, deletions and
-// substitutions turning a into b, by the recurrence
-//   d(i, j) = min(d(i-1, j) + 1, d(i, j-1) + 1, d(i-1, j-1) + [a_i != b_j])
-// kept one row at a time.
-std::size_t edit_distance(std::string_view a, std::string_view b) {
-  std::vector<std::size_t> row(b.size() + 1);
-  std::iota(row.begin(), row.end(), std::size_t{0});
-  for (std::size_t i = 1; i <= a.size(); ++i) {
-    std::size_t diagonal = row[0];  // d(i-1, j-1)
-    row[0] = i;
-    for (std::size_t j = 1; j <= b.size(); ++j) {
-      const std::size_t above = row[j];  // d(i-1, j)
-      const std::size_t substitution = diagonal + (a[i - 1] == b[j - 1] ? 0 : 1);
-      row[j] = std::min({above + 1, row[j - 1] + 1, substitution});
-      diagonal = above;
-    }
-  }
-  return row[b.size()];
 }
 
 // Folder of the running executable (from /proc/self/exe), or empty when unknown.

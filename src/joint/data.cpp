@@ -7,6 +7,7 @@
 #include <sstream>
 
 #include "lensopt/core/atomic_file.h"
+#include "lensopt/core/constants.h"
 #include "lensopt/core/error.h"
 #include "lensopt/render/chart.h"
 
@@ -57,7 +58,7 @@ FloatImage make_dead_leaves(int width, int height, std::uint64_t seed) {
   std::vector<float> big(static_cast<std::size_t>(w) * h * 3, 0.5f);
   const double r_min = 1.5 * kSuper, r_max = 0.12 * std::min(w, h);
   const double a = 1.0 / (r_min * r_min), b = 1.0 / (r_max * r_max);
-  const double mean_area = 3.14159265358979323846 * std::log(r_max / r_min) / ((a - b) / 2.0);
+  const double mean_area = kPi * std::log(r_max / r_min) / ((a - b) / 2.0);
   const long discs = static_cast<long>(4.0 * w * h / mean_area) + 1;
   for (long i = 0; i < discs; ++i) {
     const double cx = uniform(rng) * w, cy = uniform(rng) * h;

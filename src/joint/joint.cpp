@@ -8,7 +8,9 @@
 #include <ctime>
 #include <nlohmann/json.hpp>
 
+#include "lensopt/core/adam.h"
 #include "lensopt/core/atomic_file.h"
+#include "lensopt/core/constants.h"
 #include "lensopt/core/error.h"
 #include "lensopt/glass/glass.h"
 #include "lensopt/optimize/design_gradient.h"
@@ -97,16 +99,6 @@ nlohmann::json settings_json(const std::vector<JointSettingResult>& settings) {
   return j;
 }
 
-// Everything a resumed run needs.
-struct Progress {
-  std::string phase;
-  int step = 0;  // next step of the phase
-  std::vector<double> x, m, v;
-  std::string rng;
-  int steps_done = 0;
-  bool task_state = false;  // task.pt belongs to this phase
-};
-
 }  // namespace
 
 void JointOptions::validate() const {
@@ -133,7 +125,7 @@ void JointOptions::validate() const {
 double learning_rate_factor(int step, int constant_steps, int decay_steps) {
   if (step < constant_steps || decay_steps <= 0) return 1.0;
   const double t = std::min(1.0, static_cast<double>(step - constant_steps) / decay_steps);
-  return 0.5 * (1.0 + std::cos(3.14159265358979323846 * t));
+  return 0.5 * (1.0 + std::cos(kPi * t));
 }
 
 double task_loss_gradient(DifferentiableImaging& imaging, Task& task, const JointData& data,
@@ -151,282 +143,424 @@ double task_loss_gradient(DifferentiableImaging& imaging, Task& task, const Join
   return out.loss;
 }
 
-JointResult optimize_joint(const Lens& start, const JointOptions& options,
-                           const std::filesystem::path& network_out) {
-  options.validate();
-  const auto clock_start = Clock::now();
-  auto say = [&](const std::string& s) {
-    if (options.verbose) fmt::print(stderr, "{}\n", s);
-  };
-  JointResult result;
+namespace {
+
+// The lens state before the last Adam update: what a failed step reverts to (as Ceres rejects
+// an infeasible point and shrinks its trust region), and the factor on the lens learning rate:
+// halved by every failed step, doubled (up to 1) by every successful one.
+struct LensSafeguard {
+  bool valid = false;  // a successful update exists to revert
+  std::vector<double> x, m, v;
+  double step_scale = 1.0;
+  int consecutive_failures = 0;
+};
+
+// Failed steps in a row after which the run gives up (the lens cannot be imaged near here).
+constexpr int kMaxConsecutiveFailures = 8;
+
+// Where a phase starts: its step, lens, Adam moments, and the task's and crop stream's state.
+struct Progress {
+  std::string phase;
+  int step = 0;  // next step of the phase
+  std::vector<double> x;
+  AdamMoments moments;
+  LensSafeguard safeguard;
+  std::string rng;
+  int steps_done = 0;
+  bool task_state = false;  // task.pt belongs to this phase
+};
+
+// The measurements of one step, for the CSV row and the timings.
+struct StepRecord {
+  TaskOutput out;
+  std::vector<double> grad_task;
+  double render_s = 0, network_s = 0, adjoint_s = 0, design_s = 0;
+};
+
+// The lens variables of the run (the start's catalog, or OHARA).
+LensParameterization parameterization(const Lens& start, const JointOptions& options) {
   LensParameterization param(
       start, GlassSpace(*load_catalog(start.catalog_name.empty() ? "ohara" : start.catalog_name)));
   param.set_paraxial_image_solve(options.paraxial_image_solve);
-  const GlassMode mode = options.glass_mode;
-  const std::vector<double> x0 = param.from_lens(start);
-  const int n = param.size();
-  const std::vector<int> frozen = param.select(options.freeze);
-  std::vector<char> is_frozen(n, 0);
-  for (int i : frozen) is_frozen[i] = 1;
+  return param;
+}
 
-  JointData data(options.data);
-  for (const std::string& note : data.notes()) {
-    say("lensopt optimize --joint: " + note);
-    result.notes.push_back(note);
-  }
-  DifferentiableImaging imaging(param, mode, {}, options.imaging);
-
-  std::vector<std::string> phases;
-  if (options.run_baselines) phases = {kFixedFixed, kFixedTrained};
-  phases.push_back(kJoint);
-  for (const std::string& p : phases) result.settings.push_back({p, 0, 0, false});
-
-  // Resume.
-  Progress progress{
-      phases.front(), 0, x0, std::vector<double>(n, 0.0), std::vector<double>(n, 0.0), "", 0,
-      false};
-  CsvLog log(options.log_csv, CsvLog::header(param));
-  std::filesystem::path resume_task;
-  if (!options.resume_dir.empty()) {
-    const std::filesystem::path file = options.resume_dir / "checkpoint.json";
-    nlohmann::json j;
-    try {
-      j = nlohmann::json::parse(read_file(file));
-      if (j.at("version").get<int>() != kCheckpointVersion)
-        throw Error(SourceLocation{file.string()}, "unsupported checkpoint version");
-      if (j.at("variables").get<int>() != n || j.at("task").get<std::string>() != options.task ||
-          j.at("phases").get<std::vector<std::string>>() != phases)
-        throw Error(SourceLocation{file.string()},
-                    "the checkpoint is of another lens structure, task or set of settings");
-      progress.phase = j.at("phase").get<std::string>();
-      progress.step = j.at("step").get<int>();
-      progress.x = j.at("x").get<std::vector<double>>();
-      progress.m = j.at("m").get<std::vector<double>>();
-      progress.v = j.at("v").get<std::vector<double>>();
-      progress.rng = j.at("rng").get<std::string>();
-      progress.steps_done = j.at("steps_done").get<int>();
-      progress.task_state = j.at("task_state").get<bool>();
-      for (const auto& s : j.at("settings")) {
-        for (auto& r : result.settings)
-          if (r.name == s.at("name").get<std::string>()) {
-            r.metric = s.at("metric").get<double>();
-            r.mean_spot_um = s.at("mean_spot_um").get<double>();
-            r.done = s.at("done").get<bool>();
-          }
-      }
-      for (const auto& c : j.at("glass_changes"))
-        result.glass_changes.push_back(
-            {c.at("phase"), c.at("step"), c.at("element"), c.at("from"), c.at("to")});
-    } catch (const nlohmann::json::exception& e) {
-      throw Error(SourceLocation{file.string()}, fmt::format("corrupt checkpoint: {}", e.what()));
+// One call of optimize_joint: its settings run in turn, each as a sequence of steps.
+class JointRun {
+ public:
+  JointRun(const Lens& start, const JointOptions& options)
+      : options_(options),
+        param_(parameterization(start, options)),
+        data_(options.data),
+        imaging_(param_, options.glass_mode, {}, options.imaging),
+        log_(options.log_csv, CsvLog::header(param_)) {
+    x0_ = param_.from_lens(start);
+    n_ = param_.size();
+    is_frozen_.assign(n_, 0);
+    for (int i : param_.select(options.freeze)) is_frozen_[i] = 1;
+    for (const std::string& note : data_.notes()) {
+      say("lensopt optimize --joint: " + note);
+      result_.notes.push_back(note);
     }
-    log = CsvLog(options.log_csv, read_file(options.resume_dir / "log.csv"));
-    resume_task = options.resume_dir / "task.pt";
-    say(fmt::format("lensopt optimize --joint: resuming {} at step {} from {}", progress.phase,
-                    progress.step, options.resume_dir.string()));
+    if (options.run_baselines) phases_ = {kFixedFixed, kFixedTrained};
+    phases_.push_back(kJoint);
+    for (const std::string& p : phases_) result_.settings.push_back({p, 0, 0, false});
   }
 
-  const int total = options.total_steps();
-  int steps_this_call = 0;
-  auto stop_requested = [&] {
-    return (options.interrupt && options.interrupt->load()) ||
-           (options.stop_after_steps >= 0 && steps_this_call >= options.stop_after_steps);
-  };
+  JointResult run(const std::filesystem::path& network_out);
+
+ private:
+  void say(const std::string& s) const {
+    if (options_.verbose) fmt::print(stderr, "{}\n", s);
+  }
+  bool stop_requested() const {
+    return (options_.interrupt && options_.interrupt->load()) ||
+           (options_.stop_after_steps >= 0 && steps_this_call_ >= options_.stop_after_steps);
+  }
+  std::unique_ptr<Task> new_task() const {
+    return options_.task_factory ? options_.task_factory(options_.task, options_.task_options)
+                                 : make_task(options_.task, options_.task_options);
+  }
+  Progress start_progress() const {
+    return {phases_.front(), 0, x0_, AdamMoments(n_), {}, "", 0, false};
+  }
+  Progress read_checkpoint(const std::filesystem::path& dir);
+  void write_checkpoint(const std::string& phase, int step, const std::vector<double>& x,
+                        const AdamMoments& moments, const LensSafeguard& safeguard);
+  // Runs phase `pi` from `progress` (its step, lens, moments); false if interrupted.
+  bool run_phase(std::size_t pi, Progress progress, bool resumed);
+  // The images, the task's step and (training the lens) the gradient of step t; throws Error on
+  // any failure (an exception, a non-finite loss or gradient).
+  StepRecord step_gradient(const std::string& phase, int t, bool train_lens,
+                           const std::vector<double>& x, std::vector<double>& grad);
+  void log_glass_changes(const std::string& phase, int t, std::vector<int>& glasses,
+                         const std::vector<double>& x);
+  void add_timings(const StepRecord& r, Clock::time_point step_start, std::clock_t cpu_start);
+  void score_setting(std::size_t pi, const std::vector<double>& x);
+  void finish_timings();
+
+  const JointOptions& options_;
+  LensParameterization param_;
+  JointData data_;
+  DifferentiableImaging imaging_;
+  CsvLog log_;
+  std::vector<double> x0_;
+  int n_ = 0;
+  std::vector<char> is_frozen_;
+  std::vector<std::string> phases_;
+  JointResult result_;
+  std::unique_ptr<Task> task_;
+  std::filesystem::path resume_task_;
+  DesignValueGradient design_;  // l_lens at the lens of the last step
+  int steps_this_call_ = 0;
+};
+
+Progress JointRun::read_checkpoint(const std::filesystem::path& dir) {
+  Progress progress = start_progress();
+  const std::filesystem::path file = dir / "checkpoint.json";
+  nlohmann::json j;
+  try {
+    j = nlohmann::json::parse(read_file(file));
+    if (j.at("version").get<int>() != kCheckpointVersion)
+      throw Error(SourceLocation{file.string()}, "unsupported checkpoint version");
+    if (j.at("variables").get<int>() != n_ || j.at("task").get<std::string>() != options_.task ||
+        j.at("phases").get<std::vector<std::string>>() != phases_)
+      throw Error(SourceLocation{file.string()},
+                  "the checkpoint is of another lens structure, task or set of settings");
+    progress.phase = j.at("phase").get<std::string>();
+    progress.step = j.at("step").get<int>();
+    progress.x = j.at("x").get<std::vector<double>>();
+    progress.moments.m = j.at("m").get<std::vector<double>>();
+    progress.moments.v = j.at("v").get<std::vector<double>>();
+    progress.rng = j.at("rng").get<std::string>();
+    progress.steps_done = j.at("steps_done").get<int>();
+    progress.task_state = j.at("task_state").get<bool>();
+    // The safeguard (absent in checkpoints before it existed: nothing to revert, full steps).
+    LensSafeguard& g = progress.safeguard;
+    g.step_scale = j.value("lens_step_scale", 1.0);
+    result_.reverted_steps = j.value("reverted_steps", 0);
+    if (j.contains("accepted")) {
+      const nlohmann::json& a = j.at("accepted");
+      g.valid = true;
+      g.x = a.at("x").get<std::vector<double>>();
+      g.m = a.at("m").get<std::vector<double>>();
+      g.v = a.at("v").get<std::vector<double>>();
+    }
+    for (const auto& s : j.at("settings")) {
+      for (auto& r : result_.settings)
+        if (r.name == s.at("name").get<std::string>()) {
+          r.metric = s.at("metric").get<double>();
+          r.mean_spot_um = s.at("mean_spot_um").get<double>();
+          r.done = s.at("done").get<bool>();
+        }
+    }
+    for (const auto& c : j.at("glass_changes"))
+      result_.glass_changes.push_back(
+          {c.at("phase"), c.at("step"), c.at("element"), c.at("from"), c.at("to")});
+  } catch (const nlohmann::json::exception& e) {
+    throw Error(SourceLocation{file.string()}, fmt::format("corrupt checkpoint: {}", e.what()));
+  }
+  log_ = CsvLog(options_.log_csv, read_file(dir / "log.csv"));
+  resume_task_ = dir / "task.pt";
+  say(fmt::format("lensopt optimize --joint: resuming {} at step {} from {}", progress.phase,
+                  progress.step, dir.string()));
+  return progress;
+}
+
+void JointRun::write_checkpoint(const std::string& phase, int step, const std::vector<double>& x,
+                                const AdamMoments& moments, const LensSafeguard& safeguard) {
+  if (options_.checkpoint_every <= 0) return;
+  const std::filesystem::path dir = options_.checkpoint_dir;
+  std::filesystem::create_directories(dir);
+  if (task_) task_->save(dir / "task.pt");
+  write_file_atomic(dir / "log.csv", log_.text());
+  nlohmann::json changes = nlohmann::json::array();
+  for (const GlassChange& c : result_.glass_changes)
+    changes.push_back({{"phase", c.phase},
+                       {"step", c.step},
+                       {"element", c.element},
+                       {"from", c.from},
+                       {"to", c.to}});
+  nlohmann::json j = {{"version", kCheckpointVersion},
+                      {"task", options_.task},
+                      {"phases", phases_},
+                      {"variables", n_},
+                      {"phase", phase},
+                      {"step", step},
+                      {"steps_done", result_.steps_done},
+                      {"x", x},
+                      {"m", moments.m},
+                      {"v", moments.v},
+                      {"rng", data_.rng_state()},
+                      {"task_state", task_ != nullptr},
+                      {"settings", settings_json(result_.settings)},
+                      {"glass_changes", changes},
+                      {"lens_step_scale", safeguard.step_scale},
+                      {"reverted_steps", result_.reverted_steps}};
+  if (safeguard.valid) j["accepted"] = {{"x", safeguard.x}, {"m", safeguard.m}, {"v", safeguard.v}};
+  write_file_atomic(dir / "checkpoint.json", j.dump(1));
+}
+
+StepRecord JointRun::step_gradient(const std::string& phase, int t, bool train_lens,
+                                   const std::vector<double>& x, std::vector<double>& grad) {
+  StepRecord r;
+  const std::vector<Sample> samples = data_.next_batch();
+  if (train_lens) imaging_.prepare(x);
+  const auto render_start = Clock::now();
+  const TaskBatch batch = make_batch(imaging_, data_, samples);
+  r.render_s = seconds_since(render_start);
+  const auto network_start = Clock::now();
+  r.out = task_->step(batch, true, train_lens);
+  r.network_s = seconds_since(network_start);
+  if (!std::isfinite(r.out.loss))
+    throw Error(fmt::format("{} step {}: the task loss is {}", phase, t, r.out.loss));
+  r.grad_task.assign(n_, 0.0);
+  if (!train_lens) return r;
+  const auto adjoint_start = Clock::now();
+  for (std::size_t b = 0; b < samples.size(); ++b)
+    imaging_.backward(data_.scenes().at(samples[b].scene).image, samples[b].crop,
+                      r.out.grad_rendered.at(b), r.grad_task);
+  r.adjoint_s = seconds_since(adjoint_start);
+  const auto design_start = Clock::now();
+  design_ = design_loss_gradient(param_, x, options_.glass_mode, {}, options_.design_sampling,
+                                 options_.loss);
+  r.design_s = seconds_since(design_start);
+  bool finite = design_.finite && std::isfinite(design_.loss.total);
+  for (int i = 0; i < n_; ++i) {
+    grad[i] = is_frozen_[i] ? 0.0 : r.grad_task[i] + options_.lambda_lens * design_.gradient[i];
+    finite = finite && std::isfinite(grad[i]);
+  }
+  if (!finite) throw Error(fmt::format("{} step {}: non-finite lens gradient", phase, t));
+  return r;
+}
+
+void JointRun::log_glass_changes(const std::string& phase, int t, std::vector<int>& glasses,
+                                 const std::vector<double>& x) {
+  const std::vector<int> now = param_.nearest_glasses(x.data());
+  for (std::size_t e = 0; e < now.size(); ++e)
+    if (now[e] != glasses[e]) {
+      const GlassChange c{phase, t, static_cast<int>(e), param_.glass_space().name(glasses[e]),
+                          param_.glass_space().name(now[e])};
+      result_.glass_changes.push_back(c);
+      say(fmt::format("  {} step {}: glass {} {} -> {}", phase, t, e + 1, c.from, c.to));
+    }
+  glasses = now;
+}
+
+void JointRun::add_timings(const StepRecord& r, Clock::time_point step_start,
+                           std::clock_t cpu_start) {
+  const ImagingTimings it = imaging_.timings();
+  JointTimings& jt = result_.timings;
+  jt.trace_s += it.trace_s;
+  jt.psf_s += it.psf_s;
+  jt.render_s += r.render_s;
+  jt.adjoint_s += r.adjoint_s;
+  jt.network_s += r.network_s;
+  jt.design_loss_s += r.design_s;
+  jt.step_s += seconds_since(step_start);
+  jt.step_cpu_s += static_cast<double>(std::clock() - cpu_start) / CLOCKS_PER_SEC;
+  ++jt.steps;
+}
+
+bool JointRun::run_phase(std::size_t pi, Progress progress, bool resumed) {
+  const std::string phase = phases_[pi];
+  const bool train_lens = phase == kJoint;
+  const int total = options_.total_steps();
+  int t = progress.step;
+  std::vector<double>& x = progress.x;
+  AdamMoments& moments = progress.moments;
+  LensSafeguard& safeguard = progress.safeguard;
+  task_ = new_task();
+  data_.restart();
+  if (resumed) {
+    if (progress.task_state) task_->load(resume_task_);
+    if (!progress.rng.empty()) data_.set_rng_state(progress.rng);
+  }
+  if (!train_lens) imaging_.prepare(x);  // a fixed lens is sampled once; a trained one per step
+  design_ = design_loss_gradient(param_, x, options_.glass_mode, {}, options_.design_sampling,
+                                 options_.loss);
+  std::vector<int> glasses = param_.nearest_glasses(x.data());
+  say(fmt::format("lensopt optimize --joint: {} (task {}, {} steps)", phase, task_->name(),
+                  phase == kFixedFixed ? 0 : total));
+  if (phase != kFixedFixed) {
+    while (t < total) {
+      if (stop_requested()) {
+        result_.interrupted = true;
+        result_.x = x;
+        log_.flush();
+        write_checkpoint(phase, t, x, moments, safeguard);
+        return false;
+      }
+      const auto step_start = Clock::now();
+      const std::clock_t step_cpu_start = std::clock();
+      const double factor = learning_rate_factor(t, options_.constant_steps, options_.decay_steps);
+      const double lr_lens =
+          train_lens ? options_.lens_learning_rate * factor * safeguard.step_scale : 0.0;
+      const double lr_task = options_.task_options.learning_rate * factor;
+      task_->set_learning_rate(lr_task);
+      const std::string row_glasses = join_glasses(param_, glasses);
+      std::vector<double> grad(n_, 0.0);
+      StepRecord r;
+      try {
+        r = step_gradient(phase, t, train_lens, x, grad);
+      } catch (const std::exception& e) {
+        // A failed step: back to the lens before the last update, with half the step.
+        ++result_.reverted_steps;
+        if (++safeguard.consecutive_failures > kMaxConsecutiveFailures)
+          throw Error(fmt::format("{} step {}: {} failed steps in a row; the last: {}", phase, t,
+                                  safeguard.consecutive_failures, e.what()));
+        if (safeguard.valid) {
+          x = safeguard.x;
+          moments.m = safeguard.m;
+          moments.v = safeguard.v;
+          safeguard.valid = false;
+        }
+        safeguard.step_scale *= 0.5;
+        say(fmt::format("  {} step {}: failed ({}); reverted, lens step x{:g}", phase, t, e.what(),
+                        safeguard.step_scale));
+        if (train_lens) log_glass_changes(phase, t, glasses, x);
+        ++t;
+        ++result_.steps_done;
+        ++steps_this_call_;
+        continue;
+      }
+      if (train_lens) {
+        safeguard = {true, x, moments.m, moments.v, std::min(1.0, 2.0 * safeguard.step_scale), 0};
+        adam_update(x, grad, moments.m, moments.v, t + 1, lr_lens, is_frozen_);
+        log_glass_changes(phase, t, glasses, x);
+      } else {
+        safeguard.consecutive_failures = 0;
+      }
+      // The row describes the lens the step's images came from and the losses at it.
+      const double l_lens = design_.loss.total;
+      log_.add(fmt::format(
+          "{},{},{:.10g},{:.10g},{:.10g},{:.10g},{:.10g},{:.10g},{:.10g},{:.10g},{:.10g},{:.6f},"
+          "{},{:.10g},{:.10g}{}",
+          phase, t, lr_lens, lr_task, r.out.loss + options_.lambda_lens * l_lens, r.out.loss,
+          l_lens, design_.loss.spot_mm, design_.loss.ray_path_mm, design_.loss.ray_angle,
+          design_.loss.glass, design_.loss.spot_mm * 1000.0, design_.loss.failed_rays,
+          norm(r.grad_task), norm(design_.gradient), row_glasses));
+      ++t;
+      ++result_.steps_done;
+      ++steps_this_call_;
+      if (train_lens) add_timings(r, step_start, step_cpu_start);
+      if (options_.verbose && (t % 10 == 0 || t == total))
+        say(fmt::format("  {} step {}/{}: task loss {:.6g}, l_lens {:.6g}, mean spot {:.2f} um",
+                        phase, t, total, r.out.loss, l_lens, design_.loss.spot_mm * 1000.0));
+      log_.flush();  // the whole (small) log, atomically, every step
+      if (options_.checkpoint_every > 0 && t % options_.checkpoint_every == 0 && t < total)
+        write_checkpoint(phase, t, x, moments, safeguard);
+    }
+    log_.flush();
+  }
+  score_setting(pi, x);
+  result_.x = x;
+  return true;
+}
+
+// Scores setting pi on the held-out crops with the final lens and network.
+void JointRun::score_setting(std::size_t pi, const std::vector<double>& x) {
+  JointSettingResult& setting = result_.settings[pi];
+  imaging_.prepare(x);
+  setting.metric = evaluate(imaging_, *task_, data_);
+  setting.mean_spot_um = design_loss_gradient(param_, x, options_.glass_mode, {},
+                                              options_.design_sampling, options_.loss)
+                             .loss.spot_mm *
+                         1000.0;
+  setting.done = true;
+  say(fmt::format("lensopt optimize --joint: {}: held-out {} {:.4f}, mean spot {:.2f} um",
+                  setting.name, task_->metric_name(), setting.metric, setting.mean_spot_um));
+}
+
+// Per-step means of the joint phase's timings.
+void JointRun::finish_timings() {
+  JointTimings& jt = result_.timings;
+  if (jt.steps == 0) return;
+  const double s = jt.steps;
+  for (double* v : {&jt.trace_s, &jt.psf_s, &jt.render_s, &jt.adjoint_s, &jt.network_s,
+                    &jt.design_loss_s, &jt.step_s, &jt.step_cpu_s})
+    *v /= s;
+}
+
+JointResult JointRun::run(const std::filesystem::path& network_out) {
+  const auto clock_start = Clock::now();
+  const bool resuming = !options_.resume_dir.empty();
+  const Progress progress = resuming ? read_checkpoint(options_.resume_dir) : start_progress();
   const std::size_t first_phase =
-      std::find(phases.begin(), phases.end(), progress.phase) - phases.begin();
-  if (first_phase >= phases.size())
+      std::find(phases_.begin(), phases_.end(), progress.phase) - phases_.begin();
+  if (first_phase >= phases_.size())
     throw Error(
         fmt::format("checkpoint phase '{}' is not among this run's settings", progress.phase));
-
-  std::unique_ptr<Task> task;
-  auto checkpoint = [&](const std::string& phase, int step, const std::vector<double>& x,
-                        const std::vector<double>& m, const std::vector<double>& v) {
-    if (options.checkpoint_every <= 0) return;
-    const std::filesystem::path dir = options.checkpoint_dir;
-    std::filesystem::create_directories(dir);
-    if (task) task->save(dir / "task.pt");
-    write_file_atomic(dir / "log.csv", log.text());
-    nlohmann::json changes = nlohmann::json::array();
-    for (const GlassChange& c : result.glass_changes)
-      changes.push_back({{"phase", c.phase},
-                         {"step", c.step},
-                         {"element", c.element},
-                         {"from", c.from},
-                         {"to", c.to}});
-    const nlohmann::json j = {{"version", kCheckpointVersion},
-                              {"task", options.task},
-                              {"phases", phases},
-                              {"variables", n},
-                              {"phase", phase},
-                              {"step", step},
-                              {"steps_done", result.steps_done},
-                              {"x", x},
-                              {"m", m},
-                              {"v", v},
-                              {"rng", data.rng_state()},
-                              {"task_state", task != nullptr},
-                              {"settings", settings_json(result.settings)},
-                              {"glass_changes", changes}};
-    write_file_atomic(dir / "checkpoint.json", j.dump(1));
-  };
-
-  result.steps_done = progress.steps_done;
-  std::vector<double> x = x0;
-  for (std::size_t pi = first_phase; pi < phases.size() && !result.interrupted; ++pi) {
-    const std::string phase = phases[pi];
-    const bool resumed = pi == first_phase && !options.resume_dir.empty();
-    const bool train_lens = phase == kJoint;
-    int t = resumed ? progress.step : 0;
-    x = resumed ? progress.x : x0;
-    std::vector<double> m = resumed ? progress.m : std::vector<double>(n, 0.0);
-    std::vector<double> v = resumed ? progress.v : std::vector<double>(n, 0.0);
-    task = make_task(options.task, options.task_options);
-    data.restart();
-    if (resumed) {
-      if (progress.task_state) task->load(resume_task);
-      if (!progress.rng.empty()) data.set_rng_state(progress.rng);
-    }
-    JointSettingResult& setting = result.settings[pi];
-    if (!train_lens) imaging.prepare(x);  // a fixed lens is sampled once; a trained one per step
-    DesignValueGradient design =
-        design_loss_gradient(param, x, mode, {}, options.design_sampling, options.loss);
-    std::vector<int> glasses = param.nearest_glasses(x.data());
-    say(fmt::format("lensopt optimize --joint: {} (task {}, {} steps)", phase, task->name(),
-                    phase == kFixedFixed ? 0 : total));
-    if (phase != kFixedFixed) {
-      while (t < total) {
-        if (stop_requested()) {
-          result.interrupted = true;
-          break;
-        }
-        const auto step_start = Clock::now();
-        const std::clock_t step_cpu_start = std::clock();
-        const double factor = learning_rate_factor(t, options.constant_steps, options.decay_steps);
-        const double lr_lens = train_lens ? options.lens_learning_rate * factor : 0.0;
-        const double lr_task = options.task_options.learning_rate * factor;
-        task->set_learning_rate(lr_task);
-        const std::vector<Sample> samples = data.next_batch();
-        if (train_lens) imaging.prepare(x);
-        const auto render_start = Clock::now();
-        const TaskBatch batch = make_batch(imaging, data, samples);
-        const double render_s = seconds_since(render_start);
-        const auto network_start = Clock::now();
-        const TaskOutput out = task->step(batch, true, train_lens);
-        const double network_s = seconds_since(network_start);
-        const std::string row_glasses = join_glasses(param, glasses);
-        std::vector<double> grad_task(n, 0.0), grad(n, 0.0);
-        double adjoint_s = 0, design_s = 0;
-        if (train_lens) {
-          const auto adjoint_start = Clock::now();
-          for (std::size_t b = 0; b < samples.size(); ++b)
-            imaging.backward(data.scenes().at(samples[b].scene).image, samples[b].crop,
-                             out.grad_rendered.at(b), grad_task);
-          adjoint_s = seconds_since(adjoint_start);
-          const auto design_start = Clock::now();
-          design = design_loss_gradient(param, x, mode, {}, options.design_sampling, options.loss);
-          design_s = seconds_since(design_start);
-          bool finite = design.finite;
-          for (int i = 0; i < n; ++i) {
-            grad[i] = is_frozen[i] ? 0.0 : grad_task[i] + options.lambda_lens * design.gradient[i];
-            finite = finite && std::isfinite(grad[i]);
-          }
-          if (!finite) {
-            say(fmt::format("  {} step {}: non-finite gradient; lens update skipped", phase, t));
-          } else {
-            // Adam with bias correction (t + 1 updates so far).
-            const double b1 = 0.9, b2 = 0.999, eps = 1e-8;
-            const double c1 = 1.0 - std::pow(b1, t + 1), c2 = 1.0 - std::pow(b2, t + 1);
-            for (int i = 0; i < n; ++i) {
-              if (is_frozen[i]) continue;
-              m[i] = b1 * m[i] + (1.0 - b1) * grad[i];
-              v[i] = b2 * v[i] + (1.0 - b2) * grad[i] * grad[i];
-              x[i] -= lr_lens * (m[i] / c1) / (std::sqrt(v[i] / c2) + eps);
-            }
-          }
-          const std::vector<int> now = param.nearest_glasses(x.data());
-          for (std::size_t e = 0; e < now.size(); ++e)
-            if (now[e] != glasses[e]) {
-              const GlassChange c{phase, t, static_cast<int>(e),
-                                  param.glass_space().name(glasses[e]),
-                                  param.glass_space().name(now[e])};
-              result.glass_changes.push_back(c);
-              say(fmt::format("  {} step {}: glass {} {} -> {}", phase, t, e + 1, c.from, c.to));
-            }
-          glasses = now;
-        }
-        // The row describes the lens the step's images came from and the losses at it.
-        const double l_lens = design.loss.total;
-        log.add(fmt::format(
-            "{},{},{:.10g},{:.10g},{:.10g},{:.10g},{:.10g},{:.10g},{:.10g},{:.10g},{:.10g},{:.6f},"
-            "{},{:.10g},{:.10g}{}",
-            phase, t, lr_lens, lr_task, out.loss + options.lambda_lens * l_lens, out.loss, l_lens,
-            design.loss.spot_mm, design.loss.ray_path_mm, design.loss.ray_angle, design.loss.glass,
-            design.loss.spot_mm * 1000.0, design.loss.failed_rays, norm(grad_task),
-            norm(design.gradient), row_glasses));
-        ++t;
-        ++result.steps_done;
-        ++steps_this_call;
-        if (train_lens) {
-          const ImagingTimings& it = imaging.timings();
-          JointTimings& jt = result.timings;
-          jt.trace_s += it.trace_s;
-          jt.psf_s += it.psf_s;
-          jt.render_s += render_s;
-          jt.adjoint_s += adjoint_s;
-          jt.network_s += network_s;
-          jt.design_loss_s += design_s;
-          jt.step_s += seconds_since(step_start);
-          jt.step_cpu_s += static_cast<double>(std::clock() - step_cpu_start) / CLOCKS_PER_SEC;
-          ++jt.steps;
-        }
-        if (options.verbose && (t % 10 == 0 || t == total))
-          say(fmt::format("  {} step {}/{}: task loss {:.6g}, l_lens {:.6g}, mean spot {:.2f} um",
-                          phase, t, total, out.loss, l_lens, design.loss.spot_mm * 1000.0));
-        log.flush();  // the whole (small) log, atomically, every step
-        if (options.checkpoint_every > 0 && t % options.checkpoint_every == 0 && t < total)
-          checkpoint(phase, t, x, m, v);
-      }
-      log.flush();
-      if (result.interrupted) {
-        checkpoint(phase, t, x, m, v);
-        break;
-      }
-    }
-    // Score the setting on the held-out crops with the final lens and network.
-    imaging.prepare(x);
-    setting.metric = evaluate(imaging, *task, data);
-    setting.mean_spot_um =
-        design_loss_gradient(param, x, mode, {}, options.design_sampling, options.loss)
-            .loss.spot_mm *
-        1000.0;
-    setting.done = true;
-    say(fmt::format("lensopt optimize --joint: {}: held-out {} {:.4f}, mean spot {:.2f} um", phase,
-                    task->metric_name(), setting.metric, setting.mean_spot_um));
-    if (pi + 1 < phases.size()) {
-      task.reset();  // the next phase starts a fresh network
-      checkpoint(phases[pi + 1], 0, x0, std::vector<double>(n, 0.0), std::vector<double>(n, 0.0));
+  result_.steps_done = progress.steps_done;
+  result_.x = x0_;
+  for (std::size_t pi = first_phase; pi < phases_.size(); ++pi) {
+    const bool resumed = pi == first_phase && resuming;
+    Progress start = resumed ? progress : start_progress();
+    start.phase = phases_[pi];
+    if (!run_phase(pi, std::move(start), resumed)) break;
+    if (pi + 1 < phases_.size()) {
+      task_.reset();  // the next phase starts a fresh network
+      write_checkpoint(phases_[pi + 1], 0, x0_, AdamMoments(n_), LensSafeguard{});
     }
   }
-  if (result.timings.steps > 0) {
-    JointTimings& jt = result.timings;
-    const double s = jt.steps;
-    jt.trace_s /= s;
-    jt.psf_s /= s;
-    jt.render_s /= s;
-    jt.adjoint_s /= s;
-    jt.network_s /= s;
-    jt.design_loss_s /= s;
-    jt.step_s /= s;
-    jt.step_cpu_s /= s;
-  }
-  if (!network_out.empty() && task && !result.interrupted) task->save_network(network_out);
-  result.metric_name = task ? task->metric_name() : "";
-  result.x = x;
-  result.lens = param.to_lens(x.data(), mode);
-  for (int g : param.nearest_glasses(x.data()))
-    result.glasses.push_back(param.glass_space().name(g));
-  result.seconds = seconds_since(clock_start);
-  return result;
+  finish_timings();
+  if (!network_out.empty() && task_ && !result_.interrupted) task_->save_network(network_out);
+  result_.metric_name = task_ ? task_->metric_name() : "";
+  const std::vector<double>& x = result_.x;
+  result_.lens = param_.to_lens(x.data(), options_.glass_mode);
+  for (int g : param_.nearest_glasses(x.data()))
+    result_.glasses.push_back(param_.glass_space().name(g));
+  result_.seconds = seconds_since(clock_start);
+  return result_;
+}
+
+}  // namespace
+
+JointResult optimize_joint(const Lens& start, const JointOptions& options,
+                           const std::filesystem::path& network_out) {
+  options.validate();
+  JointRun run(start, options);
+  return run.run(network_out);
 }
 
 }  // namespace lensopt

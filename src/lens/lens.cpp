@@ -6,6 +6,7 @@
 #include <cmath>
 #include <limits>
 
+#include "lensopt/core/constants.h"
 #include "lensopt/core/error.h"
 #include "lensopt/glass/glass_range.h"
 #include "lensopt/lens/validate.h"
@@ -73,7 +74,6 @@ Specs::Specs()
     : wavelengths_nm(paper_wavelengths_nm()), wavelength_channels(paper_wavelength_channels()) {}
 
 double Specs::focal_length_mm() const {
-  constexpr double kPi = 3.14159265358979323846;
   return sensor_diagonal_mm / (2.0 * std::tan(half_field_deg * kPi / 180.0));
 }
 
@@ -139,7 +139,8 @@ void validate_lens(const Lens& lens, const LensSourceLines& lines) {
       fail_at(line, fmt::format("surface {}: curvature is not finite (radius too small)", n));
     if (!std::isfinite(s.thickness_mm))
       fail_at(line, fmt::format("surface {}: thickness is not finite", n));
-    if (!std::isfinite(s.conic)) fail_at(line, fmt::format("surface {}: conic constant is not finite", n));
+    if (!std::isfinite(s.conic))
+      fail_at(line, fmt::format("surface {}: conic constant is not finite", n));
     if (!std::isfinite(s.asphere_r2_per_mm))
       fail_at(line, fmt::format("surface {}: asphere r^2 term is not finite", n));
     for (std::size_t j = 0; j < s.asphere.size(); ++j)
@@ -190,8 +191,8 @@ void validate_lens(const Lens& lens, const LensSourceLines& lines) {
     if (!(specs.sensor_diagonal_mm >= kMinSensorDiagonalMm &&
           specs.sensor_diagonal_mm <= kMaxSensorDiagonalMm))
       fail_at(lines.sensor_diagonal_mm,
-              fmt::format("sensor_diagonal_mm = {} must be in [{:g}, {:g}]", specs.sensor_diagonal_mm,
-                          kMinSensorDiagonalMm, kMaxSensorDiagonalMm));
+              fmt::format("sensor_diagonal_mm = {} must be in [{:g}, {:g}]",
+                          specs.sensor_diagonal_mm, kMinSensorDiagonalMm, kMaxSensorDiagonalMm));
     const double f = specs.focal_length_mm();
     if (!(f >= kMinFocalLengthMm && f <= kMaxFocalLengthMm))
       fail_at(lines.sensor_diagonal_mm,

@@ -5,11 +5,11 @@
 #include <string>
 #include <string_view>
 
+#include "lensopt/core/text.h"
+
 namespace lensopt::detail {
 
-// Levenshtein distance d(a, b): the least number of one-character insertions, deletions and
-// substitutions turning a into b (case-sensitive).
-std::size_t edit_distance(std::string_view a, std::string_view b);
+using lensopt::edit_distance;  // core/text.h
 
 // The known key closest to `key` when it is close enough to be a likely typo or a missing unit
 // suffix (d <= 2, or d <= |known| / 3), else "".

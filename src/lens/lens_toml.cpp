@@ -37,22 +37,6 @@ namespace lensopt {
 
 namespace detail {
 
-std::size_t edit_distance(std::string_view a, std::string_view b) {
-  // d[i][j] = min(d[i-1][j] + 1, d[i][j-1] + 1, d[i-1][j-1] + (a_i != b_j)), one row at a time.
-  std::vector<std::size_t> row(b.size() + 1);
-  for (std::size_t j = 0; j <= b.size(); ++j) row[j] = j;
-  for (std::size_t i = 1; i <= a.size(); ++i) {
-    std::size_t diagonal = row[0];
-    row[0] = i;
-    for (std::size_t j = 1; j <= b.size(); ++j) {
-      const std::size_t above = row[j];
-      row[j] = std::min({row[j] + 1, row[j - 1] + 1, diagonal + (a[i - 1] != b[j - 1] ? 1 : 0)});
-      diagonal = above;
-    }
-  }
-  return row[b.size()];
-}
-
 std::string closest_key(std::string_view key, std::span<const std::string_view> known_keys) {
   std::string best;
   std::size_t best_distance = std::numeric_limits<std::size_t>::max();
@@ -96,8 +80,8 @@ constexpr std::array<std::string_view, 2> kLensKeys = {"name", "catalog"};
 constexpr std::array<std::string_view, 6> kSpecsKeys = {
     "f_number", "half_field_deg", "sensor_diagonal_mm", "wavelengths_nm", "channels", "dispersion"};
 constexpr std::array<std::string_view, 9> kSurfaceKeys = {
-    "radius_mm", "curvature_per_mm", "thickness_mm", "material",  "stop",
-    "semi_diameter_mm", "conic", "asphere", "asphere_r2"};
+    "radius_mm", "curvature_per_mm", "thickness_mm", "material", "stop", "semi_diameter_mm",
+    "conic",     "asphere",          "asphere_r2"};
 constexpr std::array<std::string_view, 2> kModelGlassKeys = {"nd", "vd"};
 constexpr std::array<char, 3> kChannelLetters = {'R', 'G', 'B'};
 

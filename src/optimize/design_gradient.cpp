@@ -7,6 +7,8 @@
 #include <limits>
 
 #include "lensopt/analysis/spot_adjoint.h"
+#include "lensopt/core/jet_width.h"
+#include "lensopt/core/threads.h"
 
 namespace lensopt {
 namespace {
@@ -94,7 +96,7 @@ SystemAdjoint design_adjoint(const TraceSystem<double>& sys, const TraceOptions&
       angle_linear(all_fields, 0.0);
   std::vector<int> failed(all_fields, 0);
   std::vector<SystemAdjoint> per_field(all_fields);
-  const int nthreads = sampling.threads > 0 ? sampling.threads : omp_get_max_threads();
+  const int nthreads = thread_count(sampling.threads);
 #pragma omp parallel num_threads(nthreads)
   {
     RayBundle<double> bundle;
@@ -286,10 +288,10 @@ DesignValueGradient design_loss_gradient(const LensParameterization& param,
                                          const TraceOptions& sampling,
                                          const DesignLossOptions& options) {
   const int n = param.size();
-  if (n <= 8) return design_adjoint_gradient<8>(param, x, mode, fixed_glasses, sampling, options);
-  if (n <= 16) return design_adjoint_gradient<16>(param, x, mode, fixed_glasses, sampling, options);
-  return design_adjoint_gradient<kDesignGradientWidth>(param, x, mode, fixed_glasses, sampling,
-                                                       options);
+  return with_jet_width<8, 16, kDesignGradientWidth>(n, [&](auto width) {
+    return design_adjoint_gradient<decltype(width)::value>(param, x, mode, fixed_glasses, sampling,
+                                                           options);
+  });
 }
 
 DesignValueGradient design_loss_gradient_jets(const LensParameterization& param,
@@ -301,15 +303,12 @@ DesignValueGradient design_loss_gradient_jets(const LensParameterization& param,
   const int n = param.size();
   out.gradient.assign(n, 0.0);
   // The narrowest Jet that holds the variables in one pass; blocks of kDesignGradientWidth above.
-  if (n <= 8) {
-    accumulate<8>(param, x, 0, mode, fixed_glasses, sampling, options, out);
-  } else if (n <= 16) {
-    accumulate<16>(param, x, 0, mode, fixed_glasses, sampling, options, out);
-  } else {
-    for (int first = 0; first < n; first += kDesignGradientWidth)
-      accumulate<kDesignGradientWidth>(param, x, first, mode, fixed_glasses, sampling, options,
-                                       out);
-  }
+  with_jet_width<8, 16, kDesignGradientWidth>(n, [&](auto width) {
+    constexpr int kWidth = decltype(width)::value;
+    for (int first = 0; first < n; first += kWidth)
+      accumulate<kWidth>(param, x, first, mode, fixed_glasses, sampling, options, out);
+    return 0;
+  });
   return out;
 }
 

@@ -13,7 +13,9 @@
 #include <memory>
 
 #include "lensopt/analysis/analyze.h"
+#include "lensopt/core/adam.h"
 #include "lensopt/core/error.h"
+#include "lensopt/core/jet_width.h"
 #include "lensopt/optimize/design_gradient.h"
 
 namespace lensopt {
@@ -102,11 +104,9 @@ ceres::CostFunction* make_cost(DesignFunctor* functor, int n, int residuals) {
 }
 
 ceres::CostFunction* make_cost_for(DesignFunctor* functor, int n, int residuals) {
-  if (n <= 8) return make_cost<8>(functor, n, residuals);
-  if (n <= 12) return make_cost<12>(functor, n, residuals);
-  if (n <= 16) return make_cost<16>(functor, n, residuals);
-  if (n <= 20) return make_cost<20>(functor, n, residuals);
-  return make_cost<24>(functor, n, residuals);
+  // Ceres' dynamic cost function takes any n in blocks of the width.
+  return with_jet_width<8, 12, 16, 20, 24>(
+      n, [&](auto width) { return make_cost<decltype(width)::value>(functor, n, residuals); });
 }
 
 int residual_count(const LensParameterization& param, const TraceOptions& sampling) {
@@ -654,9 +654,9 @@ AdamResult adam_on_design_loss(const LensParameterization& param, std::vector<do
                                const OptimizeOptions& options, double learning_rate, int max_steps,
                                double target_spot_mm) {
   const int n = param.size();
-  const std::vector<int> frozen = param.select(options.freeze);
-  std::vector<double> m(n, 0.0), v(n, 0.0);
-  const double beta1 = 0.9, beta2 = 0.999, eps = 1e-8;
+  std::vector<char> frozen(n, 0);
+  for (int i : param.select(options.freeze)) frozen[i] = 1;
+  AdamMoments moments(n);
   AdamResult result;
   for (int step = 1; step <= max_steps; ++step) {
     // l_lens and its gradient by the adjoint (design_gradient.h).
@@ -668,15 +668,7 @@ AdamResult adam_on_design_loss(const LensParameterization& param, std::vector<do
       result.reached = true;
       break;
     }
-    for (int i = 0; i < n; ++i) {
-      if (std::find(frozen.begin(), frozen.end(), i) != frozen.end()) continue;
-      const double g = loss.gradient[i];
-      m[i] = beta1 * m[i] + (1 - beta1) * g;
-      v[i] = beta2 * v[i] + (1 - beta2) * g * g;
-      const double m_hat = m[i] / (1 - std::pow(beta1, step));
-      const double v_hat = v[i] / (1 - std::pow(beta2, step));
-      x[i] -= learning_rate * m_hat / (std::sqrt(v_hat) + eps);
-    }
+    adam_update(x, loss.gradient, moments.m, moments.v, step, learning_rate, frozen);
   }
   result.x = x;
   return result;

@@ -14,6 +14,7 @@
 #include <sstream>
 
 #include "lensopt/core/atomic_file.h"
+#include "lensopt/core/constants.h"
 #include "lensopt/core/error.h"
 #include "lensopt/plot/canvas.h"
 
@@ -220,7 +221,7 @@ void draw_pieces(OIIO::ImageBuf& dst, double x, double y, const std::vector<Text
         const Point c{x + 0.2 * em, y - 0.6 * em};
         const double r = 0.11 * em;
         for (int i = 0; i < 16; ++i) {
-          const double a0 = 2 * 3.14159265358979 * i / 16, a1 = 2 * 3.14159265358979 * (i + 1) / 16;
+          const double a0 = 2 * kPi * i / 16, a1 = 2 * kPi * (i + 1) / 16;
           stroke_segment(dst, {c.x + r * std::cos(a0), c.y + r * std::sin(a0)},
                          {c.x + r * std::cos(a1), c.y + r * std::sin(a1)}, stroke * 0.9, rgba);
         }
@@ -382,7 +383,7 @@ void RasterCanvas::draw_circle(Point centre, double radius, const Style& style) 
   const int n = std::clamp(static_cast<int>(impl_->s(radius)), 24, 360);
   std::vector<Point> pts(n);
   for (int i = 0; i < n; ++i) {
-    const double a = 2.0 * 3.14159265358979323846 * i / n;
+    const double a = 2.0 * kPi * i / n;
     pts[i] = {centre.x + radius * std::cos(a), centre.y + radius * std::sin(a)};
   }
   polygon(pts, style);

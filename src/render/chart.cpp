@@ -8,12 +8,12 @@
 #include <cmath>
 #include <vector>
 
+#include "lensopt/core/constants.h"
 #include "lensopt/core/error.h"
 
 namespace lensopt {
 namespace {
 
-constexpr double kPi = 3.14159265358979323846;
 using Rgb = std::array<float, 3>;
 
 struct Star {

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "lensopt/core/error.h"
+#include "lensopt/core/threads.h"
 
 namespace lensopt {
 namespace {
@@ -20,10 +21,6 @@ void check_same_size(const FloatImage& x, const FloatImage& y, int channels) {
                             x.width, x.height, x.channels, y.width, y.height, y.channels,
                             channels));
   }
-}
-
-int thread_count(int threads) {
-  return threads > 0 ? threads : omp_get_max_threads();
 }
 
 // Normalized Gaussian weights of an odd window of `size` taps.

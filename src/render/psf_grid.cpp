@@ -121,7 +121,6 @@ PsfGrid make_psf_grid(const ImagingModel& model, int width, int height, int res_
   constexpr int n = PsfGrid::kPatches;
   PsfGrid grid = make_psf_grid_layout(model.reference_y_mm, model.sensor_diagonal_mm, width, height,
                                       res_factor);
-  const int field_count = static_cast<int>(model.fields_deg.size());
   const PsfOptions& popt = model.psfs.options;
   const std::size_t cells = static_cast<std::size_t>(popt.grid_size) * popt.grid_size;
   const double pitch_um = grid.geometry.pitch_mm * 1000.0;
@@ -130,12 +129,10 @@ PsfGrid make_psf_grid(const ImagingModel& model, int width, int height, int res_
   for (int q = 0; q < n * n; ++q) {
     const std::vector<double>& a = grid.field_weights[q];
     for (int ch = 0; ch < kColourChannels; ++ch) {
-      std::vector<double> mixed(cells, 0.0);
-      for (int h = 0; h < field_count; ++h) {
-        if (a[h] == 0.0) continue;
-        const std::vector<double>& psf = model.psfs.fields[h].psf[ch];
-        for (std::size_t i = 0; i < cells; ++i) mixed[i] += a[h] * psf[i];
-      }
+      std::vector<double> mixed;
+      mix_field_psfs(
+          a, cells,
+          [&](int h) -> const std::vector<double>& { return model.psfs.fields[h].psf[ch]; }, mixed);
       grid.kernels[q][ch] = resample_to_pixels(mixed, popt, grid.azimuth_rad[q], pitch_um);
       grid.max_radius = std::max(grid.max_radius, grid.kernels[q][ch].radius);
     }

@@ -14,14 +14,12 @@
 #include <type_traits>
 
 #include "lensopt/core/interpolate.h"
+#include "lensopt/core/threads.h"
+#include "lensopt/render/distortion_warp.h"
 #include "lensopt/render/render.h"
 
 namespace lensopt {
 namespace {
-
-int thread_count(int threads) {
-  return threads > 0 ? threads : omp_get_max_threads();
-}
 
 // One output row of the warp: pixel i samples the input at (i + 1/2 + offset_x, j + 1/2 +
 // offset_y) bicubically (taps clamped to the image); NaN offsets give black. The channel count
@@ -86,26 +84,18 @@ std::shared_ptr<const std::vector<float>> Renderer::warp_map(int width, int heig
   if (auto found = warp_maps_.find(width, height)) return found;
   const SensorGeometry geo =
       SensorGeometry::make(width, height, options_.res_factor, model_.sensor_diagonal_mm);
-  // The inverse map r(r') through (ybar_h, y_ref,h); undistorted_radius_mm throws (here, outside
-  // the parallel loop) if it is not invertible.
-  const std::vector<double>& ybar = model_.centroid_y_mm;
-  const std::vector<double>& yref = model_.reference_y_mm;
-  const int nodes = static_cast<int>(ybar.size());
+  // The inverse map (render/distortion_warp.h); undistorted_radius_mm throws (here, outside the
+  // parallel loop) if it is not invertible.
   undistorted_radius_mm(model_, 0.0);
-  auto inverse = [&](double r_out) { return interpolate_linear(ybar, yref, r_out, true); };
-  // Radial scale r / r' near the axis (the first piece of the inverse map).
-  const double axis_scale = nodes > 1 ? (yref[1] - yref[0]) / (ybar[1] - ybar[0]) : 1.0;
+  const InverseDistortion inverse(model_.centroid_y_mm, model_.reference_y_mm);
   auto map = std::make_shared<std::vector<float>>(static_cast<std::size_t>(width) * height * 2);
   constexpr float kOutside = std::numeric_limits<float>::quiet_NaN();
 #pragma omp parallel for num_threads(thread_count(options_.threads)) schedule(static)
   for (int j = 0; j < height; ++j) {
     for (int i = 0; i < width; ++i) {
-      const double dx = i + 0.5 - geo.axis_x, dy = j + 0.5 - geo.axis_y;
-      const double r_out = geo.pitch_mm * std::sqrt(dx * dx + dy * dy);
-      const double scale = r_out > 1e-12 ? inverse(r_out) / r_out : axis_scale;
-      const double sx = geo.axis_x + dx * scale, sy = geo.axis_y + dy * scale;
       float* o = map->data() + (static_cast<std::size_t>(j) * width + i) * 2;
-      if (sx >= 0.0 && sx <= width && sy >= 0.0 && sy <= height) {
+      double sx, sy;
+      if (inverse.source(geo, i, j, sx, sy)) {
         // Stored as the sample position minus the pixel's corner (i, j), minus 1/2 (so the taps
         // are at floor(i + offset) - 1 ...): small numbers, exact in float to 1e-5 pixel.
         o[0] = static_cast<float>(sx - 0.5 - i);

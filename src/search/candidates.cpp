@@ -11,6 +11,7 @@
 #include <optional>
 #include <set>
 
+#include "lensopt/core/constants.h"
 #include "lensopt/core/error.h"
 #include "lensopt/lens/lens_io.h"
 #include "lensopt/optimize/optimize_table.h"
@@ -244,7 +245,7 @@ void read_search_description(const std::filesystem::path& path, SearchOptions& o
       const toml::table* specs = file["specs"].as_table();
       double hfov = options.half_field_deg;
       if (const auto h = (*specs)["half_field_deg"].value<double>()) hfov = *h;
-      options.sensor_diagonal_mm = 2.0 * f * std::tan(hfov * M_PI / 180.0);
+      options.sensor_diagonal_mm = 2.0 * f * std::tan(hfov * kPi / 180.0);
     } else {
       throw Error(w, fmt::format("unknown key '{}' in [specs]; known: f_number, half_field_deg, "
                                  "sensor_diagonal_mm, focal_length_mm",

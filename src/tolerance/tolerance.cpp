@@ -14,6 +14,7 @@
 #include <random>
 
 #include "lensopt/core/error.h"
+#include "lensopt/core/threads.h"
 #include "lensopt/paraxial/paraxial.h"
 #include "lensopt/trace/system.h"
 
@@ -524,7 +525,7 @@ ToleranceReport run_tolerance(const Lens& lens, const ToleranceOptions& options)
   report.options = options;
   report.options.progress = nullptr;
   report.options.sensitivity_progress = nullptr;
-  report.threads = options.jobs > 0 ? options.jobs : omp_get_max_threads();
+  report.threads = thread_count(options.jobs);
   report.wavelength_count = model.wavelength_count();
   report.rays_per_field_wavelength = model.rays_per_field_wavelength();
   report.fields_deg = model.fields_deg();

@@ -48,20 +48,6 @@ JointOptions tiny_options(const std::filesystem::path& dir) {
   return o;
 }
 
-std::vector<std::vector<std::string>> csv_rows(const std::filesystem::path& path) {
-  std::vector<std::vector<std::string>> rows;
-  std::istringstream in(read_file(path));
-  std::string line;
-  while (std::getline(in, line)) {
-    std::vector<std::string> cells;
-    std::stringstream ls(line);
-    std::string cell;
-    while (std::getline(ls, cell, ',')) cells.push_back(cell);
-    rows.push_back(cells);
-  }
-  return rows;
-}
-
 std::filesystem::path fresh_dir(const std::string& name) {
   const auto dir = test::joint_temp_dir(name);
   std::filesystem::remove_all(dir);
@@ -174,7 +160,7 @@ TEST_CASE("joint: a TorchScript task trains jointly with the lens through torchs
   CHECK(!r.interrupted);
   CHECK(r.steps_done == 6);
   CHECK(std::filesystem::file_size(dir / "net.pt") > 0);
-  const auto rows = csv_rows(dir / "log.csv");
+  const auto rows = test::csv_rows(dir / "log.csv");
   REQUIRE(rows.size() == 7);
   CHECK(rows[0][5] == "loss_task");
   CHECK(rows[0][13] == "grad_norm_task");
@@ -224,7 +210,7 @@ TEST_CASE("joint: every glass change is logged, and the log names catalog glasse
   o.freeze = {"curvatures", "spacings"};
   const JointResult r = optimize_joint(doublet(), o);
   const GlassSpace space(*load_catalog("ohara"));
-  const auto rows = csv_rows(dir / "log.csv");
+  const auto rows = test::csv_rows(dir / "log.csv");
   const std::size_t first_glass = 15;
   REQUIRE(rows[0].size() == first_glass + 2);
   int changes = 0;

@@ -4,13 +4,32 @@
 #include <unistd.h>
 
 #include <filesystem>
+#include <sstream>
 #include <string>
+#include <vector>
+
+#include "lensopt/core/atomic_file.h"
 
 namespace lensopt::test {
 
 // A temporary directory of this process (several test runs may share the machine's /tmp).
 inline std::filesystem::path joint_temp_dir(const std::string& name) {
   return std::filesystem::temp_directory_path() / (name + "-" + std::to_string(::getpid()));
+}
+
+// The cells of a CSV file (the joint log: no quoted commas), row by row.
+inline std::vector<std::vector<std::string>> csv_rows(const std::filesystem::path& path) {
+  std::vector<std::vector<std::string>> rows;
+  std::istringstream in(read_file(path));
+  std::string line;
+  while (std::getline(in, line)) {
+    std::vector<std::string> cells;
+    std::stringstream ls(line);
+    std::string cell;
+    while (std::getline(ls, cell, ',')) cells.push_back(cell);
+    rows.push_back(cells);
+  }
+  return rows;
 }
 
 // Writes a small TorchScript restorer (a residual 3x3 convolution; forward(images, targets)

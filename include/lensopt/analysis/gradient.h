@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "lensopt/analysis/spot.h"
+#include "lensopt/core/jet_width.h"
 
 namespace lensopt {
 
@@ -28,8 +29,8 @@ SpotGradient mean_spot_gradient(const TraceLens<double>& lens, const Specs& spec
   const int count = static_cast<int>(variables.size());
   for (int first = 0; first < count || first == 0; first += N) {
     const int chunk = std::min(N, count - first);
-    const TraceLens<J> lens_j = convert_trace_lens<J>(
-        lens, variables, first, chunk, [](double v, int j) { return J(v, j); });
+    const TraceLens<J> lens_j = convert_trace_lens<J>(lens, variables, first, chunk,
+                                                      [](double v, int j) { return J(v, j); });
     const TraceSystem<J> sys = prepare_system(lens_j, specs, options);
     const SpotResult<J> spots = evaluate_spots(sys, options.threads);
     out.mean_rms_spot_mm = spots.mean_rms_spot_mm.a;
@@ -48,9 +49,9 @@ namespace lensopt {
 inline SpotGradient mean_spot_gradient_auto(const TraceLens<double>& lens, const Specs& specs,
                                             const std::vector<PrescriptionVariable>& variables,
                                             const TraceOptions& options) {
-  if (variables.size() <= 8) return mean_spot_gradient<8>(lens, specs, variables, options);
-  if (variables.size() <= 16) return mean_spot_gradient<16>(lens, specs, variables, options);
-  return mean_spot_gradient<24>(lens, specs, variables, options);
+  return with_jet_width<8, 16, 24>(static_cast<int>(variables.size()), [&](auto width) {
+    return mean_spot_gradient<decltype(width)::value>(lens, specs, variables, options);
+  });
 }
 
 }  // namespace lensopt

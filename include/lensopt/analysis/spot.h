@@ -11,6 +11,7 @@
 
 #include <vector>
 
+#include "lensopt/core/threads.h"
 #include "lensopt/trace/system.h"
 
 namespace lensopt {
@@ -83,7 +84,7 @@ SpotResult<T> evaluate_spots(const TraceSystem<T>& sys, int threads = 0) {
                                           std::vector<int>(sys.lens.surface_count(), 0));
   out.vignetted_rays.assign(field_count, 0);
   out.vignetted_by_field_surface.assign(field_count, std::vector<int>(sys.lens.surface_count(), 0));
-  const int nthreads = threads > 0 ? threads : omp_get_max_threads();
+  const int nthreads = thread_count(threads);
 #pragma omp parallel num_threads(nthreads)
   {
     RayBundle<T> rays;

@@ -10,6 +10,7 @@
 // is 0x10000 + ((hi - 0xD800) << 10) + (lo - 0xDC00); an unpaired surrogate becomes U+FFFD.
 #pragma once
 
+#include <cstddef>
 #include <string>
 #include <string_view>
 
@@ -30,5 +31,11 @@ std::string latin1_to_utf8(std::string_view bytes);
 
 // `bytes` if it is valid UTF-8, else read as ISO-8859-1 (for names and paths shown or written).
 std::string to_valid_utf8(std::string_view bytes);
+
+// Levenshtein distance d(a, b): the fewest single-character insertions, deletions and
+// substitutions turning a into b (byte-wise, case-sensitive), by the recurrence
+//   d(i, j) = min(d(i-1, j) + 1, d(i, j-1) + 1, d(i-1, j-1) + [a_i != b_j]).
+// For "did you mean" suggestions (lens keys, glass names).
+std::size_t edit_distance(std::string_view a, std::string_view b);
 
 }  // namespace lensopt

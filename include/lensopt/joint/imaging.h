@@ -138,7 +138,7 @@ class DifferentiableImaging {
 
   // Of the last calls. render() and backward() may run from several threads at once (the patch
   // kernels of an image size are made once, under a lock); prepare() may not overlap them.
-  const ImagingTimings& timings() const;
+  ImagingTimings timings() const;  // a snapshot
 
  private:
   struct State;

@@ -14,6 +14,12 @@
 //   m = b1 m + (1 - b1) g,  v = b2 v + (1 - b2) g^2,  x -= lr_t m^ / (sqrt(v^) + eps),
 // learning rate lr_t = lr for t < T_c, then lr (1 + cos(pi (t - T_c) / T_d)) / 2 for the T_d
 // decay steps (a half cosine to 0); the task's learning rate follows the same factor.
+// A failed step (an exception from the imaging or the task, a non-finite loss or gradient) is
+// not fatal: as Ceres rejects an infeasible point and shrinks its trust region, the lens and the
+// Adam moments go back to before the last update, the lens step is halved (and doubled again,
+// up to its schedule, by each successful step), and the run goes on with the next batch;
+// JointResult::reverted_steps counts them. 8 failures in a row end the run with the error. (The
+// task's own update of a failed step is kept: a network has no cheap snapshot.)
 //
 // The paper's three settings (its Table 2), run by one call on the same data stream (the crop
 // generator and the network's initialization restart from the seed for each):
@@ -32,6 +38,8 @@
 
 #include <atomic>
 #include <filesystem>
+#include <functional>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -75,6 +83,8 @@ struct JointOptions {
   int stop_after_steps = -1;  // stop (as if interrupted) after this many steps in all (tests)
   bool verbose = true;        // progress on stderr
   const std::atomic<bool>* interrupt = nullptr;
+  // Makes the task (empty: make_task(task, task_options)); tests inject tasks through it.
+  std::function<std::unique_ptr<Task>(const std::string&, const TaskOptions&)> task_factory;
 
   int total_steps() const { return constant_steps + decay_steps; }
   void validate() const;  // throws Error naming the bad value
@@ -117,6 +127,7 @@ struct JointResult {
   double seconds = 0;
   int steps_done = 0;        // joint steps run (all phases, this call and resumed ones)
   bool interrupted = false;  // stopped early (interrupt or stop_after_steps)
+  int reverted_steps = 0;    // failed steps (exception, non-finite loss or gradient) reverted
   JointTimings timings;      // joint phase, this call
   std::vector<std::string> notes;
 };

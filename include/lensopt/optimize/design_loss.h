@@ -34,6 +34,7 @@
 #include <limits>
 #include <vector>
 
+#include "lensopt/core/threads.h"
 #include "lensopt/optimize/variables.h"
 #include "lensopt/trace/system.h"
 
@@ -182,7 +183,7 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
   const int angle_offset = path_offset + all_fields * k_count;
   const int glass_offset = angle_offset + all_fields * k_count * 2;
 
-  const int nthreads = trace_options.threads > 0 ? trace_options.threads : omp_get_max_threads();
+  const int nthreads = thread_count(trace_options.threads);
 #pragma omp parallel num_threads(nthreads)
   {
     RayBundle<T> bundle, edge_bundle;

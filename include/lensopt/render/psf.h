@@ -36,6 +36,7 @@
 
 #include "lensopt/analysis/spot.h"
 #include "lensopt/core/scalar.h"
+#include "lensopt/core/threads.h"
 #include "lensopt/trace/system.h"
 
 namespace lensopt {
@@ -247,7 +248,7 @@ PsfSet<T> compute_psfs(const TraceSystem<T>& sys, const std::vector<int>& channe
   set.fields_deg = sys.fields_deg;
   const int field_count = static_cast<int>(sys.fields_deg.size());
   set.fields.resize(field_count);
-  const int nthreads = threads > 0 ? threads : omp_get_max_threads();
+  const int nthreads = thread_count(threads);
 #pragma omp parallel num_threads(nthreads)
   {
     RayBundle<T> rays;

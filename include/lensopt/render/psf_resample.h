@@ -73,6 +73,20 @@ struct PsfResampling {
   }
 };
 
+// The patch PSF sum_h a_h P_h of the field PSFs (`cells` bins each; psf_of_field(h) returns
+// field h's grid), fields with a_h = 0 skipped; the same sums for the Renderer (make_psf_grid)
+// and the joint imaging's patch kernels.
+template <typename FieldPsf>
+void mix_field_psfs(const std::vector<double>& a, std::size_t cells, FieldPsf&& psf_of_field,
+                    std::vector<double>& mixed) {
+  mixed.assign(cells, 0.0);
+  for (std::size_t h = 0; h < a.size(); ++h) {
+    if (a[h] == 0.0) continue;
+    const std::vector<double>& psf = psf_of_field(static_cast<int>(h));
+    for (std::size_t i = 0; i < cells; ++i) mixed[i] += a[h] * psf[i];
+  }
+}
+
 // The largest PSF kernel radius in pixels (a kernel holds (2 r + 1)^2 values).
 inline constexpr int kMaxPsfKernelRadiusPx = 4096;
 

@@ -26,6 +26,7 @@
 #include <limits>
 #include <vector>
 
+#include "lensopt/core/constants.h"
 #include "lensopt/core/scalar.h"
 #include "lensopt/glass/dispersion.h"
 #include "lensopt/paraxial/paraxial.h"
@@ -33,8 +34,6 @@
 #include "lensopt/trace/trace_lens.h"
 
 namespace lensopt {
-
-inline constexpr double kPi = 3.14159265358979323846;
 
 // Sampling and tracing options (validated by validate()).
 struct TraceOptions {

@@ -1,0 +1,41 @@
+// The blocks of the overlap-add blur (render/overlap_add.h).
+#include "lensopt/render/overlap_add.h"
+
+#include <algorithm>
+
+namespace lensopt {
+
+OverlapAddBuffers::OverlapAddBuffers(int ny_, int nx_)
+    : nx(nx_),
+      ny(ny_),
+      plans(fft_plans(ny_, nx_)),
+      real(static_cast<std::size_t>(ny_) * nx_),
+      spectrum(static_cast<std::size_t>(ny_) * (nx_ / 2 + 1)) {}
+
+void load_reflected_block(const FloatImage& image, int c, int x_first, int y_first, int cols,
+                          int rows, OverlapAddBuffers& b) {
+  const int nx = b.nx, ny = b.ny, channels = image.channels;
+  b.reflect_x.resize(cols);
+  for (int i = 0; i < cols; ++i)
+    b.reflect_x[i] = reflect_index(x_first + i, image.width) * channels;
+  for (int j = 0; j < rows; ++j) {
+    const int sy = reflect_index(y_first + j, image.height);
+    const float* src =
+        image.pixels.data() + static_cast<std::size_t>(sy) * image.width * channels + c;
+    double* row = b.real.data + static_cast<std::size_t>(j) * nx;
+    for (int i = 0; i < cols; ++i) row[i] = src[b.reflect_x[i]];
+    std::fill(row + cols, row + nx, 0.0);
+  }
+  std::fill(b.real.data + static_cast<std::size_t>(rows) * nx,
+            b.real.data + static_cast<std::size_t>(ny) * nx, 0.0);
+  fftw_execute_dft_r2c(b.plans.forward, b.real.data, b.spectrum.data);
+}
+
+void convolve_loaded_block(const std::complex<double>* kernel_spectrum, OverlapAddBuffers& b) {
+  std::complex<double>* s = b.complex_spectrum();
+  const std::size_t size = b.spectrum_size();
+  for (std::size_t i = 0; i < size; ++i) s[i] = s[i] * kernel_spectrum[i];
+  fftw_execute_dft_c2r(b.plans.backward, b.spectrum.data, b.real.data);
+}
+
+}  // namespace lensopt
