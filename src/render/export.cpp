@@ -31,33 +31,12 @@ bool label(FloatImage& img, int x, int y, const std::string& text, int size) {
   return ok;
 }
 
-}  // namespace
-
-void ExportOptions::validate() const {
-  if (output_dir.empty()) throw Error("export: no output directory given (-o DIR)");
-  if (width < 18 || height < 18 || width > 65536 || height > 65536)
-    throw Error(
-        fmt::format("image size {}x{} must be within 18..65536 in each direction", width, height));
-  if (res_factor != 1 && res_factor != 2)
-    throw Error(fmt::format("resolution factor {} must be 1 or 2", res_factor));
-}
-
-ExportSummary export_imaging_model(const ImagingModel& model, const ExportOptions& options) {
-  options.validate();
-  ExportSummary summary;
-  const fs::path& dir = options.output_dir;
-  std::error_code ec;
-  fs::create_directories(dir / "psf", ec);
-  if (ec) {
-    throw Error(SourceLocation{dir.string()},
-                fmt::format("cannot create the output directory: {}", ec.message()));
-  }
+// psf/field_NN.exr (the field PSFs, G x G, RGB) and psf_sheet.png (peak-normalized, gamma 1/2.2,
+// labelled with the field angle).
+void write_field_psfs(const ImagingModel& model, const fs::path& dir, ExportSummary& summary) {
   auto wrote = [&](const fs::path& p) { summary.files.push_back(p); };
-  const PsfOptions& popt = model.psfs.options;
-  const int g = popt.grid_size;
+  const int g = model.psfs.options.grid_size;
   const int field_count = static_cast<int>(model.fields_deg.size());
-
-  // Field PSFs as float images, and the contact sheet.
   constexpr int kScale = 3, kColumns = 7, kMargin = 8, kLabel = 22;
   const int tile = g * kScale;
   const int rows = (field_count + kColumns - 1) / kColumns;
@@ -87,9 +66,12 @@ ExportSummary export_imaging_model(const ImagingModel& model, const ExportOption
   }
   write_image(dir / "psf_sheet.png", sheet);
   wrote(dir / "psf_sheet.png");
+}
 
-  // The PSF grid of the image size.
-  const PsfGrid grid = make_psf_grid(model, options.width, options.height, options.res_factor);
+// psf_grid.exr (the 9 x 9 patch kernels at the pixel pitch, each centred in a tile of the
+// largest kernel's size) and psf_grid.png (each tile peak-normalized for viewing).
+void write_psf_grid(const PsfGrid& grid, const fs::path& dir, ExportSummary& summary) {
+  auto wrote = [&](const fs::path& p) { summary.files.push_back(p); };
   const int k = 2 * grid.max_radius + 1;
   const int n = PsfGrid::kPatches;
   summary.kernel_size = k;
@@ -120,9 +102,13 @@ ExportSummary export_imaging_model(const ImagingModel& model, const ExportOption
   wrote(dir / "psf_grid.exr");
   write_image(dir / "psf_grid.png", grid_view);
   wrote(dir / "psf_grid.png");
+}
 
-  // Distortion and relative-illumination maps.
-  const SensorGeometry& geo = grid.geometry;
+// distortion.exr: per pixel the warp's source offset (dx, dy, pixels) and D(r) at the undistorted
+// height; only if the map is invertible (returned).
+bool write_distortion_map(const ImagingModel& model, const ExportOptions& options,
+                          const SensorGeometry& geo, const fs::path& dir, ExportSummary& summary) {
+  auto wrote = [&](const fs::path& p) { summary.files.push_back(p); };
   FloatImage distortion(options.width, options.height, 3, 0.0f);
   const bool invertible = [&] {
     try {
@@ -146,15 +132,30 @@ ExportSummary export_imaging_model(const ImagingModel& model, const ExportOption
     write_float_image(dir / "distortion.exr", distortion, {"dx", "dy", "D"});
     wrote(dir / "distortion.exr");
   }
+  return invertible;
+}
+
+// relative_illumination.exr: the Renderer's factor R(r) per pixel.
+void write_relative_illumination(const ImagingModel& model, const ExportOptions& options,
+                                 const fs::path& dir, ExportSummary& summary) {
   RenderOptions ro;
   ro.res_factor = options.res_factor;
   const Renderer renderer(model, ro);
   FloatImage ri(options.width, options.height, 1, 1.0f);
   renderer.apply_relative_illumination(ri);
   write_float_image(dir / "relative_illumination.exr", ri);
-  wrote(dir / "relative_illumination.exr");
+  summary.files.push_back(dir / "relative_illumination.exr");
+}
 
-  // Per-field values and the grid's layout.
+// fields.json: the per-field values, the PSF sampling and the grid's layout.
+void write_fields_json(const ImagingModel& model, const ExportOptions& options, const PsfGrid& grid,
+                       bool invertible, const fs::path& dir, ExportSummary& summary) {
+  const PsfOptions& popt = model.psfs.options;
+  const int g = popt.grid_size;
+  const int field_count = static_cast<int>(model.fields_deg.size());
+  const int n = PsfGrid::kPatches;
+  const int k = 2 * grid.max_radius + 1;
+  const SensorGeometry& geo = grid.geometry;
   using nlohmann::json;
   json fields = json::array();
   for (int h = 0; h < field_count; ++h) {
@@ -206,7 +207,36 @@ ExportSummary export_imaging_model(const ImagingModel& model, const ExportOption
                   {"patches", patches}};
   write_file_atomic(dir / "fields.json",
                     j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n");
-  wrote(dir / "fields.json");
+  summary.files.push_back(dir / "fields.json");
+}
+
+}  // namespace
+
+void ExportOptions::validate() const {
+  if (output_dir.empty()) throw Error("export: no output directory given (-o DIR)");
+  if (width < 18 || height < 18 || width > 65536 || height > 65536)
+    throw Error(
+        fmt::format("image size {}x{} must be within 18..65536 in each direction", width, height));
+  if (res_factor != 1 && res_factor != 2)
+    throw Error(fmt::format("resolution factor {} must be 1 or 2", res_factor));
+}
+
+ExportSummary export_imaging_model(const ImagingModel& model, const ExportOptions& options) {
+  options.validate();
+  ExportSummary summary;
+  const fs::path& dir = options.output_dir;
+  std::error_code ec;
+  fs::create_directories(dir / "psf", ec);
+  if (ec) {
+    throw Error(SourceLocation{dir.string()},
+                fmt::format("cannot create the output directory: {}", ec.message()));
+  }
+  write_field_psfs(model, dir, summary);
+  const PsfGrid grid = make_psf_grid(model, options.width, options.height, options.res_factor);
+  write_psf_grid(grid, dir, summary);
+  const bool invertible = write_distortion_map(model, options, grid.geometry, dir, summary);
+  write_relative_illumination(model, options, dir, summary);
+  write_fields_json(model, options, grid, invertible, dir, summary);
   return summary;
 }
 
