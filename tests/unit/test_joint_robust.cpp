@@ -1,8 +1,9 @@
 // Robust long runs of the joint optimization (issue 13): a failed step (an exception, a
 // non-finite loss) reverts the lens to before the last update, halves the lens step and the run
-// goes on; too many failures in a row end it with the error. The task here is a plain C++ one
-// (no libtorch): the mean squared error of the rendered crops to the sharp ones, with no
-// parameters of its own, so the lens alone moves.
+// goes on; too many failures in a row end it with the error. And the calls documented as
+// concurrent (joint imaging's render/backward, Renderer::render) from two threads at once. The task
+// here is a plain C++ one (no libtorch): the mean squared error of the rendered crops to the sharp
+// ones, with no parameters of its own, so the lens alone moves.
 #include <doctest/doctest.h>
 
 #include <cmath>
@@ -10,11 +11,15 @@
 #include <limits>
 #include <set>
 #include <sstream>
+#include <thread>
 
 #include "lensopt/core/atomic_file.h"
 #include "lensopt/core/error.h"
+#include "lensopt/glass/glass.h"
+#include "lensopt/joint/imaging.h"
 #include "lensopt/joint/joint.h"
 #include "lensopt/lens/lens_io.h"
+#include "lensopt/render/render.h"
 #include "test_joint_support.h"
 #include "test_support.h"
 
@@ -145,4 +150,71 @@ TEST_CASE("joint: too many failed steps in a row end the run with the error") {
   o.constant_steps = 12;
   CHECK_THROWS_WITH_AS(optimize_joint(lens, o), doctest::Contains("failed steps in a row"), Error);
   std::filesystem::remove_all(dir);
+}
+
+TEST_CASE(
+    "joint imaging: render and backward from two threads at once give the one-thread values") {
+  // imaging.h allows render() and backward() from several threads at once (the ThreadSanitizer
+  // run of docs/tsan.md watches this test for races on the kernels, caches and timings).
+  const Lens lens = read_lens(test::source_dir() / "lenses" / "doublet.toml");
+  LensParameterization param(lens, GlassSpace(*load_catalog("ohara")));
+  const std::vector<double> x = param.from_lens(lens);
+  DifferentiableImagingOptions opt;
+  opt.sampling.rings = 4;
+  opt.sampling.fields = 5;
+  opt.threads = 1;
+  DifferentiableImaging imaging(param, GlassMode::kQuantized, {}, opt);
+  imaging.prepare(x);
+  FloatImage scene(160, 120, 3);
+  for (std::size_t i = 0; i < scene.pixels.size(); ++i)
+    scene.pixels[i] = static_cast<float>((i * 7919) % 101) / 100.0f;
+  const CropWindow crops[2] = {{8, 8, 48, 40}, {100, 60, 48, 40}};
+  FloatImage grad(48, 40, 3);
+  for (std::size_t i = 0; i < grad.pixels.size(); ++i)
+    grad.pixels[i] = static_cast<float>((i * 31) % 17) / 17.0f - 0.5f;
+  std::vector<double> one[2], gx_one[2];
+  for (int k = 0; k < 2; ++k) {
+    one[k] = imaging.render_values(scene, crops[k]);
+    imaging.backward(scene, crops[k], grad, gx_one[k]);
+  }
+  imaging.prepare(x);  // empties the kernels and the forward cache: the threads race to make them
+  std::vector<double> two[2], gx_two[2];
+  std::thread workers[2];
+  for (int k = 0; k < 2; ++k)
+    workers[k] = std::thread([&, k] {
+      two[k] = imaging.render_values(scene, crops[k]);
+      imaging.backward(scene, crops[k], grad, gx_two[k]);
+    });
+  for (std::thread& w : workers) w.join();
+  for (int k = 0; k < 2; ++k) {
+    CHECK(two[k] == one[k]);
+    CHECK(gx_two[k] == gx_one[k]);
+  }
+  const ImagingTimings t = imaging.timings();
+  CHECK(t.render_s > 0.0);
+  CHECK(t.adjoint_s > 0.0);
+}
+
+TEST_CASE("render: one Renderer rendering from two threads at once gives the one-thread images") {
+  const Lens lens = read_lens(test::source_dir() / "lenses" / "doublet.toml");
+  TraceOptions trace;
+  trace.rings = 4;
+  trace.fields = 5;
+  RenderOptions ro;
+  ro.threads = 1;
+  FloatImage a(120, 90, 3), b(96, 64, 1);
+  for (std::size_t i = 0; i < a.pixels.size(); ++i)
+    a.pixels[i] = static_cast<float>((i * 7919) % 101) / 100.0f;
+  for (std::size_t i = 0; i < b.pixels.size(); ++i)
+    b.pixels[i] = static_cast<float>((i * 104729) % 97) / 96.0f;
+  const Renderer reference(build_imaging_model(lens, trace), ro);
+  const FloatImage ra = reference.render(a).image, rb = reference.render(b).image;
+  const Renderer shared(build_imaging_model(lens, trace), ro);  // empty caches
+  FloatImage sa, sb;
+  std::thread ta([&] { sa = shared.render(a).image; });
+  std::thread tb([&] { sb = shared.render(b).image; });
+  ta.join();
+  tb.join();
+  CHECK(sa.pixels == ra.pixels);
+  CHECK(sb.pixels == rb.pixels);
 }
