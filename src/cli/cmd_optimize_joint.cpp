@@ -11,6 +11,7 @@
 
 #include "commands.h"
 #include "lensopt/core/error.h"
+#include "lensopt/core/output_checks.h"
 #include "lensopt/joint/joint.h"
 #include "lensopt/lens/lens_io.h"
 
@@ -59,11 +60,61 @@ std::filesystem::path beside(const std::filesystem::path& out, const std::string
   return out.parent_path() / (out.stem().string() + suffix);
 }
 
+// The files a joint run writes: the lens, the step log, the network and (with
+// --checkpoint-every) the checkpoint folder; defaults beside OUT.toml.
+struct JointOutputs {
+  std::filesystem::path lens, log, network, checkpoint_dir;
+};
+
+JointOutputs joint_outputs(const JointCommand& cmd, const std::filesystem::path& out_path) {
+  return {
+      out_path, cmd.log.empty() ? beside(out_path, ".csv") : std::filesystem::path(cmd.log),
+      cmd.network.empty() ? beside(out_path, ".network.pt") : std::filesystem::path(cmd.network),
+      cmd.checkpoint_dir.empty() ? beside(out_path, ".checkpoint")
+                                 : std::filesystem::path(cmd.checkpoint_dir)};
+}
+
+// The output layer's checks before any work: every output can be written and is none of the
+// run's inputs (the lens, unless --in-place; the training images; a TorchScript task's module;
+// the resumed checkpoint, except as the checkpoint folder itself, which a resumed run goes on
+// writing), and no two outputs are the same file.
+void check_joint_outputs(const JointCommand& cmd, const OptimizeShared& shared) {
+  const std::filesystem::path out_path = shared.output_path;
+  if (out_path.empty()) throw Error("give -o OUT.toml (or --in-place to overwrite the input)");
+  const JointOutputs outs = joint_outputs(cmd, out_path);
+  std::vector<std::filesystem::path> inputs;
+  if (!cmd.images.empty()) inputs.emplace_back(cmd.images);
+  const std::string kTorchScript = "torchscript:";
+  if (cmd.task.rfind(kTorchScript, 0) == 0)
+    inputs.emplace_back(cmd.task.substr(kTorchScript.size()));
+  std::vector<std::filesystem::path> file_inputs = inputs;
+  if (!cmd.resume.empty()) file_inputs.emplace_back(cmd.resume);
+  file_inputs.emplace_back(shared.lens_path);
+  std::vector<std::filesystem::path> written;
+  for (const auto& out : {outs.log, outs.network}) {
+    std::vector<std::filesystem::path> others = file_inputs;
+    others.insert(others.end(), written.begin(), written.end());
+    others.push_back(outs.lens);
+    check_output_file(out, others);
+    written.push_back(out);
+  }
+  if (!shared.in_place) {
+    check_output_file(outs.lens, file_inputs);
+  } else {
+    check_output_file(outs.lens, inputs);
+  }
+  if (cmd.checkpoint_every > 0) {
+    inputs.emplace_back(shared.lens_path);
+    check_output_dir(outs.checkpoint_dir, inputs);
+  }
+}
+
 void run_joint(const JointCommand& cmd, const OptimizeShared& shared) {
   if (!torch_available())
     throw Error(
         "--joint needs libtorch, and this lensopt was built without it (LENSOPT_WITH_TORCH=OFF); "
         "install libtorch-dev and rebuild with -DLENSOPT_WITH_TORCH=ON");
+  check_joint_outputs(cmd, shared);
   const Lens lens = read_lens(shared.lens_path);
   std::filesystem::path out_path = shared.output_path;
   if (out_path.empty()) throw Error("give -o OUT.toml (or --in-place to overwrite the input)");
