@@ -4,8 +4,9 @@
 # one shared output folder, run at the same time, one of them SIGKILLed once it has written two of
 # its images and then run again; `render merge OUT` joins them. (2) Three shards in three folders,
 # joined by `render merge D1 D2 D3 -o M` (images copied). Both must give the reference's images
-# byte for byte and its metrics (CSV and JSON) but the seconds. A merge with a shard missing or a
-# shard that was killed and not resumed is refused naming it; a bad --shard is refused.
+# byte for byte and its metrics (CSV and JSON) but the seconds; a plain run over the shards'
+# folder then renders nothing. A merge with a shard missing, given twice, or killed and not
+# resumed is refused naming it; a bad --shard is refused.
 set -euo pipefail
 lensopt="$1"
 tmp=$(mktemp -d)
@@ -84,6 +85,9 @@ same_as_reference "$tmp/shared"
 for i in 1 2 3; do
   [ -f "$tmp/shared/render_metrics-shard${i}of3.json" ] || fail "shard $i metrics"
 done
+# A plain run over the folder the shards filled trusts their records: nothing to render.
+"${render[@]}" -o "$tmp/shared" > "$tmp/plain.txt" || fail "plain run after the shards"
+grep -q "rendered 0, skipped 24 " "$tmp/plain.txt" || fail "plain run: $(cat "$tmp/plain.txt")"
 
 # (2) Three shards in three folders, merged into a fourth.
 for i in 1 2 3; do "${render[@]}" -o "$tmp/s$i" --shard "$i/3" > /dev/null || fail "shard $i/3"; done
