@@ -596,8 +596,13 @@ DatasetSummary render_dataset(const Renderer& renderer, const DatasetOptions& op
 
   auto interrupted = [&] { return options.interrupt && options.interrupt->load(); };
   const int threads = options.jobs > 0 ? options.jobs : omp_get_max_threads();
+  // Threads inside one image depend on the dataset alone, never on how many images are left: the
+  // blur sums its patches in per-thread accumulators (patches dealt out dynamically) and the
+  // metrics reduce per thread, so the bits of an image and its PSNR/SSIM depend on that count.
+  // With one thread per image a resumed run or a shard renders each image exactly as one
+  // uninterrupted run does (images run in parallel instead); a single image gets every thread.
+  const int inner = summary.dataset_images > 1 ? 1 : threads;
   const int outer = std::max(1, std::min<int>(threads, static_cast<int>(todo.size())));
-  const int inner = std::max(1, threads / outer);
   auto work = [&](int k) {
     // The record is filled in a copy and stored under the mutex (the metrics writer reads all).
     ImageRecord r = summary.records[todo[k]];

@@ -5,9 +5,11 @@
 # SIGINT in turn: each run is signalled once the output folder holds k finished images, k drawn by
 # a seeded RNG from the images still to do (progress, not wall time, decides the moment). A run
 # stopped by SIGINT must exit 130 with metrics files that list every image it reports as done.
-# Then one plain run resumes and must exit 0. The images must equal the reference byte for byte, every
+# The last stop leaves one image to do. Then one plain run resumes and must exit 0. The images must equal the reference byte for byte, every
 # metric row must be filled with the reference's values (seconds and status apart), and no
-# temporary or journal file may remain. LENSOPT_RESUME_SEED picks other moments.
+# temporary or journal file may remain. Last, one output is deleted and a rerun renders it alone:
+# it must again equal the reference (an image may not depend on how many images are left to do).
+# LENSOPT_RESUME_SEED picks other moments.
 set -euo pipefail
 lensopt="$1"
 tmp=$(mktemp -d)
@@ -60,12 +62,17 @@ if [r["path"] for r in ref_rows] != names + ["mean"]:
 out = os.path.join(tmp, "out")
 signalled = {signal.SIGKILL: 0, signal.SIGINT: 0}
 runs = 0
-for round_ in range(8):
+for round_ in range(9):
     done = finished_images(out) if os.path.isdir(out) else 0
-    if done >= n_images - 2:
+    if done >= n_images - 1:
         break
     sig = signal.SIGKILL if round_ % 2 == 0 else signal.SIGINT
-    k = rng.randrange(done + 1, min(done + 8, n_images - 1))
+    # The last round stops the run with one image to go, so the resume renders one image alone
+    # (an image must not depend on how many are left, e.g. through its thread count).
+    last = round_ == 8 or done >= n_images - 3
+    if last:
+        sig = signal.SIGKILL
+    k = n_images - 1 if last else rng.randrange(done + 1, min(done + 8, n_images - 2))
     proc = subprocess.Popen(command(out), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     runs += 1
     while proc.poll() is None and (not os.path.isdir(out) or finished_images(out) < k):
@@ -105,37 +112,52 @@ if signalled[signal.SIGKILL] < 2 or signalled[signal.SIGINT] < 2:
     fail(f"too few interruptions: {signalled}")
 
 # One plain run resumes and finishes.
-result = subprocess.run(command(out), stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-if result.returncode != 0:
-    fail(f"resume: exit {result.returncode}: {result.stderr.decode()}")
+def resume(expect):
+    result = subprocess.run(command(out), stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    if result.returncode != 0:
+        fail(f"resume: exit {result.returncode}: {result.stderr.decode()}")
+    if expect and expect not in result.stdout.decode():
+        fail(f"resume: {result.stdout.decode()}, expected {expect}")
+
 
 # Images byte for byte, metrics row for row, no temporaries.
-for n in names:
-    with open(os.path.join(ref, n), "rb") as a, open(os.path.join(out, n), "rb") as b:
-        if a.read() != b.read():
-            fail(f"{n} differs from the uninterrupted run")
-rows, j = metrics(out)
-if [r["path"] for r in rows] != [r["path"] for r in ref_rows]:
-    fail("metrics rows differ")
-for r, q in zip(rows, ref_rows):
-    for key in ("input", "width", "height", "psnr_db", "ssim", "error"):
-        if r[key] != q[key]:
-            fail(f"metrics {r['path']} {key}: {r[key]!r} vs {q[key]!r}")
-    if r["path"] != "mean" and (r["status"] not in ("rendered", "skipped") or not r["psnr_db"]
-                                or not r["ssim"] or r["width"] != str(width)):
-        fail(f"metrics row not filled: {r}")
-for key in ("mean_psnr_db", "mean_ssim", "failed", "interrupted", "settings"):
-    if j[key] != ref_json[key]:
-        fail(f"metrics JSON {key}: {j[key]} vs {ref_json[key]}")
-for a, b in zip(j["images"], ref_json["images"]):
-    for key in ("path", "width", "height", "psnr_db", "ssim"):
-        if a[key] != b[key]:
-            fail(f"metrics JSON {a['path']} {key}: {a[key]} vs {b[key]}")
-if j["rendered"] + j["skipped"] != n_images:
-    fail(f"rendered {j['rendered']} + skipped {j['skipped']}")
-left = [os.path.join(d, f) for d, _, fs in os.walk(out) for f in fs if f.startswith(".")]
-if left:
-    fail(f"temporary files left: {left}")
+def same_as_reference():
+    for n in names:
+        with open(os.path.join(ref, n), "rb") as a, open(os.path.join(out, n), "rb") as b:
+            if a.read() != b.read():
+                fail(f"{n} differs from the uninterrupted run")
+    rows, j = metrics(out)
+    if [r["path"] for r in rows] != [r["path"] for r in ref_rows]:
+        fail("metrics rows differ")
+    for r, q in zip(rows, ref_rows):
+        for key in ("input", "width", "height", "psnr_db", "ssim", "error"):
+            if r[key] != q[key]:
+                fail(f"metrics {r['path']} {key}: {r[key]!r} vs {q[key]!r}")
+        if r["path"] != "mean" and (r["status"] not in ("rendered", "skipped") or not r["psnr_db"]
+                                    or not r["ssim"] or r["width"] != str(width)):
+            fail(f"metrics row not filled: {r}")
+    for key in ("mean_psnr_db", "mean_ssim", "failed", "interrupted", "settings"):
+        if j[key] != ref_json[key]:
+            fail(f"metrics JSON {key}: {j[key]} vs {ref_json[key]}")
+    for a, b in zip(j["images"], ref_json["images"]):
+        for key in ("path", "width", "height", "psnr_db", "ssim"):
+            if a[key] != b[key]:
+                fail(f"metrics JSON {a['path']} {key}: {a[key]} vs {b[key]}")
+    if j["rendered"] + j["skipped"] != n_images:
+        fail(f"rendered {j['rendered']} + skipped {j['skipped']}")
+    left = [os.path.join(d, f) for d, _, fs in os.walk(out) for f in fs if f.startswith(".")]
+    if left:
+        fail(f"temporary files left: {left}")
+
+
+resume(None)
+same_as_reference()
+# An image rendered alone (its output lost; the run has one image to do) equals the one of the
+# uninterrupted run, where it was one of many.
+lost = rng.choice(names)
+os.remove(os.path.join(out, lost))
+resume(f"rendered 1, skipped {n_images - 1} ")
+same_as_reference()
 print(f"render resume: ok ({runs} interrupted runs: {signalled[signal.SIGKILL]} SIGKILL, "
       f"{signalled[signal.SIGINT]} SIGINT; seed {seed})")
 PY

@@ -42,7 +42,7 @@ struct DatasetOptions {
   std::vector<std::filesystem::path> inputs;
   std::filesystem::path output_dir;
   bool force = false;  // render even if the output exists
-  int jobs = 0;        // threads in all (images in parallel, and inside an image); 0: all cores
+  int jobs = 0;  // threads in all (images in parallel; one image alone: inside it); 0: all cores
   const std::atomic<bool>* interrupt = nullptr;  // set: start no further image
   int shard_index = 1, shard_count = 1;          // render slice I of N (1 <= I <= N)
 
