@@ -98,11 +98,7 @@ void check_joint_outputs(const JointCommand& cmd, const OptimizeShared& shared) 
     check_output_file(out, others);
     written.push_back(out);
   }
-  if (!shared.in_place) {
-    check_output_file(outs.lens, file_inputs);
-  } else {
-    check_output_file(outs.lens, inputs);
-  }
+  check_output_file(outs.lens, shared.in_place ? inputs : file_inputs);
   if (cmd.checkpoint_every > 0) {
     inputs.emplace_back(shared.lens_path);
     check_output_dir(outs.checkpoint_dir, inputs);
