@@ -10,6 +10,7 @@
 #include "commands.h"
 #include "lensopt/core/error.h"
 #include "lensopt/core/interrupt.h"
+#include "lensopt/core/output_checks.h"
 #include "lensopt/joint/joint.h"
 #include "lensopt/lens/lens_io.h"
 
@@ -51,6 +52,51 @@ struct JointCommand {
 
 std::filesystem::path beside(const std::filesystem::path& out, const std::string& suffix) {
   return out.parent_path() / (out.stem().string() + suffix);
+}
+
+// The files a joint run writes: the lens, the step log, the network and (with
+// --checkpoint-every) the checkpoint folder; defaults beside OUT.toml.
+struct JointOutputs {
+  std::filesystem::path lens, log, network, checkpoint_dir;
+};
+
+JointOutputs joint_outputs(const JointCommand& cmd, const std::filesystem::path& out_path) {
+  return {
+      out_path, cmd.log.empty() ? beside(out_path, ".csv") : std::filesystem::path(cmd.log),
+      cmd.network.empty() ? beside(out_path, ".network.pt") : std::filesystem::path(cmd.network),
+      cmd.checkpoint_dir.empty() ? beside(out_path, ".checkpoint")
+                                 : std::filesystem::path(cmd.checkpoint_dir)};
+}
+
+// The output layer's checks before any work: every output can be written and is none of the
+// run's inputs (the lens, unless --in-place; the training images; a TorchScript task's module;
+// the resumed checkpoint, except as the checkpoint folder itself, which a resumed run goes on
+// writing), and no two outputs are the same file.
+void check_joint_outputs(const JointCommand& cmd, const OptimizeShared& shared) {
+  const std::filesystem::path out_path = shared.output_path;
+  if (out_path.empty()) throw Error("give -o OUT.toml (or --in-place to overwrite the input)");
+  const JointOutputs outs = joint_outputs(cmd, out_path);
+  std::vector<std::filesystem::path> inputs;
+  if (!cmd.images.empty()) inputs.emplace_back(cmd.images);
+  const std::string kTorchScript = "torchscript:";
+  if (cmd.task.rfind(kTorchScript, 0) == 0)
+    inputs.emplace_back(cmd.task.substr(kTorchScript.size()));
+  std::vector<std::filesystem::path> file_inputs = inputs;
+  if (!cmd.resume.empty()) file_inputs.emplace_back(cmd.resume);
+  file_inputs.emplace_back(shared.lens_path);
+  std::vector<std::filesystem::path> written;
+  for (const auto& out : {outs.log, outs.network}) {
+    std::vector<std::filesystem::path> others = file_inputs;
+    others.insert(others.end(), written.begin(), written.end());
+    others.push_back(outs.lens);
+    check_output_file(out, others);
+    written.push_back(out);
+  }
+  check_output_file(outs.lens, shared.in_place ? inputs : file_inputs);
+  if (cmd.checkpoint_every > 0) {
+    inputs.emplace_back(shared.lens_path);
+    check_output_dir(outs.checkpoint_dir, inputs);
+  }
 }
 
 // The output lens path, checked before any work: given, .toml, not the input (unless
@@ -208,6 +254,7 @@ void run_joint(const JointCommand& cmd, const OptimizeShared& shared) {
     throw Error(
         "--joint needs libtorch, and this lensopt was built without it (LENSOPT_WITH_TORCH=OFF); "
         "install libtorch-dev and rebuild with -DLENSOPT_WITH_TORCH=ON");
+  check_joint_outputs(cmd, shared);
   const Lens lens = read_lens(shared.lens_path);
   const std::filesystem::path out_path = checked_output_path(shared);
   JointOptions options = joint_options(cmd, shared, out_path);

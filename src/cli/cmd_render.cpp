@@ -1,4 +1,5 @@
-// lensopt render LENS INPUT... -o OUT: aberrated images for single files or whole dataset trees.
+// lensopt render LENS INPUT... -o OUT: aberrated images for single files or whole dataset trees;
+// `--shard I/N` renders a slice, `lensopt render merge DIR...` joins the slices' metrics.
 #include <fmt/core.h>
 #include <malloc.h>
 #include <unistd.h>
@@ -19,6 +20,7 @@
 #include "lensopt/lens/lens_io.h"
 #include "lensopt/render/chart.h"
 #include "lensopt/render/dataset.h"
+#include "lensopt/search/search.h"
 
 namespace lensopt::cli {
 namespace {
@@ -42,6 +44,12 @@ struct RenderCommand {
   int jobs = 0;
   bool force = false;
   bool quiet = false;
+  std::string shard;
+};
+
+struct RenderMergeCommand {
+  std::vector<std::string> dirs;
+  std::string output_dir;
 };
 
 std::string clock_text(double seconds) {
@@ -128,6 +136,7 @@ void run_render(const RenderCommand& cmd) {
   dataset.force = cmd.force;
   dataset.jobs = cmd.jobs;
   dataset.interrupt = &g_render_interrupted;
+  if (!cmd.shard.empty()) parse_shard(cmd.shard, dataset.shard_index, dataset.shard_count);
   for (const std::string& in : cmd.inputs) dataset.inputs.emplace_back(in);
 
   // No input: render the built-in test chart (written to a temporary folder first).
@@ -175,6 +184,9 @@ void run_render(const RenderCommand& cmd) {
   progress.finish();
   for (const std::string& note : summary.notes)
     fmt::print(stderr, "lensopt render: note: {}\n", note);
+  if (dataset.shard_count > 1)
+    fmt::print("shard {}/{}: {} of the dataset's {} images\n", dataset.shard_index,
+               dataset.shard_count, summary.records.size(), summary.dataset_images);
   fmt::print("rendered {}, skipped {} (already there), failed {} in {:.2f} s\n", summary.rendered,
              summary.skipped, summary.failed, summary.seconds);
   if (summary.mean_psnr_db || summary.mean_ssim) {
@@ -202,21 +214,40 @@ void run_render(const RenderCommand& cmd) {
   }
 }
 
+void run_render_merge(const RenderMergeCommand& cmd) {
+  std::vector<fs::path> dirs(cmd.dirs.begin(), cmd.dirs.end());
+  if (cmd.output_dir.empty() && dirs.size() > 1)
+    throw Error("render merge: give -o OUT for the merged folder (shards in several folders)");
+  const fs::path out = cmd.output_dir.empty() ? dirs.front() : fs::path(cmd.output_dir);
+  const DatasetSummary summary = merge_render_metrics(dirs, out);
+  for (const std::string& note : summary.notes)
+    fmt::print(stderr, "lensopt render merge: note: {}\n", note);
+  fmt::print("merged {} images: rendered {}, failed {}\n", summary.records.size(), summary.rendered,
+             summary.failed);
+  if (summary.mean_psnr_db || summary.mean_ssim) {
+    fmt::print("mean PSNR {} dB, mean SSIM {}\n",
+               summary.mean_psnr_db ? fmt::format("{:.3f}", *summary.mean_psnr_db) : "n/a",
+               summary.mean_ssim ? fmt::format("{:.4f}", *summary.mean_ssim) : "n/a");
+  }
+  fmt::print("metrics: {} and {}\n", summary.csv_path.string(), summary.json_path.string());
+  if (summary.failed > 0) throw ExitCode{1};
+}
+
 }  // namespace
 
 void setup_render(CLI::App& app) {
   auto cmd = std::make_shared<RenderCommand>();
+  auto merge = std::make_shared<RenderMergeCommand>();
   CLI::App* sub = app.add_subcommand(
       "render",
       "Aberrated images: spatially varying PSF blur, relative illumination and distortion of a "
       "lens, for image files or whole folders (PNG, JPEG, TIFF, EXR)");
-  sub->add_option("LENS", cmd->lens_path, "lens file (.toml, or the paper's .yml)")->required();
+  sub->add_option("LENS", cmd->lens_path, "lens file (.toml, or the paper's .yml)");
   sub->add_option("INPUT", cmd->inputs,
                   "image files or folders (searched recursively); none: the built-in test chart");
   sub->add_option("-o,--output", cmd->output_dir,
                   "output folder: same relative paths, names, formats and bit depths, plus "
-                  "render_metrics.csv/.json")
-      ->required();
+                  "render_metrics.csv/.json (required)");
   sub->add_option("--res-factor", cmd->res_factor,
                   "simulated resolution factor: 1 (image diagonal = sensor diagonal) or 2 (the "
                   "image is a quadrant of a sensor twice as large)")
@@ -229,7 +260,26 @@ void setup_render(CLI::App& app) {
       ->check(CLI::Range(0, 1024));
   sub->add_flag("--force", cmd->force, "render images whose output already exists");
   sub->add_flag("--quiet,-q", cmd->quiet, "no progress bar");
-  sub->callback([cmd] { run_render(*cmd); });
+  sub->add_option("--shard", cmd->shard,
+                  "render slice I of N (1-based): the images at positions k (input order) with "
+                  "k mod N = I-1; metrics in render_metrics-shardIofN.csv/.json; join them with "
+                  "`lensopt render merge`");
+
+  CLI::App* m = sub->add_subcommand(
+      "merge",
+      "Join the metrics of render shards (--shard I/N) into render_metrics.csv/.json, as one run "
+      "writes them; images of shards in other folders are copied to the merged folder");
+  m->add_option("DIR", merge->dirs, "output folders of the shards (one, if they share it)")
+      ->required();
+  m->add_option("-o,--output", merge->output_dir, "merged folder (default: the one DIR given)");
+  m->callback([merge] { run_render_merge(*merge); });
+
+  sub->callback([cmd, m] {
+    if (m->parsed()) return;
+    if (cmd->lens_path.empty()) throw Error("render: give a LENS file");
+    if (cmd->output_dir.empty()) throw Error("render: give the output folder with -o OUT");
+    run_render(*cmd);
+  });
 }
 
 }  // namespace lensopt::cli

@@ -15,6 +15,16 @@
 // with its status, PSNR and SSIM (input vs blurred, before relative illumination and distortion)
 // and their means; they are rewritten atomically at least every 10 s and at the end (the journal
 // covers the time between).
+//
+// Shards (`--shard I/N`): the whole dataset is listed and checked as above, then a run renders
+// only the images whose position k in that list (input order) has k mod N = I - 1, and writes its
+// metrics as render_metrics-shardIofN.csv/.json (journal .render_metrics-shardIofN.journal), with
+// the position of each image, the dataset's size and fingerprint (FNV-1a 64 over the output
+// paths in order). Shards may share one output folder or use one each; a shard resumes like a
+// whole run, and removes only the temporaries of its own outputs (another shard may be writing
+// beside it, on another machine). `merge_render_metrics` joins the shards' metrics in dataset
+// order into render_metrics.csv/.json, byte for byte what one run writes (but the seconds),
+// copying the images into the merged folder when a shard has its own.
 #pragma once
 
 #include <atomic>
@@ -32,16 +42,18 @@ struct DatasetOptions {
   std::vector<std::filesystem::path> inputs;
   std::filesystem::path output_dir;
   bool force = false;  // render even if the output exists
-  int jobs = 0;        // threads in all (images in parallel, and inside an image); 0: all cores
+  int jobs = 0;  // threads in all (images in parallel; one image alone: inside it); 0: all cores
   const std::atomic<bool>* interrupt = nullptr;  // set: start no further image
+  int shard_index = 1, shard_count = 1;          // render slice I of N (1 <= I <= N)
 
-  // Throws Error if there is no input, no output directory or jobs < 0.
+  // Throws Error if there is no input, no output directory, jobs < 0 or a bad shard.
   void validate() const;
 };
 
 struct ImageRecord {
   enum class Status { kRendered, kSkipped, kFailed, kInterrupted };
   std::filesystem::path input;
+  int index = -1;             // position in the whole dataset (input order)
   std::string relative_path;  // output path relative to OUT ("" if it has none)
   Status status = Status::kFailed;
   std::optional<double> psnr_db;  // +inf when the blur changed nothing
@@ -54,7 +66,9 @@ struct ImageRecord {
 const char* status_name(ImageRecord::Status status);
 
 struct DatasetSummary {
-  std::vector<ImageRecord> records;  // input order
+  std::vector<ImageRecord> records;  // input order (a shard: its images only)
+  int dataset_images = 0;            // images in the whole dataset (all shards)
+  std::string dataset_fingerprint;   // FNV-1a 64 of the output paths, hex
   int rendered = 0, skipped = 0, failed = 0, interrupted = 0;
   bool was_interrupted = false;        // `interrupt` was set during the run
   int stale_temp_files_removed = 0;    // temporaries of an earlier run
@@ -72,6 +86,18 @@ using DatasetProgress = std::function<void(const ImageRecord& record, int done, 
 // output directory that cannot be created or written, two inputs with the same output path).
 DatasetSummary render_dataset(const Renderer& renderer, const DatasetOptions& options,
                               const DatasetProgress& progress = {});
+
+// The metrics files' name without extension: "render_metrics", or "render_metrics-shardIofN".
+std::string metrics_stem(int shard_index, int shard_count);
+
+// Joins the shard metrics (render_metrics-shardIofN.json) found in `dirs` into
+// `output_dir`/render_metrics.csv/.json in dataset order, as one run over the whole dataset writes
+// them (an image a resumed shard skipped counts as rendered); images of a shard in another folder
+// are copied (atomically) to `output_dir`. Throws Error, before writing anything, naming what is
+// wrong: shards of different datasets or settings, a shard missing or given twice, or one that
+// has not finished (interrupted images or a journal left by a kill: run it again).
+DatasetSummary merge_render_metrics(const std::vector<std::filesystem::path>& dirs,
+                                    const std::filesystem::path& output_dir);
 
 // Reads, renders and writes one image (atomically). Throws Error naming the file.
 RenderResult render_file(const Renderer& renderer, const std::filesystem::path& input,
