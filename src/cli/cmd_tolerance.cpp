@@ -42,7 +42,7 @@ struct ToleranceCommand {
   CLI::Option* max_spot_opt = nullptr;
   CLI::Option* distribution_opt = nullptr;
   CLI::Option* compensator_opt = nullptr;
-  CLI::Option* tolerance_opts[5] = {};
+  CLI::Option* tolerance_opts[6] = {};
 };
 
 // A CLI tolerance must be a finite number >= 0; the message names the option.
@@ -56,10 +56,10 @@ void check_cli_tolerance(const CLI::Option* opt, double value) {
 }
 
 void run_tolerance_command(const ToleranceCommand& cmd) {
-  const double cli_values[5] = {cmd.tolerances.curvature_pct, cmd.tolerances.glass_thickness_mm,
+  const double cli_values[6] = {cmd.tolerances.curvature_pct,    cmd.tolerances.glass_thickness_mm,
                                 cmd.tolerances.air_thickness_mm, cmd.tolerances.nd,
-                                cmd.tolerances.vd_pct};
-  for (int i = 0; i < 5; ++i) check_cli_tolerance(cmd.tolerance_opts[i], cli_values[i]);
+                                cmd.tolerances.vd_pct,           cmd.tolerances.asphere_sag_um};
+  for (int i = 0; i < 6; ++i) check_cli_tolerance(cmd.tolerance_opts[i], cli_values[i]);
 
   // The outputs are checked before the (long) run; none may replace the lens.
   for (const std::string& out : {cmd.csv_path, cmd.histogram_path})
@@ -72,10 +72,11 @@ void run_tolerance_command(const ToleranceCommand& cmd) {
 
   ToleranceOptions options;
   table.apply_to(options.tolerances);
-  double* targets[5] = {&options.tolerances.curvature_pct, &options.tolerances.glass_thickness_mm,
-                        &options.tolerances.air_thickness_mm, &options.tolerances.nd,
-                        &options.tolerances.vd_pct};
-  for (int i = 0; i < 5; ++i)
+  double* targets[6] = {
+      &options.tolerances.curvature_pct,    &options.tolerances.glass_thickness_mm,
+      &options.tolerances.air_thickness_mm, &options.tolerances.nd,
+      &options.tolerances.vd_pct,           &options.tolerances.asphere_sag_um};
+  for (int i = 0; i < 6; ++i)
     if (cmd.tolerance_opts[i]->count() > 0) *targets[i] = cli_values[i];
   if (table.distribution) options.distribution = *table.distribution;
   if (cmd.distribution_opt->count() > 0)
@@ -169,6 +170,10 @@ void setup_tolerance(CLI::App& app) {
       sub->add_option("--nd", cmd->tolerances.nd, "index tolerance, +- (default 5e-4)");
   cmd->tolerance_opts[4] = sub->add_option("--vd-pct", cmd->tolerances.vd_pct,
                                            "Abbe number tolerance, +- percent (default 0.5)");
+  cmd->tolerance_opts[5] = sub->add_option(
+      "--asphere-sag-um", cmd->tolerances.asphere_sag_um,
+      "conic and asphere terms of non-spherical surfaces: +- sag at the clear semi-aperture, um, "
+      "each term alone (default 1)");
   sub->add_option("--rings", cmd->rings,
                   "pupil rings per trial (default 16; the paper's full sampling is 32)")
       ->check(CLI::Range(1, 256));

@@ -28,7 +28,8 @@ std::string glass_search_name(GlassSearch search) {
 const char* optimize_table_keys() {
   return "glass_search, constraints, rings, fields, max_iterations, max_rounds, glass_neighbours, "
          "weight_ray_path, weight_ray_angle, weight_glass, min_air_mm, min_glass_mm, "
-         "max_glass_mm, min_image_clearance_mm, max_ray_angle_deg, soft_start, freeze, vary";
+         "max_glass_mm, min_image_clearance_mm, max_ray_angle_deg, max_surface_slope_deg, "
+         "weight_profile, soft_start, freeze, vary";
 }
 
 bool apply_optimize_key(const std::string& key, const toml::node& node, const SourceLocation& where,
@@ -65,6 +66,10 @@ bool apply_optimize_key(const std::string& key, const toml::node& node, const So
     loss.min_image_clearance_mm = number();
   else if (key == "max_ray_angle_deg")
     loss.max_ray_angle_deg = number();
+  else if (key == "max_surface_slope_deg")
+    loss.max_surface_slope_deg = number();
+  else if (key == "weight_profile")
+    loss.weight_profile = number();
   else if (key == "rings")
     options.sampling.rings = integer();
   else if (key == "fields")
@@ -99,7 +104,8 @@ bool apply_optimize_key(const std::string& key, const toml::node& node, const So
   } else if (key == "vary") {
     const toml::array* items = node.as_array();
     if (!items)
-      throw Error(where, "[optimize] vary must be an array of profile variables (\"k3\", \"a4_3\")");
+      throw Error(where,
+                  "[optimize] vary must be an array of profile variables (\"k3\", \"a4_3\")");
     options.vary.clear();
     for (const auto& item : *items) {
       const auto v = item.value<std::string>();

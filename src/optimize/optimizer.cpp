@@ -17,6 +17,7 @@
 #include "lensopt/core/error.h"
 #include "lensopt/core/jet_width.h"
 #include "lensopt/optimize/design_gradient.h"
+#include "lensopt/optimize/profile_bounds.h"
 
 namespace lensopt {
 namespace {
@@ -46,6 +47,52 @@ struct DesignFunctor {
     return ok;
   }
 };
+
+// The profile bounds (profile_bounds.h) of variables x at fixed clear semi-apertures.
+struct ProfileBoundFunctor {
+  const LensParameterization* param;
+  GlassMode mode;
+  std::vector<int> fixed_glasses;
+  std::vector<double> heights_mm;
+  double max_slope_deg;
+  double weight;
+
+  template <typename T>
+  bool operator()(T const* const* parameters, T* residuals) const {
+    const TraceLens<T> lens = param->to_trace_lens(parameters[0], mode, fixed_glasses);
+    profile_bound_residuals(lens, heights_mm, max_slope_deg, weight, residuals);
+    return true;
+  }
+};
+
+// The lens of x, its clear semi-apertures and its profile-bound residual count (0: no profiles).
+struct ProfileBoundSetup {
+  std::vector<double> heights_mm;
+  int count = 0;
+};
+ProfileBoundSetup profile_bound_setup(const LensParameterization& param,
+                                      const std::vector<double>& x, GlassMode mode,
+                                      const std::vector<int>& fixed) {
+  ProfileBoundSetup out;
+  const TraceLens<double> lens = param.to_trace_lens(x.data(), mode, fixed);
+  out.count = profile_bound_count(lens);
+  if (out.count > 0)
+    out.heights_mm = paraxial_clear_semi_apertures_mm(lens, param.structure().specs);
+  return out;
+}
+
+// Sum of squares of the profile-bound residuals at weight 1 (0: every bound met).
+double profile_violation(const LensParameterization& param, const std::vector<double>& x,
+                         GlassMode mode, const std::vector<int>& fixed,
+                         const ProfileBoundSetup& setup, double max_slope_deg) {
+  if (setup.count == 0) return 0.0;
+  const TraceLens<double> lens = param.to_trace_lens(x.data(), mode, fixed);
+  std::vector<double> r(setup.count);
+  profile_bound_residuals(lens, setup.heights_mm, max_slope_deg, 1.0, r.data());
+  double sum = 0.0;
+  for (double v : r) sum += v * v;
+  return sum;
+}
 
 class ProgressCallback : public ceres::IterationCallback {
  public:
@@ -84,6 +131,7 @@ DesignLossOptions with_margin(DesignLossOptions loss) {
   loss.max_glass_mm -= 0.001;
   loss.min_image_clearance_mm += 0.005;
   loss.max_ray_angle_deg -= 0.05;
+  loss.max_surface_slope_deg -= 0.05;
   return loss;
 }
 
@@ -149,6 +197,16 @@ DesignLoss<double> run_phase(const LensParameterization& param, std::vector<doub
     ceres::Problem problem;
     problem.AddResidualBlock(make_cost_for(functor, n, residual_count(param, options.sampling)),
                              nullptr, x.data());
+    // The profile bounds, at the clear semi-apertures of this round's start.
+    const ProfileBoundSetup bounds = profile_bound_setup(param, x, mode, fixed);
+    if (bounds.count > 0) {
+      auto* cost = new ceres::DynamicAutoDiffCostFunction<ProfileBoundFunctor, kStride>(
+          new ProfileBoundFunctor{&param, mode, fixed, bounds.heights_mm,
+                                  loss.max_surface_slope_deg, loss.weight_profile});
+      cost->AddParameterBlock(n);
+      cost->SetNumResiduals(bounds.count);
+      problem.AddResidualBlock(cost, nullptr, x.data());
+    }
     if (!frozen.empty()) problem.SetManifold(x.data(), new ceres::SubsetManifold(n, frozen));
     ceres::Solver::Options solver;
     solver.minimizer_type = ceres::TRUST_REGION;
@@ -181,6 +239,11 @@ DesignLoss<double> run_phase(const LensParameterization& param, std::vector<doub
     }
     if (!loss.paper_penalties && next.ray_angle > 0 && loss.weight_ray_angle < 1e8) {
       loss.weight_ray_angle *= 10;
+      violated = true;
+    }
+    if (profile_violation(param, x, mode, fixed, bounds, loss.max_surface_slope_deg) > 0 &&
+        loss.weight_profile < 1e8) {
+      loss.weight_profile *= 10;
       violated = true;
     }
     loss.weight_glass *= glass_weight_growth;
@@ -271,6 +334,10 @@ void DesignLossOptions::validate() const {
         fmt::format("max_glass_mm = {} is below min_glass_mm = {}", max_glass_mm, min_glass_mm));
   if (!(max_ray_angle_deg > 0.0 && max_ray_angle_deg < 90.0))
     throw Error(fmt::format("max_ray_angle_deg = {} must be in (0, 90)", max_ray_angle_deg));
+  positive(weight_profile, "weight_profile");
+  if (!(max_surface_slope_deg > 0.0 && max_surface_slope_deg < 90.0))
+    throw Error(
+        fmt::format("max_surface_slope_deg = {} must be in (0, 90)", max_surface_slope_deg));
 }
 
 bool ConstraintReport::all_pass() const {
@@ -361,6 +428,16 @@ ConstraintReport check_constraints(const Lens& lens, const DesignLossOptions& lo
       std::acos(std::sqrt(std::clamp(ext.min_cos2_angle, 0.0, 1.0))) * 180.0 / kPi;
   report.rows.push_back({"largest ray angle (deg)", max_angle_deg, loss.max_ray_angle_deg, false,
                          max_angle_deg <= loss.max_ray_angle_deg});
+  // Profile bounds (profile_bounds.h) of the conics and aspheres, at the lens's clear apertures.
+  const TraceLens<double> traced = param.to_trace_lens(x.data(), GlassMode::kContinuous, {});
+  if (profile_bound_count(traced) > 0) {
+    double slope_deg = 0.0, min_q2 = 1.0;
+    profile_extremes(traced, paraxial_clear_semi_apertures_mm(traced, lens.specs), slope_deg,
+                     min_q2);
+    report.rows.push_back({"steepest profile slope (deg)", slope_deg, loss.max_surface_slope_deg,
+                           false,
+                           slope_deg <= loss.max_surface_slope_deg && min_q2 >= kProfileMinDomain});
+  }
   return report;
 }
 

@@ -44,8 +44,8 @@ FocusCompensator parse_focus_compensator(const std::string& text) {
 }
 
 const std::vector<std::string>& tolerance_names() {
-  static const std::vector<std::string> names = {"curvature_pct", "glass_thickness_mm",
-                                                 "air_thickness_mm", "nd", "vd_pct"};
+  static const std::vector<std::string> names = {
+      "curvature_pct", "glass_thickness_mm", "air_thickness_mm", "nd", "vd_pct", "asphere_sag_um"};
   return names;
 }
 
@@ -67,14 +67,16 @@ void Tolerances::validate() const {
   check_tolerance("air_thickness_mm", air_thickness_mm);
   check_tolerance("nd", nd);
   check_tolerance("vd_pct", vd_pct);
+  check_tolerance("asphere_sag_um", asphere_sag_um);
   if (curvature_pct >= 100)
     throw Error(fmt::format("tolerance curvature_pct = {} must be below 100 %", curvature_pct));
   if (vd_pct >= 100) throw Error(fmt::format("tolerance vd_pct = {} must be below 100 %", vd_pct));
 }
 
 Tolerances Tolerances::times(double factor) const {
-  return {curvature_pct * factor, glass_thickness_mm * factor, air_thickness_mm * factor,
-          nd * factor, vd_pct * factor};
+  return {curvature_pct * factor,    glass_thickness_mm * factor,
+          air_thickness_mm * factor, nd * factor,
+          vd_pct * factor,           asphere_sag_um * factor};
 }
 
 void ToleranceSettings::apply_to(Tolerances& t) const {
@@ -83,6 +85,7 @@ void ToleranceSettings::apply_to(Tolerances& t) const {
   if (air_thickness_mm) t.air_thickness_mm = *air_thickness_mm;
   if (nd) t.nd = *nd;
   if (vd_pct) t.vd_pct = *vd_pct;
+  if (asphere_sag_um) t.asphere_sag_um = *asphere_sag_um;
 }
 
 void ToleranceOptions::validate() const {
@@ -165,6 +168,8 @@ ToleranceSettings parse_tolerance_table(std::string_view toml_text,
         out.nd = tolerance();
       } else if (name == "vd_pct") {
         out.vd_pct = tolerance();
+      } else if (name == "asphere_sag_um") {
+        out.asphere_sag_um = tolerance();
       } else if (name == "distribution") {
         out.distribution = parse_tolerance_distribution(text());
       } else if (name == "compensator") {
@@ -181,8 +186,8 @@ ToleranceSettings parse_tolerance_table(std::string_view toml_text,
       } else {
         throw Error(where,
                     fmt::format("unknown key '{}' in [tolerance] (known: curvature_pct, "
-                                "glass_thickness_mm, air_thickness_mm, nd, vd_pct, distribution, "
-                                "compensator, max_spot_um, trials, seed)",
+                                "glass_thickness_mm, air_thickness_mm, nd, vd_pct, asphere_sag_um, "
+                                "distribution, compensator, max_spot_um, trials, seed)",
                                 name));
       }
     } catch (const Error& e) {

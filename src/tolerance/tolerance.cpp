@@ -158,6 +158,83 @@ std::string format_limit(double value, const char* unit) {
   return fmt::format("{:g}{}", value, unit);
 }
 
+// Clear semi-aperture per surface (mm): its semi-diameter when the lens gives one, else the
+// paraxial estimate |y_marginal| + |y_chief| (marginal ray at the entrance-pupil edge, chief
+// ray through the pupil centre at the largest field).
+std::vector<double> clear_semi_apertures_mm(const Lens& lens, const TraceLens<double>& tl) {
+  const int k_count = tl.surface_count();
+  const ParaxialData<double> par = paraxial_data(tl, tl.reference_nm());
+  const double r_ep = par.efl_mm / lens.specs.f_number / 2.0;
+  const double tan_field = std::tan(lens.specs.half_field_deg * kPi / 180.0);
+  std::vector<double> aperture(k_count, 0.0);
+  for (int k = 0; k < k_count; ++k) {
+    const double given = lens.surfaces[k].semi_diameter_mm;
+    if (given > 0.0) {
+      aperture[k] = given;
+      continue;
+    }
+    const ParaxialRay<double> marginal =
+        paraxial_trace(tl, ParaxialRay<double>{r_ep, 0.0}, k + 1, kWavelengthD_nm);
+    const ParaxialRay<double> chief =
+        paraxial_trace(tl, ParaxialRay<double>{-par.entrance_pupil_z_mm * tan_field, tan_field},
+                       k + 1, kWavelengthD_nm);
+    aperture[k] = std::abs(marginal.y) + std::abs(chief.y);
+  }
+  return aperture;
+}
+
+// The profile terms of the non-spherical surfaces (tolerance.h, "profile").
+void add_profile_parameters(const Lens& lens, const Tolerances& tol,
+                            std::vector<ToleranceParameter>& out) {
+  using Kind = ToleranceParameter::Kind;
+  bool any = false;
+  for (const Surface& s : lens.surfaces) any = any || !s.is_spherical();
+  if (!any) return;
+  const std::vector<double> aperture = clear_semi_apertures_mm(lens, make_trace_lens(lens));
+  const double sag_mm = tol.asphere_sag_um / 1000.0;
+  const int k_count = static_cast<int>(lens.surfaces.size());
+  for (int k = 0; k < k_count; ++k) {
+    const Surface& s = lens.surfaces[k];
+    if (s.is_spherical()) continue;
+    const double h = aperture[k];
+    const bool usable = std::isfinite(h) && h > 0.0;
+    const std::string where = fmt::format("{:g} um sag at h {:.4g} mm", tol.asphere_sag_um, h);
+    // Conic: dS/dk = c^3 h^4 / (2 q (1 + q)^2), q = sqrt(1 - (1 + k) c^2 h^2).
+    const double c = s.curvature_per_mm;
+    if (c != 0.0) {
+      const double q2 = 1.0 - (1.0 + s.conic) * c * c * h * h;
+      const double q = std::sqrt(std::max(q2, 0.0));
+      const double slope = std::abs(c * c * c) * h * h * h * h / (2.0 * q * (1.0 + q) * (1.0 + q));
+      ToleranceParameter p;
+      p.kind = Kind::kConic;
+      p.surface = k;
+      p.limit = usable && q2 > 0.0 && slope > 0.0 ? sag_mm / slope : 0.0;
+      p.name = fmt::format("k{}", k + 1);
+      p.column = fmt::format("dk{}", k + 1);
+      p.description = fmt::format("surface {} conic constant (k {:.6g})", k + 1, s.conic);
+      p.limit_text = fmt::format("{} (k +-{:.3g})", where, p.limit);
+      out.push_back(p);
+    }
+    // Asphere terms a_2i (term j = i - 1): the sag a_2i h^(2i).
+    for (int j = 0; j < kAsphereTerms; ++j) {
+      const double value = j == 0 ? s.asphere_r2_per_mm : s.asphere[j - 1];
+      if (value == 0.0) continue;
+      const int power = 2 * (j + 1);
+      ToleranceParameter p;
+      p.kind = Kind::kAsphere;
+      p.surface = k;
+      p.term = j;
+      p.limit = usable ? sag_mm / std::pow(h, power) : 0.0;
+      p.name = fmt::format("a{}_{}", power, k + 1);
+      p.column = fmt::format("da{}_{}", power, k + 1);
+      p.description =
+          fmt::format("surface {} asphere term a{} ({:.6g} mm^{})", k + 1, power, value, 1 - power);
+      p.limit_text = fmt::format("{} (a{} +-{:.3g})", where, power, p.limit);
+      out.push_back(p);
+    }
+  }
+}
+
 }  // namespace
 
 std::vector<ToleranceParameter> tolerance_parameters(const Lens& lens, const Tolerances& tol) {
@@ -231,6 +308,7 @@ std::vector<ToleranceParameter> tolerance_parameters(const Lens& lens, const Tol
       out.push_back(p);
     }
   }
+  add_profile_parameters(lens, tol, out);
   return out;
 }
 
@@ -253,13 +331,23 @@ struct ToleranceModel::Impl {
   std::vector<char> gap_checked;
 
   // Axial distance from surface k to k+1 at height h: t_k + sag_{k+1}(h) - sag_k(h), with the
-  // sphere's sag c h^2 / (1 + sqrt(1 - c^2 h^2)) (h is kept inside every sphere).
+  // sphere's sag c h^2 / (1 + sqrt(1 - c^2 h^2)) (h is kept inside every sphere), or the
+  // profile's c h^2 / (1 + q) + a2 h^2 + ... + a16 h^16 (q clamped at 0 outside the conic's
+  // domain).
   static double edge_gap_mm(const TraceLens<double>& tl, int k, double h) {
-    auto sag = [h](double c) {
-      const double ch = std::min(std::abs(c) * h, 1.0);
-      return c * h * h / (1.0 + std::sqrt(1.0 - ch * ch));
+    auto sag = [&tl, h](int i) {
+      const double c = tl.curvature_per_mm[i];
+      if (!tl.has_profiles() || tl.profile[i] == kProfileSphere) {
+        const double ch = std::min(std::abs(c) * h, 1.0);
+        return c * h * h / (1.0 + std::sqrt(1.0 - ch * ch));
+      }
+      const double rho = h * h;
+      const double q = std::sqrt(std::max(1.0 - (1.0 + tl.conic[i]) * c * c * rho, 0.0));
+      double p = 0.0;
+      for (int j = kAsphereTerms - 1; j >= 0; --j) p = tl.asphere_term(i, j) + rho * p;
+      return c * rho / (1.0 + q) + rho * p;
     };
-    return tl.thickness_mm[k] + sag(tl.curvature_per_mm[k + 1]) - sag(tl.curvature_per_mm[k]);
+    return tl.thickness_mm[k] + sag(k + 1) - sag(k);
   }
 
   TraceLens<double> apply(const std::vector<double>& perturbations) const {
@@ -280,6 +368,17 @@ struct ToleranceModel::Impl {
           break;
         case Kind::kVd:
           tl.vd[p.surface] *= 1.0 + d;
+          break;
+        case Kind::kConic:
+          // Only non-spherical surfaces have profile terms: their loop is already the profile's.
+          tl.ensure_profiles();
+          tl.conic[p.surface] += d;
+          if (tl.profile[p.surface] == kProfileSphere) tl.profile[p.surface] = kProfileConic;
+          break;
+        case Kind::kAsphere:
+          tl.ensure_profiles();
+          tl.asphere[static_cast<std::size_t>(p.surface) * kAsphereTerms + p.term] += d;
+          tl.profile[p.surface] = kProfileAsphere;
           break;
       }
     }
@@ -321,26 +420,10 @@ ToleranceModel::ToleranceModel(const Lens& lens, const ToleranceOptions& options
   m.fields_deg = field_angles_deg(lens.specs.half_field_deg, options.fields);
   m.rays = static_cast<int>(paper_pupil_samples(options.rings).size());
 
-  // Clear semi-aperture per surface: its semi-diameter when the lens gives one, else the
-  // paraxial estimate |y_marginal| + |y_chief| (marginal ray at the entrance-pupil edge, chief
-  // ray through the pupil centre at the largest field). An element's rim is at the larger of
-  // its two surfaces' apertures; two surfaces across air meet first at the smaller one.
+  // Clear semi-apertures (clear_semi_apertures_mm). An element's rim is at the larger of its
+  // two surfaces' apertures; two surfaces across air meet first at the smaller one.
   const int k_count = m.nominal.surface_count();
-  const double tan_field = std::tan(lens.specs.half_field_deg * kPi / 180.0);
-  std::vector<double> aperture(k_count, 0.0);
-  for (int k = 0; k < k_count; ++k) {
-    const double given = m.scaled_lens.surfaces[k].semi_diameter_mm;
-    if (given > 0.0) {
-      aperture[k] = given;
-      continue;
-    }
-    const ParaxialRay<double> marginal =
-        paraxial_trace(m.nominal, ParaxialRay<double>{r_ep, 0.0}, k + 1, kWavelengthD_nm);
-    const ParaxialRay<double> chief = paraxial_trace(
-        m.nominal, ParaxialRay<double>{-par.entrance_pupil_z_mm * tan_field, tan_field}, k + 1,
-        kWavelengthD_nm);
-    aperture[k] = std::abs(marginal.y) + std::abs(chief.y);
-  }
+  const std::vector<double> aperture = clear_semi_apertures_mm(m.scaled_lens, m.nominal);
   m.gap_height_mm.assign(std::max(0, k_count - 1), 0.0);
   m.gap_checked.assign(std::max(0, k_count - 1), 0);
   for (int k = 0; k + 1 < k_count; ++k) {

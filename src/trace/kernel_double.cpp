@@ -26,4 +26,44 @@ void trace_surface_double(double c, double shift, double mu, std::size_t count, 
   }
 }
 
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
+__attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default")))
+#endif
+void asphere_intersect_double(double c, double one_plus_k, const double* a, std::size_t count,
+                              const double* x1, const double* y1, const double* l, const double* m,
+                              const double* n, double* s, std::int32_t* failure) {
+  asphere_intersect_chunk(c, one_plus_k, a, count, x1, y1, l, m, n, s, failure);
+}
+
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
+__attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default")))
+#endif
+void trace_surface_profile_double(std::uint8_t profile, double c, double conic, const double* a,
+                                  double shift, double mu, std::size_t count, double* x, double* y,
+                                  double* z, double* l, double* m, double* n,
+                                  std::int32_t* failure, double* travel, double* zeta_out,
+                                  double* zeta_prime_out, bool record) {
+  // As for the sphere: travel is null at the first surface, a constant in each instantiation.
+  if (profile == kProfileConic) {
+    if (record && travel)
+      trace_surface_conic<double, true>(c, conic, shift, mu, count, x, y, z, l, m, n, failure,
+                                        travel, zeta_out, zeta_prime_out);
+    else if (record)
+      trace_surface_conic<double, true>(c, conic, shift, mu, count, x, y, z, l, m, n, failure,
+                                        nullptr, zeta_out, zeta_prime_out);
+    else
+      trace_surface_conic<double, false>(c, conic, shift, mu, count, x, y, z, l, m, n, failure,
+                                         nullptr, nullptr, nullptr);
+  } else if (record && travel) {
+    trace_surface_asphere_chunked<double, true>(c, conic, a, shift, mu, count, x, y, z, l, m, n,
+                                                failure, travel, zeta_out, zeta_prime_out);
+  } else if (record) {
+    trace_surface_asphere_chunked<double, true>(c, conic, a, shift, mu, count, x, y, z, l, m, n,
+                                                failure, nullptr, zeta_out, zeta_prime_out);
+  } else {
+    trace_surface_asphere_chunked<double, false>(c, conic, a, shift, mu, count, x, y, z, l, m, n,
+                                                 failure, nullptr, nullptr, nullptr);
+  }
+}
+
 }  // namespace lensopt::detail

@@ -54,6 +54,11 @@ struct DesignLossOptions {
   double max_glass_mm = 3.0;
   double min_image_clearance_mm = 12.0;
   double max_ray_angle_deg = 60.0;
+  // Profile bounds (optimize/profile_bounds.h): the surface normal of a conic or asphere tilts
+  // at most this far from the axis up to the clear semi-aperture; its LM weight (raised tenfold
+  // while violated, as the others).
+  double max_surface_slope_deg = 60.0;
+  double weight_profile = 100.0;
   // false (strict): squared hinges summed over rays, weights raised while violated (see above).
   // true (paper): the paper's soft penalties, linear hinges averaged over rays (smoothed within
   // kPaperHingeSmoothing of the bound so LM has a derivative), fixed weights; a design may then

@@ -5,10 +5,17 @@
 // toleranced parameter and traces the perturbed lens as it is, never rescaled to the spec (that
 // would hide the focal-length error). For parameter p with tolerance limit L_p and a unit draw
 // u in [-1, 1]:
-//   curvature   c' = c (1 + L u)        L = curvature_pct / 100   (relative; flat surfaces stay
-//   flat) thickness   t' = t + L u            L = glass_thickness_mm, or air_thickness_mm for
-//   airspaces index       nd' = nd + L u          L = nd Abbe number vd' = vd (1 + L u)      L =
-//   vd_pct / 100          (relative)
+//   curvature   c' = c (1 + L u)     L = curvature_pct / 100   (relative; flat surfaces stay flat)
+//   thickness   t' = t + L u         L = glass_thickness_mm, or air_thickness_mm for airspaces
+//   index       nd' = nd + L u       L = nd
+//   Abbe number vd' = vd (1 + L u)   L = vd_pct / 100          (relative)
+//   profile     of every non-spherical surface (conic or even asphere, lens/lens.h), each term on
+//               its own, as a sag error at the surface's clear semi-aperture h (below):
+//                 k' = k + L_k u,   L_k = L / |dS/dk(h)|,  dS/dk = c^3 h^4 / (2 q (1 + q)^2),
+//                 q = sqrt(1 - (1 + k) c^2 h^2)   (not for a flat surface, c = 0: no effect),
+//                 a'_2i = a_2i + L_i u,  L_i = L / h^(2i)   (only the nonzero terms a2..a16),
+//               L = asphere_sag_um / 1000 mm (default 1 um: a polished or molded asphere's form
+//               error), so each term alone moves the rim sag by up to +-L (k to first order).
 // Draws: uniform u ~ U[-1, 1) (default, as in the paper), or normal u ~ N(0, 1/2^2) truncated to
 // [-1, 1], i.e. the tolerance is the 2-sigma limit. Each trial's generator is std::mt19937_64
 // seeded with splitmix64(seed ^ splitmix64(trial index)), and the unit draws are computed from
@@ -43,10 +50,10 @@
 // so does a trial whose elements intersect).
 // Collisions: each space between two surfaces is checked at the height where it would close
 // first (a glass at its element's rim, the larger clear semi-aperture of its two surfaces; an
-// air space at the smaller), the edge gap t_k + sag_{k+1}(h) - sag_k(h) and the centre thickness
-// t_k; a trial with one below 0 has intersecting elements. Clear semi-apertures are the lens's
-// semi-diameters, or the paraxial |y_marginal| + |y_chief| at the largest field. Spaces whose
-// nominal gap is already below 0 are not checked.
+// air space at the smaller), the edge gap t_k + sag_{k+1}(h) - sag_k(h) (the profiles' sags) and
+// the centre thickness t_k; a trial with one below 0 has intersecting elements. Clear
+// semi-apertures are the lens's semi-diameters, or the paraxial |y_marginal| + |y_chief| at the
+// largest field. Spaces whose nominal gap is already below 0 are not checked.
 #pragma once
 
 #include <cstdint>
@@ -77,24 +84,27 @@ struct Tolerances {
   double air_thickness_mm = 0.0;     // airspaces: off by default
   double nd = 5e-4;                  // d-line index, absolute
   double vd_pct = 0.5;               // Abbe number, percent
+  double asphere_sag_um = 1.0;       // conic and asphere terms: sag at the clear aperture, um
 
   // Throws Error naming the first negative or non-finite tolerance.
   void validate() const;
   // Every tolerance multiplied by `factor`.
   Tolerances times(double factor) const;
-  static Tolerances zero() { return {0, 0, 0, 0, 0}; }
+  static Tolerances zero() { return {0, 0, 0, 0, 0, 0}; }
 };
 
-// The tolerance names as used by the [tolerance] table and the command line (--curvature-pct).
+// The tolerance names as used by the [tolerance] table and the command line (--curvature-pct,
+// ..., --asphere-sag-um).
 const std::vector<std::string>& tolerance_names();
 
 // What a [tolerance] table in a lens TOML may set; unset entries are nullopt.
 //   [tolerance]
 //   curvature_pct = 0.2, glass_thickness_mm = 0.05, air_thickness_mm = 0.0, nd = 5e-4,
-//   vd_pct = 0.5, distribution = "uniform", compensator = "paraxial", max_spot_um = 20,
-//   trials = 10000, seed = 1
+//   vd_pct = 0.5, asphere_sag_um = 1.0, distribution = "uniform", compensator = "paraxial",
+//   max_spot_um = 20, trials = 10000, seed = 1
 struct ToleranceSettings {
-  std::optional<double> curvature_pct, glass_thickness_mm, air_thickness_mm, nd, vd_pct;
+  std::optional<double> curvature_pct, glass_thickness_mm, air_thickness_mm, nd, vd_pct,
+      asphere_sag_um;
   std::optional<ToleranceDistribution> distribution;
   std::optional<FocusCompensator> compensator;
   std::optional<double> max_spot_um;
@@ -140,19 +150,24 @@ struct ToleranceOptions {
 
 // One toleranced number of the lens.
 struct ToleranceParameter {
-  enum class Kind { kCurvature, kThickness, kNd, kVd };
+  enum class Kind { kCurvature, kThickness, kNd, kVd, kConic, kAsphere };
   Kind kind = Kind::kCurvature;
   int surface = 0;          // 0-based surface index (kNd/kVd: the surface the glass follows)
+  int term = 0;             // kAsphere: 0 = a2, 1 = a4, ..., 7 = a16
   bool air = false;         // kThickness: an airspace
-  double limit = 0;         // +- limit, native units: relative (curvature, vd), mm, or index
-  std::string name;         // "c1", "t1", "nd1", "vd1" (1-based surface numbers)
-  std::string column;       // CSV column of the drawn perturbation: "dc1_rel", "dt1_mm", ...
+  double limit = 0;         // +- limit, native units: relative (curvature, vd), mm, index,
+                            // conic constant, or mm^(1-2i) (asphere term a_2i)
+  std::string name;         // "c1", "t1", "nd1", "vd1", "k1", "a4_1" (1-based surface numbers)
+  std::string column;       // CSV column of the drawn perturbation: "dc1_rel", "dt1_mm", "dk1",
+                            // "da4_1", ...
   std::string description;  // "surface 1 radius", "element 1 (glass S-LAH64) thickness", ...
-  std::string limit_text;   // "0.2 %", "0.05 mm", "0.0005"
+  std::string limit_text;   // "0.2 %", "0.05 mm", "0.0005", "1 um sag at h 12.3 mm"
 };
 
 // Every parameter of a lens (with zero limits where the tolerance is zero), in a fixed order:
-// curvatures, thicknesses, nd, vd, each by surface.
+// curvatures, thicknesses, nd, vd, then the profile terms (k, a2..a16 of each non-spherical
+// surface), each by surface. The profile limits need the clear semi-apertures (as for the
+// collision check).
 std::vector<ToleranceParameter> tolerance_parameters(const Lens& lens,
                                                      const Tolerances& tolerances);
 

@@ -17,7 +17,8 @@
 //      has x2^2 + y2^2 > r_k^2 is vignetted (kRayVignetted; a select, not a jump).
 // Steps 3-4 are those of a sphere; a conic or even-asphere surface (TraceLens::profile) runs the
 // loops of trace/profile.h instead (closed-form conic, Newton for the asphere), one loop per
-// surface, so an all-spherical lens runs exactly this sphere loop.
+// surface, so an all-spherical lens runs exactly this sphere loop. In double every loop is built
+// for several x86-64 levels (src/trace/kernel_double.cpp).
 // After the last surface the ray is transferred to the image plane at t_{K-1}.
 // Per ray and surface the kernel can record what the design losses need: the axial travel
 // dz_k = t_k + z_{k+1} - z_k in every space k (after surface k, the last one up to the image),
@@ -209,7 +210,11 @@ void trace_bundle(const TraceLens<T>& lens, int w, int end, bool to_image, RayBu
       T* zeta_prime_rec = record ? record->cos2_refraction[k].data() : nullptr;
       const T& conic = lens.conic[k];
       const T* a = lens.asphere.data() + static_cast<std::size_t>(k) * kAsphereTerms;
-      if (profile == kProfileConic) {
+      if constexpr (std::is_same_v<T, double>) {
+        detail::trace_surface_profile_double(profile, c, conic, a, shift, mu, count, x, y, z, l, m,
+                                             n, failure, travel, zeta_rec, zeta_prime_rec,
+                                             record != nullptr);
+      } else if (profile == kProfileConic) {
         if (record)
           detail::trace_surface_conic<T, true>(c, conic, shift, mu, count, x, y, z, l, m, n,
                                                failure, travel, zeta_rec, zeta_prime_rec);

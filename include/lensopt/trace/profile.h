@@ -20,8 +20,15 @@
 // Even asphere. g(s) = s n - S(rho(s)) = 0 solved by Newton's method in double from the conic
 // intersection (from the vertex plane if the conic is missed):
 //   g'(s) = n - 2 S'(rho) (x l + y m),   s <- s - g / g',
-// safeguarded: a step that leaves the domain is halved until it does not; g' <= 0 (grazing or
-// from behind) or no convergence in kNewtonIterations steps is a miss. For a Jet type the
+// converged when |ds| <= 1e-15 (1 + |s| + r). Two stages, same steps and the same test:
+//   (a) the bundle, in chunks of kAsphereChunk rays (structure of arrays, branch-free so the
+//       double loop vectorizes): up to kVectorNewtonSteps plain Newton steps for every ray; a
+//       converged ray keeps its s (a select), a ray whose step would have g' <= 0, a non-finite
+//       ds or leave the domain is set aside; the chunk stops early once no ray is running;
+//   (b) the rays not converged in (a) (rare: steep or far-from-conic rays) run the safeguarded
+//       scalar Newton from the start: a step that leaves the domain is halved until it does not;
+//       g' <= 0 (grazing or from behind) or no convergence in kNewtonIterations steps is a miss.
+// For a Jet type the
 // converged s is then refined by Newton steps in the Jet type itself (one per level of Jet
 // nesting): from an exact value one step makes first derivatives exact (implicit
 // differentiation, ds/dp = -(dg/dp) / g'), a second step second derivatives.
@@ -33,8 +40,11 @@
 
 #include <ceres/jet.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <limits>
+#include <type_traits>
 
 #include "lensopt/core/scalar.h"
 
@@ -52,7 +62,9 @@ struct JetDepth<ceres::Jet<T, N>> {
   static constexpr int value = 1 + JetDepth<T>::value;
 };
 
-inline constexpr int kNewtonIterations = 40;
+inline constexpr int kNewtonIterations = 40;       // safeguarded scalar Newton (stage b)
+inline constexpr int kVectorNewtonSteps = 8;       // branch-free Newton on a chunk (stage a)
+inline constexpr std::size_t kAsphereChunk = 256;  // rays per chunk (stack scratch)
 
 // S(rho) and S'(rho) of an even asphere with terms a[0..7] = a2..a16; q2 = 1 - (1+k) c^2 rho must
 // be > 0 (the caller has checked the domain).
@@ -62,39 +74,47 @@ inline void asphere_sag(const T& c, const T& one_plus_k, const T* a, const T& rh
   using std::sqrt;
   const T one = K<T>(1.0);
   const T q = sqrt(one - one_plus_k * c * c * rho);
-  T p = a[7];
-  T dp = K<T>(8.0) * a[7];
-  for (int j = 6; j >= 0; --j) {
-    p = a[j] + rho * p;
-    dp = K<T>(static_cast<double>(j + 1)) * a[j] + rho * dp;
-  }
+  // Horner in rho, written out (no inner loop, so a ray loop around it vectorizes):
+  // P / rho = a2 + a4 rho + ... + a16 rho^7,  P' = a2 + 2 a4 rho + ... + 8 a16 rho^7.
+  const T p =
+      a[0] +
+      rho * (a[1] +
+             rho * (a[2] + rho * (a[3] + rho * (a[4] + rho * (a[5] + rho * (a[6] + rho * a[7]))))));
+  const T dp =
+      a[0] +
+      rho * (K<T>(2.0) * a[1] +
+             rho * (K<T>(3.0) * a[2] +
+                    rho * (K<T>(4.0) * a[3] +
+                           rho * (K<T>(5.0) * a[4] +
+                                  rho * (K<T>(6.0) * a[5] +
+                                         rho * (K<T>(7.0) * a[6] + rho * (K<T>(8.0) * a[7])))))));
   sag = c * rho / (one + q) + rho * p;
   slope = c / (K<T>(2.0) * q) + dp;
 }
 
-// Refraction at unit normal (nx, ny, nz); writes the new direction, returns the failure code.
-template <typename T, bool kRecord>
+// Refraction at unit normal (nx, ny, nz) of the direction (l, m, n): the new direction
+// (l2, m2, n2), zeta (-1 for a miss) and the raw zeta' for the records; returns the failure code.
+template <typename T>
 inline std::int32_t refract_at_normal(const T& nx, const T& ny, const T& nz, const T& mu, bool miss,
-                                      T& l, T& m, T& n, T* zeta_out, T* zeta_prime_out) {
+                                      const T& l, const T& m, const T& n, T& l2, T& m2, T& n2,
+                                      T& zeta_record, T& zeta_prime_record) {
   using std::sqrt;
   const T one = K<T>(1.0);
   const T zero = K<T>(0.0);
-  const T cos_raw = l * nx + m * ny + n * nz;
-  const bool behind = !(cos_raw > zero);
-  const bool failed = miss || behind;
+  // A miss counts as a hit from behind (one comparison: a mask, so the ray loop vectorizes).
+  const T cos_raw = miss ? zero : l * nx + m * ny + n * nz;
+  const bool failed = !(cos_raw > zero);
   const T cos_i = failed ? one : cos_raw;
   const T zeta = cos_i * cos_i;
   const T zeta_prime_raw = one - mu * mu * (one - zeta);
   const bool tir = zeta_prime_raw < zero;
   const T zeta_prime = tir ? zeta : zeta_prime_raw;
-  if constexpr (kRecord) {
-    *zeta_out = failed ? -one : zeta;  // a miss shows as zeta < 0
-    *zeta_prime_out = zeta_prime_raw;
-  }
+  zeta_record = failed ? -one : zeta;  // a miss shows as zeta < 0
+  zeta_prime_record = zeta_prime_raw;
   const T gamma = sqrt(zeta_prime) - mu * cos_i;
-  l = mu * l + gamma * nx;
-  m = mu * m + gamma * ny;
-  n = mu * n + gamma * nz;
+  l2 = mu * l + gamma * nx;
+  m2 = mu * m + gamma * ny;
+  n2 = mu * n + gamma * nz;
   return failed ? kRayMissedSurface : (tir ? kRayTotalInternalReflection : kRayOk);
 }
 
@@ -112,21 +132,21 @@ inline T conic_intersection(const T& c, const T& one_plus_k, const T& x1, const 
   const T disc = g * g - a * f;
   const bool no_root = disc < zero;
   const T denom_raw = g + sqrt(no_root ? one : disc);
-  const bool bad = no_root || !(denom_raw > zero);
+  const bool bad = no_root | !(denom_raw > zero);
   const T s = f / (bad ? one : denom_raw);
   const T z = s * n;
-  miss = bad || one - c * one_plus_k * z < zero;
+  miss = bad | (one - c * one_plus_k * z < zero);
   return s;
 }
 
 // One surface of conic profile (kernel.h step 3-4 with the conic): positions relative to the
 // previous vertex in, relative to this vertex out.
 template <typename T, bool kRecord>
-void trace_surface_conic(const T& c, const T& conic, const T& shift, const T& mu, std::size_t count,
-                         T* __restrict x, T* __restrict y, T* __restrict z, T* __restrict l,
-                         T* __restrict m, T* __restrict n, std::int32_t* __restrict failure,
-                         T* __restrict travel, T* __restrict zeta_out,
-                         T* __restrict zeta_prime_out) {
+inline __attribute__((always_inline)) void trace_surface_conic(
+    const T& c, const T& conic, const T& shift, const T& mu, std::size_t count, T* __restrict x,
+    T* __restrict y, T* __restrict z, T* __restrict l, T* __restrict m, T* __restrict n,
+    std::int32_t* __restrict failure, T* __restrict travel, T* __restrict zeta_out,
+    T* __restrict zeta_prime_out) {
   using std::sqrt;
   const T one = K<T>(1.0);
   const T one_plus_k = one + conic;
@@ -148,9 +168,16 @@ void trace_surface_conic(const T& c, const T& conic, const T& shift, const T& mu
     if constexpr (kRecord) {
       if (travel) travel[i] = z2 - z_rel;
     }
-    failure[i] = refract_at_normal<T, kRecord>(-c * x2 * inv, -c * y2 * inv, nz_raw * inv, mu, miss,
-                                               l[i], m[i], n[i], zeta_out + (kRecord ? i : 0),
-                                               zeta_prime_out + (kRecord ? i : 0));
+    T l2, m2, n2, zeta, zeta_prime;
+    failure[i] = refract_at_normal(-c * x2 * inv, -c * y2 * inv, nz_raw * inv, mu, miss, l[i], m[i],
+                                   n[i], l2, m2, n2, zeta, zeta_prime);
+    if constexpr (kRecord) {
+      zeta_out[i] = zeta;
+      zeta_prime_out[i] = zeta_prime;
+    }
+    l[i] = l2;
+    m[i] = m2;
+    n[i] = n2;
     x[i] = x2;
     y[i] = y2;
     z[i] = z2;
@@ -194,42 +221,101 @@ inline bool asphere_newton(double c, double one_plus_k, const double* a, double 
   return false;
 }
 
-// One surface of even-asphere profile; a = the surface's a2..a16.
+// Stage (a) then (b) of the header for `count` <= kAsphereChunk rays from the vertex plane points
+// (x1, y1, 0) with directions (l, m, n): the path s (mm) and, in failure, kRayMissedSurface for a
+// ray that misses the profile or leaves its domain (0 otherwise).
+inline __attribute__((always_inline)) void asphere_intersect_chunk(
+    double c, double one_plus_k, const double* a, std::size_t count, const double* __restrict x1,
+    const double* __restrict y1, const double* __restrict l, const double* __restrict m,
+    const double* __restrict n, double* __restrict s, std::int32_t* __restrict failure) {
+  // Ray state: 0 running, 1 converged, 2 left for the scalar Newton.
+  std::int64_t state[kAsphereChunk];
+  const double domain = one_plus_k * c * c;  // q^2 = 1 - domain * rho
+  double coefficients[8];                    // a local copy: no aliasing with s
+  for (int j = 0; j < 8; ++j) coefficients[j] = a[j];
+  // Start: the conic intersection, or the vertex plane if the conic is missed or lies outside
+  // the domain; outside the domain at both: the scalar Newton decides (a miss).
+  for (std::size_t i = 0; i < count; ++i) {
+    bool conic_miss = false;
+    const double s_conic =
+        conic_intersection(c, one_plus_k, x1[i], y1[i], l[i], m[i], n[i], conic_miss);
+    const double xs = x1[i] + s_conic * l[i], ys = y1[i] + s_conic * m[i];
+    const bool inside_conic = !conic_miss & (1.0 - domain * (xs * xs + ys * ys) > 0.0);
+    const bool inside_vertex = 1.0 - domain * (x1[i] * x1[i] + y1[i] * y1[i]) > 0.0;
+    s[i] = inside_conic ? s_conic : 0.0;
+    state[i] = (inside_conic | inside_vertex) ? 0 : 2;
+  }
+  // Stage (a): plain Newton steps; selects instead of jumps.
+  for (int step = 0; step < kVectorNewtonSteps; ++step) {
+    std::int64_t running = 0;
+    for (std::size_t i = 0; i < count; ++i) {
+      const double xs = x1[i] + s[i] * l[i], ys = y1[i] + s[i] * m[i];
+      const double rho = xs * xs + ys * ys;
+      const bool run = state[i] == 0;
+      // A ray set aside may sit outside the domain: evaluate it at rho = 0 (result unused).
+      double sag = 0, slope = 0;
+      asphere_sag(c, one_plus_k, coefficients, run ? rho : 0.0, sag, slope);
+      const double g = s[i] * n[i] - sag;
+      const double dg = n[i] - 2.0 * slope * (xs * l[i] + ys * m[i]);
+      const double ds = g / dg;
+      const double s_new = s[i] - ds;
+      const double xn = x1[i] + s_new * l[i], yn = y1[i] + s_new * m[i];
+      const bool ok = (dg > 0.0) & (std::abs(ds) <= std::numeric_limits<double>::max()) &
+                      (1.0 - domain * (xn * xn + yn * yn) > 0.0);
+      const bool converged = std::abs(ds) <= 1e-15 * (1.0 + std::abs(s_new) + std::sqrt(rho));
+      s[i] = (run & ok) ? s_new : s[i];
+      state[i] = run ? (ok ? (converged ? 1 : 0) : 2) : state[i];
+      running += state[i] == 0 ? 1 : 0;
+    }
+    if (running == 0) break;
+  }
+  // Stage (b): the rest through the safeguarded scalar Newton from the start.
+  for (std::size_t i = 0; i < count; ++i) {
+    failure[i] = kRayOk;
+    if (state[i] == 1) continue;
+    double s_scalar = 0.0;
+    const bool hit =
+        asphere_newton(c, one_plus_k, coefficients, x1[i], y1[i], l[i], m[i], n[i], s_scalar);
+    s[i] = hit ? s_scalar : 0.0;
+    failure[i] = hit ? kRayOk : kRayMissedSurface;
+  }
+}
+
+// asphere_intersect_chunk built for several x86-64 levels (src/trace/kernel_double.cpp), for the
+// Jet instantiations of trace_surface_asphere.
+void asphere_intersect_double(double c, double one_plus_k, const double* a, std::size_t count,
+                              const double* x1, const double* y1, const double* l, const double* m,
+                              const double* n, double* s, std::int32_t* failure);
+
+// Step (3) of trace_surface_asphere for `count` rays: from the vertex plane points (x1, y1) = (x,
+// y), z = z - shift and the double paths s, the Newton steps in T, the point on the surface, the
+// normal and the refraction (failure holds the intersection's misses on entry).
 template <typename T, bool kRecord>
-void trace_surface_asphere(const T& c, const T& conic, const T* a, const T& shift, const T& mu,
-                           std::size_t count, T* __restrict x, T* __restrict y, T* __restrict z,
-                           T* __restrict l, T* __restrict m, T* __restrict n,
-                           std::int32_t* __restrict failure, T* __restrict travel,
-                           T* __restrict zeta_out, T* __restrict zeta_prime_out) {
+inline __attribute__((always_inline)) void asphere_refract(
+    const T& c, const T& one_plus_k, const T* __restrict a, const T& mu, std::size_t count,
+    const double* __restrict s_value, T* __restrict x, T* __restrict y, T* __restrict z,
+    T* __restrict l, T* __restrict m, T* __restrict n, std::int32_t* __restrict failure,
+    T* __restrict travel, T* __restrict zeta_out, T* __restrict zeta_prime_out) {
   using std::sqrt;
   const T one = K<T>(1.0);
   const T zero = K<T>(0.0);
-  const T one_plus_k = one + conic;
-  double a_value[8];
-  for (int j = 0; j < 8; ++j) a_value[j] = value_of(a[j]);
-  const double c_value = value_of(c);
-  const double one_plus_k_value = value_of(one_plus_k);
   for (std::size_t i = 0; i < count; ++i) {
-    // Shift to the vertex and transfer to its tangent plane.
-    const T z_rel = z[i] - shift;
-    const T s0 = -z_rel / n[i];
-    const T x1 = x[i] + s0 * l[i];
-    const T y1 = y[i] + s0 * m[i];
-    // Newton in double from the conic intersection.
-    double s_value = 0.0;
-    bool miss = !asphere_newton(c_value, one_plus_k_value, a_value, value_of(x1), value_of(y1),
-                                value_of(l[i]), value_of(m[i]), value_of(n[i]), s_value);
-    if (miss) s_value = 0.0;
-    T s = K<T>(s_value);
-    // Newton steps in T carry the derivatives (none needed for double).
-    for (int step = 0; step < JetDepth<T>::value && !miss; ++step) {
-      const T xs = x1 + s * l[i];
-      const T ys = y1 + s * m[i];
-      T sag, slope;
-      asphere_sag(c, one_plus_k, a, xs * xs + ys * ys, sag, slope);
-      const T g = s * n[i] - sag;
-      const T dg = n[i] - K<T>(2.0) * slope * (xs * l[i] + ys * m[i]);
-      s = s - g / dg;
+    const T x1 = x[i];
+    const T y1 = y[i];
+    const T z_rel = z[i];
+    const bool miss = failure[i] != kRayOk;
+    T s = K<T>(s_value[i]);
+    // Newton steps in T carry the derivatives (none for double).
+    if constexpr (JetDepth<T>::value > 0) {
+      for (int step = 0; step < JetDepth<T>::value && !miss; ++step) {
+        const T xs = x1 + s * l[i];
+        const T ys = y1 + s * m[i];
+        T sag, slope;
+        asphere_sag(c, one_plus_k, a, xs * xs + ys * ys, sag, slope);
+        const T g = s * n[i] - sag;
+        const T dg = n[i] - K<T>(2.0) * slope * (xs * l[i] + ys * m[i]);
+        s = s - g / dg;
+      }
     }
     const T x2 = x1 + s * l[i];
     const T y2 = y1 + s * m[i];
@@ -240,17 +326,109 @@ void trace_surface_asphere(const T& c, const T& conic, const T* a, const T& shif
     const T px = K<T>(-2.0) * slope * x2;
     const T py = K<T>(-2.0) * slope * y2;
     const T inv = one / sqrt(px * px + py * py + one);
+    T l2, m2, n2, zeta, zeta_prime;
+    failure[i] = refract_at_normal(px * inv, py * inv, inv, mu, miss, l[i], m[i], n[i], l2, m2, n2,
+                                   zeta, zeta_prime);
     if constexpr (kRecord) {
       if (travel) travel[i] = z2 - z_rel;
+      zeta_out[i] = zeta;
+      zeta_prime_out[i] = zeta_prime;
     }
-    failure[i] = refract_at_normal<T, kRecord>(px * inv, py * inv, inv, mu, miss, l[i], m[i], n[i],
-                                               zeta_out + (kRecord ? i : 0),
-                                               zeta_prime_out + (kRecord ? i : 0));
+    l[i] = l2;
+    m[i] = m2;
+    n[i] = n2;
     x[i] = x2;
     y[i] = y2;
     z[i] = z2;
   }
 }
+
+// One surface of even-asphere profile; a = the surface's a2..a16. Rays go in chunks of
+// kAsphereChunk: (1) shift and transfer to the vertex plane (x, y hold x1, y1 and z holds z - shift
+// meanwhile), (2) the intersection in double (stages a, b), (3) the Jet Newton steps, the normal
+// and the refraction.
+template <typename T, bool kRecord>
+inline __attribute__((always_inline)) void trace_surface_asphere_chunked(
+    const T& c, const T& conic, const T* a, const T& shift, const T& mu, std::size_t count,
+    T* __restrict x, T* __restrict y, T* __restrict z, T* __restrict l, T* __restrict m,
+    T* __restrict n, std::int32_t* __restrict failure, T* __restrict travel, T* __restrict zeta_out,
+    T* __restrict zeta_prime_out) {
+  constexpr bool kDouble = std::is_same_v<T, double>;
+  const T one_plus_k = K<T>(1.0) + conic;
+  double a_value[8];
+  for (int j = 0; j < 8; ++j) a_value[j] = value_of(a[j]);
+  const double c_value = value_of(c);
+  const double one_plus_k_value = value_of(one_plus_k);
+  // double: the local copy (no aliasing with the rays); Jets: the lens's terms.
+  const T* a_local = nullptr;
+  if constexpr (kDouble) {
+    a_local = a_value;
+  } else {
+    a_local = a;
+  }
+  double s_value[kAsphereChunk];
+  // Values of the Jets' x1, y1, l, m, n (double rays use their own arrays).
+  double x1_value[kDouble ? 1 : kAsphereChunk], y1_value[kDouble ? 1 : kAsphereChunk];
+  double l_value[kDouble ? 1 : kAsphereChunk], m_value[kDouble ? 1 : kAsphereChunk];
+  double n_value[kDouble ? 1 : kAsphereChunk];
+  for (std::size_t begin = 0; begin < count; begin += kAsphereChunk) {
+    const std::size_t size = std::min(kAsphereChunk, count - begin);
+    T* __restrict xc = x + begin;
+    T* __restrict yc = y + begin;
+    T* __restrict zc = z + begin;
+    T* __restrict lc = l + begin;
+    T* __restrict mc = m + begin;
+    T* __restrict nc = n + begin;
+    std::int32_t* __restrict fc = failure + begin;
+    // Shift to the vertex and transfer to its tangent plane.
+    for (std::size_t i = 0; i < size; ++i) {
+      const T z_rel = zc[i] - shift;
+      const T s0 = -z_rel / nc[i];
+      xc[i] = xc[i] + s0 * lc[i];
+      yc[i] = yc[i] + s0 * mc[i];
+      zc[i] = z_rel;
+    }
+    // Newton in double from the conic intersection.
+    if constexpr (kDouble) {
+      asphere_intersect_chunk(c_value, one_plus_k_value, a_value, size, xc, yc, lc, mc, nc, s_value,
+                              fc);
+    } else {
+      for (std::size_t i = 0; i < size; ++i) {
+        x1_value[i] = value_of(xc[i]);
+        y1_value[i] = value_of(yc[i]);
+        l_value[i] = value_of(lc[i]);
+        m_value[i] = value_of(mc[i]);
+        n_value[i] = value_of(nc[i]);
+      }
+      asphere_intersect_double(c_value, one_plus_k_value, a_value, size, x1_value, y1_value,
+                               l_value, m_value, n_value, s_value, fc);
+    }
+    asphere_refract<T, kRecord>(c, one_plus_k, a_local, mu, size, s_value, xc, yc, zc, lc, mc, nc,
+                                fc, kRecord && travel ? travel + begin : nullptr,
+                                kRecord ? zeta_out + begin : nullptr,
+                                kRecord ? zeta_prime_out + begin : nullptr);
+  }
+}
+
+// The Jet instantiations (double goes through trace_surface_profile_double).
+template <typename T, bool kRecord>
+void trace_surface_asphere(const T& c, const T& conic, const T* a, const T& shift, const T& mu,
+                           std::size_t count, T* __restrict x, T* __restrict y, T* __restrict z,
+                           T* __restrict l, T* __restrict m, T* __restrict n,
+                           std::int32_t* __restrict failure, T* __restrict travel,
+                           T* __restrict zeta_out, T* __restrict zeta_prime_out) {
+  trace_surface_asphere_chunked<T, kRecord>(c, conic, a, shift, mu, count, x, y, z, l, m, n,
+                                            failure, travel, zeta_out, zeta_prime_out);
+}
+
+// The double loops of the conic and the even asphere (profile kind kProfileConic or
+// kProfileAsphere), built for several x86-64 levels like the sphere's
+// (src/trace/kernel_double.cpp).
+void trace_surface_profile_double(std::uint8_t profile, double c, double conic, const double* a,
+                                  double shift, double mu, std::size_t count, double* x, double* y,
+                                  double* z, double* l, double* m, double* n, std::int32_t* failure,
+                                  double* travel, double* zeta_out, double* zeta_prime_out,
+                                  bool record);
 
 }  // namespace detail
 

@@ -1,0 +1,54 @@
+// Sag and slope bounds of the surface profiles (include/lensopt/optimize/profile_bounds.h).
+#include "lensopt/optimize/profile_bounds.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "lensopt/paraxial/paraxial.h"
+
+namespace lensopt {
+
+std::vector<double> paraxial_clear_semi_apertures_mm(const TraceLens<double>& lens,
+                                                     const Specs& specs) {
+  const int k_count = lens.surface_count();
+  std::vector<double> out(k_count, 0.0);
+  const ParaxialData<double> par = paraxial_data(lens, lens.reference_nm());
+  const double r_ep = par.efl_mm / specs.f_number / 2.0;
+  const double tan_field = std::tan(specs.half_field_deg * kPi / 180.0);
+  for (int k = 0; k < k_count; ++k) {
+    const ParaxialRay<double> marginal =
+        paraxial_trace(lens, ParaxialRay<double>{r_ep, 0.0}, k + 1, kWavelengthD_nm);
+    const ParaxialRay<double> chief =
+        paraxial_trace(lens, ParaxialRay<double>{-par.entrance_pupil_z_mm * tan_field, tan_field},
+                       k + 1, kWavelengthD_nm);
+    const double h = std::abs(marginal.y) + std::abs(chief.y);
+    out[k] = std::isfinite(h) ? h : 0.0;
+  }
+  return out;
+}
+
+void profile_extremes(const TraceLens<double>& lens, const std::vector<double>& heights_mm,
+                      double& max_slope_deg, double& min_q2) {
+  max_slope_deg = 0.0;
+  min_q2 = 1.0;
+  for (int k = 0; k < lens.surface_count(); ++k) {
+    if (!lens.has_profiles() || lens.profile[k] == kProfileSphere) continue;
+    const double c = lens.curvature_per_mm[k];
+    const double* a = lens.asphere.data() + static_cast<std::size_t>(k) * kAsphereTerms;
+    for (int j = 1; j <= kProfileBoundRadii; ++j) {
+      const double r = heights_mm[k] * j / kProfileBoundRadii;
+      const double q2 = 1.0 - (1.0 + lens.conic[k]) * c * c * r * r;
+      min_q2 = std::min(min_q2, q2);
+      if (!(q2 > 0.0)) {
+        max_slope_deg = 90.0;  // outside the domain: a vertical (or no) surface
+        continue;
+      }
+      double dp = 8.0 * a[7];
+      for (int i = 6; i >= 0; --i) dp = (i + 1.0) * a[i] + r * r * dp;
+      const double slope = std::abs(2.0 * r * (c / (2.0 * std::sqrt(q2)) + dp));
+      max_slope_deg = std::max(max_slope_deg, std::atan(slope) * 180.0 / kPi);
+    }
+  }
+}
+
+}  // namespace lensopt
