@@ -166,10 +166,10 @@ JointOptions joint_options(const JointCommand& cmd, const OptimizeShared& shared
   options.freeze = shared.freeze;
   options.run_baselines = !cmd.only_joint;
   options.checkpoint_every = cmd.checkpoint_every;
-  options.checkpoint_dir = cmd.checkpoint_dir.empty() ? beside(out_path, ".checkpoint")
-                                                      : std::filesystem::path(cmd.checkpoint_dir);
+  const JointOutputs outputs = joint_outputs(cmd, out_path);
+  options.checkpoint_dir = outputs.checkpoint_dir;
   options.resume_dir = cmd.resume;
-  options.log_csv = cmd.log.empty() ? beside(out_path, ".csv") : std::filesystem::path(cmd.log);
+  options.log_csv = outputs.log;
   options.stop_after_steps = cmd.stop_after;
   options.verbose = !shared.quiet;
   options.validate();
@@ -258,8 +258,7 @@ void run_joint(const JointCommand& cmd, const OptimizeShared& shared) {
   const Lens lens = read_lens(shared.lens_path);
   const std::filesystem::path out_path = checked_output_path(shared);
   JointOptions options = joint_options(cmd, shared, out_path);
-  const std::filesystem::path network =
-      cmd.network.empty() ? beside(out_path, ".network.pt") : std::filesystem::path(cmd.network);
+  const std::filesystem::path network = joint_outputs(cmd, out_path).network;
 
   JointResult result;
   {
