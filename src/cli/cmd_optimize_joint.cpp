@@ -213,6 +213,7 @@ void print_joint_json(const Lens& lens, const std::filesystem::path& out_path,
                        {"to", c.to}});
   j["glass_changes"] = changes;
   j["steps"] = options.total_steps();
+  j["reverted_steps"] = result.reverted_steps;
   j["seconds"] = result.seconds;
   const JointTimings& t = result.timings;
   j["step_seconds"] = {{"trace", t.trace_s},     {"psf", t.psf_s},
@@ -239,6 +240,8 @@ void print_joint_text(const OptimizeShared& shared, const std::filesystem::path&
   std::string glasses;
   for (const std::string& g : result.glasses) glasses += (glasses.empty() ? "" : ", ") + g;
   fmt::print("  glasses: {}; {} glass changes\n", glasses, result.glass_changes.size());
+  if (result.reverted_steps > 0)
+    fmt::print("  {} failed steps reverted (lens step halved each time)\n", result.reverted_steps);
   const JointTimings& t = result.timings;
   fmt::print(
       "  per joint step: {:.3f} s, {:.3f} s CPU (trace {:.3f}, PSFs {:.3f}, render {:.3f}, adjoint "
