@@ -79,50 +79,67 @@ FloatImage Renderer::blur(const FloatImage& input, int threads) const {
   const int nthreads = thread_count(threads > 0 ? threads : options_.threads);
   const std::size_t plane = static_cast<std::size_t>(width) * height;
   constexpr int n = PsfGrid::kPatches;
-  const int tasks = n * n * colours;
+  // Deterministic overlap-add: the patches are added in four phases by the parity of (px, py).
+  // A window reaches at most (1 + kOverlap) / 2 < 1 patch width from its centre, so two patches
+  // of one phase never write the same pixel: within a phase the tasks run in parallel on one
+  // accumulator, and every pixel receives its terms in the same order whatever the thread count
+  // (the image is then byte-identical for any --threads, a resumed run or a shard). Should a
+  // layout ever overlap within a phase, each patch becomes its own phase.
+  std::vector<std::vector<int>> phases(4);
+  for (int q = 0; q < n * n; ++q) phases[(q % n) % 2 + 2 * ((q / n) % 2)].push_back(q);
+  auto disjoint = [](const std::vector<int>& lo, const std::vector<int>& hi, int a, int b) {
+    return hi[a] <= lo[b] || hi[b] <= lo[a];
+  };
+  bool separable = true;
+  for (const auto& phase : phases)
+    for (std::size_t i = 0; i < phase.size(); ++i)
+      for (std::size_t j = i + 1; j < phase.size(); ++j) {
+        const int a = phase[i], b = phase[j];
+        if (!disjoint(e->lo_x, e->hi_x, a % n, b % n) && !disjoint(e->lo_y, e->hi_y, a / n, b / n))
+          separable = false;
+      }
+  if (!separable) {
+    phases.assign(n * n, {});
+    for (int q = 0; q < n * n; ++q) phases[q] = {q};
+  }
 
-  // One accumulator (colours planes) per thread, summed at the end.
-  std::vector<std::vector<float>> accumulators(nthreads);
+  std::vector<float> acc(plane * colours, 0.0f);
 #pragma omp parallel num_threads(nthreads)
   {
-    std::vector<float>& acc = accumulators[omp_get_thread_num()];
-    acc.assign(plane * colours, 0.0f);
     OverlapAddBuffers buffers(e->ny, e->nx);
     std::vector<std::complex<double>> grey_spectrum;
+    for (const std::vector<int>& phase : phases) {
+      const int tasks = static_cast<int>(phase.size()) * colours;
 #pragma omp for schedule(dynamic, 1)
-    for (int t = 0; t < tasks; ++t) {
-      const int q = t / colours, c = t % colours;
-      const int px = q % n, py = q / n;
-      const int lo_x = e->lo_x[px], lo_y = e->lo_y[py];
-      const int hi_x = e->hi_x[px], hi_y = e->hi_y[py];
-      // The kernel's spectrum (grey images: the mean kernel's, made here, before the block
-      // fills the buffers).
-      const std::complex<double>* k;
-      if (colours == kColourChannels) {
-        k = e->spectra[q * kColourChannels + c].data();
-      } else {
-        kernel_spectrum(grid.grey_kernels[q].values.data(), grid.grey_kernels[q].radius, buffers,
-                        grey_spectrum);
-        k = grey_spectrum.data();
-      }
-      // The patch's input: its window's extent plus the largest PSF reach on each side.
-      const int pad = e->pad;
-      load_reflected_block(input, c, lo_x - pad, lo_y - pad, hi_x - lo_x + 2 * pad,
-                           hi_y - lo_y + 2 * pad, buffers);
-      convolve_loaded_block(k, buffers);
-      add_windowed_block(buffers, pad, lo_x, hi_x, lo_y, hi_y, e->window_x[px], e->window_y[py],
-                         acc.data() + plane * c, width, 0, 0);
+      for (int t = 0; t < tasks; ++t) {
+        const int q = phase[t / colours], c = t % colours;
+        const int px = q % n, py = q / n;
+        const int lo_x = e->lo_x[px], lo_y = e->lo_y[py];
+        const int hi_x = e->hi_x[px], hi_y = e->hi_y[py];
+        // The kernel's spectrum (grey images: the mean kernel's, made here, before the block
+        // fills the buffers).
+        const std::complex<double>* k;
+        if (colours == kColourChannels) {
+          k = e->spectra[q * kColourChannels + c].data();
+        } else {
+          kernel_spectrum(grid.grey_kernels[q].values.data(), grid.grey_kernels[q].radius,
+                          buffers, grey_spectrum);
+          k = grey_spectrum.data();
+        }
+        // The patch's input: its window's extent plus the largest PSF reach on each side.
+        const int pad = e->pad;
+        load_reflected_block(input, c, lo_x - pad, lo_y - pad, hi_x - lo_x + 2 * pad,
+                             hi_y - lo_y + 2 * pad, buffers);
+        convolve_loaded_block(k, buffers);
+        add_windowed_block(buffers, pad, lo_x, hi_x, lo_y, hi_y, e->window_x[px],
+                           e->window_y[py], acc.data() + plane * c, width, 0, 0);
+      }  // the omp for's barrier ends the phase
     }
   }
   FloatImage out = input;
 #pragma omp parallel for num_threads(nthreads) schedule(static)
-  for (std::size_t p = 0; p < plane; ++p) {
-    for (int c = 0; c < colours; ++c) {
-      float v = 0;
-      for (const auto& acc : accumulators) v += acc[plane * c + p];
-      out.pixels[p * out.channels + c] = v;
-    }
-  }
+  for (std::size_t p = 0; p < plane; ++p)
+    for (int c = 0; c < colours; ++c) out.pixels[p * out.channels + c] = acc[plane * c + p];
   return out;
 }
 

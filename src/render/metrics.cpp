@@ -98,15 +98,23 @@ int window_size(int extent) {
 double psnr_db(const FloatImage& x, const FloatImage& y, int channels, int threads) {
   check_same_size(x, y, channels);
   const std::size_t pixels = static_cast<std::size_t>(x.width) * x.height;
-  double sum = 0;
-#pragma omp parallel for reduction(+ : sum) num_threads(thread_count(threads)) schedule(static)
-  for (std::ptrdiff_t p = 0; p < static_cast<std::ptrdiff_t>(pixels); ++p) {
-    for (int c = 0; c < channels; ++c) {
-      const double d = static_cast<double>(x.pixels[p * x.channels + c]) -
-                       static_cast<double>(y.pixels[p * y.channels + c]);
-      sum += d * d;
+  // Per-row sums, then the rows in order: the same value for any thread count.
+  std::vector<double> row_sums(x.height, 0.0);
+#pragma omp parallel for num_threads(thread_count(threads)) schedule(static)
+  for (int row = 0; row < x.height; ++row) {
+    double row_sum = 0;
+    for (std::size_t p = static_cast<std::size_t>(row) * x.width;
+         p < static_cast<std::size_t>(row + 1) * x.width; ++p) {
+      for (int c = 0; c < channels; ++c) {
+        const double d = static_cast<double>(x.pixels[p * x.channels + c]) -
+                         static_cast<double>(y.pixels[p * y.channels + c]);
+        row_sum += d * d;
+      }
     }
+    row_sums[row] = row_sum;
   }
+  double sum = 0;
+  for (const double r : row_sums) sum += r;
   const double mse = sum / (static_cast<double>(pixels) * channels);
   if (mse <= 0.0) return std::numeric_limits<double>::infinity();
   return 10.0 * std::log10(1.0 / mse);
@@ -128,8 +136,9 @@ double ssim(const FloatImage& x, const FloatImage& y, int channels, int threads)
   // row one new row enters the ring and ssim_row does the rest.
   double total = 0;
   for (int c = 0; c < channels; ++c) {
-    double channel_sum = 0;
-#pragma omp parallel num_threads(nthreads) reduction(+ : channel_sum)
+    // Per-row terms, summed in row order afterwards: the same value for any thread count.
+    std::vector<double> row_terms(out_h, 0.0);
+#pragma omp parallel num_threads(nthreads)
     {
       const int t = omp_get_thread_num(), nt = omp_get_num_threads();
       const int r0 = static_cast<int>(static_cast<long>(out_h) * t / nt);
@@ -156,10 +165,12 @@ double ssim(const FloatImage& x, const FloatImage& y, int channels, int threads)
           xs[k] = ring.data() + static_cast<std::size_t>((row + k) % wy) * 2 * width;
           ys[k] = xs[k] + width;
         }
-        channel_sum += ssim_row(xs.data(), ys.data(), width, gy.data(), wy, gx.data(), wx, v.data(),
-                                m.data(), out_w);
+        row_terms[row] = ssim_row(xs.data(), ys.data(), width, gy.data(), wy, gx.data(), wx,
+                                  v.data(), m.data(), out_w);
       }
     }
+    double channel_sum = 0;
+    for (const double r : row_terms) channel_sum += r;
     total += channel_sum / (static_cast<double>(out_w) * out_h);
   }
   return total / channels;
