@@ -12,7 +12,7 @@
 #include <nlohmann/json.hpp>
 
 #include "lensopt/core/error.h"
-#include "lensopt/render/fft.h"
+#include "core/fft.h"
 
 namespace lensopt {
 namespace {

@@ -14,6 +14,7 @@
 #include "lensopt/analysis/spot.h"
 #include "lensopt/analysis/spot_adjoint.h"
 #include "lensopt/analysis/wave.h"
+#include "lensopt/formats/lens_file.h"
 #include "lensopt/joint/imaging.h"
 #include "lensopt/lens/lens_io.h"
 #include "lensopt/optimize/design_gradient.h"

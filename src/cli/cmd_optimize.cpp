@@ -14,8 +14,9 @@
 #include "lensopt/core/atomic_file.h"
 #include "lensopt/core/error.h"
 #include "lensopt/core/output_checks.h"
+#include "lensopt/formats/lens_file.h"
 #include "lensopt/lens/lens_io.h"
-#include "lensopt/optimize/optimize_table.h"
+#include "optimize/optimize_table.h"
 #include "lensopt/optimize/optimizer.h"
 
 namespace lensopt::cli {

@@ -11,6 +11,7 @@
 
 #include "commands.h"
 #include "lensopt/core/error.h"
+#include "lensopt/formats/lens_file.h"
 #include "lensopt/joint/joint.h"
 #include "lensopt/lens/lens_io.h"
 

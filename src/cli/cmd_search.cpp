@@ -13,7 +13,7 @@
 #include "lensopt/core/atomic_file.h"
 #include "lensopt/core/error.h"
 #include "lensopt/core/output_checks.h"
-#include "lensopt/optimize/optimize_table.h"
+#include "optimize/optimize_table.h"
 #include "lensopt/search/search.h"
 
 namespace lensopt::cli {

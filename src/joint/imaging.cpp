@@ -55,7 +55,7 @@
 #include "lensopt/analysis/field_maps.h"
 #include "lensopt/core/error.h"
 #include "lensopt/core/interpolate.h"
-#include "lensopt/render/fft.h"
+#include "core/fft.h"
 #include "lensopt/render/psf_resample.h"
 #include "lensopt/render/render.h"
 

@@ -9,7 +9,7 @@
 #include <cstring>
 
 #include "lensopt/core/error.h"
-#include "lensopt/render/fft.h"
+#include "core/fft.h"
 #include "lensopt/render/metrics.h"
 #include "lensopt/render/render.h"
 

@@ -6,6 +6,7 @@
 #include <cmath>
 
 #include "lensopt/analysis/gradient.h"
+#include "lensopt/formats/lens_file.h"
 #include "lensopt/lens/lens_io.h"
 #include "test_support.h"
 

@@ -7,6 +7,7 @@
 #include <cmath>
 
 #include "lensopt/core/error.h"
+#include "lensopt/formats/lens_file.h"
 #include "lensopt/lens/lens_io.h"
 #include "lensopt/optimize/optimizer.h"
 #include "test_support.h"

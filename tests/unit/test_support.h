@@ -3,10 +3,14 @@
 
 #include <doctest/doctest.h>
 
+#include <stdlib.h>  // mkdtemp
+
 #include <cstdlib>
 #include <filesystem>
 #include <optional>
+#include <stdexcept>
 #include <string>
+#include <system_error>
 
 namespace lensopt::test {
 
@@ -24,6 +28,28 @@ inline std::optional<std::filesystem::path> shared_dir() {
   }
   if (std::filesystem::is_directory(dir / "data")) return dir;
   return std::nullopt;
+}
+
+// This process's own temporary folder, made by mkdtemp on first use and removed at exit: tests
+// put their files under it, never under a fixed name in /tmp, so concurrent runs (ctest -j,
+// several work trees) never share a folder.
+inline const std::filesystem::path& temp_root() {
+  struct Root {
+    std::filesystem::path path;
+    Root() {
+      std::string pattern =
+          (std::filesystem::temp_directory_path() / "lensopt-unit-XXXXXX").string();
+      if (!::mkdtemp(pattern.data()))
+        throw std::runtime_error("cannot make a temporary folder from " + pattern);
+      path = pattern;
+    }
+    ~Root() {
+      std::error_code ignored;
+      std::filesystem::remove_all(path, ignored);
+    }
+  };
+  static const Root root;
+  return root.path;
 }
 
 }  // namespace lensopt::test

@@ -16,11 +16,12 @@
 #include "lensopt/core/atomic_file.h"
 #include "lensopt/core/error.h"
 #include "lensopt/core/text.h"
+#include "lensopt/formats/lens_file.h"
 #include "lensopt/formats/zmx.h"
 #include "lensopt/glass/dispersion.h"
 #include "lensopt/lens/lens_io.h"
 #include "lensopt/paraxial/paraxial.h"
-#include "lensopt/trace/trace_lens.h"
+#include "lensopt/lens/trace_lens.h"
 #include "lens_checks.h"
 #include "test_support.h"
 

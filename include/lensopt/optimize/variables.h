@@ -29,7 +29,7 @@
 #include "lensopt/glass/glass.h"
 #include "lensopt/lens/lens.h"
 #include "lensopt/paraxial/paraxial.h"
-#include "lensopt/trace/trace_lens.h"
+#include "lensopt/lens/trace_lens.h"
 
 namespace lensopt {
 
@@ -202,7 +202,7 @@ class LensParameterization {
     lens.curvature_per_mm[last] = solve_last_curvature(lens, K<T>(1.0), reference_nm);
     if (paraxial_image_solve_) {
       const ParaxialData<T> par = paraxial_data(lens, reference_nm);
-      lens.thickness_mm[last] = par.bfl_mm + x[defocus_index_];
+      lens.thickness_mm[last] = image_distance_for_defocus_mm(par, x[defocus_index_]);
     } else {
       lens.thickness_mm[last] = x[defocus_index_];  // ablation: s_{K-1} = s'_{K-1} f
     }

@@ -19,7 +19,7 @@
 #include <cmath>
 
 #include "lensopt/core/scalar.h"
-#include "lensopt/trace/trace_lens.h"
+#include "lensopt/lens/trace_lens.h"
 
 namespace lensopt {
 
@@ -75,6 +75,27 @@ ParaxialData<T> paraxial_data(const TraceLens<T>& lens, double wavelength_nm) {
   out.stop_magnification = ray_a.y;
   out.entrance_pupil_z_mm = ray_b.y / ray_a.y;
   return out;
+}
+
+// Defocus of the image plane from the paraxial focus (mm): delta = t_{K-1} - BFL, t_{K-1} the
+// last surface's thickness (its distance to the image plane), BFL from `par` (paraxial_data of
+// the same lens).
+template <typename T>
+T paraxial_defocus_mm(const TraceLens<T>& lens, const ParaxialData<T>& par) {
+  return lens.thickness_mm.back() - par.bfl_mm;
+}
+
+// The last thickness (mm) that puts the image plane `defocus_mm` behind the paraxial focus:
+// t_{K-1} = BFL + delta, the inverse of paraxial_defocus_mm.
+template <typename T>
+T image_distance_for_defocus_mm(const ParaxialData<T>& par, const T& defocus_mm) {
+  return par.bfl_mm + defocus_mm;
+}
+
+// The factor that scales a prescription's lengths to the spec focal length: s = f_spec / EFL.
+template <typename T>
+T spec_scale(double spec_focal_length_mm, const T& efl_mm) {
+  return K<T>(spec_focal_length_mm) / efl_mm;
 }
 
 // Paraxial image height (mm) on the actual image plane (thickness of the last surface) of the

@@ -1,4 +1,4 @@
-#include "lensopt/trace/trace_lens.h"
+#include "lensopt/lens/trace_lens.h"
 
 #include <fmt/format.h>
 
