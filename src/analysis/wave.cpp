@@ -11,8 +11,8 @@
 #include <mutex>
 #include <nlohmann/json.hpp>
 
-#include "lensopt/core/error.h"
 #include "core/fft.h"
+#include "lensopt/core/error.h"
 
 namespace lensopt {
 namespace {

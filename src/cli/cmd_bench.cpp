@@ -157,8 +157,8 @@ void run_bench(const BenchCommand& cmd) {
     fmt::print(
         "lensopt bench: {}{} ({} surfaces), {} fields x {} wavelengths x {} rays, ray aiming "
         "on, {} threads\n",
-        lens.name, cmd.aspherize ? " aspherized" : "", lens.surfaces.size(), sys.fields_deg.size(), sys.wavelength_count,
-        sys.pupil.size(), threads);
+        lens.name, cmd.aspherize ? " aspherized" : "", lens.surfaces.size(), sys.fields_deg.size(),
+        sys.wavelength_count, sys.pupil.size(), threads);
     fmt::print("  mean RMS spot                     {:10.3f} um\n", mean_spot_um);
     fmt::print("  spot evaluation (double)          {:10.2f} ms   (CPU {:.2f} ms; median of {})\n",
                eval_ms, eval_cpu_ms, cmd.repeats);

@@ -16,8 +16,8 @@
 #include "lensopt/core/output_checks.h"
 #include "lensopt/formats/lens_file.h"
 #include "lensopt/lens/lens_io.h"
-#include "optimize/optimize_table.h"
 #include "lensopt/optimize/optimizer.h"
+#include "optimize/optimize_table.h"
 
 namespace lensopt::cli {
 namespace {

@@ -1,7 +1,5 @@
 // The .zmx reader's glasses: the GCAT catalogs loaded in order, and each surface's GLAS resolved
 // against them or as a model glass (zmx_parser.h).
-#include "zmx_parser.h"
-
 #include <fmt/format.h>
 
 #include <algorithm>
@@ -9,6 +7,8 @@
 #include <cmath>
 #include <filesystem>
 #include <set>
+
+#include "zmx_parser.h"
 
 namespace lensopt::zmx_detail {
 

@@ -1,7 +1,5 @@
 // The .zmx reader's line handlers: surface keys, system keys, lensopt's NOTE lines, and the report
 // of ignored settings (zmx_parser.h).
-#include "zmx_parser.h"
-
 #include <fmt/format.h>
 
 #include <algorithm>
@@ -9,6 +7,8 @@
 #include <cmath>
 #include <filesystem>
 #include <set>
+
+#include "zmx_parser.h"
 
 namespace lensopt::zmx_detail {
 

@@ -45,9 +45,9 @@ struct RawSurface {
   bool is_stop = false;
   int stop_line = 0;
   double semi_diameter_mm = 0.0;  // a fixed (user) DIAM: a clear aperture
-  bool even_asphere = false;  // TYPE EVENASPH
-  double conic = 0.0;         // CONI
-  double parm[9] = {};        // PARM 1..8 of EVENASPH: a2, a4, ..., a16 (lens units)
+  bool even_asphere = false;      // TYPE EVENASPH
+  double conic = 0.0;             // CONI
+  double parm[9] = {};            // PARM 1..8 of EVENASPH: a2, a4, ..., a16 (lens units)
 };
 
 struct Wavelength {

@@ -244,9 +244,9 @@ void ZmxParser::set_wavelengths(Specs& specs) {
     specs.wavelength_channels = default_wavelength_channels(wavelengths_nm);
     std::vector<std::string> assigned;
     for (std::size_t i = 0; i < wavelengths_nm.size(); ++i)
-      assigned.push_back(fmt::format(
-          "{} nm {}", wavelengths_nm[i],
-          kChannelLetters[static_cast<std::size_t>(specs.wavelength_channels[i])]));
+      assigned.push_back(
+          fmt::format("{} nm {}", wavelengths_nm[i],
+                      kChannelLetters[static_cast<std::size_t>(specs.wavelength_channels[i])]));
     warn(wavelength_line_,
          fmt::format("colour channels assigned by wavelength (< 500 nm B, < 600 nm G, else R; an "
                      "empty channel borrows the nearest wavelength): {}",

@@ -27,7 +27,6 @@ bool is_blank(char ch) {
   return ch == ' ' || ch == '\t' || ch == '\r' || ch == '\f' || ch == '\v';
 }
 
-
 std::string_view Line::rest(std::size_t i) const {
   if (i >= fields.size()) return {};
   std::string_view out = text.substr(static_cast<std::size_t>(columns[i] - 1));
@@ -65,7 +64,6 @@ std::vector<Line> split_lines(std::string_view text) {
   return lines;
 }
 
-
 double micrometres_to_nm(std::string_view text, double um) {
   if (!text.empty() && text.front() == '+') text.remove_prefix(1);
   if (text.empty() || text.find_first_not_of("0123456789.") != std::string_view::npos)
@@ -79,7 +77,6 @@ double micrometres_to_nm(std::string_view text, double um) {
   const auto [end, ec] = std::from_chars(shifted.data(), shifted.data() + shifted.size(), nm);
   return ec == std::errc() ? nm : um * 1000.0;
 }
-
 
 std::string number_text(double x) {
   return fmt::format("{}", x);

@@ -1,7 +1,5 @@
 // Zemax .zmx export (include/lensopt/formats/zmx.h): ASCII, CRLF line ends, every number the
 // shortest decimal that reads back to the same double (zmx_text.h).
-#include "lensopt/formats/zmx.h"
-
 #include <fmt/format.h>
 
 #include <algorithm>
@@ -11,6 +9,7 @@
 #include "lensopt/analysis/apertures.h"
 #include "lensopt/core/atomic_file.h"
 #include "lensopt/core/error.h"
+#include "lensopt/formats/zmx.h"
 #include "lensopt/glass/glass.h"
 #include "zmx_text.h"
 

@@ -52,10 +52,10 @@
 #include <mutex>
 #include <type_traits>
 
+#include "core/fft.h"
 #include "lensopt/analysis/field_maps.h"
 #include "lensopt/core/error.h"
 #include "lensopt/core/interpolate.h"
-#include "core/fft.h"
 #include "lensopt/render/psf_resample.h"
 #include "lensopt/render/render.h"
 

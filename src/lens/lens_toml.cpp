@@ -96,8 +96,8 @@ constexpr std::array<std::string_view, 2> kLensKeys = {"name", "catalog"};
 constexpr std::array<std::string_view, 6> kSpecsKeys = {
     "f_number", "half_field_deg", "sensor_diagonal_mm", "wavelengths_nm", "channels", "dispersion"};
 constexpr std::array<std::string_view, 9> kSurfaceKeys = {
-    "radius_mm", "curvature_per_mm", "thickness_mm", "material",  "stop",
-    "semi_diameter_mm", "conic", "asphere", "asphere_r2"};
+    "radius_mm", "curvature_per_mm", "thickness_mm", "material", "stop", "semi_diameter_mm",
+    "conic",     "asphere",          "asphere_r2"};
 constexpr std::array<std::string_view, 2> kModelGlassKeys = {"nd", "vd"};
 
 std::string lower(std::string_view text) {

@@ -12,7 +12,7 @@ namespace lensopt::detail {
 
 // ApertureType and FieldType by index.
 inline constexpr std::array<std::string_view, 4> kApertureNames = {"f-number", "epd", "object-na",
-                                                            "float-by-stop"};
+                                                                   "float-by-stop"};
 inline constexpr std::array<std::string_view, 4> kFieldTypeNames = {
     "angle", "object-height", "paraxial-image-height", "real-image-height"};
 // Colour channels 0, 1, 2.

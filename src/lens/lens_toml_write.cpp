@@ -204,7 +204,9 @@ class ExtraTomlWriter {
 
 namespace detail {
 
-std::string format_extra_toml(const toml::table& root) { return ExtraTomlWriter().write(root); }
+std::string format_extra_toml(const toml::table& root) {
+  return ExtraTomlWriter().write(root);
+}
 
 }  // namespace detail
 

@@ -99,7 +99,8 @@ bool apply_optimize_key(const std::string& key, const toml::node& node, const So
   } else if (key == "vary") {
     const toml::array* items = node.as_array();
     if (!items)
-      throw Error(where, "[optimize] vary must be an array of profile variables (\"k3\", \"a4_3\")");
+      throw Error(where,
+                  "[optimize] vary must be an array of profile variables (\"k3\", \"a4_3\")");
     options.vary.clear();
     for (const auto& item : *items) {
       const auto v = item.value<std::string>();

@@ -154,7 +154,6 @@ void trim_where_surfaces_meet(LayoutGeometry& g, const TraceLens<double>& lens,
     s.drawn_semi_diameter_mm = s.clear_semi_diameter_mm;
     s.edge_semi_diameter_mm = s.clear_semi_diameter_mm;
   }
-
 }
 
 // Glass spaces [first, last]: the elements, cemented ones as one group.
@@ -187,7 +186,6 @@ void set_element_edges(LayoutGeometry& g, const std::vector<std::pair<int, int>>
         d.drawn_semi_diameter_mm = edge;
     }
   }
-
 }
 
 // The stop: from its clear radius outward, short of its neighbours' drawn curves.
@@ -233,7 +231,6 @@ void set_profiles(LayoutGeometry& g) {
       s.curve.push_back({z_end, -s.edge_semi_diameter_mm});
     }
   }
-
 }
 
 // The elements' outlines and rims, with a warning for a negative edge thickness.
@@ -260,7 +257,6 @@ void add_elements(LayoutGeometry& g, const PlotContext& ctx,
       g.elements.push_back(std::move(e));
     }
   }
-
 }
 
 // Smallest drawn gap between consecutive surfaces, with a warning where they cross.
@@ -284,7 +280,6 @@ void find_gaps(LayoutGeometry& g) {
       g.warnings.push_back(fmt::format(
           "surfaces {} and {} cross at height {:.3f} mm (by {:.3f} mm)", k + 1, k + 2, at, -gap));
   }
-
 }
 
 // Ray bundles at the reference wavelength: `rays_per_field` meridional rays per drawn field,

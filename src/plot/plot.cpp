@@ -287,9 +287,9 @@ PageData compute_page_data(const PlotContext& ctx, const PlotContext* cmp,
   }
   if (d.spots) d.spot_rows.push_back(&*d.spots);
   if (d.spots_cmp) d.spot_rows.push_back(&*d.spots_cmp);
-  d.box_um = d.spots ? (options.spot_box_um > 0 ? options.spot_box_um
-                                                : auto_spot_box_um(d.spot_rows))
-                     : 0.0;
+  d.box_um = d.spots
+                 ? (options.spot_box_um > 0 ? options.spot_box_um : auto_spot_box_um(d.spot_rows))
+                 : 0.0;
   if (d.psf) d.psf_rows.push_back(&*d.psf);
   if (d.psf_cmp) d.psf_rows.push_back(&*d.psf_cmp);
   return d;
@@ -362,8 +362,8 @@ void draw_report(Canvas& c, double top, double width, double font_px, const Page
     return at + font_px * 2.0;
   };
   double s0 = section("spot diagrams", y);
-  draw_spots(c, Rect{0, s0, width, p.spot_h - (s0 - y)}.inset(10, 0, 10, 0), d.spot_rows,
-             d.box_um, font_px);
+  draw_spots(c, Rect{0, s0, width, p.spot_h - (s0 - y)}.inset(10, 0, 10, 0), d.spot_rows, d.box_um,
+             font_px);
   y += p.spot_h;
   s0 = section("transverse ray fans", y);
   draw_fans(c, Rect{0, s0, width, p.fan_h - (s0 - y)}.inset(10, 0, 14, 0), *d.fans,

@@ -8,8 +8,8 @@
 #include <complex>
 #include <cstring>
 
-#include "lensopt/core/error.h"
 #include "core/fft.h"
+#include "lensopt/core/error.h"
 #include "lensopt/render/metrics.h"
 #include "lensopt/render/render.h"
 

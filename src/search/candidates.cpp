@@ -14,8 +14,8 @@
 #include "lensopt/core/error.h"
 #include "lensopt/formats/lens_file.h"
 #include "lensopt/lens/lens_io.h"
-#include "optimize/optimize_table.h"
 #include "lensopt/search/search.h"
+#include "optimize/optimize_table.h"
 #include "search_detail.h"
 
 namespace lensopt {
@@ -136,23 +136,24 @@ class DescriptionReader {
   void read_starts(const toml::table& file, SearchOptions& options) const {
     StartGroup defaults;
     const toml::array* start_tables = nullptr;
-    for_each(file, "search", [&](const std::string& k, const toml::node& n, const SourceLocation& w) {
-      if (group_key(defaults, k, n, w)) return;
-      if (k == "catalog") {
-        options.catalog = string(k, n, w);
-      } else if (k == "top") {
-        options.top_k = integer(k, n, w);
-      } else if (k == "starts") {
-        start_tables = n.as_array();
-        if (!start_tables || !start_tables->is_array_of_tables())
-          throw Error(w, "starts must be an array of tables: [[search.starts]]");
-      } else {
-        throw Error(w,
-                    fmt::format("unknown key '{}' in [search]; known: lenses, generate, vary_stop, "
-                                "vary_cement, stops, glass_seeds, catalog, top, starts",
-                                k));
-      }
-    });
+    for_each(
+        file, "search", [&](const std::string& k, const toml::node& n, const SourceLocation& w) {
+          if (group_key(defaults, k, n, w)) return;
+          if (k == "catalog") {
+            options.catalog = string(k, n, w);
+          } else if (k == "top") {
+            options.top_k = integer(k, n, w);
+          } else if (k == "starts") {
+            start_tables = n.as_array();
+            if (!start_tables || !start_tables->is_array_of_tables())
+              throw Error(w, "starts must be an array of tables: [[search.starts]]");
+          } else {
+            throw Error(
+                w, fmt::format("unknown key '{}' in [search]; known: lenses, generate, vary_stop, "
+                               "vary_cement, stops, glass_seeds, catalog, top, starts",
+                               k));
+          }
+        });
     if (!defaults.lens_files.empty() || !defaults.generate.empty())
       options.starts.push_back(defaults);
     if (!start_tables) return;
@@ -176,48 +177,50 @@ class DescriptionReader {
 
   // [specs]: the spec overrides; focal_length_mm gives the sensor d = 2 f tan(hfov).
   void read_specs(const toml::table& file, SearchOptions& options) const {
-    for_each(file, "specs", [&](const std::string& k, const toml::node& n, const SourceLocation& w) {
-      if (k == "f_number") {
-        options.f_number = number(k, n, w);
-        options.f_number_given = true;
-      } else if (k == "half_field_deg") {
-        options.half_field_deg = number(k, n, w);
-        options.half_field_given = true;
-      } else if (k == "sensor_diagonal_mm") {
-        options.sensor_diagonal_mm = number(k, n, w);
-        options.sensor_diagonal_given = true;
-      } else if (k == "focal_length_mm") {
-        options.sensor_diagonal_given = true;
-        // d = 2 f tan(hfov), with the half field given in this table or the default.
-        const double f = number(k, n, w);
-        const toml::table* specs = file["specs"].as_table();
-        double hfov = options.half_field_deg;
-        if (const auto h = (*specs)["half_field_deg"].value<double>()) hfov = *h;
-        options.sensor_diagonal_mm = 2.0 * f * std::tan(hfov * M_PI / 180.0);
-      } else {
-        throw Error(w, fmt::format("unknown key '{}' in [specs]; known: f_number, half_field_deg, "
-                                   "sensor_diagonal_mm, focal_length_mm",
-                                   k));
-      }
-    });
+    for_each(file, "specs",
+             [&](const std::string& k, const toml::node& n, const SourceLocation& w) {
+               if (k == "f_number") {
+                 options.f_number = number(k, n, w);
+                 options.f_number_given = true;
+               } else if (k == "half_field_deg") {
+                 options.half_field_deg = number(k, n, w);
+                 options.half_field_given = true;
+               } else if (k == "sensor_diagonal_mm") {
+                 options.sensor_diagonal_mm = number(k, n, w);
+                 options.sensor_diagonal_given = true;
+               } else if (k == "focal_length_mm") {
+                 options.sensor_diagonal_given = true;
+                 // d = 2 f tan(hfov), with the half field given in this table or the default.
+                 const double f = number(k, n, w);
+                 const toml::table* specs = file["specs"].as_table();
+                 double hfov = options.half_field_deg;
+                 if (const auto h = (*specs)["half_field_deg"].value<double>()) hfov = *h;
+                 options.sensor_diagonal_mm = 2.0 * f * std::tan(hfov * M_PI / 180.0);
+               } else {
+                 throw Error(
+                     w, fmt::format("unknown key '{}' in [specs]; known: f_number, half_field_deg, "
+                                    "sensor_diagonal_mm, focal_length_mm",
+                                    k));
+               }
+             });
   }
 
   // [optimize]: optimize's own keys (optimize_table.h), plus constraints = "paper+strict".
   void read_optimize(const toml::table& file, SearchOptions& options) const {
-    for_each(file, "optimize", [&](const std::string& k, const toml::node& n,
-                                   const SourceLocation& w) {
-      // "paper+strict" is the search's own: two optimizations per candidate.
-      if (k == "constraints" &&
-          n.value<std::string>() == std::optional<std::string>("paper+strict")) {
-        options.optimize.loss.paper_penalties = false;
-        options.paper_then_strict = true;
-        return;
-      }
-      if (k == "constraints") options.paper_then_strict = false;
-      if (!apply_optimize_key(k, n, w, options.optimize))
-        throw Error(
-            w, fmt::format("unknown key '{}' in [optimize]; known: {}", k, optimize_table_keys()));
-    });
+    for_each(file, "optimize",
+             [&](const std::string& k, const toml::node& n, const SourceLocation& w) {
+               // "paper+strict" is the search's own: two optimizations per candidate.
+               if (k == "constraints" &&
+                   n.value<std::string>() == std::optional<std::string>("paper+strict")) {
+                 options.optimize.loss.paper_penalties = false;
+                 options.paper_then_strict = true;
+                 return;
+               }
+               if (k == "constraints") options.paper_then_strict = false;
+               if (!apply_optimize_key(k, n, w, options.optimize))
+                 throw Error(w, fmt::format("unknown key '{}' in [optimize]; known: {}", k,
+                                            optimize_table_keys()));
+             });
   }
 
  private:

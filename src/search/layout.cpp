@@ -7,9 +7,9 @@
 #include <limits>
 
 #include "lensopt/core/error.h"
+#include "lensopt/lens/trace_lens.h"
 #include "lensopt/paraxial/paraxial.h"
 #include "lensopt/search/search.h"
-#include "lensopt/lens/trace_lens.h"
 #include "search_detail.h"
 
 namespace lensopt {

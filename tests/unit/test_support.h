@@ -2,7 +2,6 @@
 #pragma once
 
 #include <doctest/doctest.h>
-
 #include <stdlib.h>  // mkdtemp
 
 #include <cstdlib>
@@ -15,7 +14,9 @@
 namespace lensopt::test {
 
 // The project's source folder (lenses/, catalogs/).
-inline std::filesystem::path source_dir() { return LENSOPT_SOURCE_DIR; }
+inline std::filesystem::path source_dir() {
+  return LENSOPT_SOURCE_DIR;
+}
 
 // ../shared (reference data), or nullopt when it is absent: tests that need it then skip,
 // saying so with MESSAGE.
@@ -55,10 +56,10 @@ inline const std::filesystem::path& temp_root() {
 }  // namespace lensopt::test
 
 // Skips the rest of a test case, with a message, when ../shared is absent.
-#define LENSOPT_REQUIRE_SHARED(var)                                               \
-  const auto var##_opt = ::lensopt::test::shared_dir();                          \
-  if (!var##_opt) {                                                               \
-    MESSAGE("skipped: ../shared is absent (reference data not available)");       \
-    return;                                                                       \
-  }                                                                               \
+#define LENSOPT_REQUIRE_SHARED(var)                                         \
+  const auto var##_opt = ::lensopt::test::shared_dir();                     \
+  if (!var##_opt) {                                                         \
+    MESSAGE("skipped: ../shared is absent (reference data not available)"); \
+    return;                                                                 \
+  }                                                                         \
   const std::filesystem::path var = *var##_opt

@@ -345,8 +345,7 @@ TEST_CASE("tolerance: negative or unknown tolerances are errors naming them") {
 
 TEST_CASE("tolerance: the [tolerance] table of a lens file is read with file:line errors") {
   const std::string text = read_file(test::source_dir() / "lenses" / "tessar.toml");
-  const std::filesystem::path dir =
-      test::temp_root() / "tolerance";
+  const std::filesystem::path dir = test::temp_root() / "tolerance";
   std::filesystem::create_directories(dir);
   const std::filesystem::path good = dir / "tessar_tol.toml";
   {

@@ -51,10 +51,10 @@ ParaxialRay<T> paraxial_trace(const TraceLens<T>& lens, ParaxialRay<T> ray, int 
 // First-order data at one wavelength.
 template <typename T>
 struct ParaxialData {
-  T efl_mm;                 // effective focal length
-  T bfl_mm;                 // last vertex to paraxial focus
-  T entrance_pupil_z_mm;    // entrance pupil from the first vertex (positive: to the right)
-  T stop_magnification;     // A: stop height per object-space marginal height (y_s = A y_0)
+  T efl_mm;               // effective focal length
+  T bfl_mm;               // last vertex to paraxial focus
+  T entrance_pupil_z_mm;  // entrance pupil from the first vertex (positive: to the right)
+  T stop_magnification;   // A: stop height per object-space marginal height (y_s = A y_0)
 };
 
 template <typename T>
@@ -116,8 +116,8 @@ T paraxial_image_height(const TraceLens<T>& lens, const T& entrance_pupil_z_mm, 
 template <typename T>
 T solve_last_curvature(const TraceLens<T>& lens, const T& efl_mm, double wavelength_nm) {
   const int k_count = lens.surface_count();
-  ParaxialRay<T> ray = paraxial_trace(lens, ParaxialRay<T>{K<T>(1.0), K<T>(0.0)}, k_count - 1,
-                                      wavelength_nm);
+  ParaxialRay<T> ray =
+      paraxial_trace(lens, ParaxialRay<T>{K<T>(1.0), K<T>(0.0)}, k_count - 1, wavelength_nm);
   const int last = k_count - 1;
   ray.y = ray.y + lens.thickness_mm[last - 1] * ray.w / lens.index_at_nm(last - 1, wavelength_nm);
   const T n_before = lens.index_at_nm(last - 1, wavelength_nm);

@@ -28,9 +28,9 @@
 
 #include "lensopt/core/scalar.h"
 #include "lensopt/glass/dispersion.h"
+#include "lensopt/lens/trace_lens.h"
 #include "lensopt/paraxial/paraxial.h"
 #include "lensopt/trace/kernel.h"
-#include "lensopt/lens/trace_lens.h"
 
 namespace lensopt {
 
