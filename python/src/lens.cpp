@@ -7,6 +7,7 @@
 
 #include "bindings.h"
 #include "lensopt/core/error.h"
+#include "lensopt/formats/lens_file.h"
 #include "lensopt/formats/zmx.h"
 #include "lensopt/glass/glass.h"
 #include "lensopt/lens/lens_io.h"

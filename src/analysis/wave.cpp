@@ -11,9 +11,9 @@
 #include <mutex>
 #include <nlohmann/json.hpp>
 
+#include "core/fft.h"
 #include "lensopt/core/error.h"
 #include "lensopt/core/threads.h"
-#include "lensopt/render/fft.h"
 
 namespace lensopt {
 namespace {

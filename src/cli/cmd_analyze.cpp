@@ -9,6 +9,7 @@
 #include "lensopt/analysis/analyze.h"
 #include "lensopt/analysis/forms_image.h"
 #include "lensopt/core/error.h"
+#include "lensopt/formats/lens_file.h"
 #include "lensopt/lens/lens_io.h"
 
 namespace lensopt::cli {

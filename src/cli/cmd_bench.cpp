@@ -15,6 +15,7 @@
 #include "lensopt/analysis/spot_adjoint.h"
 #include "lensopt/analysis/wave.h"
 #include "lensopt/core/threads.h"
+#include "lensopt/formats/lens_file.h"
 #include "lensopt/joint/imaging.h"
 #include "lensopt/lens/lens_io.h"
 #include "lensopt/optimize/design_gradient.h"

@@ -13,9 +13,10 @@
 #include "lensopt/core/error.h"
 #include "lensopt/core/interrupt.h"
 #include "lensopt/core/output_checks.h"
+#include "lensopt/formats/lens_file.h"
 #include "lensopt/lens/lens_io.h"
-#include "lensopt/optimize/optimize_table.h"
 #include "lensopt/optimize/optimizer.h"
+#include "optimize/optimize_table.h"
 
 namespace lensopt::cli {
 namespace {

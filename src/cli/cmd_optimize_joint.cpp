@@ -11,6 +11,7 @@
 #include "lensopt/core/error.h"
 #include "lensopt/core/interrupt.h"
 #include "lensopt/core/output_checks.h"
+#include "lensopt/formats/lens_file.h"
 #include "lensopt/joint/joint.h"
 #include "lensopt/lens/lens_io.h"
 

@@ -17,6 +17,7 @@
 #include "lensopt/core/atomic_file.h"
 #include "lensopt/core/error.h"
 #include "lensopt/core/output_checks.h"
+#include "lensopt/formats/lens_file.h"
 #include "lensopt/lens/lens_io.h"
 #include "lensopt/render/chart.h"
 #include "lensopt/render/dataset.h"

@@ -13,8 +13,8 @@
 #include "lensopt/core/error.h"
 #include "lensopt/core/interrupt.h"
 #include "lensopt/core/output_checks.h"
-#include "lensopt/optimize/optimize_table.h"
 #include "lensopt/search/search.h"
+#include "optimize/optimize_table.h"
 
 namespace lensopt::cli {
 namespace {

@@ -42,7 +42,7 @@
 #include "lensopt/core/interpolate.h"
 #include "lensopt/core/threads.h"
 #include "lensopt/render/distortion_warp.h"
-#include "lensopt/render/overlap_add.h"
+#include "render/overlap_add.h"
 
 namespace lensopt {
 

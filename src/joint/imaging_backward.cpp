@@ -14,7 +14,7 @@
 #include "lensopt/core/error.h"
 #include "lensopt/core/interpolate.h"
 #include "lensopt/core/threads.h"
-#include "lensopt/render/fft.h"
+#include "core/fft.h"
 
 namespace lensopt {
 

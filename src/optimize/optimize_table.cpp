@@ -1,4 +1,4 @@
-#include "lensopt/optimize/optimize_table.h"
+#include "optimize/optimize_table.h"
 
 #include <fmt/format.h>
 

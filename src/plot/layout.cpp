@@ -54,29 +54,17 @@ void LayoutOptions::validate() const {
   if (edge_azimuths < 3) throw Error("layout: edge_azimuths must be >= 3");
 }
 
-LayoutGeometry compute_layout(const PlotContext& ctx, const LayoutOptions& options) {
-  options.validate();
-  const TraceSystem<double>& sys = ctx.sys;
+namespace {
+
+// Largest ray height (mm) at every surface over fields, wavelengths and aimed pupil-edge rays
+// (`edge_azimuths` of them per field).
+std::vector<double> ray_heights(const TraceSystem<double>& sys, const LayoutOptions& options) {
   const TraceLens<double>& lens = sys.lens;
   const int k_count = lens.surface_count();
-  LayoutGeometry g;
-  g.lens_name = ctx.lens.name;
-  g.scale = sys.scale;
-  g.efl_mm = sys.efl_mm;
-  g.f_number = sys.efl_mm / sys.epd_mm;
-  g.half_field_deg = sys.fields_deg.back();
-  g.stop_surface = lens.stop;
-
-  std::vector<double> vertex(k_count, 0.0);
-  for (int k = 1; k < k_count; ++k) vertex[k] = vertex[k - 1] + lens.thickness_mm[k - 1];
-  g.image_z_mm = vertex[k_count - 1] + lens.thickness_mm[k_count - 1];
-  g.stop_z_mm = vertex[lens.stop];
-
-  // Largest ray height at every surface over fields, wavelengths and aimed pupil-edge rays.
   std::vector<double> max_height(k_count, 0.0);
+  RayBundle<double> start, rays;
   const int field_count = static_cast<int>(sys.fields_deg.size());
   const int az = options.edge_azimuths;
-  RayBundle<double> start, rays;
   for (int w = 0; w <= sys.wavelength_count; ++w) {
     start.resize(static_cast<std::size_t>(field_count) * az);
     for (int h = 0; h < field_count; ++h) {
@@ -96,10 +84,14 @@ LayoutGeometry compute_layout(const PlotContext& ctx, const LayoutOptions& optio
           max_height[k] = std::max(max_height[k], std::hypot(rays.x[i], rays.y[i]));
     }
   }
-  g.stop_radius_mm = sys.stop_radius_mm;  // the real marginal ray's height (the aperture)
-  g.stop_clear_mm = std::max(g.stop_radius_mm, max_height[lens.stop]);
+  return max_height;
+}
 
-  // Surfaces: clear apertures, element groups, drawn radii.
+// Surfaces: clear apertures (ray height plus margins, short of a conic's domain edge).
+void add_surfaces(LayoutGeometry& g, const TraceLens<double>& lens,
+                  const std::vector<double>& vertex, const std::vector<double>& max_height,
+                  const LayoutOptions& options) {
+  const int k_count = lens.surface_count();
   g.surfaces.resize(k_count);
   for (int k = 0; k < k_count; ++k) {
     SurfaceDrawing& s = g.surfaces[k];
@@ -117,11 +109,16 @@ LayoutGeometry compute_layout(const PlotContext& ctx, const LayoutOptions& optio
     s.drawn_semi_diameter_mm = s.clear_semi_diameter_mm;
     s.edge_semi_diameter_mm = s.clear_semi_diameter_mm;
   }
-  // Where two surfaces across an air space meet inside their clear apertures (elements touching
-  // at the edge), the margin is given up: both are drawn only up to the meeting height (never
-  // below their ray heights).
-  // The stop counts as a flat surface here: a surface that reaches past the stop plane is drawn
-  // up to the plane (the diaphragm then rests on the element's flat rim).
+}
+
+// Where two surfaces across an air space meet inside their clear apertures (elements touching
+// at the edge), the margin is given up: both are drawn only up to the meeting height (never
+// below their ray heights).
+// The stop counts as a flat surface here: a surface that reaches past the stop plane is drawn
+// up to the plane (the diaphragm then rests on the element's flat rim).
+void trim_where_surfaces_meet(LayoutGeometry& g, const TraceLens<double>& lens,
+                              const std::vector<double>& max_height) {
+  const int k_count = lens.surface_count();
   for (int k = 0; k + 1 < k_count; ++k) {
     if (lens.is_glass[k]) continue;
     SurfaceDrawing& a = g.surfaces[k];
@@ -157,7 +154,11 @@ LayoutGeometry compute_layout(const PlotContext& ctx, const LayoutOptions& optio
     s.drawn_semi_diameter_mm = s.clear_semi_diameter_mm;
     s.edge_semi_diameter_mm = s.clear_semi_diameter_mm;
   }
+}
 
+// Glass spaces [first, last]: the elements, cemented ones as one group.
+std::vector<std::pair<int, int>> element_groups(const TraceLens<double>& lens) {
+  const int k_count = lens.surface_count();
   std::vector<std::pair<int, int>> groups;  // glass spaces [first, last]
   for (int k = 0; k < k_count - 1; ++k) {
     if (!lens.is_glass[k]) continue;
@@ -166,6 +167,12 @@ LayoutGeometry compute_layout(const PlotContext& ctx, const LayoutOptions& optio
     else
       groups.push_back({k, k});
   }
+  return groups;
+}
+
+// An element's surfaces share its edge (the largest clear aperture among them); interior
+// (cemented) surfaces are drawn out to it.
+void set_element_edges(LayoutGeometry& g, const std::vector<std::pair<int, int>>& groups) {
   for (const auto& [first, last] : groups) {
     double edge = 0;
     for (int s = first; s <= last + 1; ++s)
@@ -179,33 +186,38 @@ LayoutGeometry compute_layout(const PlotContext& ctx, const LayoutOptions& optio
         d.drawn_semi_diameter_mm = edge;
     }
   }
+}
 
-  // The stop: from its clear radius outward, short of its neighbours' drawn curves.
-  {
-    SurfaceDrawing& stop = g.surfaces[lens.stop];
-    const double inner = g.stop_clear_mm;
-    double outer = std::max(inner * 1.3, inner + 0.3);
-    const int steps = 200;
-    for (int side : {-1, 1}) {
-      const int k = lens.stop + side;
-      if (k < 0 || k >= k_count) continue;
-      const SurfaceDrawing& n = g.surfaces[k];
-      for (int i = 0; i <= steps; ++i) {
-        const double y = inner + (outer - inner) * i / steps;
-        const auto z = n.z_at(y);
-        if (z && (side < 0 ? *z >= g.stop_z_mm : *z <= g.stop_z_mm)) {
-          outer = std::max(inner * 1.02, y - (outer - inner) / steps);
-          break;
-        }
+// The stop: from its clear radius outward, short of its neighbours' drawn curves.
+void set_stop(LayoutGeometry& g, const TraceLens<double>& lens) {
+  const int k_count = lens.surface_count();
+  SurfaceDrawing& stop = g.surfaces[lens.stop];
+  const double inner = g.stop_clear_mm;
+  double outer = std::max(inner * 1.3, inner + 0.3);
+  const int steps = 200;
+  for (int side : {-1, 1}) {
+    const int k = lens.stop + side;
+    if (k < 0 || k >= k_count) continue;
+    const SurfaceDrawing& n = g.surfaces[k];
+    for (int i = 0; i <= steps; ++i) {
+      const double y = inner + (outer - inner) * i / steps;
+      const auto z = n.z_at(y);
+      if (z && (side < 0 ? *z >= g.stop_z_mm : *z <= g.stop_z_mm)) {
+        outer = std::max(inner * 1.02, y - (outer - inner) / steps);
+        break;
       }
     }
-    g.stop_outer_mm = outer;
-    if (!stop.in_element) {
-      stop.drawn_semi_diameter_mm = outer;
-      stop.edge_semi_diameter_mm = outer;
-    }
   }
+  g.stop_outer_mm = outer;
+  if (!stop.in_element) {
+    stop.drawn_semi_diameter_mm = outer;
+    stop.edge_semi_diameter_mm = outer;
+  }
+}
 
+// Each surface's profile out to its drawn semi-diameter, and its curve with the flat annulus out
+// to the element's edge.
+void set_profiles(LayoutGeometry& g) {
   for (SurfaceDrawing& s : g.surfaces) {
     const double d = s.drawn_semi_diameter_mm;
     for (int i = 0; i < kProfilePoints; ++i) {
@@ -219,7 +231,11 @@ LayoutGeometry compute_layout(const PlotContext& ctx, const LayoutOptions& optio
       s.curve.push_back({z_end, -s.edge_semi_diameter_mm});
     }
   }
+}
 
+// The elements' outlines and rims, with a warning for a negative edge thickness.
+void add_elements(LayoutGeometry& g, const PlotContext& ctx,
+                  const std::vector<std::pair<int, int>>& groups) {
   for (const auto& [first, last] : groups) {
     for (int k = first; k <= last; ++k) {
       ElementDrawing e;
@@ -241,8 +257,11 @@ LayoutGeometry compute_layout(const PlotContext& ctx, const LayoutOptions& optio
       g.elements.push_back(std::move(e));
     }
   }
+}
 
-  // Smallest drawn gap between consecutive surfaces.
+// Smallest drawn gap between consecutive surfaces, with a warning where they cross.
+void find_gaps(LayoutGeometry& g) {
+  const int k_count = static_cast<int>(g.surfaces.size());
   for (int k = 0; k + 1 < k_count; ++k) {
     const SurfaceDrawing& a = g.surfaces[k];
     const SurfaceDrawing& b = g.surfaces[k + 1];
@@ -261,8 +280,16 @@ LayoutGeometry compute_layout(const PlotContext& ctx, const LayoutOptions& optio
       g.warnings.push_back(fmt::format(
           "surfaces {} and {} cross at height {:.3f} mm (by {:.3f} mm)", k + 1, k + 2, at, -gap));
   }
+}
 
-  // Ray bundles at the reference wavelength.
+// Ray bundles at the reference wavelength: `rays_per_field` meridional rays per drawn field,
+// from before the first surface to the image.
+void add_ray_bundles(LayoutGeometry& g, const PlotContext& ctx, const LayoutOptions& options,
+                     const std::vector<double>& vertex) {
+  const TraceSystem<double>& sys = ctx.sys;
+  const TraceLens<double>& lens = sys.lens;
+  const int k_count = lens.surface_count();
+  RayBundle<double> start, rays;
   const int ref = sys.wavelength_count;
   const std::vector<int> fields = field_indices(ctx, options.field_fractions);
   double z_first = 0;
@@ -310,6 +337,10 @@ LayoutGeometry compute_layout(const PlotContext& ctx, const LayoutOptions& optio
                                        n, sys.fields_deg[h]));
     for (RayDrawing& r : drawn) g.rays.push_back(std::move(r));
   }
+}
+
+// The image's half height and the drawing's bounds.
+void set_bounds(LayoutGeometry& g) {
   double widest = 0;
   for (const SurfaceDrawing& s : g.surfaces) widest = std::max(widest, s.edge_semi_diameter_mm);
   g.image_half_height_mm = std::max(g.image_half_height_mm * 1.08, 0.5 * widest);
@@ -321,6 +352,42 @@ LayoutGeometry compute_layout(const PlotContext& ctx, const LayoutOptions& optio
     for (const Point& p : r.points) y_max = std::max(y_max, std::abs(p.y));
   g.y_lo = -y_max;
   g.y_hi = y_max;
+}
+
+}  // namespace
+
+LayoutGeometry compute_layout(const PlotContext& ctx, const LayoutOptions& options) {
+  options.validate();
+  const TraceSystem<double>& sys = ctx.sys;
+  const TraceLens<double>& lens = sys.lens;
+  const int k_count = lens.surface_count();
+  LayoutGeometry g;
+  g.lens_name = ctx.lens.name;
+  g.scale = sys.scale;
+  g.efl_mm = sys.efl_mm;
+  g.f_number = sys.efl_mm / sys.epd_mm;
+  g.half_field_deg = sys.fields_deg.back();
+  g.stop_surface = lens.stop;
+
+  std::vector<double> vertex(k_count, 0.0);
+  for (int k = 1; k < k_count; ++k) vertex[k] = vertex[k - 1] + lens.thickness_mm[k - 1];
+  g.image_z_mm = vertex[k_count - 1] + lens.thickness_mm[k_count - 1];
+  g.stop_z_mm = vertex[lens.stop];
+
+  const std::vector<double> max_height = ray_heights(sys, options);
+  g.stop_radius_mm = sys.stop_radius_mm;  // the real marginal ray's height (the aperture)
+  g.stop_clear_mm = std::max(g.stop_radius_mm, max_height[lens.stop]);
+
+  add_surfaces(g, lens, vertex, max_height, options);
+  trim_where_surfaces_meet(g, lens, max_height);
+  const std::vector<std::pair<int, int>> groups = element_groups(lens);
+  set_element_edges(g, groups);
+  set_stop(g, lens);
+  set_profiles(g);
+  add_elements(g, ctx, groups);
+  find_gaps(g);
+  add_ray_bundles(g, ctx, options, vertex);
+  set_bounds(g);
   return g;
 }
 

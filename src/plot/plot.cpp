@@ -241,143 +241,162 @@ void PlotOptions::validate() const {
     throw Error(fmt::format("MTF frequency {} cycles/mm must be > 0", mtf_frequency_cyc_mm));
 }
 
-std::unique_ptr<Canvas> draw_plot(const PlotContext& ctx, const PlotContext* cmp,
-                                  const PlotOptions& options, const CanvasFactory& make,
-                                  PlotSummary* summary) {
-  options.validate();
-  const PlotKind kind = options.kind;
-  const double width = options.width_px > 0 ? options.width_px : default_width(kind);
-  const bool report = kind == PlotKind::kReport;
-  // Text scales with the page below the default width (down to 70%), not above it.
-  const double font_px = kBaseFont * std::clamp(width / default_width(kind), 0.7, 1.0);
-  const double header_h = font_px * (cmp ? 6.2 : 4.8);
+namespace {
 
-  // Data first (only what the page shows).
+// What a page shows, computed for the lens and the comparison lens (when given).
+struct PageData {
   std::optional<LayoutGeometry> layout, layout_cmp;
   std::optional<SpotData> spots, spots_cmp;
   std::optional<FanData> fans, fans_cmp;
   std::optional<FieldCurveData> field, field_cmp;
   std::optional<PsfStrip> psf, psf_cmp;
+  std::vector<const SpotData*> spot_rows;
+  std::vector<const PsfStrip*> psf_rows;
+  double box_um = 0.0;  // the spot diagrams' box
+
+  const LayoutGeometry* layout_cmp_or_null() const { return layout_cmp ? &*layout_cmp : nullptr; }
+  const FanData* fans_cmp_or_null() const { return fans_cmp ? &*fans_cmp : nullptr; }
+  const FieldCurveData* field_cmp_or_null() const { return field_cmp ? &*field_cmp : nullptr; }
+};
+
+// Data first (only what the page shows).
+PageData compute_page_data(const PlotContext& ctx, const PlotContext* cmp,
+                           const PlotOptions& options) {
+  const PlotKind kind = options.kind;
+  const bool report = kind == PlotKind::kReport;
+  PageData d;
   if (report || kind == PlotKind::kLayout) {
-    layout = compute_layout(ctx);
-    if (cmp) layout_cmp = compute_layout(*cmp);
+    d.layout = compute_layout(ctx);
+    if (cmp) d.layout_cmp = compute_layout(*cmp);
   }
   if (report || kind == PlotKind::kSpot) {
-    spots = compute_spots(ctx);
-    if (cmp) spots_cmp = compute_spots(*cmp);
+    d.spots = compute_spots(ctx);
+    if (cmp) d.spots_cmp = compute_spots(*cmp);
   }
   if (report || kind == PlotKind::kFan) {
-    fans = compute_fans(ctx);
-    if (cmp) fans_cmp = compute_fans(*cmp);
+    d.fans = compute_fans(ctx);
+    if (cmp) d.fans_cmp = compute_fans(*cmp);
   }
   if (report || kind == PlotKind::kField) {
-    field = compute_field_curves(ctx);
-    if (cmp) field_cmp = compute_field_curves(*cmp);
+    d.field = compute_field_curves(ctx);
+    if (cmp) d.field_cmp = compute_field_curves(*cmp);
   }
   if (report || kind == PlotKind::kPsf) {
-    psf = compute_psf_strip(ctx);
-    if (cmp) psf_cmp = compute_psf_strip(*cmp);
+    d.psf = compute_psf_strip(ctx);
+    if (cmp) d.psf_cmp = compute_psf_strip(*cmp);
   }
-  std::vector<const SpotData*> spot_rows;
-  if (spots) spot_rows.push_back(&*spots);
-  if (spots_cmp) spot_rows.push_back(&*spots_cmp);
-  const double box_um =
-      spots ? (options.spot_box_um > 0 ? options.spot_box_um : auto_spot_box_um(spot_rows)) : 0.0;
-  std::vector<const PsfStrip*> psf_rows;
-  if (psf) psf_rows.push_back(&*psf);
-  if (psf_cmp) psf_rows.push_back(&*psf_cmp);
-  const int rows = cmp ? 2 : 1;
-  const LayoutGeometry* lc = layout_cmp ? &*layout_cmp : nullptr;
+  if (d.spots) d.spot_rows.push_back(&*d.spots);
+  if (d.spots_cmp) d.spot_rows.push_back(&*d.spots_cmp);
+  d.box_um = d.spots
+                 ? (options.spot_box_um > 0 ? options.spot_box_um : auto_spot_box_um(d.spot_rows))
+                 : 0.0;
+  if (d.psf) d.psf_rows.push_back(&*d.psf);
+  if (d.psf_cmp) d.psf_rows.push_back(&*d.psf_cmp);
+  return d;
+}
 
-  // Page size.
+// Heights (px) of a page and of the report's sections.
+struct PageSize {
   double height = 0;
+  double spot_h = 0, psf_h = 0;                   // spot and PSF sections, all rows
+  double layout_h = 0, top_row_h = 0, fan_h = 0;  // the report's
+};
+
+PageSize page_size(PlotKind kind, const PageData& d, int rows, double width, double font_px,
+                   double header_h) {
+  PageSize p;
+  const LayoutGeometry* lc = d.layout_cmp_or_null();
   const double spot_h_per_row = std::min(260.0, (width - 60) / 5.0) + font_px * 5;
-  const double spot_h = font_px * 5 + rows * spot_h_per_row;
+  p.spot_h = font_px * 5 + rows * spot_h_per_row;
   const double psf_h_per_row = std::min(210.0, (width - 60) / 5.0) + font_px * 5;
-  const double psf_h = font_px * 5 + rows * psf_h_per_row;
+  p.psf_h = font_px * 5 + rows * psf_h_per_row;
   switch (kind) {
     case PlotKind::kLayout:
-      height = header_h + layout_height(*layout, lc, width, font_px);
+      p.height = header_h + layout_height(*d.layout, lc, width, font_px);
       break;
     case PlotKind::kSpot:
-      height = header_h + spot_h;
+      p.height = header_h + p.spot_h;
       break;
     case PlotKind::kFan:
-      height = header_h + 0.52 * width;
+      p.height = header_h + 0.52 * width;
       break;
     case PlotKind::kField:
-      height = header_h + 0.45 * width;
+      p.height = header_h + 0.45 * width;
       break;
     case PlotKind::kPsf:
-      height = header_h + psf_h;
+      p.height = header_h + p.psf_h;
       break;
     case PlotKind::kReport:
+      p.layout_h = layout_height(*d.layout, lc, 0.58 * width, font_px);
+      p.top_row_h = std::max(p.layout_h, 0.30 * width);
+      p.fan_h = 0.36 * width;
+      p.height = header_h + p.top_row_h + p.spot_h + p.fan_h + p.psf_h + 10;
       break;
     case PlotKind::kMtf:
     case PlotKind::kThroughFocus:
-      height = header_h + 0.55 * width;
+      p.height = header_h + 0.55 * width;
       break;
     case PlotKind::kWavefront:
     case PlotKind::kPsfDiffraction:
-      height = header_h + (width - 60) / 3.0 + font_px * 6;
+      p.height = header_h + (width - 60) / 3.0 + font_px * 6;
       break;
   }
-  double layout_h = 0, top_row_h = 0, fan_h = 0;
-  if (report) {
-    layout_h = layout_height(*layout, lc, 0.58 * width, font_px);
-    top_row_h = std::max(layout_h, 0.30 * width);
-    fan_h = 0.36 * width;
-    height = header_h + top_row_h + spot_h + fan_h + psf_h + 10;
-  }
-  std::unique_ptr<Canvas> canvas = make(width, std::round(height));
-  Canvas& c = *canvas;
-  const double top = draw_header(c, ctx, cmp, kind, width, font_px);
+  return p;
+}
+
+// The report: layout and field curves side by side, then spots, fans and PSFs, each section
+// under a title.
+void draw_report(Canvas& c, double top, double width, double font_px, const PageData& d,
+                 const PageSize& p) {
+  double y = top;
+  const Rect layout_area{0, y, 0.58 * width, p.top_row_h};
+  draw_layout(c, layout_area.inset(8, 4, 4, 4), *d.layout, d.layout_cmp_or_null(), font_px);
+  const Rect field_area{0.58 * width, y, 0.42 * width, std::min(p.top_row_h, 0.36 * width)};
+  draw_field_curves(c, field_area.inset(6, 4, 14, 4), *d.field, d.field_cmp_or_null(), font_px);
+  y += p.top_row_h;
+  auto section = [&](const std::string& name, double at) {
+    TextStyle t{font_px * 1.15, Anchor::kStart, "#111111"};
+    t.bold = true;
+    c.line({16, at + 2}, {width - 16, at + 2}, Style{"#dddddd", 1.0});
+    c.text({16, at + font_px * 1.5}, name, t);
+    return at + font_px * 2.0;
+  };
+  double s0 = section("spot diagrams", y);
+  draw_spots(c, Rect{0, s0, width, p.spot_h - (s0 - y)}.inset(10, 0, 10, 0), d.spot_rows, d.box_um,
+             font_px);
+  y += p.spot_h;
+  s0 = section("transverse ray fans", y);
+  draw_fans(c, Rect{0, s0, width, p.fan_h - (s0 - y)}.inset(10, 0, 14, 0), *d.fans,
+            d.fans_cmp_or_null(), font_px);
+  y += p.fan_h;
+  s0 = section("sampled PSFs", y);
+  draw_psf_strips(c, Rect{0, s0, width, p.psf_h - (s0 - y)}.inset(10, 0, 10, 0), d.psf_rows,
+                  font_px);
+}
+
+// The page's body below the header.
+void draw_body(Canvas& c, double top, double width, double font_px, const PlotContext& ctx,
+               const PlotOptions& options, const PageData& d, const PageSize& p) {
   const Rect body{0, top, width, c.height() - top};
-  switch (kind) {
+  switch (options.kind) {
     case PlotKind::kLayout:
-      draw_layout(c, body.inset(8, 4, 8, 4), *layout, lc, font_px);
+      draw_layout(c, body.inset(8, 4, 8, 4), *d.layout, d.layout_cmp_or_null(), font_px);
       break;
     case PlotKind::kSpot:
-      draw_spots(c, body.inset(10, 4, 10, 4), spot_rows, box_um, font_px);
+      draw_spots(c, body.inset(10, 4, 10, 4), d.spot_rows, d.box_um, font_px);
       break;
     case PlotKind::kFan:
-      draw_fans(c, body.inset(10, 4, 14, 4), *fans, fans_cmp ? &*fans_cmp : nullptr, font_px);
+      draw_fans(c, body.inset(10, 4, 14, 4), *d.fans, d.fans_cmp_or_null(), font_px);
       break;
     case PlotKind::kField:
-      draw_field_curves(c, body.inset(10, 4, 14, 4), *field, field_cmp ? &*field_cmp : nullptr,
-                        font_px);
+      draw_field_curves(c, body.inset(10, 4, 14, 4), *d.field, d.field_cmp_or_null(), font_px);
       break;
     case PlotKind::kPsf:
-      draw_psf_strips(c, body.inset(10, 4, 10, 4), psf_rows, font_px);
+      draw_psf_strips(c, body.inset(10, 4, 10, 4), d.psf_rows, font_px);
       break;
-    case PlotKind::kReport: {
-      double y = top;
-      const Rect layout_area{0, y, 0.58 * width, top_row_h};
-      draw_layout(c, layout_area.inset(8, 4, 4, 4), *layout, lc, font_px);
-      const Rect field_area{0.58 * width, y, 0.42 * width, std::min(top_row_h, 0.36 * width)};
-      draw_field_curves(c, field_area.inset(6, 4, 14, 4), *field, field_cmp ? &*field_cmp : nullptr,
-                        font_px);
-      y += top_row_h;
-      auto section = [&](const std::string& name, double at) {
-        TextStyle t{font_px * 1.15, Anchor::kStart, "#111111"};
-        t.bold = true;
-        c.line({16, at + 2}, {width - 16, at + 2}, Style{"#dddddd", 1.0});
-        c.text({16, at + font_px * 1.5}, name, t);
-        return at + font_px * 2.0;
-      };
-      double s0 = section("spot diagrams", y);
-      draw_spots(c, Rect{0, s0, width, spot_h - (s0 - y)}.inset(10, 0, 10, 0), spot_rows, box_um,
-                 font_px);
-      y += spot_h;
-      s0 = section("transverse ray fans", y);
-      draw_fans(c, Rect{0, s0, width, fan_h - (s0 - y)}.inset(10, 0, 14, 0), *fans,
-                fans_cmp ? &*fans_cmp : nullptr, font_px);
-      y += fan_h;
-      s0 = section("sampled PSFs", y);
-      draw_psf_strips(c, Rect{0, s0, width, psf_h - (s0 - y)}.inset(10, 0, 10, 0), psf_rows,
-                      font_px);
+    case PlotKind::kReport:
+      draw_report(c, top, width, font_px, d, p);
       break;
-    }
     case PlotKind::kMtf:
     case PlotKind::kThroughFocus:
     case PlotKind::kWavefront:
@@ -385,18 +404,41 @@ std::unique_ptr<Canvas> draw_plot(const PlotContext& ctx, const PlotContext* cmp
       draw_wave_page(c, body.inset(10, 4, 10, 4), ctx, options, font_px);
       break;
   }
-  if (summary) {
-    summary->width_px = c.width();
-    summary->height_px = c.height();
-    summary->spot_box_um = box_um;
-    if (layout)
-      summary->warnings.insert(summary->warnings.end(), layout->warnings.begin(),
-                               layout->warnings.end());
-    if (layout_cmp)
-      for (const std::string& w : layout_cmp->warnings)
-        summary->warnings.push_back(cmp->lens.name + ": " + w);
-    for (const std::string& w : c.warnings()) summary->warnings.push_back(w);
-  }
+}
+
+void fill_summary(const Canvas& c, const PlotContext* cmp, const PageData& d,
+                  PlotSummary& summary) {
+  summary.width_px = c.width();
+  summary.height_px = c.height();
+  summary.spot_box_um = d.box_um;
+  if (d.layout)
+    summary.warnings.insert(summary.warnings.end(), d.layout->warnings.begin(),
+                            d.layout->warnings.end());
+  if (d.layout_cmp)
+    for (const std::string& w : d.layout_cmp->warnings)
+      summary.warnings.push_back(cmp->lens.name + ": " + w);
+  for (const std::string& w : c.warnings()) summary.warnings.push_back(w);
+}
+
+}  // namespace
+
+std::unique_ptr<Canvas> draw_plot(const PlotContext& ctx, const PlotContext* cmp,
+                                  const PlotOptions& options, const CanvasFactory& make,
+                                  PlotSummary* summary) {
+  options.validate();
+  const PlotKind kind = options.kind;
+  const double width = options.width_px > 0 ? options.width_px : default_width(kind);
+  // Text scales with the page below the default width (down to 70%), not above it.
+  const double font_px = kBaseFont * std::clamp(width / default_width(kind), 0.7, 1.0);
+  const double header_h = font_px * (cmp ? 6.2 : 4.8);
+
+  const PageData data = compute_page_data(ctx, cmp, options);
+  const PageSize size = page_size(kind, data, cmp ? 2 : 1, width, font_px, header_h);
+  std::unique_ptr<Canvas> canvas = make(width, std::round(size.height));
+  Canvas& c = *canvas;
+  const double top = draw_header(c, ctx, cmp, kind, width, font_px);
+  draw_body(c, top, width, font_px, ctx, options, data, size);
+  if (summary) fill_summary(c, cmp, data, *summary);
   return canvas;
 }
 

@@ -8,11 +8,11 @@
 #include <complex>
 #include <cstring>
 
+#include "core/fft.h"
 #include "lensopt/core/error.h"
 #include "lensopt/core/threads.h"
-#include "lensopt/render/fft.h"
 #include "lensopt/render/metrics.h"
-#include "lensopt/render/overlap_add.h"
+#include "render/overlap_add.h"
 #include "lensopt/render/render.h"
 
 namespace lensopt {

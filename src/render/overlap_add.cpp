@@ -1,5 +1,5 @@
 // The blocks of the overlap-add blur (render/overlap_add.h).
-#include "lensopt/render/overlap_add.h"
+#include "render/overlap_add.h"
 
 #include <algorithm>
 

@@ -13,9 +13,10 @@
 
 #include "lensopt/core/constants.h"
 #include "lensopt/core/error.h"
+#include "lensopt/formats/lens_file.h"
 #include "lensopt/lens/lens_io.h"
-#include "lensopt/optimize/optimize_table.h"
 #include "lensopt/search/search.h"
+#include "optimize/optimize_table.h"
 #include "search_detail.h"
 
 namespace lensopt {
@@ -109,63 +110,169 @@ bool is_search_description(const std::filesystem::path& path) {
   return file["search"].as_table() != nullptr;
 }
 
-void read_search_description(const std::filesystem::path& path, SearchOptions& options) {
-  const toml::table file = parse_toml_file(path);
-  const std::filesystem::path base = path.parent_path();
-  for (const auto& [key, node] : file) {
-    const std::string k(key.str());
-    if (k != "search" && k != "specs" && k != "optimize")
-      throw Error(where_of(path, node),
-                  fmt::format("unknown table [{}]; known: [search], [specs], [optimize]", k));
-    if (!node.is_table()) throw Error(where_of(path, node), fmt::format("'{}' must be a table", k));
+namespace {
+
+// Reads a search description's tables into SearchOptions, each value checked for its type with
+// an Error at its file:line:column.
+class DescriptionReader {
+ public:
+  explicit DescriptionReader(const std::filesystem::path& path)
+      : path_(path), base_(path.parent_path()) {}
+
+  // Only [search], [specs] and [optimize], each a table.
+  void check_tables(const toml::table& file) const {
+    for (const auto& [key, node] : file) {
+      const std::string k(key.str());
+      if (k != "search" && k != "specs" && k != "optimize")
+        throw Error(where_of(path_, node),
+                    fmt::format("unknown table [{}]; known: [search], [specs], [optimize]", k));
+      if (!node.is_table())
+        throw Error(where_of(path_, node), fmt::format("'{}' must be a table", k));
+    }
   }
-  auto for_each = [&](const char* table_name, auto&& handle) {
+
+  // Start keys, in [search] (the defaults, and a group of their own when they name lenses) and
+  // in each [[search.starts]] table (a group inheriting the defaults' variations); with
+  // [search]'s own keys (catalog, top).
+  void read_starts(const toml::table& file, SearchOptions& options) const {
+    StartGroup defaults;
+    const toml::array* start_tables = nullptr;
+    for_each(
+        file, "search", [&](const std::string& k, const toml::node& n, const SourceLocation& w) {
+          if (group_key(defaults, k, n, w)) return;
+          if (k == "catalog") {
+            options.catalog = string(k, n, w);
+          } else if (k == "top") {
+            options.top_k = integer(k, n, w);
+          } else if (k == "starts") {
+            start_tables = n.as_array();
+            if (!start_tables || !start_tables->is_array_of_tables())
+              throw Error(w, "starts must be an array of tables: [[search.starts]]");
+          } else {
+            throw Error(
+                w, fmt::format("unknown key '{}' in [search]; known: lenses, generate, vary_stop, "
+                               "vary_cement, stops, glass_seeds, catalog, top, starts",
+                               k));
+          }
+        });
+    if (!defaults.lens_files.empty() || !defaults.generate.empty())
+      options.starts.push_back(defaults);
+    if (!start_tables) return;
+    for (const auto& item : *start_tables) {
+      StartGroup g = defaults;
+      g.lens_files.clear();
+      g.generate.clear();
+      for (const auto& [key, node] : *item.as_table()) {
+        const std::string k(key.str());
+        if (!group_key(g, k, node, where_of(path_, node)))
+          throw Error(where_of(path_, node),
+                      fmt::format("unknown key '{}' in [[search.starts]]; known: lenses, generate, "
+                                  "vary_stop, vary_cement, stops, glass_seeds",
+                                  k));
+      }
+      if (g.lens_files.empty() && g.generate.empty())
+        throw Error(where_of(path_, item), "[[search.starts]] needs lenses or generate");
+      options.starts.push_back(g);
+    }
+  }
+
+  // [specs]: the spec overrides; focal_length_mm gives the sensor d = 2 f tan(hfov).
+  void read_specs(const toml::table& file, SearchOptions& options) const {
+    for_each(file, "specs",
+             [&](const std::string& k, const toml::node& n, const SourceLocation& w) {
+               if (k == "f_number") {
+                 options.f_number = number(k, n, w);
+                 options.f_number_given = true;
+               } else if (k == "half_field_deg") {
+                 options.half_field_deg = number(k, n, w);
+                 options.half_field_given = true;
+               } else if (k == "sensor_diagonal_mm") {
+                 options.sensor_diagonal_mm = number(k, n, w);
+                 options.sensor_diagonal_given = true;
+               } else if (k == "focal_length_mm") {
+                 options.sensor_diagonal_given = true;
+                 // d = 2 f tan(hfov), with the half field given in this table or the default.
+                 const double f = number(k, n, w);
+                 const toml::table* specs = file["specs"].as_table();
+                 double hfov = options.half_field_deg;
+                 if (const auto h = (*specs)["half_field_deg"].value<double>()) hfov = *h;
+                 options.sensor_diagonal_mm = 2.0 * f * std::tan(hfov * kPi / 180.0);
+               } else {
+                 throw Error(
+                     w, fmt::format("unknown key '{}' in [specs]; known: f_number, half_field_deg, "
+                                    "sensor_diagonal_mm, focal_length_mm",
+                                    k));
+               }
+             });
+  }
+
+  // [optimize]: optimize's own keys (optimize_table.h), plus constraints = "paper+strict".
+  void read_optimize(const toml::table& file, SearchOptions& options) const {
+    for_each(file, "optimize",
+             [&](const std::string& k, const toml::node& n, const SourceLocation& w) {
+               // "paper+strict" is the search's own: two optimizations per candidate.
+               if (k == "constraints" &&
+                   n.value<std::string>() == std::optional<std::string>("paper+strict")) {
+                 options.optimize.loss.paper_penalties = false;
+                 options.paper_then_strict = true;
+                 return;
+               }
+               if (k == "constraints") options.paper_then_strict = false;
+               if (!apply_optimize_key(k, n, w, options.optimize))
+                 throw Error(w, fmt::format("unknown key '{}' in [optimize]; known: {}", k,
+                                            optimize_table_keys()));
+             });
+  }
+
+ private:
+  template <typename Handle>
+  void for_each(const toml::table& file, const char* table_name, Handle&& handle) const {
     const toml::table* table = file[table_name].as_table();
     if (!table) return;
     for (const auto& [key, node] : *table)
-      handle(std::string(key.str()), node, where_of(path, node));
-  };
-  auto number = [](const std::string& k, const toml::node& n, const SourceLocation& w) {
+      handle(std::string(key.str()), node, where_of(path_, node));
+  }
+  static double number(const std::string& k, const toml::node& n, const SourceLocation& w) {
     const auto v = n.value<double>();
     if (!v) throw Error(w, fmt::format("{} must be a number", k));
     return *v;
-  };
-  auto integer = [](const std::string& k, const toml::node& n, const SourceLocation& w) {
+  }
+  static int integer(const std::string& k, const toml::node& n, const SourceLocation& w) {
     const auto v = n.value<int64_t>();
     if (!v || !n.is_integer()) throw Error(w, fmt::format("{} must be an integer", k));
     return static_cast<int>(*v);
-  };
-  auto boolean = [](const std::string& k, const toml::node& n, const SourceLocation& w) {
+  }
+  static bool boolean(const std::string& k, const toml::node& n, const SourceLocation& w) {
     const auto v = n.value<bool>();
     if (!v) throw Error(w, fmt::format("{} must be true or false", k));
     return *v;
-  };
-  auto string = [](const std::string& k, const toml::node& n, const SourceLocation& w) {
+  }
+  static std::string string(const std::string& k, const toml::node& n, const SourceLocation& w) {
     const auto v = n.value<std::string>();
     if (!v) throw Error(w, fmt::format("{} must be a string", k));
     return *v;
-  };
-  auto strings = [&](const std::string& k, const toml::node& n, const SourceLocation& w) {
+  }
+  std::vector<std::string> strings(const std::string& k, const toml::node& n,
+                                   const SourceLocation& w) const {
     const toml::array* arr = n.as_array();
     if (!arr) throw Error(w, fmt::format("{} must be an array of strings", k));
     std::vector<std::string> out;
-    for (const auto& item : *arr) out.push_back(string(k, item, where_of(path, item)));
+    for (const auto& item : *arr) out.push_back(string(k, item, where_of(path_, item)));
     return out;
-  };
+  }
 
-  // Start keys, in [search] (the defaults, and a group of their own when they name lenses) and in
-  // each [[search.starts]] table (a group inheriting the defaults' variations).
-  auto group_key = [&](StartGroup& g, const std::string& k, const toml::node& n,
-                       const SourceLocation& w) {
+  // One start key of a group; false for a key that is not one.
+  bool group_key(StartGroup& g, const std::string& k, const toml::node& n,
+                 const SourceLocation& w) const {
     if (k == "lenses") {
       for (const std::string& s : strings(k, n, w)) {
         const std::filesystem::path p(s);
-        g.lens_files.push_back(p.is_absolute() ? s : (base / p).lexically_normal().string());
+        g.lens_files.push_back(p.is_absolute() ? s : (base_ / p).lexically_normal().string());
       }
     } else if (k == "generate") {
       const toml::array* arr = n.as_array();
       if (!arr) throw Error(w, "generate must be an array of element counts, e.g. [2, 3]");
-      for (const auto& item : *arr) g.generate.push_back(integer(k, item, where_of(path, item)));
+      for (const auto& item : *arr) g.generate.push_back(integer(k, item, where_of(path_, item)));
     } else if (k == "vary_stop") {
       g.vary_stop = boolean(k, n, w);
     } else if (k == "vary_cement") {
@@ -188,83 +295,21 @@ void read_search_description(const std::filesystem::path& path, SearchOptions& o
       return false;
     }
     return true;
-  };
-  StartGroup defaults;
-  const toml::array* start_tables = nullptr;
-  for_each("search", [&](const std::string& k, const toml::node& n, const SourceLocation& w) {
-    if (group_key(defaults, k, n, w)) return;
-    if (k == "catalog") {
-      options.catalog = string(k, n, w);
-    } else if (k == "top") {
-      options.top_k = integer(k, n, w);
-    } else if (k == "starts") {
-      start_tables = n.as_array();
-      if (!start_tables || !start_tables->is_array_of_tables())
-        throw Error(w, "starts must be an array of tables: [[search.starts]]");
-    } else {
-      throw Error(w,
-                  fmt::format("unknown key '{}' in [search]; known: lenses, generate, vary_stop, "
-                              "vary_cement, stops, glass_seeds, catalog, top, starts",
-                              k));
-    }
-  });
-  if (!defaults.lens_files.empty() || !defaults.generate.empty())
-    options.starts.push_back(defaults);
-  if (start_tables) {
-    for (const auto& item : *start_tables) {
-      StartGroup g = defaults;
-      g.lens_files.clear();
-      g.generate.clear();
-      for (const auto& [key, node] : *item.as_table()) {
-        const std::string k(key.str());
-        if (!group_key(g, k, node, where_of(path, node)))
-          throw Error(where_of(path, node),
-                      fmt::format("unknown key '{}' in [[search.starts]]; known: lenses, generate, "
-                                  "vary_stop, vary_cement, stops, glass_seeds",
-                                  k));
-      }
-      if (g.lens_files.empty() && g.generate.empty())
-        throw Error(where_of(path, item), "[[search.starts]] needs lenses or generate");
-      options.starts.push_back(g);
-    }
   }
-  for_each("specs", [&](const std::string& k, const toml::node& n, const SourceLocation& w) {
-    if (k == "f_number") {
-      options.f_number = number(k, n, w);
-      options.f_number_given = true;
-    } else if (k == "half_field_deg") {
-      options.half_field_deg = number(k, n, w);
-      options.half_field_given = true;
-    } else if (k == "sensor_diagonal_mm") {
-      options.sensor_diagonal_mm = number(k, n, w);
-      options.sensor_diagonal_given = true;
-    } else if (k == "focal_length_mm") {
-      options.sensor_diagonal_given = true;
-      // d = 2 f tan(hfov), with the half field given in this table or the default.
-      const double f = number(k, n, w);
-      const toml::table* specs = file["specs"].as_table();
-      double hfov = options.half_field_deg;
-      if (const auto h = (*specs)["half_field_deg"].value<double>()) hfov = *h;
-      options.sensor_diagonal_mm = 2.0 * f * std::tan(hfov * kPi / 180.0);
-    } else {
-      throw Error(w, fmt::format("unknown key '{}' in [specs]; known: f_number, half_field_deg, "
-                                 "sensor_diagonal_mm, focal_length_mm",
-                                 k));
-    }
-  });
-  for_each("optimize", [&](const std::string& k, const toml::node& n, const SourceLocation& w) {
-    // "paper+strict" is the search's own: two optimizations per candidate.
-    if (k == "constraints" &&
-        n.value<std::string>() == std::optional<std::string>("paper+strict")) {
-      options.optimize.loss.paper_penalties = false;
-      options.paper_then_strict = true;
-      return;
-    }
-    if (k == "constraints") options.paper_then_strict = false;
-    if (!apply_optimize_key(k, n, w, options.optimize))
-      throw Error(
-          w, fmt::format("unknown key '{}' in [optimize]; known: {}", k, optimize_table_keys()));
-  });
+
+  std::filesystem::path path_;
+  std::filesystem::path base_;  // relative lens paths are relative to the description's folder
+};
+
+}  // namespace
+
+void read_search_description(const std::filesystem::path& path, SearchOptions& options) {
+  const toml::table file = parse_toml_file(path);
+  const DescriptionReader reader(path);
+  reader.check_tables(file);
+  reader.read_starts(file, options);
+  reader.read_specs(file, options);
+  reader.read_optimize(file, options);
 }
 
 std::vector<SearchCandidate> make_candidates(const SearchOptions& options) {

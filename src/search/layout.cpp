@@ -7,9 +7,9 @@
 #include <limits>
 
 #include "lensopt/core/error.h"
+#include "lensopt/lens/trace_lens.h"
 #include "lensopt/paraxial/paraxial.h"
 #include "lensopt/search/search.h"
-#include "lensopt/trace/trace_lens.h"
 #include "search_detail.h"
 
 namespace lensopt {
@@ -30,13 +30,6 @@ constexpr double kFlintNd = 1.6259, kFlintVd = 35.70;
 
 Error form_error(const Lens& lens, const std::string& message) {
   return Error(SourceLocation{lens.source_path}, message);
-}
-
-// Paraxial back focal length (587.6 nm) of a lens as written, mm; NaN if it has no power.
-double paraxial_bfl_mm(const Lens& lens) {
-  const TraceLens<double> tl = make_trace_lens(lens);
-  const ParaxialData<double> p = paraxial_data(tl, tl.reference_nm());
-  return std::isfinite(p.bfl_mm) ? p.bfl_mm : std::numeric_limits<double>::quiet_NaN();
 }
 
 // Thin-lens power sign of an element: (nd - 1)(c_front - c_rear).
@@ -364,13 +357,16 @@ void seed_glasses(LensForm& form, int seed, const Catalog& catalog) {
 namespace detail {
 
 double rebuilt_image_mm(const Lens& rebuilt, double old_defocus_mm) {
-  const double bfl = paraxial_bfl_mm(rebuilt);
-  return std::isfinite(bfl) ? bfl + old_defocus_mm : rebuilt.surfaces.back().thickness_mm;
+  const TraceLens<double> tl = make_trace_lens(rebuilt);
+  const ParaxialData<double> par = paraxial_data(tl, tl.reference_nm());
+  return std::isfinite(par.bfl_mm) ? image_distance_for_defocus_mm(par, old_defocus_mm)
+                                   : rebuilt.surfaces.back().thickness_mm;
 }
 
 double lens_defocus_mm(const Lens& lens) {
-  const double bfl = paraxial_bfl_mm(lens);
-  return std::isfinite(bfl) ? lens.surfaces.back().thickness_mm - bfl : 0.0;
+  const TraceLens<double> tl = make_trace_lens(lens);
+  const ParaxialData<double> par = paraxial_data(tl, tl.reference_nm());
+  return std::isfinite(par.bfl_mm) ? paraxial_defocus_mm(tl, par) : 0.0;
 }
 
 }  // namespace detail

@@ -13,6 +13,7 @@
 #include <mutex>
 #include <random>
 
+#include "lensopt/analysis/spot.h"
 #include "lensopt/core/error.h"
 #include "lensopt/core/threads.h"
 #include "lensopt/paraxial/paraxial.h"
@@ -45,69 +46,6 @@ double unit_draw(std::mt19937_64& rng, ToleranceDistribution distribution) {
     if (std::abs(u) <= 1.0) return u;
   }
 }
-
-// Spot moments of one field about a reference ray, as functions of the image-plane shift tau:
-// a ray at (x, y) on the reference plane with slopes (sx, sy) = (l/n, m/n) lands at
-// (x + tau sx, y + tau sy). With dy = y - y0, ds = sy - sy0 (y0, sy0 of the first ray):
-//   S^2(tau) = var(dy) + 2 tau cov(dy, ds) + tau^2 var(ds) + E[x^2] + 2 tau E[x sx] + tau^2 E[sx^2]
-struct FieldMoments {
-  bool has_reference = false;
-  double y0 = 0, sy0 = 0;
-  double sum_dy = 0, sum_ds = 0, sum_dy2 = 0, sum_dyds = 0, sum_ds2 = 0;
-  double sum_x2 = 0, sum_xsx = 0, sum_sx2 = 0;
-  int count = 0;
-
-  void add(const RayBundle<double>& rays) {
-    for (std::size_t i = 0; i < rays.size(); ++i) {
-      if (rays.status[i] != kRayOk) continue;
-      const double sy = rays.m[i] / rays.n[i];
-      const double sx = rays.l[i] / rays.n[i];
-      if (!has_reference) {
-        has_reference = true;
-        y0 = rays.y[i];
-        sy0 = sy;
-      }
-      const double dy = rays.y[i] - y0;
-      const double ds = sy - sy0;
-      sum_dy += dy;
-      sum_ds += ds;
-      sum_dy2 += dy * dy;
-      sum_dyds += dy * ds;
-      sum_ds2 += ds * ds;
-      sum_x2 += rays.x[i] * rays.x[i];
-      sum_xsx += rays.x[i] * sx;
-      sum_sx2 += sx * sx;
-      ++count;
-    }
-  }
-  // S^2 at the reference plane (the same arithmetic as SpotAccumulator).
-  double variance0() const {
-    const double inv = 1.0 / count;
-    const double mean_dy = sum_dy * inv;
-    return sum_dy2 * inv - mean_dy * mean_dy + sum_x2 * inv;
-  }
-  double variance(double tau) const {
-    if (tau == 0.0) return variance0();
-    const double inv = 1.0 / count;
-    const double mean_dy = sum_dy * inv;
-    const double mean_ds = sum_ds * inv;
-    const double a = sum_dy2 * inv - mean_dy * mean_dy + sum_x2 * inv;
-    const double b = sum_dyds * inv - mean_dy * mean_ds + sum_xsx * inv;
-    const double c = sum_ds2 * inv - mean_ds * mean_ds + sum_sx2 * inv;
-    return a + tau * (2.0 * b + tau * c);
-  }
-  double rms(double tau) const {
-    if (count == 0) return 0.0;
-    const double v = variance(tau);
-    return v > 0.0 ? std::sqrt(v) : 0.0;
-  }
-  double centroid(double tau) const {
-    if (count == 0) return 0.0;
-    const double inv = 1.0 / count;
-    if (tau == 0.0) return y0 + sum_dy * inv;
-    return y0 + tau * sy0 + (sum_dy + tau * sum_ds) * inv;
-  }
-};
 
 // The minimum of a convex function by golden-section search: bracket from [-h, h] outwards,
 // then shrink until the bracket is below `tolerance`.
@@ -394,17 +332,11 @@ ToleranceModel::ToleranceModel(const Lens& lens, const ToleranceOptions& options
   m.options.progress = nullptr;
   m.specs = lens.specs;
   // The scale as analyze computes it, then the nominal at the spec focal length.
-  TraceOptions scale_options;
-  scale_options.rings = 1;
-  scale_options.fields = 1;
-  scale_options.ray_aiming = false;
-  scale_options.scale_to_spec = true;
-  const TraceSystem<double> unscaled = prepare_lens_system(lens, scale_options);
-  m.scale = unscaled.scale;
+  m.scale = lens_spec_scale(lens);
   if (!(std::isfinite(m.scale) && m.scale > 0))
     throw Error(SourceLocation{lens.source_path},
                 fmt::format("cannot scale the lens to the spec focal length (paraxial EFL {} mm)",
-                            unscaled.efl_mm / unscaled.scale));
+                            lens.specs.focal_length_mm() / m.scale));
   m.scaled_lens = scaled(lens, m.scale);
   m.nominal = make_trace_lens(m.scaled_lens);
   m.parameters = tolerance_parameters(m.scaled_lens, options.tolerances);
@@ -413,7 +345,7 @@ ToleranceModel::ToleranceModel(const Lens& lens, const ToleranceOptions& options
   const double r_ep = par.efl_mm / lens.specs.f_number / 2.0;
   m.stop_height_mm = par.stop_magnification * r_ep;
   m.image_distance0_mm = m.nominal.thickness_mm.back();
-  m.defocus_mm = m.image_distance0_mm - par.bfl_mm;
+  m.defocus_mm = paraxial_defocus_mm(m.nominal, par);
   if (!(std::isfinite(m.stop_height_mm) && m.stop_height_mm != 0.0 && std::isfinite(m.defocus_mm)))
     throw Error(SourceLocation{lens.source_path},
                 "the lens has no finite paraxial stop height or back focal length");
@@ -497,8 +429,9 @@ TrialResult ToleranceModel::evaluate(const std::vector<double>& perturbations) c
   if (!std::isfinite(r.min_edge_gap_mm)) r.min_edge_gap_mm = 0.0;
   const ParaxialData<double> par = paraxial_data(tl, tl.reference_nm());
   // Reference image plane: the paraxial solve (also the start of the best-RMS search).
-  const double t_ref = m.options.compensator == FocusCompensator::kNone ? m.image_distance0_mm
-                                                                        : par.bfl_mm + m.defocus_mm;
+  const double t_ref = m.options.compensator == FocusCompensator::kNone
+                           ? m.image_distance0_mm
+                           : image_distance_for_defocus_mm(par, m.defocus_mm);
   tl.thickness_mm[last] = t_ref;
   r.efl_mm = par.efl_mm;
   r.image_distance_mm = t_ref;
@@ -519,7 +452,7 @@ TrialResult ToleranceModel::evaluate(const std::vector<double>& perturbations) c
   TraceSystem<double> sys =
       prepare_system(tl, m.specs.focal_length_mm(), f_number, m.specs.half_field_deg, to);
 
-  std::vector<FieldMoments> moments(field_count);
+  std::vector<ThroughFocusSpot> moments(field_count);
   RayBundle<double> rays;
   const int k_count = sys.lens.surface_count();
   for (int h = 0; h < field_count; ++h) {
@@ -530,14 +463,14 @@ TrialResult ToleranceModel::evaluate(const std::vector<double>& perturbations) c
         if (rays.status[i] != kRayOk) ++r.ray_failures;
       moments[h].add(rays);
     }
-    if (moments[h].count == 0) r.valid = false;
+    if (moments[h].count() == 0) r.valid = false;
   }
 
   double tau = 0.0;
   if (m.options.compensator == FocusCompensator::kBestRms && r.valid) {
     auto mean_spot = [&](double t) {
       double sum = 0.0;
-      for (const FieldMoments& fm : moments) sum += fm.rms(t);
+      for (const ThroughFocusSpot& fm : moments) sum += fm.rms(t);
       return sum / field_count;
     };
     // Start with a bracket of +-2 % of the image distance (or 0.1 mm): focus shifts from
@@ -560,7 +493,7 @@ TrialResult ToleranceModel::evaluate(const std::vector<double>& perturbations) c
   r.mean_spot_um = sum / field_count;
   const double y_ref_last = y_ref.back();
   for (int h = 0; h < field_count; ++h) {
-    if (moments[h].count == 0 || y_ref_last == 0.0) continue;
+    if (moments[h].count() == 0 || y_ref_last == 0.0) continue;
     const double d = 100.0 * (moments[h].centroid(tau) - y_ref[h]) / y_ref_last;
     r.max_abs_distortion_pct = std::max(r.max_abs_distortion_pct, std::abs(d));
   }

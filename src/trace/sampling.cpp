@@ -111,6 +111,14 @@ TraceSystem<double> prepare_lens_system(const Lens& lens, const TraceOptions& op
   return prepare_system(make_trace_lens(lens), lens_setup(lens, options), options);
 }
 
+double lens_spec_scale(const Lens& lens) {
+  const SystemSetup setup = specs_setup(lens.specs, TraceOptions{});
+  if (!setup.scale) return 1.0;
+  const TraceLens<double> trace_lens = make_trace_lens(lens);
+  return spec_scale(setup.focal_length_mm,
+                    paraxial_data(trace_lens, trace_lens.reference_nm()).efl_mm);
+}
+
 std::vector<double> field_angles_deg(double half_field_deg, int count) {
   std::vector<double> out;
   if (count == 1) return {0.0};

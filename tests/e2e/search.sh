@@ -10,11 +10,36 @@ lensopt="$1"
 tmp=$(mktemp -d)
 pid=""
 trap '[ -n "$pid" ] && kill -9 "$pid" 2>/dev/null; rm -rf "$tmp"' EXIT
+
+# Waits (at most 60 s a line) for the first "[1/N] ..." line of a run's stderr, read from the
+# FIFO $1: a search prints it once its first candidate's result file is written. The rest of the
+# output is then copied to $2 (default /dev/null) in the background, so the run never blocks on a
+# full pipe; finish_reading waits for that copy after the run has ended.
+wait_for_first_result() {
+  exec 3< "$1"
+  local line="" out="${2:-/dev/null}"
+  : > "$out"
+  while true; do
+    IFS= read -r -t 60 -u 3 line || fail "the search finished no candidate in 60 s"
+    printf '%s\n' "$line" >> "$out"
+    [[ "$line" =~ ^\[[0-9]+/[0-9]+\] ]] && break  # "[1/6] <id>: ...": a result is written
+  done
+  cat <&3 >> "$out" &
+  drain=$!
+}
+finish_reading() {
+  wait "$drain" 2>/dev/null || true
+  exec 3<&-
+}
 fail() { echo "FAIL: $*" >&2; exit 1; }
 command -v python3 > /dev/null || { echo "skipped: python3 is needed to compare leaderboards"; exit 77; }
 
 search=(lenses/doublet.toml --vary-stop --glass-seeds 2 --rings 3 --fields 3 --max-iterations 3
         --max-rounds 1 --top 2 -q)
+# The same search with a line per finished candidate on stderr (no -q), for the runs that are
+# stopped once their first result is written.
+noisy=()
+for arg in "${search[@]}"; do [ "$arg" = -q ] || noisy+=("$arg"); done
 
 # Compares two result folders' leaderboards, every column but seconds.
 same_leaderboard() {
@@ -63,15 +88,15 @@ done
 find "$tmp/one" -name '*.tmp*' | grep -q . && fail "a temporary file was left behind"
 
 # 2. Killed after its first finished candidate (SIGKILL: no chance to clean up), then resumed.
-"$lensopt" search "${search[@]}" -o "$tmp/killed" --jobs 1 > /dev/null 2>&1 &
+# The run's stderr comes through a FIFO: its first "[1/6] ..." line says a result is written.
+mkfifo "$tmp/killed.fifo"
+"$lensopt" search "${noisy[@]}" -o "$tmp/killed" --jobs 1 > /dev/null 2> "$tmp/killed.fifo" &
 pid=$!
-for _ in $(seq 1 600); do
-  [ "$(find "$tmp/killed/results" -name '*.json' 2>/dev/null | wc -l)" -ge 1 ] && break
-  sleep 0.05
-done
+wait_for_first_result "$tmp/killed.fifo"
 kill -9 "$pid" 2>/dev/null || true
 wait "$pid" 2>/dev/null || true
 pid=""
+finish_reading
 before=$(find "$tmp/killed/results" -name '*.json' | wc -l)
 [ "$before" -ge 1 ] || fail "no result file before the kill"
 [ "$before" -lt 6 ] || echo "note: the search finished before it could be killed"
@@ -89,16 +114,15 @@ same_leaderboard "$tmp/one" "$tmp/merged"
 cmp -s "$tmp/one/search.json" "$tmp/merged/search.json" || fail "search.json differs after merge"
 
 # 4. SIGINT stops the search: exit 130, the finished candidates kept, a partial leaderboard.
-"$lensopt" search "${search[@]}" -o "$tmp/int" --jobs 1 > /dev/null 2> "$tmp/int.txt" &
+mkfifo "$tmp/int.fifo"
+"$lensopt" search "${noisy[@]}" -o "$tmp/int" --jobs 1 > /dev/null 2> "$tmp/int.fifo" &
 pid=$!
-for _ in $(seq 1 600); do
-  [ "$(find "$tmp/int/results" -name '*.json' 2>/dev/null | wc -l)" -ge 1 ] && break
-  sleep 0.05
-done
+wait_for_first_result "$tmp/int.fifo" "$tmp/int.txt"
 kill -INT "$pid" 2>/dev/null || true
 rc=0
 wait "$pid" || rc=$?
 pid=""
+finish_reading
 if [ "$rc" -eq 130 ]; then
   grep -q "run the same command again to resume" "$tmp/int.txt" || fail "SIGINT message: $(cat "$tmp/int.txt")"
   [ -f "$tmp/int/leaderboard.csv" ] || fail "no partial leaderboard after SIGINT"

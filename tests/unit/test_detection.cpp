@@ -13,6 +13,7 @@
 #include "lensopt/detection/coco_eval.h"
 #include "lensopt/detection/dataset.h"
 #include "lensopt/detection/scenes.h"
+#include "lensopt/formats/lens_file.h"
 #include "lensopt/lens/lens_io.h"
 #include "test_support.h"
 

@@ -6,6 +6,7 @@
 #include <cmath>
 
 #include "lensopt/analysis/gradient.h"
+#include "lensopt/formats/lens_file.h"
 #include "lensopt/lens/lens_io.h"
 #include "test_support.h"
 
@@ -24,11 +25,21 @@ double finite_difference(const Lens& lens, const PrescriptionVariable& v,
   const double x0 = variable_value(lens, v);
   double scale = 1.0;
   switch (v.kind) {
-    case PrescriptionVariable::Kind::kCurvature: scale = 0.05; break;
-    case PrescriptionVariable::Kind::kThickness: scale = 1.0; break;
-    case PrescriptionVariable::Kind::kNd: scale = 1.0; break;
-    case PrescriptionVariable::Kind::kVd: scale = 40.0; break;
-    default: scale = 1.0; break;
+    case PrescriptionVariable::Kind::kCurvature:
+      scale = 0.05;
+      break;
+    case PrescriptionVariable::Kind::kThickness:
+      scale = 1.0;
+      break;
+    case PrescriptionVariable::Kind::kNd:
+      scale = 1.0;
+      break;
+    case PrescriptionVariable::Kind::kVd:
+      scale = 40.0;
+      break;
+    default:
+      scale = 1.0;
+      break;
   }
   auto central = [&](double h) {
     Lens plus = lens, minus = lens;
@@ -47,7 +58,8 @@ double finite_difference(const Lens& lens, const PrescriptionVariable& v,
 // derivative that is zero up to rounding is not held to a relative bound.
 double check_gradient(const Lens& lens, const TraceOptions& options) {
   const std::vector<PrescriptionVariable> variables = all_prescription_variables(lens);
-  const SpotGradient g = mean_spot_gradient<8>(make_trace_lens(lens), lens.specs, variables, options);
+  const SpotGradient g =
+      mean_spot_gradient<8>(make_trace_lens(lens), lens.specs, variables, options);
   CHECK(g.mean_rms_spot_mm == doctest::Approx(mean_spot(lens, options)).epsilon(1e-12));
   double largest = 0;
   for (double d : g.gradient) largest = std::max(largest, std::abs(d));

@@ -9,6 +9,7 @@
 
 #include "lensopt/core/atomic_file.h"
 #include "lensopt/core/error.h"
+#include "lensopt/formats/lens_file.h"
 #include "lensopt/joint/data.h"
 #include "lensopt/lens/lens_io.h"
 #include "lensopt/optimize/design_gradient.h"

@@ -12,6 +12,7 @@
 #include <random>
 
 #include "lensopt/core/error.h"
+#include "lensopt/formats/lens_file.h"
 #include "lensopt/glass/glass.h"
 #include "lensopt/joint/imaging.h"
 #include "lensopt/lens/lens_io.h"

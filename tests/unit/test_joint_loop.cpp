@@ -13,6 +13,7 @@
 
 #include "lensopt/core/atomic_file.h"
 #include "lensopt/core/error.h"
+#include "lensopt/formats/lens_file.h"
 #include "lensopt/joint/joint.h"
 #include "lensopt/lens/lens_io.h"
 #include "test_joint_support.h"

@@ -16,6 +16,7 @@
 #include "lens_checks.h"
 #include "lensopt/core/atomic_file.h"
 #include "lensopt/core/error.h"
+#include "lensopt/formats/lens_file.h"
 #include "lensopt/glass/glass.h"
 #include "lensopt/lens/lens_io.h"
 #include "test_support.h"

@@ -7,6 +7,7 @@
 #include <cmath>
 
 #include "lensopt/core/error.h"
+#include "lensopt/formats/lens_file.h"
 #include "lensopt/lens/lens_io.h"
 #include "lensopt/optimize/optimizer.h"
 #include "test_support.h"
@@ -104,7 +105,8 @@ TEST_CASE("optimize: quantized glass variables use the catalog glass, gradient s
   const TraceLens<J> quantized = param.to_trace_lens(xj.data(), GlassMode::kQuantized);
   const int surface = param.variables()[g].surface;
   const std::vector<int> nearest = param.nearest_glasses(x.data());
-  CHECK(quantized.nd[surface].a == doctest::Approx(param.glass_space().nd(nearest[0])).epsilon(1e-14));
+  CHECK(quantized.nd[surface].a ==
+        doctest::Approx(param.glass_space().nd(nearest[0])).epsilon(1e-14));
   // Straight-through: the derivative is that of the continuous map.
   const TraceLens<J> continuous = param.to_trace_lens(xj.data(), GlassMode::kContinuous);
   CHECK(quantized.nd[surface].v[0] == doctest::Approx(continuous.nd[surface].v[0]).epsilon(1e-14));
@@ -141,10 +143,10 @@ TEST_CASE("optimize: the reweighted least squares equals the paper's spot loss a
   std::vector<double> weights(fields);
   for (int h = 0; h < fields; ++h) weights[h] = 1.0 / (fields * loss.field_rms_mm[h]);
   const int rays = static_cast<int>(paper_pupil_samples(sampling.rings).size());
-  const int count = design_residual_count(
-      fields, constraint_field_count(fields, kConstraintFields),
-      static_cast<int>(lens.specs.wavelengths_nm.size()), rays,
-      static_cast<int>(lens.surfaces.size()), lens.element_count());
+  const int count =
+      design_residual_count(fields, constraint_field_count(fields, kConstraintFields),
+                            static_cast<int>(lens.specs.wavelengths_nm.size()), rays,
+                            static_cast<int>(lens.surfaces.size()), lens.element_count());
   // Value: sum r^2 = l_S at the reweighting point.
   std::vector<double> r(count);
   evaluate_design<double>(param, x.data(), GlassMode::kFixed, glasses, sampling, options, &weights,
@@ -214,7 +216,8 @@ TEST_CASE("optimize: design-loss Jacobian matches finite differences") {
   }
 }
 
-TEST_CASE("optimize: a short run from the Doublet never worsens its spot and keeps catalog glasses") {
+TEST_CASE(
+    "optimize: a short run from the Doublet never worsens its spot and keeps catalog glasses") {
   const Lens lens = baseline("doublet");
   OptimizeOptions options;
   options.sampling = small_sampling();
@@ -248,7 +251,8 @@ TEST_CASE("optimize: bad options are rejected with the option named") {
   CHECK(param.select({"curvatures"}).size() == 6);
 }
 
-TEST_CASE("optimize: with the paper's penalties the least squares equals lambda l_RP + lambda l_RA") {
+TEST_CASE(
+    "optimize: with the paper's penalties the least squares equals lambda l_RP + lambda l_RA") {
   const Lens lens = baseline("cooke");  // violates its ray-path and ray-angle bounds
   const LensParameterization param = parameterization(lens);
   const std::vector<double> x = param.from_lens(lens);
@@ -264,18 +268,18 @@ TEST_CASE("optimize: with the paper's penalties the least squares equals lambda 
   REQUIRE(loss.ray_path_mm > 0.0);
   REQUIRE(loss.ray_angle > 0.0);
   const int fields = static_cast<int>(loss.field_rms_mm.size());
-  const int count = design_residual_count(
-      fields, constraint_field_count(fields, kConstraintFields),
-      static_cast<int>(lens.specs.wavelengths_nm.size()),
-      static_cast<int>(paper_pupil_samples(sampling.rings).size()),
-      static_cast<int>(lens.surfaces.size()), lens.element_count());
+  const int count =
+      design_residual_count(fields, constraint_field_count(fields, kConstraintFields),
+                            static_cast<int>(lens.specs.wavelengths_nm.size()),
+                            static_cast<int>(paper_pupil_samples(sampling.rings).size()),
+                            static_cast<int>(lens.surfaces.size()), lens.element_count());
   std::vector<double> r(count);
   evaluate_design<double>(param, x.data(), GlassMode::kFixed, glasses, sampling, options, nullptr,
                           r.data(), nullptr);
   double sum = 0;
   for (double v : r) sum += v * v;
-  const double paper = options.weight_ray_path * loss.ray_path_mm +
-                       options.weight_ray_angle * loss.ray_angle;
+  const double paper =
+      options.weight_ray_path * loss.ray_path_mm + options.weight_ray_angle * loss.ray_angle;
   MESSAGE("cooke: sum of squares ", sum, ", 100 l_RP + 100 l_RA ", paper);
   // Equal but for the hinge's rounding within 1e-4 of each bound (at most 5e-5 per active ray).
   CHECK(sum == doctest::Approx(paper).epsilon(0.02));

@@ -16,6 +16,7 @@
 #include "lensopt/analysis/analyze.h"
 #include "lensopt/core/atomic_file.h"
 #include "lensopt/core/error.h"
+#include "lensopt/formats/lens_file.h"
 #include "lensopt/lens/lens_io.h"
 #include "lensopt/paraxial/paraxial.h"
 #include "lensopt/plot/canvas.h"

@@ -3,6 +3,7 @@
 #include <doctest/doctest.h>
 
 #include "lensopt/analysis/analyze.h"
+#include "lensopt/formats/lens_file.h"
 #include "lensopt/lens/lens_io.h"
 #include "test_support.h"
 

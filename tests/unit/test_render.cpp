@@ -14,6 +14,7 @@
 
 #include "lensopt/core/atomic_file.h"
 #include "lensopt/core/error.h"
+#include "lensopt/formats/lens_file.h"
 #include "lensopt/lens/lens_io.h"
 #include "lensopt/render/chart.h"
 #include "lensopt/render/dataset.h"

@@ -21,6 +21,7 @@
 #include "lensopt/core/error.h"
 #include "lensopt/core/output_checks.h"
 #include "lensopt/core/text.h"
+#include "lensopt/formats/lens_file.h"
 #include "lensopt/formats/zmx.h"
 #include "lensopt/glass/glass.h"
 #include "lensopt/glass/glass_range.h"

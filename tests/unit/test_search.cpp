@@ -13,6 +13,7 @@
 
 #include "lensopt/core/atomic_file.h"
 #include "lensopt/core/error.h"
+#include "lensopt/formats/lens_file.h"
 #include "lensopt/lens/lens_io.h"
 #include "lensopt/search/search.h"
 #include "test_support.h"
@@ -45,7 +46,7 @@ std::string without_seconds(const std::string& csv) {
 }
 
 fs::path fresh_dir(const std::string& name) {
-  const fs::path dir = fs::temp_directory_path() / ("lensopt-test-search-" + name);
+  const fs::path dir = test::temp_root() / ("search-" + name);
   fs::remove_all(dir);
   return dir;
 }
@@ -383,7 +384,7 @@ TEST_CASE("search: one run, a resumed run and merged shards give the same leader
   CHECK_THROWS_AS(merge_searches({one, other}, fresh_dir("bad-merge"), 1), Error);
   for (const char* d :
        {"one", "resumed", "shard1", "shard2", "shard3", "merged", "other", "bad-merge"})
-    fs::remove_all(fs::temp_directory_path() / (std::string("lensopt-test-search-") + d));
+    fs::remove_all(test::temp_root() / (std::string("search-") + d));
 }
 
 TEST_CASE(

@@ -2,16 +2,21 @@
 #pragma once
 
 #include <doctest/doctest.h>
+#include <stdlib.h>  // mkdtemp
 
 #include <cstdlib>
 #include <filesystem>
 #include <optional>
+#include <stdexcept>
 #include <string>
+#include <system_error>
 
 namespace lensopt::test {
 
 // The project's source folder (lenses/, catalogs/).
-inline std::filesystem::path source_dir() { return LENSOPT_SOURCE_DIR; }
+inline std::filesystem::path source_dir() {
+  return LENSOPT_SOURCE_DIR;
+}
 
 // ../shared (reference data), or nullopt when it is absent: tests that need it then skip,
 // saying so with MESSAGE.
@@ -26,13 +31,35 @@ inline std::optional<std::filesystem::path> shared_dir() {
   return std::nullopt;
 }
 
+// This process's own temporary folder, made by mkdtemp on first use and removed at exit: tests
+// put their files under it, never under a fixed name in /tmp, so concurrent runs (ctest -j,
+// several work trees) never share a folder.
+inline const std::filesystem::path& temp_root() {
+  struct Root {
+    std::filesystem::path path;
+    Root() {
+      std::string pattern =
+          (std::filesystem::temp_directory_path() / "lensopt-unit-XXXXXX").string();
+      if (!::mkdtemp(pattern.data()))
+        throw std::runtime_error("cannot make a temporary folder from " + pattern);
+      path = pattern;
+    }
+    ~Root() {
+      std::error_code ignored;
+      std::filesystem::remove_all(path, ignored);
+    }
+  };
+  static const Root root;
+  return root.path;
+}
+
 }  // namespace lensopt::test
 
 // Skips the rest of a test case, with a message, when ../shared is absent.
-#define LENSOPT_REQUIRE_SHARED(var)                                               \
-  const auto var##_opt = ::lensopt::test::shared_dir();                          \
-  if (!var##_opt) {                                                               \
-    MESSAGE("skipped: ../shared is absent (reference data not available)");       \
-    return;                                                                       \
-  }                                                                               \
+#define LENSOPT_REQUIRE_SHARED(var)                                         \
+  const auto var##_opt = ::lensopt::test::shared_dir();                     \
+  if (!var##_opt) {                                                         \
+    MESSAGE("skipped: ../shared is absent (reference data not available)"); \
+    return;                                                                 \
+  }                                                                         \
   const std::filesystem::path var = *var##_opt

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "lensopt/analysis/gradient.h"
+#include "lensopt/formats/lens_file.h"
 #include "lensopt/lens/lens_io.h"
 #include "lensopt/trace/kernel.h"
 #include "test_support.h"

@@ -11,6 +11,7 @@
 #include "lensopt/analysis/field_maps.h"
 #include "lensopt/analysis/spot.h"
 #include "lensopt/core/error.h"
+#include "lensopt/formats/lens_file.h"
 #include "lensopt/formats/zmx.h"
 #include "lensopt/lens/lens_io.h"
 #include "lensopt/optimize/optimizer.h"

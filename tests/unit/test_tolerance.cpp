@@ -14,6 +14,7 @@
 #include "lensopt/analysis/analyze.h"
 #include "lensopt/core/atomic_file.h"
 #include "lensopt/core/error.h"
+#include "lensopt/formats/lens_file.h"
 #include "lensopt/lens/lens_io.h"
 #include "lensopt/paraxial/paraxial.h"
 #include "lensopt/tolerance/tolerance.h"
@@ -344,8 +345,7 @@ TEST_CASE("tolerance: negative or unknown tolerances are errors naming them") {
 
 TEST_CASE("tolerance: the [tolerance] table of a lens file is read with file:line errors") {
   const std::string text = read_file(test::source_dir() / "lenses" / "tessar.toml");
-  const std::filesystem::path dir =
-      std::filesystem::temp_directory_path() / "lensopt_test_tolerance";
+  const std::filesystem::path dir = test::temp_root() / "tolerance";
   std::filesystem::create_directories(dir);
   const std::filesystem::path good = dir / "tessar_tol.toml";
   {

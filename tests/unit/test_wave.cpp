@@ -9,6 +9,7 @@
 
 #include "lensopt/analysis/wave.h"
 #include "lensopt/analysis/wavefront.h"
+#include "lensopt/formats/lens_file.h"
 #include "lensopt/lens/lens_io.h"
 #include "test_support.h"
 

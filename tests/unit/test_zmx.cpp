@@ -12,23 +12,23 @@
 #include <string>
 #include <vector>
 
+#include "lens_checks.h"
 #include "lensopt/analysis/analyze.h"
 #include "lensopt/core/atomic_file.h"
 #include "lensopt/core/error.h"
 #include "lensopt/core/text.h"
+#include "lensopt/formats/lens_file.h"
 #include "lensopt/formats/zmx.h"
 #include "lensopt/glass/dispersion.h"
 #include "lensopt/lens/lens_io.h"
+#include "lensopt/lens/trace_lens.h"
 #include "lensopt/paraxial/paraxial.h"
-#include "lensopt/trace/trace_lens.h"
-#include "lens_checks.h"
 #include "test_support.h"
 
 using namespace lensopt;
 using lensopt::test::bits;
 
 namespace {
-
 
 std::string to_lf(const std::string& text) {
   std::string out;
@@ -198,7 +198,8 @@ TEST_CASE("zmx: textbook designs import and analyse to their stated focal length
   CHECK(stop_warning);
 }
 
-TEST_CASE("zmx: conics and even aspheres round-trip exactly; other types are errors naming the line") {
+TEST_CASE(
+    "zmx: conics and even aspheres round-trip exactly; other types are errors naming the line") {
   // TOML -> ZMX -> TOML keeps every profile number bit for bit.
   Lens lens = read_lens(test::source_dir() / "lenses" / "doublet.toml");
   lens.surfaces[0].conic = -0.637;
@@ -233,9 +234,10 @@ TEST_CASE("zmx: conics and even aspheres round-trip exactly; other types are err
   }
   {
     // A conic and an even asphere import (in the file's units: CM here).
-    std::string text = small_zmx(
-        "", "  TYPE EVENASPH\n  CURV 0.02\n  DISZ 3\n  CONI -1.5\n  PARM 1 0.001\n"
-            "  PARM 2 2e-5\n  PARM 8 -3e-17\n  GLAS ___BLANK 1 0 1.5 60\n");
+    std::string text =
+        small_zmx("",
+                  "  TYPE EVENASPH\n  CURV 0.02\n  DISZ 3\n  CONI -1.5\n  PARM 1 0.001\n"
+                  "  PARM 2 2e-5\n  PARM 8 -3e-17\n  GLAS ___BLANK 1 0 1.5 60\n");
     const Lens mm = parse_zmx(text, "a.zmx").lens;
     CHECK(mm.surfaces[1].conic == -1.5);
     CHECK(mm.surfaces[1].asphere_r2_per_mm == 0.001);

@@ -17,8 +17,8 @@
 #include "lensopt/formats/zmx.h"
 #include "lensopt/glass/dispersion.h"
 #include "lensopt/lens/lens.h"
+#include "lensopt/lens/trace_lens.h"
 #include "lensopt/paraxial/paraxial.h"
-#include "lensopt/trace/trace_lens.h"
 #include "test_support.h"
 
 using namespace lensopt;

@@ -54,13 +54,9 @@ bool pupil_edge_directions(const TraceSystem<T>& sys, int h, std::array<T, 3>& o
   const double object_y = sys.field_object_y_mm.empty() ? 0.0 : sys.field_object_y_mm[h];
   RayBundle<T> rays;
   rays.resize(3);
-  for (int i = 0; i < 3; ++i) {
-    rays.x[i] = r_ep * px[i];
-    rays.y[i] = r_ep * py[i];
-    rays.z[i] = sys.entrance_pupil_z_mm;
-    detail::field_ray_direction(sys.object_distance_mm, sin(theta), cos(theta), object_y, rays.x[i],
-                                rays.y[i], rays.z[i], rays.l[i], rays.m[i], rays.n[i]);
-  }
+  for (int i = 0; i < 3; ++i)
+    start_pupil_ray(rays, i, r_ep * px[i], r_ep * py[i], sys.entrance_pupil_z_mm,
+                    sys.object_distance_mm, sin(theta), cos(theta), object_y);
   // Edge rays are geometry here: clear apertures are accounted for by the transmitted fraction.
   TraceLens<T> open_lens = sys.lens;
   open_lens.semi_diameter_mm.clear();

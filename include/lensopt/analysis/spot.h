@@ -9,6 +9,7 @@
 
 #include <omp.h>
 
+#include <cmath>
 #include <vector>
 
 #include "lensopt/core/threads.h"
@@ -40,21 +41,23 @@ struct SpotAccumulator {
   int count = 0;
 
   void add(const RayBundle<T>& rays) {
-    for (std::size_t i = 0; i < rays.size(); ++i) {
-      if (rays.status[i] != kRayOk) continue;
-      if (!has_reference) {
-        has_reference = true;
-        y0 = rays.y[i];
-        sum_dy = K<T>(0.0);
-        sum_dy2 = K<T>(0.0);
-        sum_x2 = K<T>(0.0);
-      }
-      const T dy = rays.y[i] - y0;
-      sum_dy = sum_dy + dy;
-      sum_dy2 = sum_dy2 + dy * dy;
-      sum_x2 = sum_x2 + rays.x[i] * rays.x[i];
-      ++count;
+    for (std::size_t i = 0; i < rays.size(); ++i)
+      if (rays.status[i] == kRayOk) add_ray(rays.x[i], rays.y[i]);
+  }
+  // One arrived ray at (x, y) mm; the first one becomes the reference y0.
+  void add_ray(const T& x, const T& y) {
+    if (!has_reference) {
+      has_reference = true;
+      y0 = y;
+      sum_dy = K<T>(0.0);
+      sum_dy2 = K<T>(0.0);
+      sum_x2 = K<T>(0.0);
     }
+    const T dy = y - y0;
+    sum_dy = sum_dy + dy;
+    sum_dy2 = sum_dy2 + dy * dy;
+    sum_x2 = sum_x2 + x * x;
+    ++count;
   }
   // RMS radius (mm); 0 when no ray arrived.
   T rms() const {
@@ -67,6 +70,60 @@ struct SpotAccumulator {
     return sqrt(var);
   }
   T centroid() const { return count == 0 ? K<T>(0.0) : y0 + sum_dy * K<T>(1.0 / count); }
+};
+
+// The spot of one field through focus: SpotAccumulator's sums plus those of the ray slopes, so the
+// spot on a plane shifted by tau (mm) along the axis follows without tracing again. A ray at
+// (x, y) on the reference plane with slopes (sx, sy) = (l/n, m/n) lands at (x + tau sx,
+// y + tau sy). With dy = y - y0, ds = sy - sy0 (y0, sy0 of the first ray):
+//   S^2(tau) = var(dy) + 2 tau cov(dy, ds) + tau^2 var(ds) + E[x^2] + 2 tau E[x sx] + tau^2 E[sx^2]
+// At tau = 0 it is SpotAccumulator's rms and centroid, the same numbers.
+struct ThroughFocusSpot {
+  SpotAccumulator<double> spot;  // the tau = 0 moments: y0, sum_dy, sum_dy2, sum_x2, count
+  double sy0 = 0;
+  double sum_ds = 0, sum_dyds = 0, sum_ds2 = 0, sum_xsx = 0, sum_sx2 = 0;
+
+  int count() const { return spot.count; }
+  void add(const RayBundle<double>& rays) {
+    for (std::size_t i = 0; i < rays.size(); ++i) {
+      if (rays.status[i] != kRayOk) continue;
+      const double sy = rays.m[i] / rays.n[i];
+      const double sx = rays.l[i] / rays.n[i];
+      if (!spot.has_reference) sy0 = sy;
+      spot.add_ray(rays.x[i], rays.y[i]);
+      const double dy = rays.y[i] - spot.y0;
+      const double ds = sy - sy0;
+      sum_ds += ds;
+      sum_dyds += dy * ds;
+      sum_ds2 += ds * ds;
+      sum_xsx += rays.x[i] * sx;
+      sum_sx2 += sx * sx;
+    }
+  }
+  // S^2(tau) (mm^2).
+  double variance(double tau) const {
+    const double inv = 1.0 / spot.count;
+    const double mean_dy = spot.sum_dy * inv;
+    const double mean_ds = sum_ds * inv;
+    const double a = spot.sum_dy2 * inv - mean_dy * mean_dy + spot.sum_x2 * inv;
+    const double b = sum_dyds * inv - mean_dy * mean_ds + sum_xsx * inv;
+    const double c = sum_ds2 * inv - mean_ds * mean_ds + sum_sx2 * inv;
+    return a + tau * (2.0 * b + tau * c);
+  }
+  // RMS radius (mm) at shift tau; 0 when no ray arrived.
+  double rms(double tau) const {
+    if (spot.count == 0) return 0.0;
+    if (tau == 0.0) return spot.rms();
+    const double v = variance(tau);
+    return v > 0.0 ? std::sqrt(v) : 0.0;
+  }
+  // Centroid height (mm) at shift tau: y0 + tau sy0 + mean(dy + tau ds).
+  double centroid(double tau) const {
+    if (spot.count == 0) return 0.0;
+    if (tau == 0.0) return spot.centroid();
+    const double inv = 1.0 / spot.count;
+    return spot.y0 + tau * sy0 + (spot.sum_dy + tau * sum_ds) * inv;
+  }
 };
 
 // Traces every field, wavelength and pupil sample of `sys` and returns the spot sizes. Fields

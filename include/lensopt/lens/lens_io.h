@@ -23,17 +23,16 @@
 
 namespace lensopt {
 
-// Reads a lens by file extension: .toml, .yml/.yaml (the paper's format), .zmx (when supported).
+// Reading a lens file by its extension (.toml, .yml/.yaml, .zmx) is formats/lens_file.h's
+// read_lens: the Zemax reader needs paraxial optics, which sit above this module.
 // Glass names resolve against the lens's catalog (load_catalog). Throws Error with file:line:col.
-Lens read_lens(const std::filesystem::path& path);
-
 Lens parse_lens_toml(std::string_view text, const std::string& source_name);
 Lens parse_lens_yaml(std::string_view text, const std::string& source_name);
 
 // The native TOML text of a lens; parse_lens_toml(format_lens_toml(l)) == l, every number exact.
 std::string format_lens_toml(const Lens& lens);
 
-// Writes a lens as TOML (or by extension, when other writers exist), atomically.
-void write_lens(const Lens& lens, const std::filesystem::path& path);
+// Writes a lens as native TOML, atomically (formats/lens_file.h's write_lens picks by extension).
+void write_lens_toml(const Lens& lens, const std::filesystem::path& path);
 
 }  // namespace lensopt

@@ -22,7 +22,7 @@
 #include "lensopt/core/scalar.h"
 #include "lensopt/lens/lens.h"
 #include "lensopt/trace/system.h"
-#include "lensopt/trace/trace_lens.h"
+#include "lensopt/lens/trace_lens.h"
 
 namespace lensopt {
 

@@ -28,8 +28,8 @@
 
 #include "lensopt/glass/glass.h"
 #include "lensopt/lens/lens.h"
+#include "lensopt/lens/trace_lens.h"
 #include "lensopt/paraxial/paraxial.h"
-#include "lensopt/trace/trace_lens.h"
 
 namespace lensopt {
 
@@ -75,10 +75,10 @@ class GlassSpace {
 struct LensVariable {
   enum class Kind { kCurvature, kSpacing, kDefocus, kGlass0, kGlass1, kConic, kAsphere };
   Kind kind;
-  int surface;          // 0-based surface index
-  std::string name;     // "c1", "s3", "defocus", "g2.0", "g2.1", "k3", "a4_3" (1-based surfaces)
-  std::string group;    // "curvatures", "spacings", "glasses", "conics", "aspheres"
-  int term = 0;         // kAsphere: 0 = a2, 1 = a4, ..., 7 = a16
+  int surface;        // 0-based surface index
+  std::string name;   // "c1", "s3", "defocus", "g2.0", "g2.1", "k3", "a4_3" (1-based surfaces)
+  std::string group;  // "curvatures", "spacings", "glasses", "conics", "aspheres"
+  int term = 0;       // kAsphere: 0 = a2, 1 = a4, ..., 7 = a16
 };
 
 // How glass variables enter the forward pass.
@@ -94,8 +94,8 @@ class LensParameterization {
   // `lens` fixes the structure (surfaces, stop, which spaces are glass) and the specs;
   // `glasses` is the catalog's whitened space. Throws Error if the last surface's medium before
   // it is air (the last curvature cannot be solved) or the lens has no glass.
-  // `profile_variables` adds conic and asphere variables: "k3", "a4_3" (a4 of surface 3), ... (1-based
-  // surfaces, TraceLens naming); throws Error for an unknown name or the stop.
+  // `profile_variables` adds conic and asphere variables: "k3", "a4_3" (a4 of surface 3), ...
+  // (1-based surfaces, TraceLens naming); throws Error for an unknown name or the stop.
   LensParameterization(const Lens& lens, GlassSpace glasses,
                        const std::vector<std::string>& profile_variables = {});
 
@@ -202,7 +202,7 @@ class LensParameterization {
     lens.curvature_per_mm[last] = solve_last_curvature(lens, K<T>(1.0), reference_nm);
     if (paraxial_image_solve_) {
       const ParaxialData<T> par = paraxial_data(lens, reference_nm);
-      lens.thickness_mm[last] = par.bfl_mm + x[defocus_index_];
+      lens.thickness_mm[last] = image_distance_for_defocus_mm(par, x[defocus_index_]);
     } else {
       lens.thickness_mm[last] = x[defocus_index_];  // ablation: s_{K-1} = s'_{K-1} f
     }

@@ -19,7 +19,7 @@
 #include <cmath>
 
 #include "lensopt/core/scalar.h"
-#include "lensopt/trace/trace_lens.h"
+#include "lensopt/lens/trace_lens.h"
 
 namespace lensopt {
 
@@ -51,10 +51,10 @@ ParaxialRay<T> paraxial_trace(const TraceLens<T>& lens, ParaxialRay<T> ray, int 
 // First-order data at one wavelength.
 template <typename T>
 struct ParaxialData {
-  T efl_mm;                 // effective focal length
-  T bfl_mm;                 // last vertex to paraxial focus
-  T entrance_pupil_z_mm;    // entrance pupil from the first vertex (positive: to the right)
-  T stop_magnification;     // A: stop height per object-space marginal height (y_s = A y_0)
+  T efl_mm;               // effective focal length
+  T bfl_mm;               // last vertex to paraxial focus
+  T entrance_pupil_z_mm;  // entrance pupil from the first vertex (positive: to the right)
+  T stop_magnification;   // A: stop height per object-space marginal height (y_s = A y_0)
 };
 
 template <typename T>
@@ -77,6 +77,27 @@ ParaxialData<T> paraxial_data(const TraceLens<T>& lens, double wavelength_nm) {
   return out;
 }
 
+// Defocus of the image plane from the paraxial focus (mm): delta = t_{K-1} - BFL, t_{K-1} the
+// last surface's thickness (its distance to the image plane), BFL from `par` (paraxial_data of
+// the same lens).
+template <typename T>
+T paraxial_defocus_mm(const TraceLens<T>& lens, const ParaxialData<T>& par) {
+  return lens.thickness_mm.back() - par.bfl_mm;
+}
+
+// The last thickness (mm) that puts the image plane `defocus_mm` behind the paraxial focus:
+// t_{K-1} = BFL + delta, the inverse of paraxial_defocus_mm.
+template <typename T>
+T image_distance_for_defocus_mm(const ParaxialData<T>& par, const T& defocus_mm) {
+  return par.bfl_mm + defocus_mm;
+}
+
+// The factor that scales a prescription's lengths to the spec focal length: s = f_spec / EFL.
+template <typename T>
+T spec_scale(double spec_focal_length_mm, const T& efl_mm) {
+  return K<T>(spec_focal_length_mm) / efl_mm;
+}
+
 // Paraxial image height (mm) on the actual image plane (thickness of the last surface) of the
 // chief ray at field angle tan_theta through the entrance pupil centre.
 template <typename T>
@@ -95,8 +116,8 @@ T paraxial_image_height(const TraceLens<T>& lens, const T& entrance_pupil_z_mm, 
 template <typename T>
 T solve_last_curvature(const TraceLens<T>& lens, const T& efl_mm, double wavelength_nm) {
   const int k_count = lens.surface_count();
-  ParaxialRay<T> ray = paraxial_trace(lens, ParaxialRay<T>{K<T>(1.0), K<T>(0.0)}, k_count - 1,
-                                      wavelength_nm);
+  ParaxialRay<T> ray =
+      paraxial_trace(lens, ParaxialRay<T>{K<T>(1.0), K<T>(0.0)}, k_count - 1, wavelength_nm);
   const int last = k_count - 1;
   ray.y = ray.y + lens.thickness_mm[last - 1] * ray.w / lens.index_at_nm(last - 1, wavelength_nm);
   const T n_before = lens.index_at_nm(last - 1, wavelength_nm);

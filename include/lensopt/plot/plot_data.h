@@ -52,17 +52,15 @@ inline bool ray_ok(const RayBundle<double>& rays, std::size_t i) {
 }
 
 // Ray i of `rays`: field h of `sys` starting on the entrance pupil at normalized (already aimed)
-// pupil coordinates (x_norm, y_norm), direction (0, sin theta, cos theta).
+// pupil coordinates (x_norm, y_norm), in the field's direction (start_pupil_ray: collimated for
+// an object at infinity, from the object point for a finite one).
 inline void set_pupil_ray(const TraceSystem<double>& sys, int h, double x_norm, double y_norm,
                           RayBundle<double>& rays, std::size_t i) {
   const double theta = sys.fields_deg[h] * kPi / 180.0;
   const double r_ep = sys.epd_mm / 2.0;
-  rays.x[i] = r_ep * x_norm;
-  rays.y[i] = r_ep * y_norm;
-  rays.z[i] = sys.entrance_pupil_z_mm;
-  rays.l[i] = 0.0;
-  rays.m[i] = std::sin(theta);
-  rays.n[i] = std::cos(theta);
+  const double object_y = sys.field_object_y_mm.empty() ? 0.0 : sys.field_object_y_mm[h];
+  start_pupil_ray(rays, i, r_ep * x_norm, r_ep * y_norm, sys.entrance_pupil_z_mm,
+                  sys.object_distance_mm, std::sin(theta), std::cos(theta), object_y);
 }
 
 // Traces the lens at `trace` (analysis defaults) and analyzes it.

@@ -33,7 +33,7 @@
 #include <vector>
 
 #include "lensopt/core/scalar.h"
-#include "lensopt/trace/trace_lens.h"
+#include "lensopt/lens/trace_lens.h"
 
 namespace lensopt {
 

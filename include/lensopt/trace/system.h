@@ -29,9 +29,9 @@
 #include "lensopt/core/constants.h"
 #include "lensopt/core/scalar.h"
 #include "lensopt/glass/dispersion.h"
+#include "lensopt/lens/trace_lens.h"
 #include "lensopt/paraxial/paraxial.h"
 #include "lensopt/trace/kernel.h"
-#include "lensopt/trace/trace_lens.h"
 
 namespace lensopt {
 
@@ -125,6 +125,20 @@ void field_ray_direction(double object_distance_mm, double sin_theta, double cos
 
 }  // namespace detail
 
+// The one pupil-ray constructor: ray i of `rays` starts at the entrance-pupil point (x, y, z_ep)
+// (mm) in the direction of a field, (0, sin theta, cos theta) for an object at infinity, else
+// from the object point (0, object_y, -d) through the pupil point (detail::field_ray_direction).
+template <typename T>
+void start_pupil_ray(RayBundle<T>& rays, std::size_t i, const T& x, const T& y, const T& z_ep,
+                     double object_distance_mm, double sin_theta, double cos_theta,
+                     double object_y_mm) {
+  rays.x[i] = x;
+  rays.y[i] = y;
+  rays.z[i] = z_ep;
+  detail::field_ray_direction(object_distance_mm, sin_theta, cos_theta, object_y_mm, rays.x[i],
+                              rays.y[i], rays.z[i], rays.l[i], rays.m[i], rays.n[i]);
+}
+
 namespace detail {
 
 // Traces the upper, lower and sagittal pupil rays of field h and wavelength w to the stop,
@@ -142,19 +156,12 @@ void trace_aiming_rays(const TraceLens<ceres::Jet<T, 1>>& lens_a, int w, const S
   const J side_x(map.scale_x, 0);
   const J zero = K<J>(0.0);
   const J r(r_ep);
-  rays.x[0] = zero;
-  rays.y[0] = r * top_y;
-  rays.x[1] = zero;
-  rays.y[1] = r * bottom_y;
-  rays.x[2] = r * side_x;
-  rays.y[2] = r * J(map.offset_y);
+  const J x[3] = {zero, zero, r * side_x};
+  const J y[3] = {r * top_y, r * bottom_y, r * J(map.offset_y)};
   const double theta = sys.fields_deg[h] * kPi / 180.0;
-  for (int i = 0; i < 3; ++i) {
-    rays.z[i] = J(z_ep);
-    field_ray_direction(sys.object_distance_mm, std::sin(theta), std::cos(theta),
-                        sys.field_object_y_mm[h], rays.x[i], rays.y[i], rays.z[i], rays.l[i],
-                        rays.m[i], rays.n[i]);
-  }
+  for (int i = 0; i < 3; ++i)
+    start_pupil_ray(rays, i, x[i], y[i], J(z_ep), sys.object_distance_mm, std::sin(theta),
+                    std::cos(theta), sys.field_object_y_mm[h]);
   trace_bundle(lens_a, w, lens_a.stop + 1, false, rays, static_cast<RayRecord<J>*>(nullptr));
   stop_coord[0] = rays.y[0].a;
   stop_derivative[0] = rays.y[0].v[0];
@@ -220,7 +227,7 @@ TraceSystem<T> prepare_system(const TraceLens<T>& lens_in, const SystemSetup& se
   const int reference_w = static_cast<int>(lens_in.wavelengths_nm.size()) - 1;  // primary
   const double reference_nm = lens_in.wavelengths_nm[reference_w];
   ParaxialData<T> par = paraxial_data(sys.lens, reference_nm);
-  sys.scale = setup.scale ? K<T>(setup.focal_length_mm) / par.efl_mm : K<T>(1.0);
+  sys.scale = setup.scale ? spec_scale(setup.focal_length_mm, par.efl_mm) : K<T>(1.0);
   if (setup.scale) {
     sys.lens.scale_lengths(sys.scale);
     for (double& r : sys.lens.semi_diameter_mm) r *= value_of(sys.scale);
@@ -276,12 +283,9 @@ TraceSystem<T> prepare_system(const TraceLens<T>& lens_in, const SystemSetup& se
     RayBundle<T> chief;
     chief.resize(1);
     const double theta = std::atan(tan_theta);
-    chief.x[0] = K<T>(0.0);
-    chief.y[0] = K<T>(0.0);
-    chief.z[0] = par.entrance_pupil_z_mm;
-    chief.l[0] = K<T>(0.0);
-    chief.m[0] = K<T>(std::sin(theta));
-    chief.n[0] = K<T>(std::cos(theta));
+    // Collimated at theta whatever the object distance: the field's direction is being solved.
+    start_pupil_ray(chief, 0, K<T>(0.0), K<T>(0.0), par.entrance_pupil_z_mm,
+                    std::numeric_limits<double>::infinity(), std::sin(theta), std::cos(theta), 0.0);
     trace_bundle(sys.lens, reference_w, sys.lens.surface_count(), true, chief,
                  static_cast<RayRecord<T>*>(nullptr));
     return chief.status[0] == kRayOk ? value_of(chief.y[0]) : std::nan("");
@@ -328,11 +332,7 @@ TraceSystem<T> prepare_system(const TraceLens<T>& lens_in, const SystemSetup& se
   {
     RayBundle<T> marginal;
     marginal.resize(1);
-    marginal.x[0] = K<T>(0.0);
-    marginal.y[0] = r_ep;
-    marginal.z[0] = sys.entrance_pupil_z_mm;
-    detail::field_ray_direction(d_obj, 0.0, 1.0, 0.0, marginal.x[0], marginal.y[0], marginal.z[0],
-                                marginal.l[0], marginal.m[0], marginal.n[0]);
+    start_pupil_ray(marginal, 0, K<T>(0.0), r_ep, sys.entrance_pupil_z_mm, d_obj, 0.0, 1.0, 0.0);
     trace_bundle(sys.lens, reference_w, sys.lens.stop + 1, false, marginal,
                  static_cast<RayRecord<T>*>(nullptr));
     sys.stop_radius_mm = marginal.y[0];
@@ -397,13 +397,9 @@ void start_rays(const TraceSystem<T>& sys, int h, int w, RayBundle<T>& rays,
   const T sy = r_ep * map.scale_y * K<T>(1.0 - v.vcy);
   const T oy = r_ep * (map.offset_y + map.scale_y * K<T>(v.vdy));
   const double object_y = sys.field_object_y_mm.empty() ? 0.0 : sys.field_object_y_mm[h];
-  for (std::size_t i = 0; i < count; ++i) {
-    rays.x[i] = sx * K<T>(pupil.x[i]);
-    rays.y[i] = oy + sy * K<T>(pupil.y[i]);
-    rays.z[i] = sys.entrance_pupil_z_mm;
-    detail::field_ray_direction(sys.object_distance_mm, sin_t, cos_t, object_y, rays.x[i],
-                                rays.y[i], rays.z[i], rays.l[i], rays.m[i], rays.n[i]);
-  }
+  for (std::size_t i = 0; i < count; ++i)
+    start_pupil_ray(rays, i, sx * K<T>(pupil.x[i]), oy + sy * K<T>(pupil.y[i]),
+                    sys.entrance_pupil_z_mm, sys.object_distance_mm, sin_t, cos_t, object_y);
 }
 
 }  // namespace lensopt
@@ -422,5 +418,10 @@ TraceSystem<T> prepare_system(const TraceLens<T>& lens, const Specs& specs,
 
 // The one way from a Lens to a traced system: make_trace_lens and its spec mode.
 TraceSystem<double> prepare_lens_system(const Lens& lens, const TraceOptions& options);
+
+// The scale prepare_lens_system applies to a lens (TraceSystem::scale): f_spec / EFL at the
+// primary wavelength in the paper's spec mode, 1 in the as-written mode. NaN or infinite for a
+// lens without power.
+double lens_spec_scale(const Lens& lens);
 
 }  // namespace lensopt

@@ -14,7 +14,7 @@
 #include <cstddef>
 #include <vector>
 
-#include "lensopt/render/fft.h"
+#include "core/fft.h"
 #include "lensopt/render/image.h"
 
 namespace lensopt {

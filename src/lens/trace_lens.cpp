@@ -1,4 +1,4 @@
-#include "lensopt/trace/trace_lens.h"
+#include "lensopt/lens/trace_lens.h"
 
 #include <fmt/format.h>
 
@@ -171,8 +171,8 @@ TraceLens<double> make_trace_lens(const Lens& lens) {
       out.asphere[static_cast<std::size_t>(k) * kAsphereTerms] = s.asphere_r2_per_mm;
       for (int j = 0; j < kAsphereOrders; ++j)
         out.asphere[static_cast<std::size_t>(k) * kAsphereTerms + j + 1] = s.asphere[j];
-      out.profile[k] = s.has_asphere() ? kProfileAsphere
-                                       : (s.conic != 0.0 ? kProfileConic : kProfileSphere);
+      out.profile[k] =
+          s.has_asphere() ? kProfileAsphere : (s.conic != 0.0 ? kProfileConic : kProfileSphere);
     }
   }
   if (lens.specs.dispersion == DispersionModel::kCatalog) {

@@ -1,5 +1,7 @@
-// FFTW helpers shared by the renderer's overlap-add convolution and the joint optimization's
-// differentiable rendering: FFT sizes, aligned buffers, cached plans, symmetric reflection.
+// FFTW helpers shared by the renderer's overlap-add convolution, the joint optimization's
+// differentiable rendering and the wave-optics PSF: FFT sizes, aligned buffers, cached plans,
+// symmetric reflection. An internal header of the core library (src/, not installed), so that
+// FFTW's types stay out of the public headers.
 //
 // FFTW rather than a hand-written FFT: patch buffers have arbitrary sizes (we pick products of
 // 2, 3, 5, 7), FFTW is fast for all of them, and its plans, made once per size, may be executed

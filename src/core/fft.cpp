@@ -1,5 +1,5 @@
-// FFT sizes and the process-wide FFTW plan cache (render/fft.h).
-#include "lensopt/render/fft.h"
+// FFT sizes and the process-wide FFTW plan cache (core/fft.h).
+#include "core/fft.h"
 
 #include <fmt/format.h>
 

@@ -1,5 +1,7 @@
 // The [optimize] table of a lens TOML or search description: one parser for `lensopt optimize`
-// and `lensopt search`, so both accept the same keys with the same checks.
+// and `lensopt search`, so both accept the same keys with the same checks. An internal header of
+// the optimize module (src/, not installed; included as "optimize/optimize_table.h" by search/ and
+// the CLI): it takes toml++ nodes, which stay out of the public headers.
 #pragma once
 
 #include <toml++/toml.h>

@@ -2,9 +2,9 @@
 // from a Lens once. Prescription variables can be seeded as Jet derivative directions.
 //
 // Surfaces k = 0..K-1: curvature c_k (1/mm), profile (trace/profile.h: sphere, conic k_k, even
-// asphere a_{2i,k}; `profile` empty = every surface a sphere), thickness t_k (mm, to surface k+1; t_{K-1} is the
-// distance to the image plane), medium after surface k with (nd_k, vd_k) (air: 1, 0).
-// Refractive index of medium k at wavelength l:
+// asphere a_{2i,k}; `profile` empty = every surface a sphere), thickness t_k (mm, to surface k+1;
+// t_{K-1} is the distance to the image plane), medium after surface k with (nd_k, vd_k) (air: 1,
+// 0). Refractive index of medium k at wavelength l:
 //   abbe model:     n_k(l) = A_k + B_k / l^2 (glass/dispersion.h)
 //   catalog model:  n_k(l) = abbe(nd_k, vd_k, l) + [n_cat(l) - abbe(nd_k0, vd_k0, l)]
 // The bracket is a constant per (surface, wavelength), so the catalog model equals the catalog's
@@ -178,10 +178,18 @@ TraceLens<U> convert_trace_lens(const TraceLens<T>& in,
     std::vector<U>* target = nullptr;
     int index = v.surface;
     switch (v.kind) {
-      case PrescriptionVariable::Kind::kCurvature: target = &out.curvature_per_mm; break;
-      case PrescriptionVariable::Kind::kThickness: target = &out.thickness_mm; break;
-      case PrescriptionVariable::Kind::kNd: target = &out.nd; break;
-      case PrescriptionVariable::Kind::kVd: target = &out.vd; break;
+      case PrescriptionVariable::Kind::kCurvature:
+        target = &out.curvature_per_mm;
+        break;
+      case PrescriptionVariable::Kind::kThickness:
+        target = &out.thickness_mm;
+        break;
+      case PrescriptionVariable::Kind::kNd:
+        target = &out.nd;
+        break;
+      case PrescriptionVariable::Kind::kVd:
+        target = &out.vd;
+        break;
       case PrescriptionVariable::Kind::kConic:
       case PrescriptionVariable::Kind::kAsphere: {
         // A seeded profile term needs the profile's own loop even at the value 0.

@@ -1,0 +1,394 @@
+// Zemax .zmx import (include/lensopt/formats/zmx.h states the mapping): parse() builds the lens
+// from the file's lines in named steps: the surfaces and their glasses, the wavelengths, the
+// fields, the aperture, and the summary specs from the paraxial system.
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+
+#include "lensopt/core/atomic_file.h"
+#include "lensopt/core/text.h"
+#include "lensopt/trace/system.h"
+#include "zmx_parser.h"
+
+namespace lensopt {
+namespace zmx_detail {
+
+ZmxImport ZmxParser::parse(std::string_view bytes) {
+  const std::string text = decode_text(bytes);
+  const std::vector<Line> lines = split_lines(text);  // views into `text`
+  read_lines(lines);
+  last_line_ = lines.empty() ? 1 : lines.back().number;
+  check_object_and_image();
+
+  ZmxImport result;
+  Lens& lens = result.lens;
+  lens.source_path = file_;
+  lens.name = has_name_ && !name_.empty() ? name_ : std::filesystem::path(file_).stem().string();
+  const LensSourceLines source_lines = build_surfaces(lens);
+  set_wavelengths(lens.specs);
+  set_fields(lens.specs);
+  set_aperture(lens);
+  lens.specs.half_field_deg =
+      lens.specs.field_type == FieldType::kAngle ? lens.specs.max_field_value() : 0.0;
+  validate(lens, source_lines);
+  set_summary_specs(lens);
+  apply_lensopt_notes(lens);
+  validate(lens, source_lines);
+
+  report_ignored();
+  result.warnings = std::move(warnings_);
+  return result;
+}
+
+// Every line: SURF opens a surface block; a surface's keys go to it, the rest are system keys.
+void ZmxParser::read_lines(const std::vector<Line>& lines) {
+  for (const Line& line : lines) {
+    if (line.fields.empty()) continue;
+    const char first = line.fields[0].front();
+    if (first == '!' || first == '#') continue;  // a comment line
+    const std::string key = upper(line.fields[0]);
+    if (key == "SURF") {
+      RawSurface s;
+      s.number = integer(line, 1, "the surface number");
+      s.line = line.number;
+      if (s.number != static_cast<int>(surfaces_.size()))
+        fail(line, 1,
+             fmt::format("SURF {} is out of order: surface {} was expected", s.number,
+                         surfaces_.size()));
+      surfaces_.push_back(s);
+      continue;
+    }
+    if (surface_line(line, key)) continue;
+    system_line(line, key);
+  }
+}
+
+// The object must be air at a positive distance or at infinity; the image a flat plane; neither
+// the stop.
+void ZmxParser::check_object_and_image() const {
+  if (surfaces_.size() < 4)
+    fail_at(last_line_, 1,
+            fmt::format("{} SURF block{}: a lens needs the object surface, at least two lens "
+                        "surfaces and the image surface",
+                        surfaces_.size(), surfaces_.size() == 1 ? "" : "s"));
+
+  // Object and image.
+  const RawSurface& object = surfaces_.front();
+  if (!object.thickness_infinite && !(object.thickness_mm > 0.0))
+    fail_at(object.disz_line > 0 ? object.disz_line : object.line, 1,
+            fmt::format("the object is at {} mm; lensopt needs a positive object distance or "
+                        "INFINITY",
+                        object.thickness_mm * unit_mm_));
+  if (!object.glass.empty())
+    fail_at(object.glas_line, object.glas_column, "the object space must be air");
+  if (object.is_stop) fail_at(object.stop_line, 1, "the object surface cannot be the stop");
+  const RawSurface& image = surfaces_.back();
+  if (image.curvature_per_mm != 0.0)
+    fail_at(image.curv_line, 1, "the image surface is curved; lensopt's image plane is flat");
+  if (image.is_stop) fail_at(image.stop_line, 1, "the image surface cannot be the stop");
+}
+
+// The lens surfaces (SURF 1 .. N-1) in mm, with their glasses resolved; a STOP on a curved
+// surface becomes a flat stop surface before it. Returns the file lines of the lens's surfaces.
+LensSourceLines ZmxParser::build_surfaces(Lens& lens) {
+  // Specs that decide how glasses resolve.
+  std::vector<CatalogEntry> catalogs = load_catalogs();
+  for (const CatalogEntry& entry : catalogs)
+    if (!entry.catalog)
+      warn(0, fmt::format("glass catalog '{}' {}", entry.requested, entry.failure));
+  bool has_catalog_glass = false;
+  for (std::size_t k = 1; k + 1 < surfaces_.size(); ++k)
+    has_catalog_glass =
+        has_catalog_glass || (!surfaces_[k].glass.empty() && !surfaces_[k].model_glass);
+  const DispersionModel dispersion =
+      note_dispersion_ ? *note_dispersion_
+                       : (has_catalog_glass ? DispersionModel::kCatalog : DispersionModel::kAbbe);
+  lens.specs.dispersion = dispersion;
+
+  LensSourceLines source_lines;
+  std::vector<std::string> used_catalogs;
+  int stop_count = 0;
+  for (std::size_t k = 1; k + 1 < surfaces_.size(); ++k) {
+    const RawSurface& raw = surfaces_[k];
+    if (raw.thickness_infinite)
+      fail_at(raw.disz_line, 1, fmt::format("surface {} has an infinite thickness", raw.number));
+    Surface surface;
+    surface.curvature_per_mm = raw.curvature_per_mm / unit_mm_;
+    surface.thickness_mm = raw.thickness_mm * unit_mm_;
+    surface.semi_diameter_mm = raw.semi_diameter_mm * unit_mm_;
+    surface.conic = raw.conic;
+    if (raw.even_asphere) {
+      // a_{2i} in lens units^(1-2i).
+      double unit_power = unit_mm_;  // unit^(2i-1)
+      surface.asphere_r2_per_mm = raw.parm[1] / unit_power;
+      for (int j = 0; j < kAsphereOrders; ++j) {
+        unit_power *= unit_mm_ * unit_mm_;
+        surface.asphere[j] = raw.parm[j + 2] / unit_power;
+      }
+    }
+    surface.material = resolve_glass(raw, catalogs, used_catalogs, dispersion);
+    if (raw.is_stop) {
+      if (++stop_count > 1)
+        fail_at(
+            raw.stop_line, 1,
+            fmt::format("surface {} is a second STOP; a lens has one aperture stop", raw.number));
+      if (surface.curvature_per_mm != 0.0 || !surface.is_spherical()) {
+        // A flat stop at the vertex of the curved surface, in the medium before it.
+        Surface stop;
+        stop.is_stop = true;
+        stop.thickness_mm = 0.0;
+        stop.material = lens.surfaces.empty() ? Material::air() : lens.surfaces.back().material;
+        stop.semi_diameter_mm = surface.semi_diameter_mm;
+        lens.surfaces.push_back(stop);
+        source_lines.surfaces.push_back(raw.line);
+        warn(raw.stop_line,
+             fmt::format("the stop is on curved surface {}; lensopt's stop is flat, so a flat "
+                         "stop surface is inserted at its vertex (0 mm before it)",
+                         raw.number));
+      } else {
+        surface.is_stop = true;
+      }
+    }
+    lens.surfaces.push_back(surface);
+    source_lines.surfaces.push_back(raw.line);
+  }
+  if (stop_count == 0) {
+    // OpticStudio's default stop is surface 1.
+    warn(surfaces_[1].line, "no STOP line: surface 1 is the stop (OpticStudio's default)");
+    if (lens.surfaces.front().curvature_per_mm == 0.0 && lens.surfaces.front().is_spherical()) {
+      lens.surfaces.front().is_stop = true;
+    } else {
+      Surface stop;
+      stop.is_stop = true;
+      lens.surfaces.insert(lens.surfaces.begin(), stop);
+    }
+  }
+  if (!lens.surfaces.back().material.is_air()) {
+    const RawSurface& raw = surfaces_[surfaces_.size() - 2];
+    fail_at(raw.glas_line, raw.glas_column,
+            fmt::format("surface {} (the last before the image) must be followed by air, not {}",
+                        raw.number, raw.glass));
+  }
+  if (!used_catalogs.empty()) {
+    lens.catalog_name = note_catalog_ && std::find(used_catalogs.begin(), used_catalogs.end(),
+                                                   *note_catalog_) != used_catalogs.end()
+                            ? *note_catalog_
+                            : used_catalogs.front();
+    if (used_catalogs.size() > 1)
+      warn(0, fmt::format("glasses come from {} catalogs ({}); a lensopt TOML lens names one "
+                          "(catalog = \"{}\"), so written as TOML the others would not resolve",
+                          used_catalogs.size(), fmt::join(used_catalogs, ", "), lens.catalog_name));
+  } else if (note_catalog_) {
+    lens.catalog_name = *note_catalog_;
+  }
+  return source_lines;
+}
+
+void ZmxParser::set_wavelengths(Specs& specs) {
+  // Wavelengths: the active ones (FTYP's count), in um.
+  std::vector<Wavelength> waves;
+  if (!wavm_.empty()) {
+    for (const auto& [index, w] : wavm_) {
+      if (wavelength_count_ >= 0 && index > wavelength_count_) continue;
+      waves.push_back(w);
+    }
+  } else {
+    waves = wavl_;
+    if (wavelength_count_ >= 0 && static_cast<int>(waves.size()) > wavelength_count_)
+      waves.resize(static_cast<std::size_t>(wavelength_count_));
+  }
+  if (waves.empty())
+    fail_at(wavelength_line_ > 0 ? wavelength_line_ : last_line_, 1,
+            "no wavelength; the file needs WAVM lines");
+  std::vector<double> wavelengths_nm;
+  std::vector<double> weights;
+  bool equal_weights = true;
+  for (const Wavelength& w : waves) {
+    const double nm = w.nm;
+    if (!(nm > 200.0 && nm < 20000.0))
+      fail_at(w.line, 1, fmt::format("wavelength {} um is out of range", w.um));
+    if (!(w.weight >= 0.0)) fail_at(w.line, 1, "a wavelength weight must be >= 0");
+    wavelengths_nm.push_back(nm);
+    weights.push_back(w.weight);
+    equal_weights = equal_weights && w.weight == waves.front().weight;
+  }
+  if (note_wavelengths_nm_) {
+    bool agrees = note_wavelengths_nm_->size() == wavelengths_nm.size();
+    for (std::size_t i = 0; agrees && i < wavelengths_nm.size(); ++i)
+      agrees = std::abs((*note_wavelengths_nm_)[i] - wavelengths_nm[i]) <=
+               kNoteTolerance * wavelengths_nm[i];
+    if (agrees) {
+      wavelengths_nm = *note_wavelengths_nm_;
+    } else {
+      warn(note_line_, "the lensopt wavelengths note disagrees with the WAVM lines; ignored");
+    }
+  }
+  specs.wavelengths_nm = wavelengths_nm;
+  if (!equal_weights) specs.wavelength_weights = weights;
+  // The primary wavelength: PWAV's (OpticStudio's paraxial reference), else the note's.
+  if (pwav_ > 0 && static_cast<std::size_t>(pwav_) <= wavelengths_nm.size()) {
+    specs.primary_wavelength_nm = wavelengths_nm[static_cast<std::size_t>(pwav_) - 1];
+  } else if (pwav_ > 0) {
+    fail_at(pwav_line_, 2,
+            fmt::format("PWAV {} names no active wavelength ({} are active)", pwav_,
+                        wavelengths_nm.size()));
+  } else {
+    specs.primary_wavelength_nm = wavelengths_nm.front();
+  }
+  if (note_primary_nm_) specs.primary_wavelength_nm = *note_primary_nm_;
+  if (note_channels_ && note_channels_->size() == wavelengths_nm.size()) {
+    specs.wavelength_channels = *note_channels_;
+  } else {
+    specs.wavelength_channels = default_wavelength_channels(wavelengths_nm);
+    std::vector<std::string> assigned;
+    for (std::size_t i = 0; i < wavelengths_nm.size(); ++i)
+      assigned.push_back(
+          fmt::format("{} nm {}", wavelengths_nm[i],
+                      kChannelLetters[static_cast<std::size_t>(specs.wavelength_channels[i])]));
+    warn(wavelength_line_,
+         fmt::format("colour channels assigned by wavelength (< 500 nm B, < 600 nm G, else R; an "
+                     "empty channel borrows the nearest wavelength): {}",
+                     fmt::join(assigned, ", ")));
+  }
+}
+
+void ZmxParser::set_fields(Specs& specs) {
+  const RawSurface& object = surfaces_.front();
+  // Fields: the active ones, radial distance sqrt(x^2 + y^2) (the lens is rotationally
+  // symmetric), with their weights and vignetting factors.
+  std::size_t field_count = std::max(xfln_.size(), yfln_.size());
+  if (field_count_ >= 0)
+    field_count = std::min(field_count, static_cast<std::size_t>(field_count_));
+  if (field_count == 0) field_count = 1;
+  specs.field_type = static_cast<FieldType>(field_type_);
+  specs.fields.clear();
+  auto factor = [&](const char* key, std::size_t i) {
+    const auto it = vignetting_.find(key);
+    return it != vignetting_.end() && i < it->second.size() ? it->second[i] : 0.0;
+  };
+  bool dropped_vdx = false;
+  for (std::size_t i = 0; i < field_count; ++i) {
+    const double x = i < xfln_.size() ? xfln_[i] : 0.0;
+    const double y = i < yfln_.size() ? yfln_[i] : 0.0;
+    FieldPoint f;
+    f.value = x == 0.0 ? std::abs(y) : std::hypot(x, y);
+    f.weight = i < field_weights_.size() ? field_weights_[i] : 1.0;
+    f.vignetting.vdy = factor("VDYN", i);
+    f.vignetting.vcx = factor("VCXN", i);
+    f.vignetting.vcy = factor("VCYN", i);
+    if (factor("VDXN", i) != 0.0) dropped_vdx = true;
+    if (!(f.vignetting.vcx < 1.0) || !(f.vignetting.vcy < 1.0))
+      fail_at(yfln_line_ > 0 ? yfln_line_ : last_line_, 1,
+              fmt::format("field {}: vignetting compression VCX, VCY must be < 1", i + 1));
+    specs.fields.push_back(f);
+  }
+  if (dropped_vdx)
+    warn(vdxn_line_,
+         "x-decentre vignetting factors (VDXN) ignored: lensopt traces half pupils "
+         "symmetric in x");
+  if (!object.thickness_infinite) specs.object_distance_mm = object.thickness_mm * unit_mm_;
+  if (specs.field_type == FieldType::kObjectHeight && specs.object_at_infinity())
+    fail_at(ftyp_line_, 1, "object-height fields (FTYP 1) need a finite object distance");
+  if (specs.field_type == FieldType::kAngle) {
+    for (const FieldPoint& f : specs.fields)
+      if (!(f.value < 89.0))
+        fail_at(yfln_line_ > 0 ? yfln_line_ : last_line_, 1,
+                fmt::format("the field {} deg must be less than 89", f.value));
+  } else {
+    for (FieldPoint& f : specs.fields) f.value *= unit_mm_;
+  }
+}
+
+void ZmxParser::set_aperture(Lens& lens) {
+  // Aperture.
+  if (!fnum_ && !enpd_ && !obna_ && !floa_)
+    fail_at(last_line_, 1,
+            "no aperture: the file needs ENPD, FNUM, OBNA or FLOA (float by stop size)");
+  lens.specs.mode = SpecMode::kAsWritten;
+  if (fnum_) {
+    lens.specs.aperture_type = ApertureType::kFNumber;
+    lens.specs.f_number = *fnum_;
+  } else if (enpd_) {
+    lens.specs.aperture_type = ApertureType::kEntrancePupilDiameter;
+    lens.specs.aperture_value = *enpd_ * unit_mm_;
+  } else if (obna_) {
+    lens.specs.aperture_type = ApertureType::kObjectNA;
+    lens.specs.aperture_value = *obna_;
+    if (lens.specs.object_at_infinity())
+      fail_at(aperture_line_, 1, "OBNA (object-space NA) needs a finite object distance");
+  } else {
+    lens.specs.aperture_type = ApertureType::kFloatByStop;
+    const int stop = lens.stop_index();
+    if (stop < 0 || !(lens.surfaces[stop].semi_diameter_mm > 0.0)) {
+      // The stop's DIAM sets the aperture whatever its flag.
+      for (const RawSurface& raw : surfaces_)
+        if (raw.is_stop && raw.semi_diameter_mm > 0.0 && stop >= 0)
+          lens.surfaces[stop].semi_diameter_mm = raw.semi_diameter_mm * unit_mm_;
+    }
+    if (stop < 0 || !(lens.surfaces[stop].semi_diameter_mm > 0.0))
+      fail_at(aperture_line_, 1, "FLOA (float by stop size) needs the stop's DIAM");
+  }
+}
+
+void ZmxParser::set_summary_specs(Lens& lens) {
+  // The summary specs the paper's machinery uses (optimize, tolerance): the chief-ray half field,
+  // the image-space F/# and the sensor whose spec focal length is the lens's EFL.
+  TraceOptions summary;
+  summary.rings = 1;
+  summary.ray_aiming = false;
+  const TraceSystem<double> sys = prepare_lens_system(lens, summary);
+  const double efl_mm = sys.efl_mm;
+  double half_field_deg = 0.0;
+  for (const double a : sys.fields_deg) half_field_deg = std::max(half_field_deg, std::abs(a));
+  if (lens.specs.field_type == FieldType::kAngle) half_field_deg = lens.specs.max_field_value();
+  if (!(half_field_deg < 89.0) || !std::isfinite(half_field_deg))
+    fail_at(yfln_line_ > 0 ? yfln_line_ : last_line_, 1,
+            fmt::format("the largest field is {} deg; lensopt needs less than 89", half_field_deg));
+  lens.specs.half_field_deg = half_field_deg;
+  if (!(efl_mm > 0.0) || !std::isfinite(efl_mm))
+    fail_at(
+        aperture_line_, 1,
+        fmt::format("the paraxial EFL is {} mm; lensopt needs a positive focal length", efl_mm));
+  if (!fnum_) lens.specs.f_number = efl_mm / sys.epd_mm;
+  if (note_sensor_mm_) {
+    lens.specs.sensor_diagonal_mm = *note_sensor_mm_;
+  } else if (half_field_deg > 0.0) {
+    lens.specs.sensor_diagonal_mm = 2.0 * efl_mm * std::tan(half_field_deg * kPi / 180.0);
+  }
+}
+
+// What lensopt wrote in NOTE lines and Zemax cannot say: the paper's spec mode, extra TOML.
+void ZmxParser::apply_lensopt_notes(Lens& lens) const {
+  if (note_mode_paper_) {
+    // Written by lensopt from a lens in the paper's mode: its specs are f/#, hfov and sensor.
+    lens.specs.mode = SpecMode::kPaper;
+    lens.specs.fields.clear();
+    lens.specs.field_type = FieldType::kAngle;
+    lens.specs.aperture_type = ApertureType::kFNumber;
+    lens.specs.aperture_value = 0.0;
+  }
+  lens.extra_toml = note_toml_;
+}
+
+// validate_lens, its errors at the .zmx file's lines.
+void ZmxParser::validate(const Lens& lens, const LensSourceLines& source_lines) const {
+  try {
+    validate_lens(lens, source_lines);
+  } catch (const Error& error) {
+    throw Error(SourceLocation{file_, error.where().line}, error.message());
+  }
+}
+
+}  // namespace zmx_detail
+
+ZmxImport parse_zmx(std::string_view bytes, const std::string& source_name) {
+  return zmx_detail::ZmxParser(source_name).parse(bytes);
+}
+
+ZmxImport read_zmx(const std::filesystem::path& path) {
+  return parse_zmx(read_file(path), path.string());
+}
+
+}  // namespace lensopt

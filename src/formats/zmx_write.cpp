@@ -1,0 +1,212 @@
+// Zemax .zmx export (include/lensopt/formats/zmx.h): ASCII, CRLF line ends, every number the
+// shortest decimal that reads back to the same double (zmx_text.h).
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+#include <set>
+
+#include "lensopt/analysis/apertures.h"
+#include "lensopt/core/atomic_file.h"
+#include "lensopt/core/error.h"
+#include "lensopt/formats/zmx.h"
+#include "lensopt/glass/glass.h"
+#include "zmx_text.h"
+
+namespace lensopt {
+
+using zmx_detail::kChannelLetters;
+using zmx_detail::micrometre_text;
+using zmx_detail::number_text;
+using zmx_detail::upper;
+
+std::string zemax_catalog_name(std::string_view catalog_name) {
+  if (upper(catalog_name) == "OHARA") return "OHARA";
+  const std::filesystem::path path{std::string(catalog_name)};
+  if (path.has_parent_path() || path.has_extension()) return path.stem().string();
+  return std::string(catalog_name);
+}
+
+std::string format_zmx(const Lens& lens) {
+  std::string out;
+  auto line = [&out](const std::string& text) { out += text + "\r\n"; };
+  const Specs& specs = lens.specs;
+  if (specs.wavelengths_nm.size() != specs.wavelength_channels.size())
+    throw Error(fmt::format("lens '{}': {} wavelengths but {} channels", lens.name,
+                            specs.wavelengths_nm.size(), specs.wavelength_channels.size()));
+
+  line("VERS 190513 80 123457 L123457");
+  line("MODE SEQ");
+  std::string name = lens.name;
+  std::replace(name.begin(), name.end(), '\n', ' ');
+  std::replace(name.begin(), name.end(), '\r', ' ');
+  line("NAME " + name);
+  line("NOTE 0 Written by lensopt; the lensopt notes below keep what Zemax has no field for");
+  if (!lens.catalog_name.empty()) line("NOTE 0 lensopt catalog " + lens.catalog_name);
+  line("NOTE 0 lensopt sensor_diagonal_mm " + number_text(specs.sensor_diagonal_mm));
+  line(std::string("NOTE 0 lensopt dispersion ") +
+       (specs.dispersion == DispersionModel::kCatalog ? "catalog" : "abbe"));
+  std::string channels;
+  for (const int channel : specs.wavelength_channels) {
+    if (channel < 0 || channel > 2)
+      throw Error(
+          fmt::format("lens '{}': wavelength channel {} is not R, G or B", lens.name, channel));
+    channels += kChannelLetters[static_cast<std::size_t>(channel)];
+  }
+  line("NOTE 0 lensopt channels " + channels);
+  std::vector<std::string> nm_texts;
+  for (const double nm : specs.wavelengths_nm) nm_texts.push_back(number_text(nm));
+  line(fmt::format("NOTE 0 lensopt wavelengths_nm {}", fmt::join(nm_texts, " ")));
+  if (!lens.extra_toml.empty()) {
+    std::size_t start = 0;
+    const std::string& extra = lens.extra_toml;
+    while (start < extra.size()) {
+      std::size_t end = extra.find('\n', start);
+      if (end == std::string::npos) end = extra.size();
+      std::string text = extra.substr(start, end - start);
+      if (!text.empty() && text.back() == '\r') text.pop_back();
+      line(text.empty() ? "NOTE 0 lensopt-toml" : "NOTE 0 lensopt-toml " + text);
+      start = end + 1;
+    }
+  }
+  if (specs.mode == SpecMode::kPaper) line("NOTE 0 lensopt mode paper");
+  line("NOTE 0 lensopt primary_wavelength_nm " + number_text(specs.primary_wavelength_nm));
+  line("UNIT MM X W X CM MR CPMM");
+  const bool as_written = specs.mode == SpecMode::kAsWritten;
+  switch (as_written ? specs.aperture_type : ApertureType::kFNumber) {
+    case ApertureType::kFNumber:
+      line(fmt::format("FNUM {} 0", number_text(specs.f_number)));
+      break;
+    case ApertureType::kEntrancePupilDiameter:
+      line(fmt::format("ENPD {}", number_text(specs.aperture_value)));
+      break;
+    case ApertureType::kObjectNA:
+      line(fmt::format("OBNA {}", number_text(specs.aperture_value)));
+      break;
+    case ApertureType::kFloatByStop:
+      line("FLOA");
+      break;
+  }
+
+  // Catalogs: the lens's, then any other its glasses come from.
+  std::vector<std::string> gcat;
+  auto add_catalog = [&gcat](const std::string& zemax_name) {
+    if (!zemax_name.empty() && std::find(gcat.begin(), gcat.end(), zemax_name) == gcat.end())
+      gcat.push_back(zemax_name);
+  };
+  bool has_catalog_glass = false;
+  for (const Surface& s : lens.surfaces)
+    has_catalog_glass = has_catalog_glass || s.material.kind == Material::Kind::kCatalog;
+  if (has_catalog_glass) {
+    if (!lens.catalog_name.empty()) add_catalog(zemax_catalog_name(lens.catalog_name));
+    for (const Surface& s : lens.surfaces)
+      if (s.material.kind == Material::Kind::kCatalog && s.material.glass &&
+          lens.catalog_name.empty())
+        add_catalog(zemax_catalog_name(s.material.glass->catalog));
+    if (!gcat.empty()) line(fmt::format("GCAT {}", fmt::join(gcat, " ")));
+  }
+
+  // Fields: the written ones, else 0, 0.7 and 1 of the half field (one on axis when it is 0).
+  std::vector<FieldPoint> fields;
+  if (as_written && !specs.fields.empty()) {
+    fields = specs.fields;
+  } else {
+    fields.push_back({});
+    if (specs.half_field_deg != 0.0)
+      for (const double f : {0.7, 1.0}) fields.push_back({f * specs.half_field_deg, 1.0, {}});
+  }
+  const int field_type =
+      as_written && !specs.fields.empty() ? static_cast<int>(specs.field_type) : 0;
+  std::vector<std::string> x_texts, y_texts, weight_texts, vdy, vcx, vcy;
+  bool vignetting = false;
+  for (const FieldPoint& f : fields) {
+    x_texts.push_back("0");
+    y_texts.push_back(number_text(f.value));
+    weight_texts.push_back(number_text(f.weight));
+    vdy.push_back(number_text(f.vignetting.vdy));
+    vcx.push_back(number_text(f.vignetting.vcx));
+    vcy.push_back(number_text(f.vignetting.vcy));
+    vignetting = vignetting || f.vignetting.any();
+  }
+  line(
+      fmt::format("FTYP {} 0 {} {} 0 0 0", field_type, fields.size(), specs.wavelengths_nm.size()));
+  line(fmt::format("XFLN {}", fmt::join(x_texts, " ")));
+  line(fmt::format("YFLN {}", fmt::join(y_texts, " ")));
+  line(fmt::format("FWGN {}", fmt::join(weight_texts, " ")));
+  if (vignetting) {
+    line(fmt::format("VDYN {}", fmt::join(vdy, " ")));
+    line(fmt::format("VCXN {}", fmt::join(vcx, " ")));
+    line(fmt::format("VCYN {}", fmt::join(vcy, " ")));
+  }
+  std::size_t primary = 0;
+  for (std::size_t i = 0; i < specs.wavelengths_nm.size(); ++i) {
+    const double weight = specs.wavelength_weights.size() == specs.wavelengths_nm.size()
+                              ? specs.wavelength_weights[i]
+                              : 1.0;
+    line(fmt::format("WAVM {} {} {}", i + 1, micrometre_text(specs.wavelengths_nm[i]),
+                     number_text(weight)));
+    if (std::abs(specs.wavelengths_nm[i] - specs.primary_wavelength_nm) <
+        std::abs(specs.wavelengths_nm[primary] - specs.primary_wavelength_nm))
+      primary = i;
+  }
+  line(fmt::format("PWAV {}", primary + 1));
+
+  line("SURF 0");
+  line("  TYPE STANDARD");
+  line("  CURV 0");
+  line(specs.object_at_infinity()
+           ? std::string("  DISZ INFINITY")
+           : fmt::format("  DISZ {}", number_text(specs.object_distance_mm)));
+  // Surfaces without a clear aperture get OpticStudio's automatic semi-diameter ("DIAM r 0",
+  // not an aperture when read back); none if the lens cannot be traced.
+  std::vector<double> automatic;
+  try {
+    automatic = automatic_semi_diameters(lens);
+  } catch (const Error&) {
+    automatic.clear();
+  }
+  int number = 1;
+  for (const Surface& s : lens.surfaces) {
+    line(fmt::format("SURF {}", number++));
+    line(s.has_asphere() ? "  TYPE EVENASPH" : "  TYPE STANDARD");
+    line(fmt::format("  CURV {}", number_text(s.curvature_per_mm)));
+    if (s.has_asphere()) {
+      line(fmt::format("  PARM 1 {}", number_text(s.asphere_r2_per_mm)));
+      for (int j = 0; j < kAsphereOrders; ++j)
+        line(fmt::format("  PARM {} {}", j + 2, number_text(s.asphere[j])));
+    }
+    line(fmt::format("  DISZ {}", number_text(s.thickness_mm)));
+    switch (s.material.kind) {
+      case Material::Kind::kAir:
+        break;
+      case Material::Kind::kCatalog:
+        line(fmt::format("  GLAS {} 0 0 {} {} 0 0 0 0 0 0", s.material.glass_name,
+                         number_text(s.material.nd), number_text(s.material.vd)));
+        break;
+      case Material::Kind::kModel:
+        line(fmt::format("  GLAS ___BLANK 1 0 {} {} 0 0 0 0 0 0", number_text(s.material.nd),
+                         number_text(s.material.vd)));
+        break;
+    }
+    if (s.is_stop) line("  STOP");
+    if (s.semi_diameter_mm != 0.0) {
+      line(fmt::format("  DIAM {} 1", number_text(s.semi_diameter_mm)));
+    } else if (static_cast<std::size_t>(number - 2) < automatic.size() &&
+               std::isfinite(automatic[static_cast<std::size_t>(number - 2)])) {
+      line(
+          fmt::format("  DIAM {} 0", number_text(automatic[static_cast<std::size_t>(number - 2)])));
+    }
+    if (s.conic != 0.0) line(fmt::format("  CONI {}", number_text(s.conic)));
+  }
+  line(fmt::format("SURF {}", number));
+  line("  TYPE STANDARD");
+  line("  CURV 0");
+  line("  DISZ 0");
+  return out;
+}
+
+void write_zmx(const Lens& lens, const std::filesystem::path& path) {
+  write_file_atomic(path, format_zmx(lens));
+}
+
+}  // namespace lensopt
