@@ -39,13 +39,17 @@ fi
 grep -q "opt.toml:.*weight_rayangle" "$tmp/err.txt" || fail "unknown key message: $(cat "$tmp/err.txt")"
 
 # SIGINT: the best lens so far is written, exit status 130.
-# The signal is sent once the run reports progress (its handler is installed by then): the test
-# reads the run's stderr through a FIFO and waits for its first line, not for a fixed time.
+# The signal is sent once the run reports an iteration ("  [name] iter ..."; its handler is
+# installed by then, unlike at the "lensopt optimize: ... bounds" line before): the test reads the
+# run's stderr through a FIFO and waits for that line, not for a fixed time.
 mkfifo "$tmp/progress.fifo"
 "$lensopt" optimize lenses/cooke.toml -o "$tmp/interrupted.toml" 2> "$tmp/progress.fifo" &
 pid=$!
 exec 3< "$tmp/progress.fifo"
-IFS= read -r -t 120 -u 3 _ || fail "optimize printed no progress in 120 s"
+while true; do
+  IFS= read -r -t 120 -u 3 line || fail "optimize printed no iteration in 120 s"
+  [[ "$line" =~ \]\ iter\  ]] && break
+done
 kill -INT "$pid"
 cat <&3 > "$tmp/progress.txt" &  # drain the rest, so the run never blocks on a full pipe
 drain=$!
