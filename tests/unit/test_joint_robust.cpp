@@ -19,6 +19,7 @@
 #include "lensopt/joint/imaging.h"
 #include "lensopt/joint/joint.h"
 #include "lensopt/lens/lens_io.h"
+#include "lensopt/formats/lens_file.h"
 #include "lensopt/render/render.h"
 #include "test_joint_support.h"
 #include "test_support.h"

@@ -8,6 +8,7 @@
 #include <random>
 #include <vector>
 
+#include "lensopt/formats/lens_file.h"
 #include "lensopt/core/error.h"
 #include "lensopt/lens/lens_io.h"
 #include "lensopt/optimize/optimizer.h"
