@@ -74,7 +74,7 @@ struct AnalysisReport {
   std::string aperture = "f-number";
   double object_distance_mm = 0;  // 0: at infinity
   double primary_wavelength_nm = 0;
-  double max_aiming_error = 0;  // fraction of the stop radius
+  double max_aiming_error = 0;     // fraction of the stop radius
   std::optional<WaveReport> wave;  // with AnalyzeOptions::wave
 };
 

@@ -32,9 +32,9 @@
 // Export writes TYPE EVENASPH with PARM 1..8 for a surface with asphere terms (else STANDARD)
 // and CONI when k != 0.
 // Errors (lensopt::Error at file:line:column, one line naming the feature): a surface type other
-// than STANDARD or EVENASPH, an EVENASPH PARM beyond 8, a mirror, a finite object, a curved image, a field type other than angle, an unknown unit,
-// a glass in none of the GCAT catalogs (naming them). Lines lensopt does not model are warnings
-// with their line numbers, never dropped silently.
+// than STANDARD or EVENASPH, an EVENASPH PARM beyond 8, a mirror, a finite object, a curved image,
+// a field type other than angle, an unknown unit, a glass in none of the GCAT catalogs (naming
+// them). Lines lensopt does not model are warnings with their line numbers, never dropped silently.
 #pragma once
 
 #include <filesystem>
