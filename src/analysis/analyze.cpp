@@ -269,7 +269,8 @@ std::string format_report_json(const AnalysisReport& r) {
   // An object at infinity is written as object_at_infinity = true and a distance of 0 (no null
   // or infinity in an output).
   j["object_at_infinity"] = !(r.object_distance_mm > 0);
-  j["object_distance_mm"] = r.object_distance_mm > 0 ? finite_or_null(r.object_distance_mm) : json(0.0);
+  j["object_distance_mm"] =
+      r.object_distance_mm > 0 ? finite_or_null(r.object_distance_mm) : json(0.0);
   j["primary_wavelength_nm"] = finite_or_null(r.primary_wavelength_nm);
   j["vignetted_rays"] = r.vignetted_rays;
   j["vignetted_rays_per_field"] = vignetted;

@@ -10,11 +10,11 @@
 #include <cmath>
 #include <complex>
 
+#include "core/fft.h"
 #include "imaging_detail.h"
 #include "lensopt/core/error.h"
 #include "lensopt/core/interpolate.h"
 #include "lensopt/core/threads.h"
-#include "core/fft.h"
 
 namespace lensopt {
 

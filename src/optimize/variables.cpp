@@ -74,12 +74,12 @@ LensParameterization::LensParameterization(const Lens& lens, GlassSpace glasses,
   lens.validate();
   focal_length_mm_ = lens.specs.focal_length_mm();
   if (!std::isfinite(focal_length_mm_) || !(focal_length_mm_ > 0.0))
-    throw Error(SourceLocation{lens.source_path},
-                fmt::format("the optimizer works at the spec focal length d / (2 tan hfov), which "
-                            "is {} mm for half_field_deg = {} and sensor_diagonal_mm = {}; give "
-                            "the lens a field",
-                            focal_length_mm_, lens.specs.half_field_deg,
-                            lens.specs.sensor_diagonal_mm));
+    throw Error(
+        SourceLocation{lens.source_path},
+        fmt::format("the optimizer works at the spec focal length d / (2 tan hfov), which "
+                    "is {} mm for half_field_deg = {} and sensor_diagonal_mm = {}; give "
+                    "the lens a field",
+                    focal_length_mm_, lens.specs.half_field_deg, lens.specs.sensor_diagonal_mm));
   const int k_count = static_cast<int>(lens.surfaces.size());
   const int last = k_count - 1;
   if (lens.surfaces[last - 1].material.is_air()) {
@@ -161,8 +161,7 @@ LensParameterization::LensParameterization(const Lens& lens, GlassSpace glasses,
     scale_only.ray_aiming = false;
     scale_only.fields = 1;
     scale_only.rings = 1;
-    const double scale =
-        prepare_system(make_trace_lens(lens), lens.specs, scale_only).scale;
+    const double scale = prepare_system(make_trace_lens(lens), lens.specs, scale_only).scale;
     const Lens normalized = scaled(lens, scale / focal_length_mm_);
     profile_kind_.assign(k_count, kProfileSphere);
     conic0_.assign(k_count, 0.0);
@@ -221,8 +220,11 @@ std::vector<double> LensParameterization::from_lens(const Lens& lens_in) const {
         x[i + 1] = g[1];
         break;
       }
-      case LensVariable::Kind::kGlass1: break;
-      case LensVariable::Kind::kConic: x[i] = s.conic; break;
+      case LensVariable::Kind::kGlass1:
+        break;
+      case LensVariable::Kind::kConic:
+        x[i] = s.conic;
+        break;
       case LensVariable::Kind::kAsphere: {
         // a'_{2i} = a_{2i} f^(2i-1) of the f = 1 lens, times rho^(2i).
         const double a = v.term == 0 ? s.asphere_r2_per_mm : s.asphere[v.term - 1];
@@ -306,10 +308,10 @@ std::vector<int> LensParameterization::select(const std::vector<std::string>& na
     if (!found) {
       std::string known;
       for (const LensVariable& v : variables_) known += (known.empty() ? "" : ", ") + v.name;
-      throw Error(fmt::format("unknown variable '{}'; known: curvatures, spacings, glasses, "
-                              "conics, aspheres, {}",
-                              raw,
-                              known));
+      throw Error(
+          fmt::format("unknown variable '{}'; known: curvatures, spacings, glasses, "
+                      "conics, aspheres, {}",
+                      raw, known));
     }
   }
   std::sort(out.begin(), out.end());

@@ -12,8 +12,8 @@
 #include "lensopt/core/error.h"
 #include "lensopt/core/threads.h"
 #include "lensopt/render/metrics.h"
-#include "render/overlap_add.h"
 #include "lensopt/render/render.h"
+#include "render/overlap_add.h"
 
 namespace lensopt {
 // Everything a render of one image size needs beyond the PSF grid: windows, patch extents, one
@@ -122,8 +122,8 @@ FloatImage Renderer::blur(const FloatImage& input, int threads) const {
         if (colours == kColourChannels) {
           k = e->spectra[q * kColourChannels + c].data();
         } else {
-          kernel_spectrum(grid.grey_kernels[q].values.data(), grid.grey_kernels[q].radius,
-                          buffers, grey_spectrum);
+          kernel_spectrum(grid.grey_kernels[q].values.data(), grid.grey_kernels[q].radius, buffers,
+                          grey_spectrum);
           k = grey_spectrum.data();
         }
         // The patch's input: its window's extent plus the largest PSF reach on each side.
@@ -131,8 +131,8 @@ FloatImage Renderer::blur(const FloatImage& input, int threads) const {
         load_reflected_block(input, c, lo_x - pad, lo_y - pad, hi_x - lo_x + 2 * pad,
                              hi_y - lo_y + 2 * pad, buffers);
         convolve_loaded_block(k, buffers);
-        add_windowed_block(buffers, pad, lo_x, hi_x, lo_y, hi_y, e->window_x[px],
-                           e->window_y[py], acc.data() + plane * c, width, 0, 0);
+        add_windowed_block(buffers, pad, lo_x, hi_x, lo_y, hi_y, e->window_x[px], e->window_y[py],
+                           acc.data() + plane * c, width, 0, 0);
       }  // the omp for's barrier ends the phase
     }
   }

@@ -15,11 +15,11 @@
 
 #include "lensopt/core/atomic_file.h"
 #include "lensopt/core/error.h"
+#include "lensopt/formats/lens_file.h"
 #include "lensopt/glass/glass.h"
 #include "lensopt/joint/imaging.h"
 #include "lensopt/joint/joint.h"
 #include "lensopt/lens/lens_io.h"
-#include "lensopt/formats/lens_file.h"
 #include "lensopt/render/render.h"
 #include "test_joint_support.h"
 #include "test_support.h"

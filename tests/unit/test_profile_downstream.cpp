@@ -8,8 +8,8 @@
 #include <random>
 #include <vector>
 
-#include "lensopt/formats/lens_file.h"
 #include "lensopt/core/error.h"
+#include "lensopt/formats/lens_file.h"
 #include "lensopt/lens/lens_io.h"
 #include "lensopt/optimize/optimizer.h"
 #include "lensopt/optimize/profile_bounds.h"

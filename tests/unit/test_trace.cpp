@@ -65,7 +65,8 @@ TEST_CASE_TEMPLATE("trace: Snell's law in vector form at a sphere", T, double,
   const double in_x = l0, in_y = m0, in_z = n0;
   const double cross_in[3] = {in_y * nz - in_z * ny, in_z * nx - in_x * nz, in_x * ny - in_y * nx};
   const double cross_out[3] = {dy * nz - dz * ny, dz * nx - dx * nz, dx * ny - dy * nx};
-  for (int i = 0; i < 3; ++i) CHECK(1.0 * cross_in[i] == doctest::Approx(nd * cross_out[i]).epsilon(1e-13));
+  for (int i = 0; i < 3; ++i)
+    CHECK(1.0 * cross_in[i] == doctest::Approx(nd * cross_out[i]).epsilon(1e-13));
   // Refraction bends towards the normal: the angle with N shrinks.
   const double cos_in = in_x * nx + in_y * ny + in_z * nz;
   const double cos_out = dx * nx + dy * ny + dz * nz;
@@ -121,7 +122,8 @@ TEST_CASE("paraxial: thick lens EFL matches the lensmaker's formula") {
       const double power = (nd - 1) * (c1 - c2 + (nd - 1) * t * c1 * c2 / nd);
       CHECK(p.efl_mm == doctest::Approx(1.0 / power).epsilon(1e-13));
       // BFL = f (1 - (n-1) t c1 / n)
-      CHECK(p.bfl_mm == doctest::Approx((1.0 / power) * (1 - (nd - 1) * t * c1 / nd)).epsilon(1e-12));
+      CHECK(p.bfl_mm ==
+            doctest::Approx((1.0 / power) * (1 - (nd - 1) * t * c1 / nd)).epsilon(1e-12));
     }
   }
 }

@@ -47,13 +47,13 @@ inline constexpr int kAsphereOrders = 7;
 
 // One refracting (or stop) surface.
 struct Surface {
-  double curvature_per_mm = 0.0;  // c = 1/R; 0 for a flat surface
-  double thickness_mm = 0.0;      // axial distance to the next surface (or the image plane)
-  Material material;              // medium from this surface to the next
-  bool is_stop = false;           // the aperture stop (must be flat)
-  double semi_diameter_mm = 0.0;  // clear semi-aperture if known; 0 = not set
-  bool written_as_radius = true;  // TOML round trip: written as radius_mm (else curvature_per_mm)
-  double conic = 0.0;             // conic constant k (dimensionless)
+  double curvature_per_mm = 0.0;   // c = 1/R; 0 for a flat surface
+  double thickness_mm = 0.0;       // axial distance to the next surface (or the image plane)
+  Material material;               // medium from this surface to the next
+  bool is_stop = false;            // the aperture stop (must be flat)
+  double semi_diameter_mm = 0.0;   // clear semi-aperture if known; 0 = not set
+  bool written_as_radius = true;   // TOML round trip: written as radius_mm (else curvature_per_mm)
+  double conic = 0.0;              // conic constant k (dimensionless)
   double asphere_r2_per_mm = 0.0;  // a2, the r^2 term (Zemax EVENASPH PARM 1), 1/mm
   std::array<double, kAsphereOrders> asphere{};  // a4, a6, ..., a16 in mm^(1-2i) (i = 2..8)
 

@@ -46,10 +46,10 @@ struct OptimizeOptions {
   // Surface-profile variables added to the lens's own ("k3", "a4_3": conic of surface 3, its a4);
   // variables.h normalizes them. Profile terms not named keep the start's values.
   std::vector<std::string> vary;
-  int max_iterations = 50;          // LM iterations per round
-  int max_rounds = 4;               // reweighting rounds per phase
-  bool soft_start = true;           // strict constraints: run the paper's soft penalties first
-  bool verbose = true;              // progress on stderr
+  int max_iterations = 50;  // LM iterations per round
+  int max_rounds = 4;       // reweighting rounds per phase
+  bool soft_start = true;   // strict constraints: run the paper's soft penalties first
+  bool verbose = true;      // progress on stderr
   const std::atomic<bool>* interrupt = nullptr;  // set (e.g. by SIGINT) to stop early
 
   OptimizeOptions();

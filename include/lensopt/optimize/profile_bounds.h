@@ -21,8 +21,8 @@
 
 #include "lensopt/core/scalar.h"
 #include "lensopt/lens/lens.h"
-#include "lensopt/trace/system.h"
 #include "lensopt/lens/trace_lens.h"
+#include "lensopt/trace/system.h"
 
 namespace lensopt {
 

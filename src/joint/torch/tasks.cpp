@@ -10,9 +10,9 @@
 #include "lensopt/core/atomic_file.h"
 #include "lensopt/core/error.h"
 #include "lensopt/joint/data.h"
+#include "lensopt/joint/detector.h"
 #include "lensopt/joint/task.h"
 #include "torch_common.h"
-#include "lensopt/joint/detector.h"
 
 namespace lensopt {
 namespace {
@@ -243,8 +243,8 @@ std::unique_ptr<Task> make_task(const std::string& spec, const TaskOptions& opti
       return make_torchscript_detection_task(model, options);
     return std::make_unique<TorchScriptTask>(model, options);
   }
-  throw Error(fmt::format(
-      "unknown task '{}'; known: restoration, detection, torchscript:MODEL.pt", spec));
+  throw Error(
+      fmt::format("unknown task '{}'; known: restoration, detection, torchscript:MODEL.pt", spec));
 }
 
 }  // namespace lensopt
