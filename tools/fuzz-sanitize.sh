@@ -14,6 +14,7 @@ cmake -S . -B build-sanitize -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
 cmake --build build-sanitize -j "$(nproc)" --target lensopt lensopt_tests
 export ASAN_OPTIONS="halt_on_error=1:detect_leaks=0:abort_on_error=0:exitcode=86"
 export UBSAN_OPTIONS="halt_on_error=1:print_stacktrace=1:exitcode=87"
-build-sanitize/lensopt_tests -ts="*io*,*zmx*,*glass*,*fuzz*" --no-intro
+build-sanitize/lensopt_tests --no-intro \
+  -sf="*/test_zmx*.cpp,*/test_lens*.cpp,*/test_glass*.cpp,*/test_robustness*.cpp"
 LENSOPT_FUZZ_CASES="$cases" LENSOPT_FUZZ_SEED="$seed" bash tests/e2e/fuzz.sh build-sanitize/lensopt
 echo "fuzz-sanitize: $cases cases (seed $seed) under ASan + UBSan: no report"
