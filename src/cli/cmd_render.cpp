@@ -6,7 +6,6 @@
 
 #include <atomic>
 #include <chrono>
-#include <csignal>
 #include <filesystem>
 #include <memory>
 #include <string>
@@ -16,6 +15,7 @@
 #include "lens_checks.h"
 #include "lensopt/core/atomic_file.h"
 #include "lensopt/core/error.h"
+#include "lensopt/core/interrupt.h"
 #include "lensopt/core/output_checks.h"
 #include "lensopt/formats/lens_file.h"
 #include "lensopt/lens/lens_io.h"
@@ -28,12 +28,6 @@ namespace {
 
 namespace fs = std::filesystem;
 using Clock = std::chrono::steady_clock;
-
-std::atomic<bool> g_render_interrupted{false};
-
-extern "C" void on_render_signal(int) {
-  g_render_interrupted.store(true);
-}
 
 struct RenderCommand {
   std::string lens_path;
@@ -111,16 +105,7 @@ class Progress {
 
 void run_render(const RenderCommand& cmd) {
   // SIGINT / SIGTERM: start no further image, write the metrics of what is done, exit 130.
-  g_render_interrupted.store(false);
-  auto previous_int = std::signal(SIGINT, on_render_signal);
-  auto previous_term = std::signal(SIGTERM, on_render_signal);
-  struct RestoreSignals {
-    decltype(previous_int) i, t;
-    ~RestoreSignals() {
-      std::signal(SIGINT, i);
-      std::signal(SIGTERM, t);
-    }
-  } restore{previous_int, previous_term};
+  const InterruptScope interrupt;
   // Every image allocates and frees buffers of tens of megabytes; by default glibc maps each
   // with mmap and unmaps it when freed, so every image faults its pages in again (about a tenth
   // of the CPU time of a dataset run). Keep freed memory in the heap for reuse instead.
@@ -136,7 +121,7 @@ void run_render(const RenderCommand& cmd) {
   dataset.output_dir = cmd.output_dir;
   dataset.force = cmd.force;
   dataset.jobs = cmd.jobs;
-  dataset.interrupt = &g_render_interrupted;
+  dataset.interrupt = interrupt.flag();
   if (!cmd.shard.empty()) parse_shard(cmd.shard, dataset.shard_index, dataset.shard_count);
   for (const std::string& in : cmd.inputs) dataset.inputs.emplace_back(in);
 
