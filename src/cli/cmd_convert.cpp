@@ -13,6 +13,7 @@
 #include "lensopt/core/atomic_file.h"
 #include "lensopt/core/error.h"
 #include "lensopt/core/output_checks.h"
+#include "lensopt/core/text.h"
 #include "lensopt/formats/zmx.h"
 #include "lensopt/lens/lens_io.h"
 
@@ -23,13 +24,6 @@ struct ConvertCommand {
   std::string input_path;
   std::string output_path;
 };
-
-std::string lower_extension(const std::filesystem::path& path) {
-  std::string extension = path.extension().string();
-  std::transform(extension.begin(), extension.end(), extension.begin(),
-                 [](unsigned char ch) { return static_cast<char>(std::tolower(ch)); });
-  return extension;
-}
 
 Lens read_input(const std::filesystem::path& path) {
   const std::string extension = lower_extension(path);

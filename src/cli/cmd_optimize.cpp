@@ -17,6 +17,7 @@
 #include "lensopt/lens/lens_io.h"
 #include "lensopt/optimize/optimizer.h"
 #include "optimize/optimize_table.h"
+#include "optimize/summary_json.h"
 
 namespace lensopt::cli {
 namespace {
@@ -169,20 +170,14 @@ void run_optimize(const OptimizeCommand& cmd) {
     nlohmann::json j;
     j["lens"] = lens.name;
     j["output"] = out_path.string();
-    j["start_mean_rms_spot_um"] = result.start_spot_um;
-    j["final_mean_rms_spot_um"] = result.final_spot_um;
+    add_summary_json(j, summarize(result));  // the keys search's results use too
     j["start_rms_spot_um"] = result.start_field_spot_um;
     j["final_rms_spot_um"] = result.final_field_spot_um;
     j["start_constraints"] = constraints_json(result.start_constraints);
     j["final_constraints"] = constraints_json(result.final_constraints);
-    j["glasses"] = result.glasses;
-    j["iterations"] = result.iterations;
-    j["loss_evaluations"] = result.loss_evaluations;
     j["jacobian_evaluations"] = result.jacobian_evaluations;
-    j["seconds"] = result.seconds;
     j["termination"] = result.termination;
     j["interrupted"] = result.interrupted;
-    j["kept_start"] = result.kept_start;
     j["bounds"] = {{"mode", paper_bounds ? "paper" : "lens"},
                    {"min_air_mm", options.loss.min_air_mm},
                    {"min_glass_mm", options.loss.min_glass_mm},

@@ -20,6 +20,7 @@
 
 #include "lensopt/core/error.h"
 #include "lensopt/core/output_checks.h"
+#include "lensopt/core/text.h"
 
 namespace lensopt {
 namespace {
@@ -62,8 +63,7 @@ void sync_dir(const fs::path& dir) {
 // Image encoders do not all report a short write (a full disk can leave a truncated PNG that was
 // "written" without error), so an image is decoded again before it replaces the target.
 bool is_image_path(const fs::path& path) {
-  std::string ext = path.extension().string();
-  for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  const std::string ext = lower_extension(path);
   return ext == ".png" || ext == ".jpg" || ext == ".jpeg" || ext == ".tif" || ext == ".tiff" ||
          ext == ".exr";
 }

@@ -2,6 +2,7 @@
 #include "lensopt/core/text.h"
 
 #include <algorithm>
+#include <cctype>
 #include <cstdint>
 #include <initializer_list>
 #include <numeric>
@@ -133,6 +134,16 @@ std::size_t edit_distance(std::string_view a, std::string_view b) {
     }
   }
   return row[b.size()];
+}
+
+std::string to_lower(std::string_view text) {
+  std::string out(text);
+  for (char& ch : out) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
+  return out;
+}
+
+std::string lower_extension(const std::filesystem::path& path) {
+  return to_lower(path.extension().string());
 }
 
 }  // namespace lensopt

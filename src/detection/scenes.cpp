@@ -6,9 +6,9 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
-#include <random>
 
 #include "lensopt/core/error.h"
+#include "lensopt/core/random.h"
 
 namespace lensopt {
 namespace {
@@ -72,9 +72,9 @@ struct Canvas {
 // Smooth value noise in [-1, 1] on a lattice of `cell` pixels (bilinear between random values).
 class ValueNoise {
  public:
-  ValueNoise(std::mt19937_64& rng, int width, int height, double cell)
+  ValueNoise(Rng& rng, int width, int height, double cell)
       : cell_(cell), nx_(int(width / cell) + 2), ny_(int(height / cell) + 2), v_(nx_ * ny_) {
-    std::uniform_real_distribution<double> u(-1.0, 1.0);
+    const UniformReal u{-1.0, 1.0};
     for (double& x : v_) x = u(rng);
   }
   double at(double x, double y) const {
@@ -97,14 +97,14 @@ Rgb scale(Rgb c, double f) {
           float(std::clamp(c[2] * f, 0.0, 1.0))};
 }
 
-Rgb random_colour(std::mt19937_64& rng) {
-  std::uniform_real_distribution<double> u(0.05, 0.95);
+Rgb random_colour(Rng& rng) {
+  const UniformReal u{0.05, 0.95};
   return {float(u(rng)), float(u(rng)), float(u(rng))};
 }
 
-void paint_background(Canvas& cv, std::mt19937_64& rng, double horizon) {
+void paint_background(Canvas& cv, Rng& rng, double horizon) {
   const ValueNoise coarse(rng, cv.w, cv.h, cv.h / 6.0), fine(rng, cv.w, cv.h, 3.0);
-  std::uniform_real_distribution<double> u(0.0, 1.0);
+  const UniformReal u{0.0, 1.0};
   const Rgb sky_top{0.35f, 0.5f, 0.8f}, sky_low{0.75f, 0.8f, 0.88f};
   const double road_half_bottom = 0.55 * cv.w * (0.8 + 0.4 * u(rng));
   const double vanish_x = cv.w * (0.4 + 0.2 * u(rng));
@@ -131,7 +131,7 @@ void paint_background(Canvas& cv, std::mt19937_64& rng, double horizon) {
       cv.put(x, y, c);
     }
   // Buildings and trees along the horizon on both sides (background: owner -1).
-  std::uniform_int_distribution<int> count(6, 14);
+  const UniformInt count{6, 14};
   const int buildings = count(rng);
   for (int b = 0; b < buildings; ++b) {
     const bool left = u(rng) < 0.5;
@@ -157,8 +157,8 @@ void paint_background(Canvas& cv, std::mt19937_64& rng, double horizon) {
 
 // One object of class `category` (paper_class_map ids) with its foot at (fx, fy) and scale s
 // (supersampled pixels per metre-like unit).
-void paint_object(Canvas& cv, std::mt19937_64& rng, int category, double fx, double fy, double s) {
-  std::uniform_real_distribution<double> u(0.0, 1.0);
+void paint_object(Canvas& cv, Rng& rng, int category, double fx, double fy, double s) {
+  const UniformReal u{0.0, 1.0};
   const Rgb body = random_colour(rng);
   switch (category) {
     case 1: {  // car: body, cabin, windows, wheels
@@ -210,7 +210,7 @@ void paint_object(Canvas& cv, std::mt19937_64& rng, int category, double fx, dou
       cv.rect(fx - w / 8, fy - h, fx + w / 8, fy, {0.25f, 0.25f, 0.25f});
       const double top = fy - h - 0.9 * s;
       cv.rect(fx - w / 2, top, fx + w / 2, fy - h, {0.08f, 0.08f, 0.08f});
-      std::uniform_int_distribution<int> lit(0, 2);
+      const UniformInt lit{0, 2};
       const int on = lit(rng);
       const Rgb lamps[3] = {{1.0f, 0.15f, 0.1f}, {1.0f, 0.8f, 0.1f}, {0.2f, 1.0f, 0.4f}};
       for (int k = 0; k < 3; ++k)
@@ -251,8 +251,8 @@ DetectionScene make_detection_scene(int width, int height, std::uint64_t seed) {
   if (width < 64 || height < 64 || width > 8192 || height > 8192)
     throw Error(
         fmt::format("scene size {}x{} must be within 64 .. 8192 pixels a side", width, height));
-  std::mt19937_64 rng(seed * 0x9E3779B97F4A7C15ull + 777);
-  std::uniform_real_distribution<double> u(0.0, 1.0);
+  Rng rng(seed * 0x9E3779B97F4A7C15ull + 777);
+  const UniformReal u{0.0, 1.0};
   Canvas cv(width * kSuper, height * kSuper);
   const double horizon = cv.h * (0.40 + 0.08 * u(rng));
   paint_background(cv, rng, horizon);
@@ -262,7 +262,7 @@ DetectionScene make_detection_scene(int width, int height, std::uint64_t seed) {
     int category;
     double z, x_ground;  // x_ground: lateral position, -1 .. 1 of the view at that depth
   };
-  std::uniform_int_distribution<int> how_many(6, 18);
+  const UniformInt how_many{6, 18};
   std::vector<Object> objects(how_many(rng));
   // Class frequencies like a street: cars most, then people and signs.
   const double weights[6] = {0.38, 0.1, 0.07, 0.2, 0.1, 0.15};

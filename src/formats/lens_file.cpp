@@ -11,20 +11,12 @@
 
 #include "lensopt/core/atomic_file.h"
 #include "lensopt/core/error.h"
+#include "lensopt/core/text.h"
 #include "lensopt/formats/zmx.h"
 #include "lensopt/lens/lens_io.h"
 
 namespace lensopt {
-namespace {
-
-std::string lower_extension(const std::filesystem::path& path) {
-  std::string out = path.extension().string();
-  std::transform(out.begin(), out.end(), out.begin(),
-                 [](unsigned char ch) { return static_cast<char>(std::tolower(ch)); });
-  return out;
-}
-
-}  // namespace
+namespace {}  // namespace
 
 Lens read_lens(const std::filesystem::path& path) {
   const std::string extension = lower_extension(path);

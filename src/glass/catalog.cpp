@@ -24,12 +24,6 @@ namespace {
 constexpr std::string_view kOharaAlias = "ohara";
 constexpr std::string_view kOharaFile = "ohara65.agf";
 
-std::string to_lower(std::string_view text) {
-  std::string out(text);
-  for (char& ch : out) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
-  return out;
-}
-
 bool equals_ignoring_case(std::string_view a, std::string_view b) {
   return a.size() == b.size() && std::equal(a.begin(), a.end(), b.begin(), [](char x, char y) {
            return std::tolower(static_cast<unsigned char>(x)) ==

@@ -53,8 +53,8 @@ FloatImage make_dead_leaves(int width, int height, std::uint64_t seed) {
   // (scale invariant), drawn by the inverse CDF r = (r_min^-2 - u (r_min^-2 - r_max^-2))^-1/2.
   constexpr int kSuper = 2;
   const int w = width * kSuper, h = height * kSuper;
-  std::mt19937_64 rng(seed * 0x9E3779B97F4A7C15ull + 12345);
-  std::uniform_real_distribution<double> uniform(0.0, 1.0);
+  Rng rng(seed * 0x9E3779B97F4A7C15ull + 12345);
+  const UniformReal uniform{0.0, 1.0};
   std::vector<float> big(static_cast<std::size_t>(w) * h * 3, 0.5f);
   const double r_min = 1.5 * kSuper, r_max = 0.12 * std::min(w, h);
   const double a = 1.0 / (r_min * r_min), b = 1.0 / (r_max * r_max);
@@ -199,7 +199,7 @@ JointData::JointData(const DataOptions& options) : options_(options), rng_(optio
                               scenes_.size(), c, c));
     std::vector<int> order(scenes_.size());
     for (std::size_t i = 0; i < order.size(); ++i) order[i] = static_cast<int>(i);
-    std::mt19937_64 split_rng(options_.seed ^ 0x5851F42D4C957F2Dull);
+    Rng split_rng(options_.seed ^ 0x5851F42D4C957F2Dull);
     std::shuffle(order.begin(), order.end(), split_rng);
     const int n = static_cast<int>(order.size());
     const int held =

@@ -27,6 +27,7 @@
 #include "lens_toml_detail.h"
 #include "lensopt/core/atomic_file.h"
 #include "lensopt/core/error.h"
+#include "lensopt/core/text.h"
 #include "lensopt/glass/glass.h"
 #include "lensopt/lens/lens_io.h"
 #include "lensopt/lens/validate.h"
@@ -83,12 +84,6 @@ constexpr std::array<std::string_view, 9> kSurfaceKeys = {
     "radius_mm", "curvature_per_mm", "thickness_mm", "material", "stop", "semi_diameter_mm",
     "conic",     "asphere",          "asphere_r2"};
 constexpr std::array<std::string_view, 2> kModelGlassKeys = {"nd", "vd"};
-
-std::string lower(std::string_view text) {
-  std::string out(text);
-  for (char& ch : out) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
-  return out;
-}
 
 std::string_view type_phrase(const toml::node& node) {
   switch (node.type()) {
@@ -199,7 +194,7 @@ class TomlReader {
 // optionally signed), all meaning a flat surface.
 double read_radius_mm(const TomlReader& reader, const toml::node& node, std::string_view what) {
   if (const auto* s = node.as_string()) {
-    std::string text = lower(s->get());
+    std::string text = to_lower(s->get());
     double sign = 1.0;
     if (!text.empty() && (text.front() == '+' || text.front() == '-')) {
       sign = text.front() == '-' ? -1.0 : 1.0;
@@ -272,7 +267,7 @@ Specs read_specs(const TomlReader& reader, const toml::table& table) {
     }
   }
   if (const Entry e = entry(table, "dispersion")) {
-    const std::string model = lower(reader.string(*e.node, "dispersion"));
+    const std::string model = to_lower(reader.string(*e.node, "dispersion"));
     if (model == "abbe") {
       specs.dispersion = DispersionModel::kAbbe;
     } else if (model == "catalog") {
@@ -290,7 +285,7 @@ void read_system(const TomlReader& reader, const toml::table& table, Specs& spec
   reader.check_keys(table, kSystemKeys, "[system]");
   specs.mode = SpecMode::kAsWritten;
   auto name_index = [&](const toml::node& node, const auto& names, std::string_view what) {
-    const std::string value = lower(reader.string(node, what));
+    const std::string value = to_lower(reader.string(node, what));
     for (std::size_t i = 0; i < names.size(); ++i)
       if (value == names[i]) return static_cast<int>(i);
     std::vector<std::string> quoted;
@@ -305,7 +300,7 @@ void read_system(const TomlReader& reader, const toml::table& table, Specs& spec
     return out;
   };
   if (const Entry e = entry(table, "mode")) {
-    const std::string mode = lower(reader.string(*e.node, "mode"));
+    const std::string mode = to_lower(reader.string(*e.node, "mode"));
     if (mode == "paper") {
       specs.mode = SpecMode::kPaper;
     } else if (mode != "as-written") {
@@ -389,7 +384,7 @@ Material read_material(const TomlReader& reader, const toml::node& node, int sur
                        const Lens& lens, const Catalog* catalog) {
   if (const auto* s = node.as_string()) {
     const std::string& name = s->get();
-    if (lower(name) == "air") return Material::air();
+    if (to_lower(name) == "air") return Material::air();
     if (catalog == nullptr)
       reader.fail(node, fmt::format("surface {}: material \"{}\" names a catalog glass, but [lens] "
                                     "has no catalog (add catalog = \"ohara\")",

@@ -16,6 +16,7 @@
 #include "lensopt/core/adam.h"
 #include "lensopt/core/error.h"
 #include "lensopt/core/jet_width.h"
+#include "lensopt/core/text.h"
 #include "lensopt/optimize/design_gradient.h"
 #include "lensopt/optimize/profile_bounds.h"
 
@@ -447,8 +448,7 @@ bool is_paper_lens(const Lens& lens) {
 
 namespace {
 bool is_paper_lens_impl(const Lens& lens) {
-  std::string extension = std::filesystem::path(lens.source_path).extension().string();
-  for (char& ch : extension) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
+  const std::string extension = lower_extension(lens.source_path);
   return extension == ".yml" || extension == ".yaml" || lens.catalog_name == "ohara";
 }
 }  // namespace

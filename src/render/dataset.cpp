@@ -1,5 +1,6 @@
 #include "lensopt/render/dataset.h"
 
+#include <OpenImageIO/imageio.h>
 #include <fcntl.h>
 #include <fmt/format.h>
 #include <fmt/ranges.h>

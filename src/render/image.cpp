@@ -1,5 +1,6 @@
 #include "lensopt/render/image.h"
 
+#include <OpenImageIO/imageio.h>
 #include <fmt/format.h>
 
 #include <algorithm>
@@ -8,16 +9,10 @@
 
 #include "lensopt/core/atomic_file.h"
 #include "lensopt/core/error.h"
+#include "lensopt/core/text.h"
 
 namespace lensopt {
 namespace {
-
-std::string lower_extension(const std::filesystem::path& path) {
-  std::string ext = path.extension().string();
-  std::transform(ext.begin(), ext.end(), ext.begin(),
-                 [](unsigned char ch) { return static_cast<char>(std::tolower(ch)); });
-  return ext;
-}
 
 // The first line of an OpenImageIO message (some readers add a second, redundant line).
 std::string first_line(std::string message) {
@@ -77,6 +72,34 @@ std::string image_format_name(const std::filesystem::path& path) {
   return "";
 }
 
+struct ImageFileSpec::Impl {
+  OIIO::ImageSpec spec;
+};
+
+ImageFileSpec::ImageFileSpec() = default;
+ImageFileSpec::ImageFileSpec(std::shared_ptr<const Impl> impl) : impl_(std::move(impl)) {}
+
+ImageFileSpec image_file_spec(ImagePixelType type) {
+  OIIO::TypeDesc desc = OIIO::TypeDesc::UINT8;
+  switch (type) {
+    case ImagePixelType::kUint8:
+      desc = OIIO::TypeDesc::UINT8;
+      break;
+    case ImagePixelType::kUint16:
+      desc = OIIO::TypeDesc::UINT16;
+      break;
+    case ImagePixelType::kHalf:
+      desc = OIIO::TypeDesc::HALF;
+      break;
+    case ImagePixelType::kFloat:
+      desc = OIIO::TypeDesc::FLOAT;
+      break;
+  }
+  // The size is a placeholder: write_image takes width, height and channels from the image.
+  return ImageFileSpec(std::make_shared<const ImageFileSpec::Impl>(
+      ImageFileSpec::Impl{OIIO::ImageSpec(1, 1, 3, desc)}));
+}
+
 LoadedImage read_image(const std::filesystem::path& path) {
   const SourceLocation where{path.string()};
   std::error_code ec;
@@ -98,8 +121,8 @@ LoadedImage read_image(const std::filesystem::path& path) {
                                    image_format_name(path), first_line(OIIO::geterror())));
   }
   LoadedImage loaded;
-  loaded.spec = in->spec();
-  const OIIO::ImageSpec& spec = loaded.spec;
+  auto file_spec = std::make_shared<ImageFileSpec::Impl>(ImageFileSpec::Impl{in->spec()});
+  const OIIO::ImageSpec& spec = file_spec->spec;
   if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0 || spec.depth > 1) {
     in->close();
     throw Error(where, fmt::format("cannot render a {} x {} x {} image with {} channels",
@@ -117,22 +140,22 @@ LoadedImage read_image(const std::filesystem::path& path) {
   for (float& v : image.pixels)
     if (!std::isfinite(v)) v = 0.0f;
   // The spec describes the file as it will be written back: drop the reader's bookkeeping.
-  loaded.spec.erase_attribute("oiio:SubImages");
+  file_spec->spec.erase_attribute("oiio:SubImages");
+  loaded.spec = ImageFileSpec(std::move(file_spec));
   return loaded;
 }
 
 void write_image(const std::filesystem::path& path, const FloatImage& image,
-                 const OIIO::ImageSpec& like) {
+                 const ImageFileSpec& like) {
   const std::string format = image_format_name(path);
   if (format.empty()) {
     throw Error(SourceLocation{path.string()},
                 fmt::format("cannot write: unsupported image format '{}' (PNG, JPEG, TIFF, EXR)",
                             path.extension().string()));
   }
-  OIIO::ImageSpec spec = like;
-  const bool has_like = like.width > 0;
-  if (!has_like)
-    spec = OIIO::ImageSpec(image.width, image.height, image.channels, default_pixel_type(format));
+  OIIO::ImageSpec spec = like.empty() ? OIIO::ImageSpec(image.width, image.height, image.channels,
+                                                        default_pixel_type(format))
+                                      : like.impl()->spec;
   spec.width = spec.full_width = image.width;
   spec.height = spec.full_height = image.height;
   spec.x = spec.y = spec.full_x = spec.full_y = 0;

@@ -55,13 +55,6 @@ const Glass& nearest_glass(const Catalog& catalog, double nd, double vd) {
 
 }  // namespace
 
-uint64_t splitmix64(uint64_t x) {
-  x += 0x9E3779B97F4A7C15ull;
-  x = (x ^ (x >> 30)) * 0xBF58476D1CE4E5B9ull;
-  x = (x ^ (x >> 27)) * 0x94D049BB133111EBull;
-  return x ^ (x >> 31);
-}
-
 std::string LensLayout::code() const {
   std::string out;
   for (int i = 0; i <= elements; ++i) {

@@ -19,6 +19,7 @@
 #include "lensopt/core/error.h"
 #include "lensopt/lens/lens_io.h"
 #include "lensopt/search/search.h"
+#include "optimize/summary_json.h"
 #include "search_detail.h"
 
 namespace lensopt {
@@ -28,25 +29,6 @@ using Clock = std::chrono::steady_clock;
 namespace fs = std::filesystem;
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
-
-nlohmann::json spot_json(double um) {
-  return std::isfinite(um) ? nlohmann::json(um) : nlohmann::json();
-}
-
-double spot_from_json(const nlohmann::json& j) {
-  return j.is_number() ? j.get<double>() : kInf;
-}
-
-std::string failing_constraints(const ConstraintReport& c) {
-  std::string out;
-  for (const ConstraintReport::Row& r : c.rows)
-    if (!r.pass)
-      out += fmt::format("{}{} = {:.4f} ({} {})", out.empty() ? "" : "; ", r.name, r.value,
-                         r.is_lower ? ">=" : "<=", r.bound);
-  if (c.ray_failures > 0)
-    out += fmt::format("{}{} failing rays", out.empty() ? "" : "; ", c.ray_failures);
-  return out;
-}
 
 std::string status_of(const CandidateResult& r) {
   return r.ok ? "ok" : "error";
@@ -189,11 +171,8 @@ CandidateResult run_candidate(const SearchCandidate& candidate, const OptimizeOp
       return r;
     }
     r.ok = true;
+    static_cast<OptimizeSummary&>(r) = summarize(o);
     r.start_spot_um = std::isfinite(start_spot_um) ? start_spot_um : kInf;
-    r.final_spot_um = std::isfinite(o.final_spot_um) ? o.final_spot_um : kInf;
-    r.constraints_met = o.final_constraints.all_pass() && std::isfinite(r.final_spot_um);
-    r.failing = failing_constraints(o.final_constraints);
-    r.glasses = o.glasses;
     r.iterations = stage_iterations + o.iterations;
     r.loss_evaluations = stage_evaluations + o.loss_evaluations;
     r.kept_start = kept_start && o.kept_start;
@@ -228,15 +207,7 @@ std::string result_to_json(const CandidateResult& r, const std::string& fingerpr
   j["glass_seed"] = r.glass_seed;
   j["status"] = status_of(r);
   j["error"] = r.error;
-  j["start_spot_um"] = spot_json(r.start_spot_um);
-  j["final_spot_um"] = spot_json(r.final_spot_um);
-  j["constraints_met"] = r.constraints_met;
-  j["failing_constraints"] = r.failing;
-  j["glasses"] = r.glasses;
-  j["iterations"] = r.iterations;
-  j["loss_evaluations"] = r.loss_evaluations;
-  j["kept_start"] = r.kept_start;
-  j["seconds"] = r.seconds;
+  add_summary_json(j, r);
   j["lens_toml"] = r.lens_toml;
   return j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n";
 }
@@ -246,6 +217,7 @@ CandidateResult result_from_json(const std::string& text, const std::string& sou
   try {
     const nlohmann::json j = nlohmann::json::parse(text);
     CandidateResult r;
+    static_cast<OptimizeSummary&>(r) = summary_from_json(j);
     r.index = j.at("index").get<int>();
     r.id = j.at("id").get<std::string>();
     r.source = j.at("source").get<std::string>();
@@ -253,15 +225,6 @@ CandidateResult result_from_json(const std::string& text, const std::string& sou
     r.glass_seed = j.at("glass_seed").get<int>();
     r.ok = j.at("status").get<std::string>() == "ok";
     r.error = j.at("error").get<std::string>();
-    r.start_spot_um = spot_from_json(j.at("start_spot_um"));
-    r.final_spot_um = spot_from_json(j.at("final_spot_um"));
-    r.constraints_met = j.at("constraints_met").get<bool>();
-    r.failing = j.at("failing_constraints").get<std::string>();
-    r.glasses = j.at("glasses").get<std::vector<std::string>>();
-    r.iterations = j.at("iterations").get<int>();
-    r.loss_evaluations = j.at("loss_evaluations").get<int>();
-    r.kept_start = j.at("kept_start").get<bool>();
-    r.seconds = j.at("seconds").get<double>();
     r.lens_toml = j.at("lens_toml").get<std::string>();
     if (fingerprint) *fingerprint = j.at("fingerprint").get<std::string>();
     return r;
@@ -303,23 +266,13 @@ std::string leaderboard_json(const std::vector<CandidateResult>& ranked,
                              const std::string& fingerprint, int candidates_in_run) {
   nlohmann::json rows = nlohmann::json::array();
   for (const CandidateResult& r : ranked) {
-    rows.push_back({{"rank", r.rank},
-                    {"index", r.index},
-                    {"id", r.id},
-                    {"source", r.source},
-                    {"layout", r.layout},
-                    {"glass_seed", r.glass_seed},
-                    {"status", status_of(r)},
-                    {"constraints_met", r.constraints_met},
-                    {"start_spot_um", spot_json(r.start_spot_um)},
-                    {"final_spot_um", r.ok ? spot_json(r.final_spot_um) : nlohmann::json()},
-                    {"glasses", r.glasses},
-                    {"failing_constraints", r.failing},
-                    {"kept_start", r.kept_start},
-                    {"iterations", r.iterations},
-                    {"loss_evaluations", r.loss_evaluations},
-                    {"error", r.error},
-                    {"seconds", r.seconds}});
+    nlohmann::json row = {
+        {"rank", r.rank},         {"index", r.index},   {"id", r.id},
+        {"source", r.source},     {"layout", r.layout}, {"glass_seed", r.glass_seed},
+        {"status", status_of(r)}, {"error", r.error}};
+    add_summary_json(row, r);
+    if (!r.ok) row["final_mean_rms_spot_um"] = nlohmann::json();
+    rows.push_back(std::move(row));
   }
   nlohmann::json j;
   j["fingerprint"] = fingerprint;

@@ -11,10 +11,10 @@
 #include <cmath>
 #include <limits>
 #include <mutex>
-#include <random>
 
 #include "lensopt/analysis/spot.h"
 #include "lensopt/core/error.h"
+#include "lensopt/core/random.h"
 #include "lensopt/core/threads.h"
 #include "lensopt/paraxial/paraxial.h"
 #include "lensopt/trace/system.h"
@@ -22,21 +22,9 @@
 namespace lensopt {
 namespace {
 
-std::uint64_t splitmix64(std::uint64_t x) {
-  x += 0x9e3779b97f4a7c15ULL;
-  x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ULL;
-  x = (x ^ (x >> 27)) * 0x94d049bb133111ebULL;
-  return x ^ (x >> 31);
-}
-
-// A uniform double in [0, 1) from the top 53 bits of one 64-bit output.
-double unit_interval(std::mt19937_64& rng) {
-  return static_cast<double>(rng() >> 11) * 0x1.0p-53;
-}
-
 // One unit draw in [-1, 1]: uniform, or normal with sigma 1/2 truncated at +-1 (Box-Muller,
 // rejection outside the limits).
-double unit_draw(std::mt19937_64& rng, ToleranceDistribution distribution) {
+double unit_draw(Rng& rng, ToleranceDistribution distribution) {
   if (distribution == ToleranceDistribution::kUniform) return 2.0 * unit_interval(rng) - 1.0;
   for (;;) {
     const double u1 = 1.0 - unit_interval(rng);  // (0, 1]
@@ -399,7 +387,7 @@ int ToleranceModel::rays_per_field_wavelength() const {
 
 std::vector<double> ToleranceModel::draw(int index) const {
   const Impl& m = *impl_;
-  std::mt19937_64 rng(splitmix64(m.options.seed ^ splitmix64(static_cast<std::uint64_t>(index))));
+  Rng rng(stream_seed(m.options.seed, static_cast<std::uint64_t>(index)));
   std::vector<double> out(m.parameters.size());
   for (std::size_t i = 0; i < out.size(); ++i)
     out[i] = m.parameters[i].limit * unit_draw(rng, m.options.distribution);

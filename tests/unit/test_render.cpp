@@ -547,8 +547,7 @@ TEST_CASE("render: bad inputs are reported, skipped, and leave nothing half-writ
   const fs::path in = tmp.path / "in", out = tmp.path / "out";
   fs::create_directories(in / "sub");
   write_image(in / "good.png", chart(96, 64));
-  write_image(in / "sub" / "good16.tif", chart(80, 60),
-              OIIO::ImageSpec(80, 60, 3, OIIO::TypeDesc::UINT16));
+  write_image(in / "sub" / "good16.tif", chart(80, 60), image_file_spec(ImagePixelType::kUint16));
   write_image(in / "tiny.png", FloatImage(8, 8, 3, 0.5f));
   write_image(in / "strip.png", FloatImage(2000, 20, 3, 0.5f));
   { std::ofstream(in / "empty.png"); }

@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <nlohmann/json.hpp>
 #include <set>
 #include <sstream>
 
@@ -16,6 +17,7 @@
 #include "lensopt/formats/lens_file.h"
 #include "lensopt/lens/lens_io.h"
 #include "lensopt/search/search.h"
+#include "optimize/summary_json.h"
 #include "test_support.h"
 
 using namespace lensopt;
@@ -314,6 +316,29 @@ TEST_CASE("search: result files round-trip exactly, an infinite spot as null") {
   CHECK(back.lens_toml == r.lens_toml);
   CHECK(result_to_json(back, "abc") == text);
   CHECK_THROWS_AS(result_from_json("{}", "t.json"), Error);
+}
+
+TEST_CASE("search: a candidate's result carries optimize --json's keys for the optimize summary") {
+  // One serializer (optimize/summary_json.h): the summary's keys and values are those that
+  // `lensopt optimize --json` writes, and a search result file holds them unchanged.
+  CandidateResult r = fake(3, true, true, 4.5);
+  r.glasses = {"N-BK7"};
+  r.iterations = 17;
+  r.loss_evaluations = 40;
+  nlohmann::json summary;
+  add_summary_json(summary, r);
+  const nlohmann::json file = nlohmann::json::parse(result_to_json(r, "fp"));
+  for (const char* key : {"start_mean_rms_spot_um", "final_mean_rms_spot_um", "constraints_met",
+                          "failing_constraints", "glasses", "iterations", "loss_evaluations",
+                          "kept_start", "seconds"}) {
+    INFO(key);
+    REQUIRE(summary.contains(key));
+    CHECK(file.at(key) == summary.at(key));
+  }
+  CHECK(file.at("final_mean_rms_spot_um").get<double>() == 4.5);
+  const OptimizeSummary back = summary_from_json(summary);
+  CHECK(back.iterations == 17);
+  CHECK(back.glasses == r.glasses);
 }
 
 TEST_CASE("search: one run, a resumed run and merged shards give the same leaderboard") {

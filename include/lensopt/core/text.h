@@ -11,6 +11,7 @@
 #pragma once
 
 #include <cstddef>
+#include <filesystem>
 #include <string>
 #include <string_view>
 
@@ -37,5 +38,12 @@ std::string to_valid_utf8(std::string_view bytes);
 //   d(i, j) = min(d(i-1, j) + 1, d(i, j-1) + 1, d(i-1, j-1) + [a_i != b_j]).
 // For "did you mean" suggestions (lens keys, glass names).
 std::size_t edit_distance(std::string_view a, std::string_view b);
+
+// ASCII letters in lower case (other bytes unchanged).
+std::string to_lower(std::string_view text);
+
+// A path's extension in lower case, with its dot (".zmx", ".png"; "" when it has none): the key of
+// every choice of file format by name.
+std::string lower_extension(const std::filesystem::path& path);
 
 }  // namespace lensopt

@@ -29,10 +29,10 @@
 
 #include <cstdint>
 #include <filesystem>
-#include <random>
 #include <string>
 #include <vector>
 
+#include "lensopt/core/random.h"
 #include "lensopt/joint/imaging.h"
 #include "lensopt/render/image.h"
 
@@ -97,7 +97,7 @@ class JointData {
   std::vector<int> train_, eval_;
   std::vector<Sample> eval_samples_;
   std::vector<std::string> notes_;
-  std::mt19937_64 rng_;
+  Rng rng_;
 };
 
 // The dead-leaves scene of a seed (RGB, [0, 1], 2 x 2 supersampled).

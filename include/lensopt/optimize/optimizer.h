@@ -92,6 +92,27 @@ struct OptimizeResult {
   std::vector<std::string> log;  // phase summaries
 };
 
+// What an optimization achieved, as `lensopt optimize --json` and every `lensopt search`
+// candidate report it (one set of names: optimize/summary_json.h writes and reads them).
+// Spots are at full sampling; +inf when rays fail (JSON null).
+struct OptimizeSummary {
+  double start_spot_um = 0;      // JSON start_mean_rms_spot_um
+  double final_spot_um = 0;      // JSON final_mean_rms_spot_um
+  bool constraints_met = false;  // every constraint met at full sampling and the spot finite
+  std::string failing;           // JSON failing_constraints: "ray angle = 61.2 (<= 60); ..."
+  std::vector<std::string> glasses;
+  int iterations = 0;
+  int loss_evaluations = 0;
+  bool kept_start = false;
+  double seconds = 0;
+};
+
+// The summary of `result` (non-finite spots become +inf).
+OptimizeSummary summarize(const OptimizeResult& result);
+
+// The constraints that fail, as one line: "name = value (>= bound); ...; N failing rays".
+std::string failing_constraints(const ConstraintReport& report);
+
 // Never behind the start: the result is ordered against the start by (every constraint met at
 // full sampling, then mean RMS spot at full sampling), and the start is returned (kept_start)
 // when it is not behind. Glasses come from the lens's own catalog (Lens::catalog_name); a start of

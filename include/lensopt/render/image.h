@@ -7,9 +7,8 @@
 // extension, through a temporary file renamed into place (core/atomic_file.h).
 #pragma once
 
-#include <OpenImageIO/imageio.h>
-
 #include <filesystem>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -33,10 +32,29 @@ struct FloatImage {
   bool empty() const { return pixels.empty(); }
 };
 
+// How an image file stores its pixels: the pixel type and the file's metadata (OpenImageIO's
+// ImageSpec, kept opaque so that OpenImageIO stays out of lensopt's public headers). An empty
+// spec stands for the format's default (see write_image).
+class ImageFileSpec {
+ public:
+  struct Impl;  // defined in render/image.cpp
+  ImageFileSpec();
+  explicit ImageFileSpec(std::shared_ptr<const Impl> impl);
+  bool empty() const { return impl_ == nullptr; }
+  const Impl* impl() const { return impl_.get(); }
+
+ private:
+  std::shared_ptr<const Impl> impl_;
+};
+
+// Stored pixel types (of an ImageFileSpec without metadata).
+enum class ImagePixelType { kUint8, kUint16, kHalf, kFloat };
+ImageFileSpec image_file_spec(ImagePixelType type);
+
 // An image read from a file, with the file's spec (pixel type, metadata) for writing it back.
 struct LoadedImage {
   FloatImage image;
-  OIIO::ImageSpec spec;
+  ImageFileSpec spec;
 };
 
 // The extensions lensopt renders, lower case with the dot: .png .jpg .jpeg .tif .tiff .exr.
@@ -54,7 +72,7 @@ LoadedImage read_image(const std::filesystem::path& path);
 // metadata of `like` (the input's spec); a default spec writes 8-bit for PNG/JPEG, 16-bit for
 // TIFF and half for EXR. Throws Error naming the path.
 void write_image(const std::filesystem::path& path, const FloatImage& image,
-                 const OIIO::ImageSpec& like = OIIO::ImageSpec());
+                 const ImageFileSpec& like = ImageFileSpec());
 
 // Writes a float image (EXR or TIFF, 32-bit float) atomically, with the given channel names
 // (default: R, G, B, A or Y for one channel).

@@ -51,6 +51,7 @@
 #include <string>
 #include <vector>
 
+#include "lensopt/core/random.h"  // splitmix64: the glass seeds' generator
 #include "lensopt/lens/lens.h"
 #include "lensopt/optimize/optimizer.h"
 
@@ -125,9 +126,6 @@ LensLayout default_layout(int elements);
 // Seeds every element's glass (see above); seed 0 leaves the form as it is.
 void seed_glasses(LensForm& form, int seed, const Catalog& catalog);
 
-// SplitMix64: the glass seeds' generator (the same sequence everywhere).
-uint64_t splitmix64(uint64_t x);
-
 // A group of starting lenses and how each is varied.
 struct StartGroup {
   std::vector<std::string> lens_files;  // starting lens files (TOML, the paper's YAML, .zmx)
@@ -199,21 +197,14 @@ bool in_shard(int index, int shard_index, int shard_count);
 void parse_shard(const std::string& text, int& shard_index, int& shard_count);
 
 // The outcome of one candidate.
-struct CandidateResult {
+// A candidate's result: the optimize summary (the same fields and JSON keys as `lensopt optimize
+// --json`; start_spot_um is the candidate's own start, seconds its wall time) and the candidate.
+struct CandidateResult : OptimizeSummary {
   int index = 0;
   std::string id, source, layout;
   int glass_seed = 0;
   bool ok = false;  // the optimizer ran (else `error`)
   std::string error;
-  double start_spot_um = 0;  // full sampling; +inf when rays fail
-  double final_spot_um = 0;
-  bool constraints_met = false;
-  std::string failing;  // the failing constraints, "ray angle = 61.2 (<= 60); ..."
-  std::vector<std::string> glasses;
-  int iterations = 0;
-  int loss_evaluations = 0;
-  bool kept_start = false;
-  double seconds = 0;     // wall time of this candidate (the one non-deterministic field)
   std::string lens_toml;  // the optimized lens
   int rank = 0;           // 1-based, set by rank_results
 };
