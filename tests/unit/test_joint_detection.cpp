@@ -126,6 +126,10 @@ TEST_CASE("joint detection: the four settings, and the perfect-optics detector r
     CHECK(r2.settings[i].ap50 == r.settings[i].ap50);
   }
   CHECK(r2.x == r.x);
+  // Step for step the same losses: the loaded detector is the trained one, bit for bit.
+  const auto rows2 = test::csv_rows(dir / "again.csv");
+  REQUIRE(rows2.size() == 9);
+  for (int i = 1; i < 9; ++i) CHECK(rows2[i] == rows[i + 4]);
   std::filesystem::remove_all(dir);
 }
 
