@@ -1,8 +1,11 @@
 // lensopt optimize LENS --joint -o OUT.toml: joint lens + network optimization (joint/joint.h).
 // Writes OUT.toml (the joint lens), OUT.csv (per-step log, unless --log), OUT.network.pt (the
-// jointly trained network, unless --network), and checkpoints with --checkpoint-every.
+// jointly trained network, unless --network), and checkpoints with --checkpoint-every. With a
+// detection dataset (--data) also OUT.detector.pt, the perfect-optics detector (--detector
+// reuses it in a run of another lens), and the paper's four-setting table.
 #include <fmt/core.h>
 
+#include <cmath>
 #include <filesystem>
 #include <memory>
 #include <nlohmann/json.hpp>
@@ -21,7 +24,10 @@ namespace {
 struct JointCommand {
   std::string task = "restoration";
   std::string images;
+  std::string data;
+  std::string detector;
   int steps = 300;
+  int perfect_steps = 0;
   int decay_steps = -1;  // default: two thirds of the steps (the paper: 50k + 100k)
   int batch = 4;
   int crop = 256;
@@ -59,6 +65,7 @@ std::filesystem::path beside(const std::filesystem::path& out, const std::string
 // --checkpoint-every) the checkpoint folder; defaults beside OUT.toml.
 struct JointOutputs {
   std::filesystem::path lens, log, network, checkpoint_dir;
+  std::filesystem::path detector;  // with --data: the perfect-optics detector (else empty)
 };
 
 JointOutputs joint_outputs(const JointCommand& cmd, const std::filesystem::path& out_path) {
@@ -66,7 +73,24 @@ JointOutputs joint_outputs(const JointCommand& cmd, const std::filesystem::path&
       out_path, cmd.log.empty() ? beside(out_path, ".csv") : std::filesystem::path(cmd.log),
       cmd.network.empty() ? beside(out_path, ".network.pt") : std::filesystem::path(cmd.network),
       cmd.checkpoint_dir.empty() ? beside(out_path, ".checkpoint")
-                                 : std::filesystem::path(cmd.checkpoint_dir)};
+                                 : std::filesystem::path(cmd.checkpoint_dir),
+      cmd.data.empty() ? std::filesystem::path() : beside(out_path, ".detector.pt")};
+}
+
+// --data: a COCO / BDD100K JSON, or a folder with annotations.json (`lensopt chart --detection`).
+std::filesystem::path annotations_path(const std::string& data) {
+  if (data.empty()) return {};
+  const std::filesystem::path p(data);
+  if (std::filesystem::is_directory(p)) {
+    const std::filesystem::path json = p / "annotations.json";
+    if (!std::filesystem::is_regular_file(json))
+      throw Error(SourceLocation{p.string()},
+                  "a detection dataset folder needs annotations.json (COCO; or give the JSON)");
+    return json;
+  }
+  if (!std::filesystem::is_regular_file(p))
+    throw Error(SourceLocation{p.string()}, "no such detection dataset (COCO or BDD100K JSON)");
+  return p;
 }
 
 // The output layer's checks before any work: every output can be written and is none of the
@@ -79,6 +103,8 @@ void check_joint_outputs(const JointCommand& cmd, const OptimizeShared& shared) 
   const JointOutputs outs = joint_outputs(cmd, out_path);
   std::vector<std::filesystem::path> inputs;
   if (!cmd.images.empty()) inputs.emplace_back(cmd.images);
+  if (!cmd.data.empty()) inputs.emplace_back(cmd.data);
+  if (!cmd.detector.empty()) inputs.emplace_back(cmd.detector);
   const std::string kTorchScript = "torchscript:";
   if (cmd.task.rfind(kTorchScript, 0) == 0)
     inputs.emplace_back(cmd.task.substr(kTorchScript.size()));
@@ -86,7 +112,9 @@ void check_joint_outputs(const JointCommand& cmd, const OptimizeShared& shared) 
   if (!cmd.resume.empty()) file_inputs.emplace_back(cmd.resume);
   file_inputs.emplace_back(shared.lens_path);
   std::vector<std::filesystem::path> written;
-  for (const auto& out : {outs.log, outs.network}) {
+  std::vector<std::filesystem::path> files = {outs.log, outs.network};
+  if (!outs.detector.empty()) files.push_back(outs.detector);
+  for (const auto& out : files) {
     std::vector<std::filesystem::path> others = file_inputs;
     others.insert(others.end(), written.begin(), written.end());
     others.push_back(outs.lens);
@@ -125,6 +153,9 @@ JointOptions joint_options(const JointCommand& cmd, const OptimizeShared& shared
   options.task_options.layers = cmd.layers;
   if (shared.threads > 0) options.task_options.threads = shared.threads;
   options.data.images_dir = cmd.images;
+  options.data.annotations = annotations_path(cmd.data);
+  options.pretrained_task = cmd.detector;
+  options.perfect_steps = cmd.perfect_steps;
   options.data.batch_size = cmd.batch;
   options.data.crop_px = cmd.crop;
   options.data.seed = cmd.seed;
@@ -171,6 +202,7 @@ JointOptions joint_options(const JointCommand& cmd, const OptimizeShared& shared
   options.checkpoint_dir = outputs.checkpoint_dir;
   options.resume_dir = cmd.resume;
   options.log_csv = outputs.log;
+  options.perfect_task_out = outputs.detector;
   options.stop_after_steps = cmd.stop_after;
   options.verbose = !shared.quiet;
   options.validate();
@@ -199,10 +231,34 @@ void print_joint_json(const Lens& lens, const std::filesystem::path& out_path,
   j["log"] = options.log_csv.string();
   j["task"] = options.task;
   j["metric"] = result.metric_name;
+  const bool detection = !options.data.annotations.empty();
+  auto number = [](double v) {
+    return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr);
+  };
   nlohmann::json settings = nlohmann::json::array();
-  for (const auto& s : result.settings)
-    settings.push_back({{"name", s.name}, {"metric", s.metric}, {"mean_spot_um", s.mean_spot_um}});
+  for (const auto& s : result.settings) {
+    nlohmann::json row = {
+        {"name", s.name}, {"metric", number(s.metric)}, {"mean_spot_um", number(s.mean_spot_um)}};
+    if (detection) {
+      row["ap"] = number(s.metric);
+      row["ap50"] = number(s.ap50);
+      row["ap75"] = number(s.ap75);
+      row["psnr_db"] = number(s.psnr_db);
+      row["ssim"] = number(s.ssim);
+    }
+    settings.push_back(row);
+  }
   j["settings"] = settings;
+  if (detection) {
+    j["data"] = options.data.annotations.string();
+    j["detector"] = options.perfect_task_out.string();
+    j["res_factor"] = options.imaging.res_factor;
+    j["distortion"] = options.imaging.distortion;
+    j["seed"] = options.data.seed;
+    j["batch"] = options.data.batch_size;
+    j["crop"] = options.data.crop_px;
+    j["eval_crops"] = result.eval_crops;
+  }
   if (!std::isnan(margin)) j["joint_minus_fixed_trained"] = margin;
   j["glasses"] = result.glasses;
   nlohmann::json changes = nlohmann::json::array();
@@ -232,9 +288,27 @@ void print_joint_text(const OptimizeShared& shared, const std::filesystem::path&
   const double margin = joint_margin(result);
   fmt::print("lensopt optimize --joint: {} -> {} (task {}, {} steps)\n", shared.lens_path,
              out_path.string(), options.task, options.total_steps());
-  fmt::print("  setting          held-out {:<12} mean spot (um)\n", result.metric_name);
-  for (const auto& s : result.settings)
-    fmt::print("  {:<16} {:21.4f}   {:10.2f}\n", s.name, s.metric, s.mean_spot_um);
+  if (!options.data.annotations.empty()) {
+    // The paper's Table 2: per setting the lens's mean spot, PSNR and SSIM and the detector's
+    // COCO AP on the held-out crops (predicted boxes corrected for distortion).
+    auto cell = [](double v, int width, int digits) {
+      return std::isfinite(v) ? fmt::format("{:{}.{}f}", v, width, digits)
+                              : fmt::format("{:>{}}", "-", width);
+    };
+    fmt::print("  {:<14} {:>14} {:>10} {:>7} {:>7} {:>7} {:>7}\n", "setting", "mean spot (um)",
+               "PSNR (dB)", "SSIM", "AP", "AP50", "AP75");
+    for (const auto& s : result.settings)
+      fmt::print("  {:<14} {} {} {} {} {} {}\n", s.name, cell(s.mean_spot_um, 14, 2),
+                 cell(s.psnr_db, 10, 2), cell(s.ssim, 7, 4), cell(s.metric, 7, 4),
+                 cell(s.ap50, 7, 4), cell(s.ap75, 7, 4));
+    fmt::print("  held out: {} crops of {} px; resolution factor {}x; distortion {}\n",
+               result.eval_crops, options.data.crop_px, options.imaging.res_factor,
+               options.imaging.distortion ? "on (boxes corrected)" : "off");
+  } else {
+    fmt::print("  setting          held-out {:<12} mean spot (um)\n", result.metric_name);
+    for (const auto& s : result.settings)
+      fmt::print("  {:<16} {:21.4f}   {:10.2f}\n", s.name, s.metric, s.mean_spot_um);
+  }
   if (!std::isnan(margin))
     fmt::print("  joint - fixed/trained: {:+.4f} ({})\n", margin,
                margin > 0 ? "joint wins" : "joint does not win");
@@ -293,8 +367,25 @@ void run_joint(const JointCommand& cmd, const OptimizeShared& shared) {
 std::function<void(const OptimizeShared&)> setup_optimize_joint(CLI::App& sub) {
   auto cmd = std::make_shared<JointCommand>();
   const std::string g = "joint (with --joint)";
-  sub.add_option("--task", cmd->task, "restoration (default) or torchscript:MODEL.pt")->group(g);
-  sub.add_option("--images", cmd->images, "directory of training images (default: built-in scenes)")
+  sub.add_option("--task", cmd->task,
+                 "restoration (default), detection (the built-in detector; needs --data) or "
+                 "torchscript:MODEL.pt")
+      ->group(g);
+  sub.add_option("--images", cmd->images,
+                 "directory of training images (default: built-in scenes; with --data: the "
+                 "dataset's images, default DATA/images)")
+      ->group(g);
+  sub.add_option("--data", cmd->data,
+                 "detection dataset: COCO or BDD100K JSON, or a folder with annotations.json "
+                 "(lensopt chart --detection); runs perfect optics, fixed/fixed, fixed/trained "
+                 "and joint")
+      ->group(g);
+  sub.add_option("--perfect-steps", cmd->perfect_steps,
+                 "with --data: training steps of the perfect-optics detector (default: --steps)")
+      ->group(g);
+  sub.add_option("--detector", cmd->detector,
+                 "with --data: the perfect-optics detector of an earlier run (OUT.detector.pt), "
+                 "used instead of training one")
       ->group(g);
   sub.add_option("--steps", cmd->steps, "optimization steps per trained setting (default 300)")
       ->group(g);
@@ -327,7 +418,7 @@ std::function<void(const OptimizeShared&)> setup_optimize_joint(CLI::App& sub) {
       ->group(g);
   sub.add_option("--distortion", cmd->distortion,
                  "render the distortion warp: auto (default: off for restoration, on for "
-                 "TorchScript tasks), on, off")
+                 "detection and TorchScript tasks), on, off")
       ->check(CLI::IsMember({"auto", "on", "off"}))
       ->group(g);
   sub.add_flag("--no-relative-illumination", cmd->no_relative_illumination,

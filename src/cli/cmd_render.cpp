@@ -1,5 +1,6 @@
 // lensopt render LENS INPUT... -o OUT: aberrated images for single files or whole dataset trees;
-// `--shard I/N` renders a slice, `lensopt render merge DIR...` joins the slices' metrics.
+// `--shard I/N` renders a slice, `lensopt render merge DIR...` joins the slices' metrics;
+// `--annotations FILE` writes the detection dataset's boxes as the rendered images show them.
 #include <fmt/core.h>
 #include <malloc.h>
 #include <unistd.h>
@@ -17,6 +18,7 @@
 #include "lensopt/core/error.h"
 #include "lensopt/core/interrupt.h"
 #include "lensopt/core/output_checks.h"
+#include "lensopt/detection/crop_boxes.h"
 #include "lensopt/formats/lens_file.h"
 #include "lensopt/lens/lens_io.h"
 #include "lensopt/render/chart.h"
@@ -40,6 +42,7 @@ struct RenderCommand {
   bool force = false;
   bool quiet = false;
   std::string shard;
+  std::string annotations;  // a COCO or BDD100K JSON of the inputs
 };
 
 struct RenderMergeCommand {
@@ -103,6 +106,66 @@ class Progress {
   double last_line_ = -1e9;
 };
 
+// Where --annotations writes: OUT/<the JSON's name> (a BDD100K input: OUT/<stem>.coco.json).
+fs::path annotations_output(const RenderCommand& cmd, bool coco) {
+  const fs::path in(cmd.annotations);
+  return fs::path(cmd.output_dir) /
+         (coco ? in.filename() : fs::path(in.stem().string() + ".coco.json"));
+}
+
+// The record of an annotated image: its output path relative to OUT is the file name, or ends
+// with it (a dataset folder given as the input: OUT/images/NAME); nullptr if none or several.
+const ImageRecord* record_of(const std::vector<ImageRecord>& records, const std::string& name) {
+  const ImageRecord* found = nullptr;
+  int matches = 0;
+  for (const ImageRecord& r : records) {
+    if (r.relative_path == name) return &r;
+    const std::string& p = r.relative_path;
+    if (p.size() > name.size() && p.compare(p.size() - name.size(), name.size(), name) == 0 &&
+        p[p.size() - name.size() - 1] == '/') {
+      found = &r;
+      ++matches;
+    }
+  }
+  return matches == 1 ? found : nullptr;
+}
+
+// --annotations: the boxes of the rendered images (detection/crop_boxes.h), written in COCO with
+// the input's file names (relative to the folder the input JSON's names were relative to). An
+// image that was not rendered (failed, interrupted, not in the inputs or in another shard) is
+// left out with a note.
+void write_rendered_annotations(const RenderCommand& cmd, const Renderer& renderer,
+                                const RenderOptions& options, const DatasetSummary& summary,
+                                const DetectionDataset& input, const fs::path& out_path) {
+  DetectionDataset rendered = input;
+  rendered.images.clear();
+  int left_out = 0;
+  for (const DetectionImage& image : input.images) {
+    const ImageRecord* r = record_of(summary.records, image.file_name);
+    if (!r || (r->status != ImageRecord::Status::kRendered &&
+               r->status != ImageRecord::Status::kSkipped)) {
+      ++left_out;
+      continue;
+    }
+    DetectionImage kept = image;
+    if (r->width > 0) kept.width = r->width;
+    if (r->height > 0) kept.height = r->height;
+    if (kept.width <= 0 || kept.height <= 0) {
+      const FloatImage pixels = read_image(fs::path(cmd.output_dir) / r->relative_path).image;
+      kept.width = pixels.width;
+      kept.height = pixels.height;
+    }
+    rendered.images.push_back(kept);
+  }
+  const DetectionDataset out =
+      rendered_annotations(rendered, renderer.model(), options.res_factor, options.distortion);
+  write_coco(out, out_path);
+  fmt::print(
+      "annotations: {} ({} images, {} boxes{}{})\n", out_path.string(), out.images.size(),
+      out.annotations.size(), options.distortion ? ", distorted as rendered" : "",
+      left_out > 0 ? fmt::format("; {} annotated images not rendered, left out", left_out) : "");
+}
+
 void run_render(const RenderCommand& cmd) {
   // SIGINT / SIGTERM: start no further image, write the metrics of what is done, exit 130.
   const InterruptScope interrupt;
@@ -148,6 +211,23 @@ void run_render(const RenderCommand& cmd) {
   std::vector<fs::path> run_inputs = dataset.inputs;
   run_inputs.emplace_back(cmd.lens_path);
   check_output_dir(dataset.output_dir, run_inputs);
+  // --annotations: read (and so checked) before any work; its output is no input.
+  DetectionDataset annotations;
+  fs::path annotations_out;
+  if (!cmd.annotations.empty()) {
+    annotations = read_detection_dataset(cmd.annotations, paper_class_map());
+    for (const std::string& note : annotations.notes)
+      fmt::print(stderr, "lensopt render: {}: {}\n", cmd.annotations, note);
+    if (dataset.shard_count > 1)
+      throw Error("--annotations needs the whole dataset: give it to a run without --shard");
+    // COCO is a JSON object, BDD100K a list (detection/dataset.h).
+    const std::string text = read_file(cmd.annotations);
+    const std::size_t first = text.find_first_not_of(" \t\r\n");
+    const bool coco = first != std::string::npos && text[first] == '{';
+    annotations_out = annotations_output(cmd, coco);
+    run_inputs.emplace_back(cmd.annotations);
+    check_output_file(annotations_out, run_inputs);
+  }
 
   const Lens lens = read_lens(cmd.lens_path);
   check_glass_ranges(lens, "render", false);
@@ -183,6 +263,8 @@ void run_render(const RenderCommand& cmd) {
         summary.mean_ssim ? fmt::format("{:.4f}", *summary.mean_ssim) : "n/a");
   }
   fmt::print("metrics: {} and {}\n", summary.csv_path.string(), summary.json_path.string());
+  if (!cmd.annotations.empty() && !summary.was_interrupted)
+    write_rendered_annotations(cmd, renderer, options, summary, annotations, annotations_out);
   if (summary.was_interrupted) {
     fmt::print(stderr,
                "lensopt render: interrupted with {} image(s) not rendered; run the same command "
@@ -246,6 +328,10 @@ void setup_render(CLI::App& app) {
       ->check(CLI::Range(0, 1024));
   sub->add_flag("--force", cmd->force, "render images whose output already exists");
   sub->add_flag("--quiet,-q", cmd->quiet, "no progress bar");
+  sub->add_option("--annotations", cmd->annotations,
+                  "detection annotations of the inputs (COCO or BDD100K JSON): also write them as "
+                  "the rendered images show them (boxes distorted, clipped), as COCO, to "
+                  "OUT/<its name>");
   sub->add_option("--shard", cmd->shard,
                   "render slice I of N (1-based): the images at positions k (input order) with "
                   "k mod N = I-1; metrics in render_metrics-shardIofN.csv/.json; join them with "

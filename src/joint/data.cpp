@@ -38,7 +38,7 @@ void DataOptions::validate() const {
   if (!(holdout_fraction > 0.0 && holdout_fraction < 1.0))
     throw Error(fmt::format("held-out fraction {} must be in (0, 1)", holdout_fraction));
   if (eval_crops < 1) throw Error(fmt::format("evaluation crops {} must be >= 1", eval_crops));
-  if (images_dir.empty()) {
+  if (images_dir.empty() && annotations.empty()) {
     if (builtin_scenes < 2 || builtin_scenes > 64)
       throw Error(fmt::format("built-in scenes {} must be 2 to 64", builtin_scenes));
     if (builtin_width < crop_px || builtin_height < crop_px || builtin_width > 16384 ||
@@ -151,16 +151,17 @@ std::vector<double> read_targets_file(const std::filesystem::path& path) {
 JointData::JointData(const DataOptions& options) : options_(options), rng_(options.seed) {
   options_.validate();
   const int c = options_.crop_px;
-  if (options_.images_dir.empty()) {
+  if (options_.images_dir.empty() && !detection()) {
     ChartOptions chart_options;
     chart_options.width = options_.builtin_width;
     chart_options.height = options_.builtin_height;
     chart_options.text = false;
-    scenes_.push_back({"chart", make_test_chart(chart_options).image, {}});
+    scenes_.push_back({"chart", make_test_chart(chart_options).image, {}, {}});
     for (int i = 1; i < options_.builtin_scenes; ++i)
       scenes_.push_back({fmt::format("dead-leaves-{}", i),
                          make_dead_leaves(options_.builtin_width, options_.builtin_height,
                                           options_.seed * 1000 + i),
+                         {},
                          {}});
     for (int i = 0; i + 1 < options_.builtin_scenes; ++i) train_.push_back(i);
     eval_.push_back(options_.builtin_scenes - 1);
@@ -168,6 +169,8 @@ JointData::JointData(const DataOptions& options) : options_(options), rng_(optio
         "built-in scenes: the test chart and {} dead-leaves scenes, {}x{}; held out: {}",
         options_.builtin_scenes - 1, options_.builtin_width, options_.builtin_height,
         scenes_.back().name));
+  } else if (detection()) {
+    load_detection_dataset();
   } else {
     const std::filesystem::path dir = options_.images_dir;
     if (!std::filesystem::is_directory(dir))
@@ -186,8 +189,10 @@ JointData::JointData(const DataOptions& options) : options_(options), rng_(optio
           continue;
         }
         const std::filesystem::path t = targets_path_of(file);
-        scenes_.push_back({file.filename().string(), std::move(image),
-                           std::filesystem::exists(t) ? t : std::filesystem::path()});
+        scenes_.push_back({file.filename().string(),
+                           std::move(image),
+                           std::filesystem::exists(t) ? t : std::filesystem::path(),
+                           {}});
       } catch (const Error& e) {
         notes_.push_back(fmt::format("skipped: {}", e.what()));
       }
@@ -197,20 +202,7 @@ JointData::JointData(const DataOptions& options) : options_(options), rng_(optio
                   fmt::format("{} usable images of at least {} x {} px; the joint optimization "
                               "needs at least 2 (one is held out for evaluation)",
                               scenes_.size(), c, c));
-    std::vector<int> order(scenes_.size());
-    for (std::size_t i = 0; i < order.size(); ++i) order[i] = static_cast<int>(i);
-    Rng split_rng(options_.seed ^ 0x5851F42D4C957F2Dull);
-    std::shuffle(order.begin(), order.end(), split_rng);
-    const int n = static_cast<int>(order.size());
-    const int held =
-        std::clamp(static_cast<int>(std::lround(options_.holdout_fraction * n)), 1, n - 1);
-    eval_.assign(order.begin(), order.begin() + held);
-    train_.assign(order.begin() + held, order.end());
-    std::sort(eval_.begin(), eval_.end());
-    std::sort(train_.begin(), train_.end());
-    std::string held_names;
-    for (int i : eval_) held_names += (held_names.empty() ? "" : ", ") + scenes_[i].name;
-    notes_.push_back(fmt::format("{} images from {}; held out: {}", n, dir.string(), held_names));
+    split_scenes(dir.string());
   }
   // Evaluation tiles.
   std::vector<Sample> tiles;
@@ -225,6 +217,70 @@ JointData::JointData(const DataOptions& options) : options_(options), rng_(optio
   const int keep = std::min(count, options_.eval_crops);
   for (int k = 0; k < keep; ++k)
     eval_samples_.push_back(tiles[static_cast<std::size_t>((static_cast<long>(k) * count) / keep)]);
+}
+
+// The held-out split of loaded scenes (see the header).
+void JointData::split_scenes(const std::string& source) {
+  std::vector<int> order(scenes_.size());
+  for (std::size_t i = 0; i < order.size(); ++i) order[i] = static_cast<int>(i);
+  Rng split_rng(options_.seed ^ 0x5851F42D4C957F2Dull);
+  std::shuffle(order.begin(), order.end(), split_rng);
+  const int n = static_cast<int>(order.size());
+  const int held =
+      std::clamp(static_cast<int>(std::lround(options_.holdout_fraction * n)), 1, n - 1);
+  eval_.assign(order.begin(), order.begin() + held);
+  train_.assign(order.begin() + held, order.end());
+  std::sort(eval_.begin(), eval_.end());
+  std::sort(train_.begin(), train_.end());
+  std::string held_names;
+  for (int i : eval_) held_names += (held_names.empty() ? "" : ", ") + scenes_[i].name;
+  notes_.push_back(fmt::format("{} images from {}; held out: {}", n, source, held_names));
+}
+
+void JointData::load_detection_dataset() {
+  const std::filesystem::path json = options_.annotations;
+  const DetectionDataset dataset = read_detection_dataset(json, paper_class_map());
+  categories_ = dataset.categories;
+  for (const std::string& note : dataset.notes) notes_.push_back(note);
+  std::filesystem::path dir = options_.images_dir;
+  if (dir.empty()) {
+    dir = json.parent_path() / "images";
+    if (!std::filesystem::is_directory(dir)) dir = json.parent_path();
+  }
+  const int c = options_.crop_px;
+  int boxes = 0;
+  for (const DetectionImage& image : dataset.images) {
+    const std::filesystem::path file = dir / image.file_name;
+    try {
+      FloatImage pixels = to_rgb(read_image(file).image);
+      if ((image.width > 0 && pixels.width != image.width) ||
+          (image.height > 0 && pixels.height != image.height)) {
+        notes_.push_back(fmt::format("skipped {}: {}x{}, but {} says {}x{}", file.string(),
+                                     pixels.width, pixels.height, json.string(), image.width,
+                                     image.height));
+        continue;
+      }
+      if (pixels.width < c || pixels.height < c) {
+        notes_.push_back(fmt::format("skipped {}: {}x{} is smaller than a {} px crop",
+                                     file.string(), pixels.width, pixels.height, c));
+        continue;
+      }
+      Scene scene{image.file_name, std::move(pixels), {}, dataset.annotations_of(image.id)};
+      for (GroundTruth& g : scene.boxes) g.image = static_cast<int>(scenes_.size());
+      boxes += static_cast<int>(scene.boxes.size());
+      scenes_.push_back(std::move(scene));
+    } catch (const Error& e) {
+      notes_.push_back(fmt::format("skipped: {}", e.what()));
+    }
+  }
+  if (scenes_.size() < 2)
+    throw Error(SourceLocation{json.string()},
+                fmt::format("{} usable images of at least {} x {} px in {}; the joint "
+                            "optimization needs at least 2 (one is held out for evaluation)",
+                            scenes_.size(), c, c, dir.string()));
+  notes_.push_back(fmt::format("detection dataset {}: {} images, {} boxes, {} categories",
+                               json.string(), scenes_.size(), boxes, categories_.size()));
+  split_scenes(dir.string());
 }
 
 std::vector<Sample> JointData::next_batch() {

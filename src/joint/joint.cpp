@@ -1,19 +1,26 @@
 #include "lensopt/joint/joint.h"
 
 #include <fmt/format.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <ctime>
+#include <map>
 #include <nlohmann/json.hpp>
+#include <utility>
 
 #include "lensopt/core/adam.h"
 #include "lensopt/core/atomic_file.h"
 #include "lensopt/core/constants.h"
 #include "lensopt/core/error.h"
+#include "lensopt/detection/crop_boxes.h"
 #include "lensopt/glass/glass.h"
+#include "lensopt/joint/detector.h"
 #include "lensopt/optimize/design_gradient.h"
+#include "lensopt/render/metrics.h"
+#include "lensopt/render/render.h"
 
 namespace lensopt {
 namespace {
@@ -23,6 +30,7 @@ double seconds_since(Clock::time_point t) {
   return std::chrono::duration<double>(Clock::now() - t).count();
 }
 
+constexpr const char* kPerfect = "perfect";
 constexpr const char* kFixedFixed = "fixed/fixed";
 constexpr const char* kFixedTrained = "fixed/trained";
 constexpr const char* kJoint = "joint";
@@ -89,12 +97,25 @@ double norm(const std::vector<double>& v) {
   return std::sqrt(s);
 }
 
+// A number, or null for NaN (JSON has no NaN), and back.
+nlohmann::json number_or_null(double v) {
+  return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr);
+}
+double number_of(const nlohmann::json& j, const char* key) {
+  const auto it = j.find(key);
+  return it != j.end() && it->is_number() ? it->get<double>() : NAN;
+}
+
 nlohmann::json settings_json(const std::vector<JointSettingResult>& settings) {
   nlohmann::json j = nlohmann::json::array();
   for (const auto& s : settings)
     j.push_back({{"name", s.name},
-                 {"metric", s.metric},
-                 {"mean_spot_um", s.mean_spot_um},
+                 {"metric", number_or_null(s.metric)},
+                 {"mean_spot_um", number_or_null(s.mean_spot_um)},
+                 {"ap50", number_or_null(s.ap50)},
+                 {"ap75", number_or_null(s.ap75)},
+                 {"psnr_db", number_or_null(s.psnr_db)},
+                 {"ssim", number_or_null(s.ssim)},
                  {"done", s.done}});
   return j;
 }
@@ -116,10 +137,22 @@ void JointOptions::validate() const {
                             constant_steps, decay_steps));
   if (checkpoint_every < 0)
     throw Error(fmt::format("checkpoint interval {} must be >= 0", checkpoint_every));
+  if (perfect_steps < 0)
+    throw Error(fmt::format("perfect-optics steps {} must be >= 0", perfect_steps));
   if (checkpoint_every > 0 && checkpoint_dir.empty())
     throw Error("checkpoints every N steps need a checkpoint directory");
   if (glass_mode == GlassMode::kFixed)
     throw Error("the joint optimization's glasses are quantized or continuous, not fixed");
+  if (task == "detection" && data.annotations.empty())
+    throw Error(
+        "the detection task needs a detection dataset (COCO or BDD100K annotations: --data)");
+  if (task == "detection" && data.crop_px % 16 != 0)
+    throw Error(
+        fmt::format("the built-in detector needs crops whose side is a multiple of 16 "
+                    "(crop {} px)",
+                    data.crop_px));
+  if (!pretrained_task.empty() && !std::filesystem::is_regular_file(pretrained_task))
+    throw Error(SourceLocation{pretrained_task.string()}, "no such detector state file");
 }
 
 double learning_rate_factor(int step, int constant_steps, int decay_steps) {
@@ -130,9 +163,11 @@ double learning_rate_factor(int step, int constant_steps, int decay_steps) {
 
 double task_loss_gradient(DifferentiableImaging& imaging, Task& task, const JointData& data,
                           const std::vector<Sample>& samples, const std::vector<double>& x,
-                          std::vector<double>* grad_x) {
+                          std::vector<double>* grad_x,
+                          const std::vector<std::vector<GroundTruth>>& boxes) {
   imaging.prepare(x);
-  const TaskBatch batch = make_batch(imaging, data, samples);
+  TaskBatch batch = make_batch(imaging, data, samples);
+  batch.boxes = boxes;
   const TaskOutput out = task.step(batch, false, grad_x != nullptr);
   if (grad_x) {
     grad_x->assign(x.size(), 0.0);
@@ -193,7 +228,9 @@ class JointRun {
         param_(parameterization(start, options)),
         data_(options.data),
         imaging_(param_, options.glass_mode, {}, options.imaging),
-        log_(options.log_csv, CsvLog::header(param_)) {
+        log_(options.log_csv, CsvLog::header(param_)),
+        detection_(data_.detection()),
+        sensor_diagonal_mm_(param_.structure().specs.sensor_diagonal_mm) {
     x0_ = param_.from_lens(start);
     n_ = param_.size();
     is_frozen_.assign(n_, 0);
@@ -202,10 +239,34 @@ class JointRun {
       say("lensopt optimize --joint: " + note);
       result_.notes.push_back(note);
     }
-    if (options.run_baselines) phases_ = {kFixedFixed, kFixedTrained};
+    if (detection_) {
+      phases_.push_back(kPerfect);
+      check_categories();
+      DifferentiableImagingOptions quality = options.imaging;
+      quality.distortion = false;
+      quality.relative_illumination = false;
+      quality_imaging_ = std::make_unique<DifferentiableImaging>(param_, options.glass_mode,
+                                                                 std::vector<int>{}, quality);
+      perfect_path_ = options.checkpoint_every > 0 ? options.checkpoint_dir / "perfect.pt"
+                                                   : temporary_dir() / "perfect.pt";
+    }
+    if (options.run_baselines) {
+      phases_.push_back(kFixedFixed);
+      phases_.push_back(kFixedTrained);
+    }
     phases_.push_back(kJoint);
-    for (const std::string& p : phases_) result_.settings.push_back({p, 0, 0, false});
+    for (const std::string& p : phases_) {
+      JointSettingResult r;
+      r.name = p;
+      result_.settings.push_back(r);
+    }
   }
+  ~JointRun() {
+    std::error_code ec;
+    if (!temp_dir_.empty()) std::filesystem::remove_all(temp_dir_, ec);
+  }
+  JointRun(const JointRun&) = delete;
+  JointRun& operator=(const JointRun&) = delete;
 
   JointResult run(const std::filesystem::path& network_out);
 
@@ -237,7 +298,22 @@ class JointRun {
                          const std::vector<double>& x);
   void add_timings(const StepRecord& r, Clock::time_point step_start, std::clock_t cpu_start);
   void score_setting(std::size_t pi, const std::vector<double>& x);
+  void score_detection(JointSettingResult& setting, bool perfect, const std::vector<double>& x);
   void finish_timings();
+  // Samples the lens (imaging_.prepare) and forgets the box distortions of the previous lens.
+  void prepare(const std::vector<double>& x) {
+    imaging_.prepare(x);
+    distortions_.clear();
+  }
+  // The distortion of boxes in a scene of this size at the prepared lens (null: not rendered).
+  const BoxDistortion* distortion_for(const FloatImage& scene, bool perfect);
+  // The task's batch of samples: the lens's images (or, for perfect optics, the sharp crops)
+  // and, with detection, the boxes as the images show them.
+  TaskBatch batch_of(const std::vector<Sample>& samples, bool perfect);
+  // The built-in detector's classes hold the dataset's categories (Error naming the first not).
+  void check_categories() const;
+  // A folder of this run for the perfect-optics detector when there are no checkpoints.
+  std::filesystem::path temporary_dir();
 
   const JointOptions& options_;
   LensParameterization param_;
@@ -253,7 +329,69 @@ class JointRun {
   std::filesystem::path resume_task_;
   DesignValueGradient design_;  // l_lens at the lens of the last step
   int steps_this_call_ = 0;
+  bool detection_ = false;
+  double sensor_diagonal_mm_ = 0;
+  std::unique_ptr<DifferentiableImaging> quality_imaging_;    // detection: PSNR and SSIM
+  std::map<std::pair<int, int>, BoxDistortion> distortions_;  // by scene size
+  std::filesystem::path perfect_path_;                        // the perfect-optics detector
+  std::filesystem::path temp_dir_;
 };
+
+std::filesystem::path JointRun::temporary_dir() {
+  if (temp_dir_.empty()) {
+    static std::atomic<int> counter{0};
+    temp_dir_ = std::filesystem::temp_directory_path() /
+                fmt::format("lensopt-joint-{}-{}", ::getpid(), counter++);
+    std::filesystem::create_directories(temp_dir_);
+  }
+  return temp_dir_;
+}
+
+void JointRun::check_categories() const {
+  if (options_.task != "detection") return;
+  for (const Scene& scene : data_.scenes())
+    for (const GroundTruth& g : scene.boxes)
+      if (g.category < 1 || g.category > kDetectorClasses)
+        throw Error(SourceLocation{options_.data.annotations.string()},
+                    fmt::format("{}: category id {} is outside the built-in detector's classes "
+                                "1..{} (the paper's six, detection/dataset.h)",
+                                scene.name, g.category, kDetectorClasses));
+}
+
+const BoxDistortion* JointRun::distortion_for(const FloatImage& scene, bool perfect) {
+  if (perfect || !options_.imaging.distortion) return nullptr;
+  const std::pair<int, int> size{scene.width, scene.height};
+  auto it = distortions_.find(size);
+  if (it == distortions_.end()) {
+    const ImagingOptics& optics = imaging_.optics();
+    ImagingModel model;
+    model.sensor_diagonal_mm = sensor_diagonal_mm_;
+    model.fields_deg = optics.fields_deg;
+    model.reference_y_mm = optics.reference_y_mm;
+    model.centroid_y_mm = optics.centroid_y_mm;
+    it = distortions_
+             .emplace(size,
+                      BoxDistortion(model, scene.width, scene.height, options_.imaging.res_factor))
+             .first;
+  }
+  return &it->second;
+}
+
+TaskBatch JointRun::batch_of(const std::vector<Sample>& samples, bool perfect) {
+  if (!perfect && !detection_) return make_batch(imaging_, data_, samples);
+  TaskBatch batch;
+  for (const Sample& s : samples) {
+    const Scene& scene = data_.scenes().at(s.scene);
+    batch.sharp.push_back(data_.crop(s));
+    batch.rendered.push_back(perfect ? batch.sharp.back() : imaging_.render(scene.image, s.crop));
+    batch.targets.push_back(scene.targets);
+    const CropFrame frame{double(s.crop.x0), double(s.crop.y0), double(s.crop.width),
+                          double(s.crop.height)};
+    batch.boxes.push_back(
+        crop_ground_truth(scene.boxes, distortion_for(scene.image, perfect), frame));
+  }
+  return batch;
+}
 
 Progress JointRun::read_checkpoint(const std::filesystem::path& dir) {
   Progress progress = start_progress();
@@ -289,8 +427,12 @@ Progress JointRun::read_checkpoint(const std::filesystem::path& dir) {
     for (const auto& s : j.at("settings")) {
       for (auto& r : result_.settings)
         if (r.name == s.at("name").get<std::string>()) {
-          r.metric = s.at("metric").get<double>();
-          r.mean_spot_um = s.at("mean_spot_um").get<double>();
+          r.metric = number_of(s, "metric");
+          r.mean_spot_um = number_of(s, "mean_spot_um");
+          r.ap50 = number_of(s, "ap50");
+          r.ap75 = number_of(s, "ap75");
+          r.psnr_db = number_of(s, "psnr_db");
+          r.ssim = number_of(s, "ssim");
           r.done = s.at("done").get<bool>();
         }
     }
@@ -302,6 +444,14 @@ Progress JointRun::read_checkpoint(const std::filesystem::path& dir) {
   }
   log_ = CsvLog(options_.log_csv, read_file(dir / "log.csv"));
   resume_task_ = dir / "task.pt";
+  // The perfect-optics detector, where this run keeps it (it may checkpoint elsewhere).
+  const std::filesystem::path perfect = dir / "perfect.pt";
+  if (detection_ && std::filesystem::exists(perfect) &&
+      !(std::filesystem::exists(perfect_path_) &&
+        std::filesystem::equivalent(perfect, perfect_path_))) {
+    std::filesystem::create_directories(perfect_path_.parent_path());
+    write_file_atomic(perfect_path_, read_file(perfect));
+  }
   say(fmt::format("lensopt optimize --joint: resuming {} at step {} from {}", progress.phase,
                   progress.step, dir.string()));
   return progress;
@@ -345,9 +495,9 @@ StepRecord JointRun::step_gradient(const std::string& phase, int t, bool train_l
                                    const std::vector<double>& x, std::vector<double>& grad) {
   StepRecord r;
   const std::vector<Sample> samples = data_.next_batch();
-  if (train_lens) imaging_.prepare(x);
+  if (train_lens) prepare(x);
   const auto render_start = Clock::now();
-  const TaskBatch batch = make_batch(imaging_, data_, samples);
+  const TaskBatch batch = batch_of(samples, phase == kPerfect);
   r.render_s = seconds_since(render_start);
   const auto network_start = Clock::now();
   r.out = task_->step(batch, true, train_lens);
@@ -405,24 +555,48 @@ void JointRun::add_timings(const StepRecord& r, Clock::time_point step_start,
 bool JointRun::run_phase(std::size_t pi, Progress progress, bool resumed) {
   const std::string phase = phases_[pi];
   const bool train_lens = phase == kJoint;
-  const int total = options_.total_steps();
+  // The perfect-optics phase may have its own length (the same share of decay steps).
+  int constant = options_.constant_steps, decay = options_.decay_steps;
+  if (phase == kPerfect && options_.perfect_steps > 0) {
+    decay = static_cast<int>(std::lround(static_cast<double>(options_.perfect_steps) *
+                                         options_.decay_steps / options_.total_steps()));
+    constant = options_.perfect_steps - decay;
+  }
+  const int total = constant + decay;
   int t = progress.step;
   std::vector<double>& x = progress.x;
   AdamMoments& moments = progress.moments;
   LensSafeguard& safeguard = progress.safeguard;
+  const bool perfect = phase == kPerfect;
+  const bool pretrained = perfect && !options_.pretrained_task.empty();
   task_ = new_task();
+  if (task_->detects() != detection_)
+    throw Error(detection_ ? fmt::format("task {} is not a detector; a detection dataset needs "
+                                         "--task detection or a TorchScript detector",
+                                         task_->name())
+                           : fmt::format("task {} is a detector: give it a detection dataset "
+                                         "(COCO or BDD100K annotations, --data)",
+                                         task_->name()));
   data_.restart();
-  if (resumed) {
-    if (progress.task_state) task_->load(resume_task_);
-    if (!progress.rng.empty()) data_.set_rng_state(progress.rng);
+  // The network's start: the state of a resumed phase; else, with detection, the perfect-optics
+  // detector (given, or trained by the first phase); else the task's initialization.
+  if (resumed && progress.task_state) {
+    task_->load(resume_task_);
+  } else if (pretrained) {
+    task_->load(options_.pretrained_task);
+  } else if (detection_ && !perfect) {
+    task_->load(perfect_path_);
   }
-  if (!train_lens) imaging_.prepare(x);  // a fixed lens is sampled once; a trained one per step
+  if (resumed && !progress.rng.empty()) data_.set_rng_state(progress.rng);
+  // A fixed lens is sampled once; a trained one per step; perfect optics renders nothing.
+  if (!train_lens && !perfect) prepare(x);
   design_ = design_loss_gradient(param_, x, options_.glass_mode, {}, options_.design_sampling,
                                  options_.loss);
   std::vector<int> glasses = param_.nearest_glasses(x.data());
+  const bool trains = phase != kFixedFixed && !pretrained;
   say(fmt::format("lensopt optimize --joint: {} (task {}, {} steps)", phase, task_->name(),
-                  phase == kFixedFixed ? 0 : total));
-  if (phase != kFixedFixed) {
+                  trains ? total : 0));
+  if (trains) {
     while (t < total) {
       if (stop_requested()) {
         result_.interrupted = true;
@@ -433,7 +607,7 @@ bool JointRun::run_phase(std::size_t pi, Progress progress, bool resumed) {
       }
       const auto step_start = Clock::now();
       const std::clock_t step_cpu_start = std::clock();
-      const double factor = learning_rate_factor(t, options_.constant_steps, options_.decay_steps);
+      const double factor = learning_rate_factor(t, constant, decay);
       const double lr_lens =
           train_lens ? options_.lens_learning_rate * factor * safeguard.step_scale : 0.0;
       const double lr_task = options_.task_options.learning_rate * factor;
@@ -493,6 +667,12 @@ bool JointRun::run_phase(std::size_t pi, Progress progress, bool resumed) {
     }
     log_.flush();
   }
+  if (perfect) {
+    if (perfect_path_.has_parent_path())
+      std::filesystem::create_directories(perfect_path_.parent_path());
+    task_->save(perfect_path_);
+    if (!options_.perfect_task_out.empty()) task_->save(options_.perfect_task_out);
+  }
   score_setting(pi, x);
   result_.x = x;
   return true;
@@ -501,15 +681,86 @@ bool JointRun::run_phase(std::size_t pi, Progress progress, bool resumed) {
 // Scores setting pi on the held-out crops with the final lens and network.
 void JointRun::score_setting(std::size_t pi, const std::vector<double>& x) {
   JointSettingResult& setting = result_.settings[pi];
-  imaging_.prepare(x);
-  setting.metric = evaluate(imaging_, *task_, data_);
-  setting.mean_spot_um = design_loss_gradient(param_, x, options_.glass_mode, {},
-                                              options_.design_sampling, options_.loss)
-                             .loss.spot_mm *
-                         1000.0;
+  const bool perfect = setting.name == kPerfect;
+  if (detection_) {
+    score_detection(setting, perfect, x);
+  } else {
+    prepare(x);
+    setting.metric = evaluate(imaging_, *task_, data_);
+  }
+  setting.mean_spot_um = perfect ? NAN
+                                 : design_loss_gradient(param_, x, options_.glass_mode, {},
+                                                        options_.design_sampling, options_.loss)
+                                           .loss.spot_mm *
+                                       1000.0;
   setting.done = true;
-  say(fmt::format("lensopt optimize --joint: {}: held-out {} {:.4f}, mean spot {:.2f} um",
-                  setting.name, task_->metric_name(), setting.metric, setting.mean_spot_um));
+  if (detection_)
+    say(
+        fmt::format("lensopt optimize --joint: {}: held-out AP {:.4f} (AP50 {:.4f}, AP75 {:.4f}), "
+                    "PSNR {:.2f} dB, SSIM {:.4f}, mean spot {:.2f} um",
+                    setting.name, setting.metric, setting.ap50, setting.ap75, setting.psnr_db,
+                    setting.ssim, setting.mean_spot_um));
+  else
+    say(fmt::format("lensopt optimize --joint: {}: held-out {} {:.4f}, mean spot {:.2f} um",
+                    setting.name, task_->metric_name(), setting.metric, setting.mean_spot_um));
+}
+
+// COCO AP of all held-out crops' detections at once (predictions corrected for distortion), and
+// the lens's PSNR and SSIM (joint/joint.h).
+void JointRun::score_detection(JointSettingResult& setting, bool perfect,
+                               const std::vector<double>& x) {
+  if (!perfect) prepare(x);
+  const std::vector<Sample>& all = data_.eval_samples();
+  const std::size_t b = static_cast<std::size_t>(data_.options().batch_size);
+  std::vector<GroundTruth> truths;
+  std::vector<Detection> detections;
+  for (std::size_t i = 0; i < all.size(); i += b) {
+    const std::vector<Sample> part(all.begin() + i, all.begin() + std::min(all.size(), i + b));
+    const TaskBatch batch = batch_of(part, perfect);
+    const std::vector<std::vector<Detection>> found = task_->detect(batch);
+    for (std::size_t k = 0; k < part.size(); ++k) {
+      const Sample& s = part[k];
+      const Scene& scene = data_.scenes().at(s.scene);
+      const int id = static_cast<int>(i + k);
+      const CropFrame frame{double(s.crop.x0), double(s.crop.y0), double(s.crop.width),
+                            double(s.crop.height)};
+      const BoxDistortion* distortion = distortion_for(scene.image, perfect);
+      for (GroundTruth g : crop_evaluation_ground_truth(scene.boxes, distortion, frame)) {
+        g.image = id;
+        truths.push_back(g);
+      }
+      if (k >= found.size()) continue;
+      std::vector<Detection> d = found[k];
+      correct_crop_detections(d, distortion, frame);
+      for (Detection& one : d) {
+        one.image = id;
+        detections.push_back(one);
+      }
+    }
+  }
+  const CocoStats stats = evaluate_coco(truths, detections);
+  setting.metric = stats.ap;
+  setting.ap50 = stats.ap50;
+  setting.ap75 = stats.ap75;
+  setting.psnr_db = NAN;
+  setting.ssim = NAN;
+  if (perfect) return;
+  quality_imaging_->prepare(x, false);
+  double psnr_sum = 0, ssim_sum = 0;
+  int n = 0;
+  for (const Sample& s : all) {
+    const FloatImage sharp = data_.crop(s);
+    const FloatImage lens = quality_imaging_->render(data_.scenes().at(s.scene).image, s.crop);
+    const double p = psnr_db(sharp, lens, 3, options_.imaging.threads);
+    if (!std::isfinite(p)) continue;
+    psnr_sum += p;
+    ssim_sum += ssim(sharp, lens, 3, options_.imaging.threads);
+    ++n;
+  }
+  if (n > 0) {
+    setting.psnr_db = psnr_sum / n;
+    setting.ssim = ssim_sum / n;
+  }
 }
 
 // Per-step means of the joint phase's timings.
@@ -533,6 +784,7 @@ JointResult JointRun::run(const std::filesystem::path& network_out) {
         fmt::format("checkpoint phase '{}' is not among this run's settings", progress.phase));
   result_.steps_done = progress.steps_done;
   result_.x = x0_;
+  result_.eval_crops = static_cast<int>(data_.eval_samples().size());
   for (std::size_t pi = first_phase; pi < phases_.size(); ++pi) {
     const bool resumed = pi == first_phase && resuming;
     Progress start = resumed ? progress : start_progress();

@@ -12,9 +12,12 @@
 // its area lies inside the crop: a box mostly cut away would ask the detector to find an object
 // from a sliver.
 //
-// Resolution factor. At factor s the sensor sees the upper-left 1/s of the scene in both axes
-// enlarged s times (render/render.h): a box of the scene maps to s times its coordinates, then the
-// image-sized crop above.
+// Resolution factor (render/render.h's model). At factor s = 2 an image of W x H pixels is the
+// upper-left quadrant of a virtual 2W x 2H sensor of the same diagonal: the scene's pixels are the
+// image's pixels (pitch halved, the optical axis at the image's bottom-right corner), so a box
+// keeps its pixel coordinates and the factor enters through the geometry of the distortion
+// (BoxDistortion's `res_factor`; the PSFs cover twice as many pixels). `scale_box` is the map for
+// a pipeline that instead enlarges the scene s times (coordinates times s).
 //
 // Distortion. The renderer's warp moves the scene point at undistorted radial height r (mm on the
 // sensor, from the optical axis) to r' = ybar(r), the piecewise-linear map through the nodes

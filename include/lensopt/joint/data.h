@@ -21,6 +21,14 @@
 // floor(W / crop_px) x floor(H / crop_px) tiles, centred, at most eval_crops in all (evenly spread
 // over the tiles in raster order).
 //
+// Detection datasets (`annotations`: a COCO or BDD100K JSON, detection/dataset.h, BDD100K's
+// categories through the paper's six-class map): the scenes are the annotated images, read from
+// `images_dir` (default: the folder `images` beside the JSON if it exists, else the JSON's own
+// folder) by their file names; an image that is missing, corrupt, smaller than a crop, or whose
+// size differs from the one the JSON states is reported and skipped, and so are bad annotations.
+// Each scene keeps its boxes (scene pixels; detection/crop_boxes.h moves them with the crops).
+// The split is the directory's (shuffled with the seed, round(holdout_fraction N) held out).
+//
 // Targets (for user tasks): beside IMAGE.ext, an optional IMAGE.targets.txt: numbers separated by
 // white space or commas, '#' starts a comment to the end of the line. The numbers are passed as
 // they are (no crop transform): a task that needs image coordinates should use crops of the whole
@@ -33,13 +41,16 @@
 #include <vector>
 
 #include "lensopt/core/random.h"
+#include "lensopt/detection/dataset.h"
 #include "lensopt/joint/imaging.h"
 #include "lensopt/render/image.h"
 
 namespace lensopt {
 
 struct DataOptions {
-  std::filesystem::path images_dir;  // empty: the built-in scenes
+  std::filesystem::path images_dir;   // empty: the built-in scenes (or, with annotations, the
+                                      // folder beside the JSON)
+  std::filesystem::path annotations;  // a COCO or BDD100K JSON: a detection dataset
   int batch_size = 4;
   int crop_px = 256;
   double holdout_fraction = 0.2;  // directory: share of images held out for evaluation
@@ -54,8 +65,9 @@ struct DataOptions {
 
 struct Scene {
   std::string name;
-  FloatImage image;               // RGB, [0, 1]
-  std::filesystem::path targets;  // IMAGE.targets.txt, or empty
+  FloatImage image;                // RGB, [0, 1]
+  std::filesystem::path targets;   // IMAGE.targets.txt, or empty
+  std::vector<GroundTruth> boxes;  // detection datasets: the image's boxes (scene pixels)
 };
 
 // One crop of one scene.
@@ -76,6 +88,9 @@ class JointData {
   const std::vector<int>& eval_scenes() const { return eval_; }
   // Notes for the log: skipped files, what the built-in scenes are.
   const std::vector<std::string>& notes() const { return notes_; }
+  // Whether the scenes carry boxes (a detection dataset), and its categories.
+  bool detection() const { return !options_.annotations.empty(); }
+  const std::vector<DetectionCategory>& categories() const { return categories_; }
 
   // The next training batch (advances the generator).
   std::vector<Sample> next_batch();
@@ -97,7 +112,11 @@ class JointData {
   std::vector<int> train_, eval_;
   std::vector<Sample> eval_samples_;
   std::vector<std::string> notes_;
+  std::vector<DetectionCategory> categories_;
   Rng rng_;
+
+  void load_detection_dataset();
+  void split_scenes(const std::string& source);
 };
 
 // The dead-leaves scene of a seed (RGB, [0, 1], 2 x 2 supersampled).

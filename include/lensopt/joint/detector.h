@@ -8,16 +8,16 @@
 //   Heads at stride S = 4, from 32 channels: a heat map per class (sigmoid; bias initialised to
 //   log(0.1 / 0.9) so the untrained map predicts 0.1), the box size (log(w / S), log(h / S)) and
 //   the sub-cell centre offset.
-//   Targets: each ground-truth box puts a Gaussian bump exp(-d^2 / (2 sigma^2)) at its centre
-//   cell c = floor(centre / S) in its class's map (sigma = (2 r + 1) / 6, r = 0.3 min(w, h) / S;
-//   the maximum where bumps overlap; exactly 1 at c), its size and offset at c.
-//   Loss: the penalty-reduced focal loss over every map cell (alpha = 2, beta = 4) divided by the
-//   number of objects, plus L1 of the size and of the offset at the centre cells, also divided by
-//   the number of objects. The mean over the batch is the task's loss.
-//   Detections: heat-map peaks (a cell equal to the maximum of its 3 x 3 neighbourhood), the best
-//   100 per image over all classes, box = (c + offset) S -+ exp(size) S / 2, score = heat.
-//   Metric: COCO AP (detection/coco_eval.h) of a batch's detections, after the correction the
-//   caller applies (the joint loop un-distorts predicted boxes before evaluation).
+//   Targets: each ground-truth box (crowd regions excepted) puts a Gaussian bump exp(-d^2 / (2
+//   sigma^2)) at its centre cell c = floor(centre / S) in its class's map (sigma = (2 r + 1) / 6, r
+//   = 0.3 min(w, h) / S; the maximum where bumps overlap; exactly 1 at c), its size and offset at
+//   c. Loss: the penalty-reduced focal loss over every map cell (alpha = 2, beta = 4) divided by
+//   the number of objects, plus L1 of the size and of the offset at the centre cells, also divided
+//   by the number of objects. The mean over the batch is the task's loss. Detections: heat-map
+//   peaks (a cell equal to the maximum of its 3 x 3 neighbourhood), the best 100 per image over all
+//   classes, box = (c + offset) S -+ exp(size) S / 2, score = heat. Metric: COCO AP
+//   (detection/coco_eval.h) of a batch's detections, after the correction the caller applies (the
+//   joint loop un-distorts predicted boxes before evaluation).
 //
 // TorchScript detectors ("torchscript:MODEL.pt" whose forward takes three tensors):
 //   forward(images, boxes, labels)

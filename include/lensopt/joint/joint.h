@@ -28,6 +28,24 @@
 //   joint:         lens and network trained together for all steps.
 // Each is scored by the task metric on the held-out crops (restoration: PSNR, dB).
 //
+// Object detection (the paper's experiment; data.annotations set, a detector task: "detection"
+// or a TorchScript detector, joint/detector.h). The crops carry their ground-truth boxes as the
+// rendered image shows them (detection/crop_boxes.h: distorted by the lens's distortion at the
+// current lens when the warp is rendered, then moved and clipped by the crop; the resolution
+// factor enters through the distortion's geometry). The boxes are targets: no gradient flows
+// through them to the lens (the images carry the lens's gradient). Four settings, the paper's
+// Table 2:
+//   perfect:       the detector trained on the sharp crops (no lens) for all steps, scored on the
+//                  sharp held-out crops (or loaded from `pretrained_task` instead of trained);
+//   fixed/fixed:   that detector, unchanged, on the start lens's images;
+//   fixed/trained: that detector fine-tuned for all steps on the start lens's images;
+//   joint:         that detector and the lens trained together for all steps.
+// Scores on the held-out crops: COCO AP, AP50, AP75 (detection/coco_eval.h) of all crops'
+// detections at once, the predicted boxes corrected by the inverse distortion and compared with the
+// crop's evaluation ground truth (detection/crop_boxes.h); and the lens's image quality, the mean
+// over the crops of PSNR and SSIM between the sharp crop and the lens's rendering without relative
+// illumination and distortion (render/metrics.h; not defined for perfect optics).
+//
 // State. A per-step CSV (phase, step, learning rates, every loss term, mean spot, glasses);
 // every glass change is logged; checkpoints every N steps to a directory (checkpoint.json with
 // the lens variables, Adam moments, step, phase, finished results and the crop generator's
@@ -37,6 +55,7 @@
 #pragma once
 
 #include <atomic>
+#include <cmath>
 #include <filesystem>
 #include <functional>
 #include <memory>
@@ -75,8 +94,15 @@ struct JointOptions {
   GlassMode glass_mode = GlassMode::kQuantized;  // kContinuous: the ablation
   bool paraxial_image_solve = true;              // false: the ablation
   std::vector<std::string> freeze;               // lens variables held (names or groups)
-  bool run_baselines = true;             // also run fixed/fixed and fixed/trained (else only joint)
-  int checkpoint_every = 0;              // steps; 0: none
+  bool run_baselines = true;  // also run fixed/fixed and fixed/trained (else only joint; with
+                              // detection the perfect-optics detector is always trained)
+  std::filesystem::path pretrained_task;   // detection: the perfect-optics detector (a
+                                           // perfect_task_out of an earlier run), not trained
+  std::filesystem::path perfect_task_out;  // detection: writes the perfect-optics detector
+                                           // (Task::save: weights and optimizer state)
+  int perfect_steps = 0;     // detection: steps of the perfect-optics detector (0: total_steps();
+                             // the same share of them decays)
+  int checkpoint_every = 0;  // steps; 0: none
   std::filesystem::path checkpoint_dir;  // required when checkpoint_every > 0
   std::filesystem::path resume_dir;      // a checkpoint directory to resume from
   std::filesystem::path log_csv;         // the per-step CSV (empty: none)
@@ -101,10 +127,13 @@ struct GlassChange {
 };
 
 struct JointSettingResult {
-  std::string name;  // "fixed/fixed", "fixed/trained", "joint"
-  double metric = 0;
-  double mean_spot_um = 0;  // at the design sampling
+  std::string name;         // "perfect" (detection), "fixed/fixed", "fixed/trained", "joint"
+  double metric = 0;        // the task metric (detection: AP, -1 without ground truth)
+  double mean_spot_um = 0;  // at the design sampling (NaN for perfect optics)
   bool done = false;
+  // Detection only (else NaN): AP at IoU 0.5 and 0.75, and the lens's mean PSNR (dB) and SSIM
+  // on the held-out crops (NaN for perfect optics).
+  double ap50 = NAN, ap75 = NAN, psnr_db = NAN, ssim = NAN;
 };
 
 // Mean wall time per joint step, seconds (the imaging's split plus the task and l_lens).
@@ -129,6 +158,7 @@ struct JointResult {
   bool interrupted = false;  // stopped early (interrupt or stop_after_steps)
   int reverted_steps = 0;    // failed steps (exception, non-finite loss or gradient) reverted
   JointTimings timings;      // joint phase, this call
+  int eval_crops = 0;        // held-out crops scored
   std::vector<std::string> notes;
 };
 
@@ -140,8 +170,10 @@ JointResult optimize_joint(const Lens& start, const JointOptions& options,
 // One joint step's gradient pieces, for tests and the benchmark: the task loss of the crops
 // rendered with variables x and its gradient (task autograd + imaging backward), without
 // updating anything. `grad_x` is resized to the variable count.
+// `boxes` (detection): the crops' ground truth, held fixed (TaskBatch::boxes).
 double task_loss_gradient(DifferentiableImaging& imaging, Task& task, const JointData& data,
                           const std::vector<Sample>& samples, const std::vector<double>& x,
-                          std::vector<double>* grad_x);
+                          std::vector<double>* grad_x,
+                          const std::vector<std::vector<GroundTruth>>& boxes = {});
 
 }  // namespace lensopt

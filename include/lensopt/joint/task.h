@@ -76,6 +76,8 @@ class Task {
   // Detection tasks: per image, the detected boxes in the crop's pixels (Detection::image is the
   // index in the batch); empty for other tasks.
   virtual std::vector<std::vector<Detection>> detect(const TaskBatch&) { return {}; }
+  // Whether the task is a detector (trains on TaskBatch::boxes, answers detect()).
+  virtual bool detects() const { return false; }
   // Weights and optimizer state, written atomically; load restores both exactly.
   virtual void save(const std::filesystem::path& path) const = 0;
   virtual void load(const std::filesystem::path& path) = 0;

@@ -79,7 +79,7 @@ Targets make_targets(const TaskBatch& batch, int classes, int h, int w, torch::D
   std::vector<float> log_size, offset;
   for (int i = 0; i < b && i < static_cast<int>(batch.boxes.size()); ++i) {
     for (const GroundTruth& g : batch.boxes[i]) {
-      if (g.category < 1 || g.category > classes || g.box.empty()) continue;
+      if (g.crowd || g.category < 1 || g.category > classes || g.box.empty()) continue;
       const double cx = 0.5 * (g.box.x0 + g.box.x1) / kStride,
                    cy = 0.5 * (g.box.y0 + g.box.y1) / kStride;
       const int ix = static_cast<int>(std::floor(cx)), iy = static_cast<int>(std::floor(cy));
@@ -219,6 +219,7 @@ class DetectionTask : public Task {
   }
 
   std::vector<FloatImage> predict(const TaskBatch&) override { return {}; }
+  bool detects() const override { return true; }
 
   double metric(const TaskBatch& batch) override { return batch_ap(batch, detect(batch)); }
 
@@ -317,6 +318,7 @@ class TorchScriptDetectionTask : public Task {
   }
 
   std::vector<FloatImage> predict(const TaskBatch&) override { return {}; }
+  bool detects() const override { return true; }
   double metric(const TaskBatch& batch) override { return batch_ap(batch, detect(batch)); }
   void set_learning_rate(double learning_rate) override {
     set_adam_learning_rate(*adam_, learning_rate);
