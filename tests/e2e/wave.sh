@@ -89,6 +89,7 @@ for f in r["fields"]:
 PY
 
 # render: the default equals --psf geometric byte for byte; diffraction and auto render and differ.
+mkdir -p "$tmp/in"
 "$lensopt" chart -o "$tmp/in/chart.png" --size 96x64 > /dev/null
 for psf in default geometric diffraction auto; do
   opt=(); [ "$psf" = default ] || opt=(--psf "$psf" --pupil-samples 32)
