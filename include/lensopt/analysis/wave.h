@@ -44,7 +44,7 @@ struct WaveOptions {
   bool keep_psf = false;                   // keep each monochromatic PSF (plots, export)
   bool geometric = true;                   // also the geometric MTF
   int threads = 0;                         // fields in parallel; 0: all cores
-  int zernike_terms = 0;                   // Zernike fit of each wavefront (0: none)
+  int zernike_terms = 0;                   // Zernike fit of each wavefront (0: none; Fringe <= 37)
   ZernikeOrdering zernike_ordering = ZernikeOrdering::kFringe;
 
   // Throws Error for out-of-range values.
@@ -124,10 +124,10 @@ double diffraction_limited_mtf(double nu_over_cutoff);
 
 // One monochromatic PSF (WaveOptions::keep_psf) integrated over the cells of a grid of `pixels`
 // x `pixels` square cells of side `spacing_um` whose centre lies at (centre_x_um, centre_y_um)
-// from the reference point C; row 0 is +y (top). Each cell holds the PSF's energy inside it as a
-// fraction of the energy of the whole FFT window (sum_k I_k |dx dy|): the mean of the bilinear
-// interpolation over s x s sub-samples, s = ceil(spacing / min(|dx|, |dy|)) (at most 32), times
-// the cell's area. The cells sum to 1 when they cover the window; what lies outside is lost.
+// from the reference point C; row 0 is +y (top). Each cell holds the integral over it of the
+// bilinear interpolation of the samples, exactly (the overlaps of the cell with the samples' hat
+// functions, per axis), as a fraction of the whole PSF's energy (sum_k I_k): the cells sum to 1
+// when they cover the FFT window (and a sample beyond); what lies outside is lost.
 // All zeros for a PSF that failed (!ok) or was not kept.
 std::vector<double> psf_cell_energies(const MonoWave& mono, int pixels, double spacing_um,
                                       double centre_x_um, double centre_y_um);

@@ -14,8 +14,8 @@
 //   * Fringe (University of Arizona, OpticStudio's "Zernike Fringe"): unnormalized (peak 1 at
 //     the edge); grouped by g = (n + m)/2 = 0, 1, 2, ..., within a group m descending from g
 //     (n = 2g - m), cos before sin (Z1 = 1, Z2 = rho cos, Z3 = rho sin, Z4 = 2 rho^2 - 1,
-//     Z5 = rho^2 cos 2theta, ..., Z9 = 6 rho^4 - 6 rho^2 + 1, ..., Z37 = R_12^0); the same rule
-//     continues past 37.
+//     Z5 = rho^2 cos 2theta, ..., Z9 = 6 rho^4 - 6 rho^2 + 1, ..., Z36 = R_10^0), and the set
+//     ends with Z37 = R_12^0: at most 37 terms.
 // Fit: weighted least squares over the samples that arrived (vignetted and failed rays
 // excluded), weights = the grid cells' area fractions:
 //   min_c sum_i a_i (W_i - sum_j c_j Z_j(x_i, y_i))^2
@@ -33,8 +33,8 @@ namespace lensopt {
 
 enum class ZernikeOrdering { kFringe, kStandard };
 
-// The largest number of terms a fit takes.
-inline constexpr int kMaxZernikeTerms = 231;  // Standard: n <= 20
+// The largest number of terms a fit takes (Standard: n <= 20; Fringe: 37).
+inline constexpr int kMaxZernikeTerms = 231;
 
 struct ZernikeTerm {
   int n = 0;          // radial order
@@ -42,7 +42,8 @@ struct ZernikeTerm {
   bool sine = false;  // sin(m theta) (else cos, or 1 for m = 0)
 };
 
-// Term j (1-based) of an ordering; throws Error for j outside [1, kMaxZernikeTerms].
+// Term j (1-based) of an ordering; throws Error for j outside [1, kMaxZernikeTerms] (Standard)
+// or [1, 37] (Fringe).
 ZernikeTerm zernike_term(ZernikeOrdering ordering, int j);
 
 // Z_j at the pupil point (x, y), with the ordering's normalization.
