@@ -107,8 +107,13 @@ AnalysisReport analyze_lens(const Lens& lens_in, const AnalyzeOptions& options) 
   }
   if (all_fields_traced && weight_sum > 0.0 && std::isfinite(spot_sum))
     r.mean_rms_spot_um = spot_sum / weight_sum;
-  if (options.wave)
-    r.wave = analyze_wave(sys, options.wave_options, options.mtf_frequencies_cyc_mm);
+  if (options.wave) {
+    // The lens's wavelength weights unless the options give their own.
+    WaveOptions wave = options.wave_options;
+    if (wave.wavelength_weights.empty())
+      wave.wavelength_weights = lens_wavelength_weights(lens, sys.wavelength_count);
+    r.wave = analyze_wave(sys, wave, options.mtf_frequencies_cyc_mm);
+  }
   return r;
 }
 

@@ -10,6 +10,7 @@
 #include <map>
 #include <mutex>
 #include <nlohmann/json.hpp>
+#include <utility>
 
 #include "core/fft.h"
 #include "lensopt/core/error.h"
@@ -95,6 +96,15 @@ MonoWave mono_wave(const TraceSystem<double>& sys, int h, int w, const PupilGrid
   out.fft_n = m;
   out.vignetted_fraction = wf.total_weight > 0 ? 1.0 - wf.valid_weight / wf.total_weight : 1.0;
   out.ok = wf.chief_ok && wf.valid_weight > 0 && wf.du_x != 0 && wf.du_y != 0;
+  if (options.zernike_terms > 0 && wf.chief_ok) {
+    int arrived = 0;
+    for (std::uint8_t k : wf.ok) arrived += k;
+    if (arrived >= options.zernike_terms) {
+      const ZernikeFit fit = fit_zernike(wf, grid, options.zernike_terms, options.zernike_ordering);
+      out.zernike_waves = fit.coefficients_waves;
+      out.zernike_residual_rms_waves = fit.residual_rms_waves;
+    }
+  }
   out.otf_t.assign(freqs.size(), Complex(0, 0));
   out.otf_s = out.otf_t;
   out.geo_t = out.otf_t;
@@ -231,6 +241,23 @@ PupilGrid make_pupil_grid(int n) {
   return grid;
 }
 
+PupilGrid make_half_pupil_grid(int n) {
+  const PupilGrid full = make_pupil_grid(n);
+  PupilGrid half;
+  half.n = n;
+  half.mirrored = true;
+  for (std::size_t i = 0; i < full.size(); ++i) {
+    const double x = full.samples.x[i];
+    if (x < -1e-12) continue;
+    half.column.push_back(full.column[i]);
+    half.row.push_back(full.row[i]);
+    half.weight.push_back(x > 1e-12 ? 2.0 * full.weight[i] : full.weight[i]);
+    half.samples.x.push_back(x);
+    half.samples.y.push_back(full.samples.y[i]);
+  }
+  return half;
+}
+
 void WaveOptions::validate(int wavelength_count) const {
   if (pupil_samples < 8 || pupil_samples > 1024)
     throw Error(fmt::format("pupil samples = {} must be in [8, 1024]", pupil_samples));
@@ -250,6 +277,15 @@ void WaveOptions::validate(int wavelength_count) const {
   }
   if (!std::isfinite(focus_shift_mm)) throw Error("the focus shift must be finite");
   if (threads < 0) throw Error(fmt::format("threads = {} must be >= 0", threads));
+  if (zernike_terms < 0 || zernike_terms > kMaxZernikeTerms)
+    throw Error(
+        fmt::format("Zernike terms = {} must be in [0, {}]", zernike_terms, kMaxZernikeTerms));
+  if (zernike_terms > 0) zernike_term(zernike_ordering, zernike_terms);  // Fringe: at most 37
+}
+
+std::vector<double> lens_wavelength_weights(const Lens& lens, int wavelength_count) {
+  if (static_cast<int>(lens.specs.wavelength_weights.size()) != wavelength_count) return {};
+  return lens.specs.wavelength_weights;
 }
 
 double diffraction_limited_mtf(double v) {
@@ -286,6 +322,8 @@ WaveReport analyze_wave(const TraceSystem<double>& sys, const WaveOptions& optio
   report.fft_n = m;
   report.padding = options.padding;
   report.focus_shift_mm = options.focus_shift_mm;
+  report.zernike_terms = options.zernike_terms;
+  report.zernike_ordering = options.zernike_ordering;
   report.frequencies_cyc_mm = freqs;
   report.weights = options.wavelength_weights;
   if (report.weights.empty()) report.weights.assign(wl_count, 1.0);
@@ -305,6 +343,8 @@ WaveReport analyze_wave(const TraceSystem<double>& sys, const WaveOptions& optio
   for (std::size_t f = 0; f < fields.size(); ++f) {
     spheres[f] = reference_sphere(sys, fields[f], options.focus_shift_mm);
     report.fields[f].field_deg = sys.fields_deg[fields[f]];
+    report.fields[f].reference_x_mm = spheres[f].centre_x_mm;
+    report.fields[f].reference_y_mm = spheres[f].centre_y_mm;
     report.fields[f].mono.resize(wl_count);
   }
   const int nthreads = thread_count(options.threads);
@@ -361,32 +401,74 @@ WaveReport analyze_wave(const TraceSystem<double>& sys, const WaveOptions& optio
   return report;
 }
 
+namespace {
+
+// The integral of the hat function max(0, 1 - |t|) from -inf to u.
+double hat_integral(double u) {
+  if (u <= -1.0) return 0.0;
+  if (u <= 0.0) return 0.5 * (u + 1.0) * (u + 1.0);
+  if (u <= 1.0) return 1.0 - 0.5 * (1.0 - u) * (1.0 - u);
+  return 1.0;
+}
+
+// The overlaps of the interval [a, b] (sample-index units) with the hats of samples 0 .. m-1:
+// (first sample, overlaps).
+std::pair<int, std::vector<double>> hat_overlaps(double a, double b, int m) {
+  if (a > b) std::swap(a, b);
+  const int j0 = std::max(0, static_cast<int>(std::floor(a)) - 1);
+  const int j1 = std::min(m - 1, static_cast<int>(std::ceil(b)) + 1);
+  std::vector<double> w;
+  for (int j = j0; j <= j1; ++j) w.push_back(hat_integral(b - j) - hat_integral(a - j));
+  return {j0, w};
+}
+
+}  // namespace
+
+std::vector<double> psf_cell_energies(const MonoWave& mono, int pixels, double spacing_um,
+                                      double centre_x_um, double centre_y_um) {
+  std::vector<double> out(static_cast<std::size_t>(pixels) * pixels, 0.0);
+  if (!mono.ok || mono.psf.empty()) return out;
+  const int m = mono.fft_n;
+  double energy = 0;  // the interpolant's integral, in sample units
+  for (float v : mono.psf) energy += v;
+  if (!(energy > 0)) return out;
+  // Sample-index coordinate of a position (um): f = (p - shift) / d + m / 2.
+  auto fy = [&](double y_um) { return (y_um - mono.psf_shift_y_um) / mono.psf_dy_um + m / 2; };
+  auto fx = [&](double x_um) { return (x_um - mono.psf_shift_x_um) / mono.psf_dx_um + m / 2; };
+  std::vector<std::pair<int, std::vector<double>>> cols(pixels);
+  for (int c = 0; c < pixels; ++c) {
+    const double x_um = centre_x_um + (c - 0.5 * (pixels - 1)) * spacing_um;
+    cols[c] = hat_overlaps(fx(x_um - 0.5 * spacing_um), fx(x_um + 0.5 * spacing_um), m);
+  }
+  std::vector<double> row_sum(m);
+  for (int r = 0; r < pixels; ++r) {
+    const double y_um = centre_y_um + (0.5 * (pixels - 1) - r) * spacing_um;  // row 0 is +y
+    const auto [j0, wy] = hat_overlaps(fy(y_um - 0.5 * spacing_um), fy(y_um + 0.5 * spacing_um), m);
+    // The row's weighted sum of sample rows, then each cell's columns.
+    std::fill(row_sum.begin(), row_sum.end(), 0.0);
+    bool any = false;
+    for (std::size_t a = 0; a < wy.size(); ++a) {
+      if (wy[a] <= 0.0) continue;
+      any = true;
+      const float* line = &mono.psf[static_cast<std::size_t>(j0 + a) * m];
+      for (int k = 0; k < m; ++k) row_sum[k] += wy[a] * line[k];
+    }
+    if (!any) continue;
+    for (int c = 0; c < pixels; ++c) {
+      const auto& [k0, wx] = cols[c];
+      double sum = 0;
+      for (std::size_t b = 0; b < wx.size(); ++b) sum += wx[b] * row_sum[k0 + b];
+      out[static_cast<std::size_t>(r) * pixels + c] = sum / energy;
+    }
+  }
+  return out;
+}
+
 std::vector<float> polychromatic_psf(const WaveField& field, int pixels, double spacing_um) {
   std::vector<double> sum(static_cast<std::size_t>(pixels) * pixels, 0.0);
   for (const MonoWave& mono : field.mono) {
-    if (!mono.ok || mono.psf.empty()) continue;
-    const int m = mono.fft_n;
-    // Unit energy per um^2, then weighted.
-    double energy = 0;
-    for (float v : mono.psf) energy += v;
-    energy *= std::abs(mono.psf_dx_um * mono.psf_dy_um);
-    if (!(energy > 0)) continue;
-    const double scale = mono.weight / energy;
-    for (int r = 0; r < pixels; ++r) {
-      const double y_um = (0.5 * (pixels - 1) - r) * spacing_um;  // row 0 is +y
-      const double fy = (y_um - mono.psf_shift_y_um) / mono.psf_dy_um + m / 2;
-      for (int c = 0; c < pixels; ++c) {
-        const double x_um = (c - 0.5 * (pixels - 1)) * spacing_um;
-        const double fx = (x_um - mono.psf_shift_x_um) / mono.psf_dx_um + m / 2;
-        const int y0 = static_cast<int>(std::floor(fy)), x0 = static_cast<int>(std::floor(fx));
-        if (y0 < 0 || x0 < 0 || y0 + 1 >= m || x0 + 1 >= m) continue;
-        const double ty = fy - y0, tx = fx - x0;
-        auto at = [&](int yy, int xx) { return mono.psf[static_cast<std::size_t>(yy) * m + xx]; };
-        const double v = (1 - ty) * ((1 - tx) * at(y0, x0) + tx * at(y0, x0 + 1)) +
-                         ty * ((1 - tx) * at(y0 + 1, x0) + tx * at(y0 + 1, x0 + 1));
-        sum[static_cast<std::size_t>(r) * pixels + c] += scale * v;
-      }
-    }
+    const std::vector<double> cells = psf_cell_energies(mono, pixels, spacing_um, 0.0, 0.0);
+    for (std::size_t i = 0; i < sum.size(); ++i) sum[i] += mono.weight * cells[i];
   }
   double peak = 0;
   for (double v : sum) peak = std::max(peak, v);
@@ -464,6 +546,30 @@ std::string format_wave_text(const WaveReport& r) {
   }
   line(fmt::format("  mean RMS wavefront {:.4f} waves, mean Strehl {:.4f}", r.mean_rms_waves,
                    r.mean_strehl));
+  if (r.zernike_terms > 0) {
+    line(fmt::format(
+        "  Zernike {} coefficients (waves; Z1..Z{}, the raw OPD: piston and tilt included; "
+        "least squares over the rays that arrived)",
+        zernike_ordering_name(r.zernike_ordering), r.zernike_terms));
+    for (const WaveField& f : r.fields)
+      for (const MonoWave& m : f.mono) {
+        if (m.zernike_waves.empty()) {
+          line(fmt::format("    field {:.3f} deg, {:.1f} nm: no fit (too few rays arrived)",
+                           f.field_deg, m.wavelength_nm));
+          continue;
+        }
+        line(fmt::format("    field {:.3f} deg, {:.1f} nm (fit residual RMS {:.2e} waves):",
+                         f.field_deg, m.wavelength_nm, m.zernike_residual_rms_waves));
+        std::string row;
+        for (std::size_t j = 0; j < m.zernike_waves.size(); ++j) {
+          row += fmt::format("  Z{:<3d}{:+.5f}", j + 1, m.zernike_waves[j]);
+          if ((j + 1) % 6 == 0 || j + 1 == m.zernike_waves.size()) {
+            line("    " + row);
+            row.clear();
+          }
+        }
+      }
+  }
   for (const std::string& w : r.warnings) line("  warning: " + w);
   return out;
 }
@@ -487,6 +593,10 @@ std::string format_wave_json(const WaveReport& r) {
   j["frequencies_cyc_mm"] = arr(r.frequencies_cyc_mm);
   j["mean_rms_wavefront_waves"] = num(r.mean_rms_waves);
   j["mean_strehl"] = num(r.mean_strehl);
+  if (r.zernike_terms > 0) {
+    j["zernike_terms"] = r.zernike_terms;
+    j["zernike_ordering"] = zernike_ordering_name(r.zernike_ordering);
+  }
   json fields = json::array();
   for (const WaveField& f : r.fields) {
     json o;
@@ -507,6 +617,11 @@ std::string format_wave_json(const WaveReport& r) {
       q["psf_dx_um"] = num(std::abs(m.psf_dx_um));
       q["psf_dy_um"] = num(std::abs(m.psf_dy_um));
       q["vignetted_fraction"] = num(m.vignetted_fraction);
+      if (r.zernike_terms > 0) {
+        q["zernike_waves"] = arr(m.zernike_waves);
+        q["zernike_residual_rms_waves"] =
+            m.zernike_waves.empty() ? json(nullptr) : num(m.zernike_residual_rms_waves);
+      }
       mono.push_back(q);
     }
     o["per_wavelength"] = mono;

@@ -23,6 +23,7 @@ struct AnalyzeCommand {
   bool no_scale = false;
   std::string dispersion;  // "" = the lens's own
   std::string mode;        // "" = the lens's own spec mode
+  std::string zernike_order = "fringe";
   AnalyzeOptions options;
 };
 
@@ -31,6 +32,8 @@ void run_analyze(const AnalyzeCommand& cmd) {
   options.trace.ray_aiming = !cmd.no_ray_aiming;
   options.trace.scale_to_spec = !cmd.no_scale;
   options.wave_options.threads = options.trace.threads;
+  options.wave_options.zernike_ordering = parse_zernike_ordering(cmd.zernike_order);
+  if (options.wave_options.zernike_terms > 0) options.wave = true;
   if (cmd.dispersion == "abbe") options.dispersion = DispersionModel::kAbbe;
   if (cmd.dispersion == "catalog") options.dispersion = DispersionModel::kCatalog;
   Lens lens = read_lens(cmd.lens_path);
@@ -94,8 +97,15 @@ void setup_analyze(CLI::App& app) {
                   "pupil grid cells across the diameter for --wave (default 64)")
       ->check(CLI::Range(8, 1024));
   sub->add_option("--wavelength-weights", cmd->options.wave_options.wavelength_weights,
-                  "weights of the spec wavelengths for --wave (default equal)")
+                  "weights of the spec wavelengths for --wave (default: the lens's own "
+                  "wavelength weights, else equal)")
       ->delimiter(',');
+  sub->add_option("--zernike", cmd->options.wave_options.zernike_terms,
+                  "Zernike fit of each wavefront with this many terms (implies --wave)")
+      ->check(CLI::Range(1, kMaxZernikeTerms));
+  sub->add_option("--zernike-order", cmd->zernike_order,
+                  "Zernike ordering: fringe (default; unnormalized) or standard (Noll, unit RMS)")
+      ->check(CLI::IsMember({"fringe", "standard"}));
   sub->add_flag("--strict", cmd->strict,
                 "exit with status 3 if any ray fails; refuse a wavelength outside a glass's range");
   sub->footer(

@@ -2,6 +2,7 @@
 #include <fmt/core.h>
 
 #include <memory>
+#include <optional>
 #include <string>
 
 #include "commands.h"
@@ -21,6 +22,8 @@ struct ExportCommand {
   std::string image_size = "1280x720";
   int res_factor = 1;
   int jobs = 0;
+  bool diffraction = false;
+  int pupil_samples = 64;
 };
 
 void run_export(const ExportCommand& cmd) {
@@ -38,7 +41,16 @@ void run_export(const ExportCommand& cmd) {
   TraceOptions trace;
   trace.threads = cmd.jobs;
   const ImagingModel model = build_imaging_model(lens, trace);
-  const ExportSummary summary = export_imaging_model(model, options);
+  std::optional<DiffractionPsfs> diffraction;
+  if (cmd.diffraction) {
+    WaveOptions wave;
+    wave.pupil_samples = cmd.pupil_samples;
+    diffraction = model_diffraction_psfs(model, lens, wave);
+    for (const std::string& w : diffraction->warnings)
+      fmt::print(stderr, "lensopt export: warning: {}\n", w);
+  }
+  const ExportSummary summary =
+      export_imaging_model(model, options, diffraction ? &*diffraction : nullptr);
   fmt::print("{}: {} files in {} (image {}x{} at {}x: pitch {:.3f} um, patch PSFs up to {} px)\n",
              lens.name, summary.files.size(), cmd.output_dir, options.width, options.height,
              options.res_factor, summary.pitch_um, summary.kernel_size);
@@ -62,6 +74,12 @@ void setup_export(CLI::App& app) {
       ->check(CLI::IsMember({1, 2}));
   sub->add_option("--threads,--jobs,-j", cmd->jobs, "threads (0: all cores; --jobs: old name)")
       ->check(CLI::Range(0, 1024));
+  sub->add_flag("--diffraction", cmd->diffraction,
+                "also write diffraction PSFs (FFT of the pupil function) beside the geometric "
+                "ones: psf/field_HH_diffraction.exr, psf_sheet_diffraction.png");
+  sub->add_option("--pupil-samples", cmd->pupil_samples,
+                  "pupil grid cells across the diameter for --diffraction (default 64)")
+      ->check(CLI::Range(8, 1024));
   sub->callback([cmd] { run_export(*cmd); });
 }
 

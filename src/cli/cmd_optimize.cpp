@@ -35,6 +35,8 @@ struct OptimizeCommand {
   std::string glass_search;
   std::string constraints;
   std::string bounds = "auto";
+  std::string merit;  // "" = the [optimize] table's, else spot
+  int wavefront_pupil_samples = -1;
   std::vector<std::string> freeze;
   std::vector<std::string> vary;
   // Command-line overrides (NaN / -1: not given).
@@ -124,6 +126,10 @@ void run_optimize(const OptimizeCommand& cmd) {
                             (parse_bounds(cmd.bounds) == BoundsMode::kAuto && is_paper_lens(lens));
   apply_optimize_table(lens, options);
   if (!cmd.constraints.empty()) options.loss.paper_penalties = cmd.constraints == "paper";
+  if (!cmd.merit.empty()) options.loss.merit = parse_merit(cmd.merit, SourceLocation{"--merit"});
+  if (cmd.wavefront_pupil_samples > 0)
+    options.loss.wavefront_pupil_samples = cmd.wavefront_pupil_samples;
+  const bool wavefront = options.loss.merit == DesignMerit::kWavefront;
   if (!cmd.glass_search.empty())
     options.glass_search = parse_glass_search(cmd.glass_search, SourceLocation{"--glass-search"});
   for (const std::string& f : cmd.freeze) options.freeze.push_back(f);
@@ -172,6 +178,12 @@ void run_optimize(const OptimizeCommand& cmd) {
     j["output"] = out_path.string();
     add_summary_json(j, summarize(result));  // the keys search's results use too
     j["start_rms_spot_um"] = result.start_field_spot_um;
+    j["merit"] = wavefront ? "wavefront" : "spot";
+    if (wavefront) {
+      j["start_mean_rms_wavefront_waves"] = result.start_wavefront_waves;
+      j["final_mean_rms_wavefront_waves"] = result.final_wavefront_waves;
+      j["wavefront_pupil_samples"] = options.loss.wavefront_pupil_samples;
+    }
     j["final_rms_spot_um"] = result.final_field_spot_um;
     j["start_constraints"] = constraints_json(result.start_constraints);
     j["final_constraints"] = constraints_json(result.final_constraints);
@@ -189,6 +201,11 @@ void run_optimize(const OptimizeCommand& cmd) {
     fmt::print("{}\n", j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace));
   } else {
     fmt::print("lensopt optimize: {} -> {}\n", cmd.lens_path, out_path.string());
+    if (wavefront)
+      fmt::print(
+          "  mean RMS wavefront (full sampling, piston and tilt removed): {:.5f} -> {:.5f} "
+          "waves (the merit)\n",
+          result.start_wavefront_waves, result.final_wavefront_waves);
     fmt::print("  mean RMS spot (full sampling): {:.3f} um -> {:.3f} um{}\n", result.start_spot_um,
                result.final_spot_um,
                result.kept_start ? "  (no improvement found: start kept)" : "");
@@ -285,6 +302,13 @@ void setup_optimize(CLI::App& app) {
   sub->add_option("--constraints", cmd->constraints,
                   "strict (default: every bound held) or paper (the paper's soft penalties)")
       ->check(CLI::IsMember({"strict", "paper"}));
+  sub->add_option("--merit", cmd->merit,
+                  "spot (default: the paper's mean RMS spot) or wavefront (the mean RMS "
+                  "wavefront error, piston and tilt removed, exact Jacobian)")
+      ->check(CLI::IsMember({"spot", "wavefront"}));
+  sub->add_option("--wavefront-pupil-samples", cmd->wavefront_pupil_samples,
+                  "pupil grid cells across the diameter for --merit wavefront (default 12)")
+      ->check(CLI::Range(4, 256));
   sub->add_option(
          "--freeze", cmd->freeze,
          "variables or groups to hold (c3, s2, defocus, g1, curvatures, spacings, glasses)")

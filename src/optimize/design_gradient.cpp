@@ -37,6 +37,10 @@ void accumulate(const LensParameterization& param, const std::vector<double>& x,
     out.loss.total = loss.total.a;
     out.loss.field_rms_mm.clear();
     for (const J& f : loss.field_rms_mm) out.loss.field_rms_mm.push_back(f.a);
+    out.loss.merit = loss.merit;
+    out.loss.wavefront_waves = loss.wavefront_waves.a;
+    out.loss.field_wavefront_waves.clear();
+    for (const J& f : loss.field_wavefront_waves) out.loss.field_wavefront_waves.push_back(f.a);
     out.loss.failed_rays = loss.failed_rays;
     out.loss.rays = loss.rays;
   }
@@ -287,6 +291,9 @@ DesignValueGradient design_loss_gradient(const LensParameterization& param,
                                          const std::vector<int>& fixed_glasses,
                                          const TraceOptions& sampling,
                                          const DesignLossOptions& options) {
+  // The adjoint covers the spot merit; the wavefront merit takes the forward-mode Jets.
+  if (options.merit == DesignMerit::kWavefront)
+    return design_loss_gradient_jets(param, x, mode, fixed_glasses, sampling, options);
   const int n = param.size();
   return with_jet_width<8, 16, kDesignGradientWidth>(n, [&](auto width) {
     return design_adjoint_gradient<decltype(width)::value>(param, x, mode, fixed_glasses, sampling,

@@ -25,11 +25,17 @@ std::string glass_search_name(GlassSearch search) {
   return "?";
 }
 
+DesignMerit parse_merit(const std::string& name, const SourceLocation& where) {
+  if (name == "spot") return DesignMerit::kSpot;
+  if (name == "wavefront") return DesignMerit::kWavefront;
+  throw Error(where, fmt::format("merit = '{}' must be spot or wavefront", name));
+}
+
 const char* optimize_table_keys() {
   return "glass_search, constraints, rings, fields, max_iterations, max_rounds, glass_neighbours, "
          "weight_ray_path, weight_ray_angle, weight_glass, min_air_mm, min_glass_mm, "
          "max_glass_mm, min_image_clearance_mm, max_ray_angle_deg, max_surface_slope_deg, "
-         "weight_profile, soft_start, freeze, vary";
+         "weight_profile, soft_start, freeze, vary, merit, wavefront_pupil_samples";
 }
 
 bool apply_optimize_key(const std::string& key, const toml::node& node, const SourceLocation& where,
@@ -92,6 +98,13 @@ bool apply_optimize_key(const std::string& key, const toml::node& node, const So
       throw Error(where,
                   fmt::format("[optimize] constraints = '{}' must be \"strict\" or \"paper\"", v));
     loss.paper_penalties = v == "paper";
+  } else if (key == "merit") {
+    loss.merit = parse_merit(text(), where);
+  } else if (key == "wavefront_pupil_samples") {
+    loss.wavefront_pupil_samples = integer();
+    if (loss.wavefront_pupil_samples < 4 || loss.wavefront_pupil_samples > 256)
+      throw Error(where, fmt::format("[optimize] wavefront_pupil_samples = {} must be in [4, 256]",
+                                     loss.wavefront_pupil_samples));
   } else if (key == "freeze") {
     const toml::array* items = node.as_array();
     if (!items) throw Error(where, "[optimize] freeze must be an array of variable names");

@@ -17,6 +17,9 @@ namespace lensopt {
 GlassSearch parse_glass_search(const std::string& name, const SourceLocation& where);
 std::string glass_search_name(GlassSearch search);
 
+// "spot" or "wavefront" (DesignLossOptions::merit); throws Error at `where` otherwise.
+DesignMerit parse_merit(const std::string& name, const SourceLocation& where);
+
 // Applies one key of an [optimize] table to `options`. Returns false for an unknown key (the
 // caller may know keys of its own); throws Error at `where` for a value of the wrong type or
 // out of range.

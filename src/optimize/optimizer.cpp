@@ -13,6 +13,7 @@
 #include <memory>
 
 #include "lensopt/analysis/analyze.h"
+#include "lensopt/analysis/wavefront.h"
 #include "lensopt/core/adam.h"
 #include "lensopt/core/error.h"
 #include "lensopt/core/jet_width.h"
@@ -158,16 +159,37 @@ ceres::CostFunction* make_cost_for(DesignFunctor* functor, int n, int residuals)
       n, [&](auto width) { return make_cost<decltype(width)::value>(functor, n, residuals); });
 }
 
-int residual_count(const LensParameterization& param, const TraceOptions& sampling) {
+int residual_count(const LensParameterization& param, const TraceOptions& sampling,
+                   const DesignLossOptions& loss) {
   const Specs& specs = param.structure().specs;
   const int fields =
       static_cast<int>(field_angles_deg(specs.half_field_deg, sampling.fields).size());
   const int rays = static_cast<int>(paper_pupil_samples(sampling.rings).size());
   int glasses = 0;
   for (const LensVariable& v : param.variables()) glasses += v.kind == LensVariable::Kind::kGlass0;
-  return design_residual_count(fields, constraint_field_count(fields, kConstraintFields),
+  return design_residual_count(loss, fields, constraint_field_count(fields, kConstraintFields),
                                static_cast<int>(specs.wavelengths_nm.size()), rays,
                                static_cast<int>(param.structure().surfaces.size()), glasses);
+}
+
+// "mean spot 12.3456 um" (and the mean RMS wavefront with the wavefront merit).
+std::string merit_text(const DesignLoss<double>& l) {
+  std::string out = fmt::format("mean spot {:.4f} um", l.spot_mm * 1000);
+  if (l.merit == DesignMerit::kWavefront)
+    out = fmt::format("mean RMS wavefront {:.5f} waves, ", l.wavefront_waves) + out;
+  return out;
+}
+
+// The mean RMS wavefront (waves, piston and tilt removed) of a lens traced as `analyze` traces
+// it (its spec mode, `sampling`'s fields) on a 32 x 32 pupil grid, with the lens's wavelength
+// weights: the full-sampling measure of the wavefront merit.
+double full_wavefront_waves(const Lens& lens, const TraceOptions& sampling) {
+  const TraceSystem<double> sys = prepare_lens_system(lens, sampling);
+  std::vector<double> weights;
+  if (static_cast<int>(lens.specs.wavelength_weights.size()) == sys.wavelength_count)
+    weights = lens.specs.wavelength_weights;
+  const double w = mean_rms_wavefront(sys, make_pupil_grid(32), weights);
+  return std::isfinite(w) ? w : std::numeric_limits<double>::infinity();
 }
 
 // Rounds of LM with reweighting; x is updated in place. Returns the final double loss.
@@ -183,10 +205,11 @@ DesignLoss<double> run_phase(const LensParameterization& param, std::vector<doub
   for (int round = 0; round < max_rounds; ++round) {
     if (options.interrupt && options.interrupt->load()) break;
     if (static_cast<int>(frozen.size()) >= n) break;
-    const int field_count = static_cast<int>(current.field_rms_mm.size());
+    const std::vector<double>& field_merit = current.field_merit();
+    const int field_count = static_cast<int>(field_merit.size());
     std::vector<double> weights(field_count);
     for (int h = 0; h < field_count; ++h)
-      weights[h] = 1.0 / (field_count * std::max(current.field_rms_mm[h], 1e-5));
+      weights[h] = 1.0 / (field_count * std::max(field_merit[h], 1e-5));
     auto* functor = new DesignFunctor{&param,
                                       mode,
                                       fixed,
@@ -196,8 +219,9 @@ DesignLoss<double> run_phase(const LensParameterization& param, std::vector<doub
                                       &counters.evaluations,
                                       &counters.trajectory};
     ceres::Problem problem;
-    problem.AddResidualBlock(make_cost_for(functor, n, residual_count(param, options.sampling)),
-                             nullptr, x.data());
+    problem.AddResidualBlock(
+        make_cost_for(functor, n, residual_count(param, options.sampling, loss)), nullptr,
+        x.data());
     // The profile bounds, at the clear semi-apertures of this round's start.
     const ProfileBoundSetup bounds = profile_bound_setup(param, x, mode, fixed);
     if (bounds.count > 0) {
@@ -248,13 +272,13 @@ DesignLoss<double> run_phase(const LensParameterization& param, std::vector<doub
       violated = true;
     }
     loss.weight_glass *= glass_weight_growth;
-    const double change =
-        std::abs(next.spot_mm - current.spot_mm) / std::max(current.spot_mm, 1e-9);
+    const double change = std::abs(next.merit_value() - current.merit_value()) /
+                          std::max(current.merit_value(), 1e-9);
     if (options.verbose) {
       fmt::print(stderr,
-                 "lensopt optimize: {} round {}: mean spot {:.4f} um (optimization sampling), "
+                 "lensopt optimize: {} round {}: {} (optimization sampling), "
                  "l_RP {:.2e}, l_RA {:.2e}, l_GV {:.2e}, {} failed rays; {} iterations\n",
-                 name, round + 1, next.spot_mm * 1000, next.ray_path_mm, next.ray_angle, next.glass,
+                 name, round + 1, merit_text(next), next.ray_path_mm, next.ray_angle, next.glass,
                  next.failed_rays, summary.iterations.size());
     }
     current = next;
@@ -336,6 +360,9 @@ void DesignLossOptions::validate() const {
   if (!(max_ray_angle_deg > 0.0 && max_ray_angle_deg < 90.0))
     throw Error(fmt::format("max_ray_angle_deg = {} must be in (0, 90)", max_ray_angle_deg));
   positive(weight_profile, "weight_profile");
+  if (wavefront_pupil_samples < 4 || wavefront_pupil_samples > 256)
+    throw Error(
+        fmt::format("wavefront_pupil_samples = {} must be in [4, 256]", wavefront_pupil_samples));
   if (!(max_surface_slope_deg > 0.0 && max_surface_slope_deg < 90.0))
     throw Error(
         fmt::format("max_surface_slope_deg = {} must be in (0, 90)", max_surface_slope_deg));
@@ -523,6 +550,8 @@ OptimizeResult optimize_lens(const Lens& start, const OptimizeOptions& options) 
   for (const FieldReport& f : start_report.fields)
     result.start_field_spot_um.push_back(f.rms_spot_um.value_or(0.0));
   result.start_constraints = check_constraints(start, options.loss, full.trace);
+  const bool wavefront = options.loss.merit == DesignMerit::kWavefront;
+  if (wavefront) result.start_wavefront_waves = full_wavefront_waves(start, full.trace);
 
   const std::vector<int> frozen_user = param.select(options.freeze);
   std::vector<int> glass_indices;
@@ -548,7 +577,7 @@ OptimizeResult optimize_lens(const Lens& start, const OptimizeOptions& options) 
   const bool soft = options.loss.paper_penalties;
   auto feasible = [&](const DesignLoss<double>& l) { return soft || constraints_met(l); };
   auto better = [&](const DesignLoss<double>& a, const DesignLoss<double>& b) {
-    return soft ? a.total < b.total * (1 - 1e-4) : a.spot_mm < b.spot_mm * (1 - 1e-3);
+    return soft ? a.total < b.total * (1 - 1e-4) : a.merit_value() < b.merit_value() * (1 - 1e-3);
   };
   const auto interrupted = [&] { return options.interrupt && options.interrupt->load(); };
   const std::vector<int> frozen_all = merged(frozen_user, glass_indices);
@@ -586,8 +615,7 @@ OptimizeResult optimize_lens(const Lens& start, const OptimizeOptions& options) 
       focus_loss.paper_penalties = true;
       const DesignLoss<double> f = run_phase(param, x, GlassMode::kFixed, fixed, all_but_defocus,
                                              options, focus_loss, "focus", 1, iterations, counters);
-      result.log.push_back(
-          fmt::format("focus: {:.4f} um (optimization sampling)", f.spot_mm * 1000));
+      result.log.push_back(fmt::format("focus: {} (optimization sampling)", merit_text(f)));
     }
   }
   // Phase 0 (strict constraints only): the paper's soft penalties first. Squared hinges summed
@@ -600,8 +628,7 @@ OptimizeResult optimize_lens(const Lens& start, const OptimizeOptions& options) 
     const DesignLoss<double> s =
         run_phase(param, x, GlassMode::kFixed, fixed, frozen_all, options, soft_loss,
                   "soft penalties", rounds, iterations, counters);
-    result.log.push_back(
-        fmt::format("soft penalties: {:.4f} um (optimization sampling)", s.spot_mm * 1000));
+    result.log.push_back(fmt::format("soft penalties: {} (optimization sampling)", merit_text(s)));
   }
   DesignExtremes start_extremes;
   evaluate_double(param, x, GlassMode::kFixed, fixed, options.sampling, loss, &start_extremes);
@@ -616,8 +643,7 @@ OptimizeResult optimize_lens(const Lens& start, const OptimizeOptions& options) 
   }
   DesignLoss<double> best = run_phase(param, x, GlassMode::kFixed, fixed, frozen_all, options, loss,
                                       "fixed glasses", rounds, iterations, counters);
-  result.log.push_back(
-      fmt::format("fixed glasses: {:.4f} um (optimization sampling)", best.spot_mm * 1000));
+  result.log.push_back(fmt::format("fixed glasses: {} (optimization sampling)", merit_text(best)));
 
   const bool search = options.glass_search != GlassSearch::kNone && !glasses_frozen_by_user;
   // Phase B: continuous glasses with an annealed glass-variable loss (its weight grows tenfold
@@ -634,7 +660,7 @@ OptimizeResult optimize_lens(const Lens& start, const OptimizeOptions& options) 
     const DesignLoss<double> b =
         run_phase(param, xc, GlassMode::kFixed, snapped, frozen_all, options, snapped_loss,
                   "snapped", rounds, iterations, counters);
-    result.log.push_back(fmt::format("continuous then snapped: {:.4f} um", b.spot_mm * 1000));
+    result.log.push_back(fmt::format("continuous then snapped: {}", merit_text(b)));
     if (feasible(b) && (!feasible(best) || better(b, best))) {
       x = xc;
       fixed = snapped;
@@ -666,9 +692,9 @@ OptimizeResult optimize_lens(const Lens& start, const OptimizeOptions& options) 
               fmt::format("element {} as {}", m + 1, param.glass_space().name(candidate)), 2,
               std::max(10, iterations / 3), counters);
           if (feasible(trial) && better(trial, best)) {
-            result.log.push_back(fmt::format(
-                "element {}: {} -> {} ({:.4f} um)", m + 1, param.glass_space().name(fixed[m]),
-                param.glass_space().name(candidate), trial.spot_mm * 1000));
+            result.log.push_back(
+                fmt::format("element {}: {} -> {} ({})", m + 1, param.glass_space().name(fixed[m]),
+                            param.glass_space().name(candidate), merit_text(trial)));
             fixed = trial_fixed;
             x = trial_x;
             best = trial;
@@ -697,19 +723,23 @@ OptimizeResult optimize_lens(const Lens& start, const OptimizeOptions& options) 
   for (const FieldReport& f : final_report.fields)
     result.final_field_spot_um.push_back(f.rms_spot_um.value_or(0.0));
   result.final_constraints = check_constraints(result.lens, options.loss, full.trace);
+  if (wavefront) result.final_wavefront_waves = full_wavefront_waves(result.lens, full.trace);
   // Never return a worse lens than the start: designs are ordered by (every constraint met at
-  // full sampling, then mean spot at full sampling); a start that is not behind the result in
-  // this order is returned instead (a feasible start is never traded for an infeasible result;
-  // an infeasible start only for a feasible result or a smaller spot), whatever its glasses.
+  // full sampling, then the merit at full sampling: mean spot, or mean RMS wavefront); a start
+  // that is not behind the result in this order is returned instead (a feasible start is never
+  // traded for an infeasible result; an infeasible start only for a feasible result or a smaller
+  // merit), whatever its glasses.
   const bool start_ok = result.start_constraints.all_pass();
   const bool final_ok = result.final_constraints.all_pass();
+  const double start_merit = wavefront ? result.start_wavefront_waves : result.start_spot_um;
+  const double final_merit = wavefront ? result.final_wavefront_waves : result.final_spot_um;
   const bool start_not_behind =
-      (start_ok && !final_ok) ||
-      (start_ok == final_ok && !(result.final_spot_um < result.start_spot_um));
-  if (start_not_behind || !std::isfinite(result.final_spot_um)) {
+      (start_ok && !final_ok) || (start_ok == final_ok && !(final_merit < start_merit));
+  if (start_not_behind || !std::isfinite(final_merit)) {
     result.lens = start;
     result.final_spot_um = result.start_spot_um;
     result.final_field_spot_um = result.start_field_spot_um;
+    result.final_wavefront_waves = result.start_wavefront_waves;
     result.final_constraints = result.start_constraints;
     result.kept_start = true;
   }

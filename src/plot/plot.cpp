@@ -111,6 +111,30 @@ double default_width(PlotKind kind) {
   return 1200;
 }
 
+// The polychromatic diffraction MTF of fields 0, 0.7 and 1 of the lens (61 frequencies from 0
+// to the cutoff of the shortest wavelength), with its wavelength weights: the MTF page's and the
+// report's chart.
+WaveReport compute_mtf_curves(const PlotContext& ctx, const PlotOptions& options) {
+  const TraceSystem<double>& sys = ctx.sys;
+  WaveOptions wave;
+  wave.pupil_samples = options.pupil_samples;
+  wave.threads = options.trace.threads;
+  wave.wavelength_weights = lens_wavelength_weights(ctx.lens, sys.wavelength_count);
+  wave.geometric = false;
+  double lambda_min = 1e9;
+  for (int w = 0; w < sys.wavelength_count; ++w)
+    lambda_min = std::min(lambda_min, sys.lens.wavelengths_nm[w]);
+  const double cutoff = 1.0 / (lambda_min * 1e-6 * (sys.efl_mm / sys.epd_mm));
+  std::vector<double> freqs;
+  for (int k = 0; k <= 60; ++k) freqs.push_back(cutoff * k / 60.0);
+  return analyze_wave(sys, wave, freqs, field_indices(ctx, {0.0, 0.7, 1.0}));
+}
+
+std::string mtf_title(const WaveReport& r) {
+  return fmt::format("polychromatic diffraction MTF ({} x {} pupil, FFT {})", r.pupil_samples,
+                     r.pupil_samples, r.fft_n);
+}
+
 // The wave-optics page of one lens, drawn into `area` (no compare lens: one lens per page).
 void draw_wave_page(Canvas& c, Rect area, const PlotContext& ctx, const PlotOptions& options,
                     double font_px) {
@@ -119,22 +143,13 @@ void draw_wave_page(Canvas& c, Rect area, const PlotContext& ctx, const PlotOpti
   WaveOptions wave;
   wave.pupil_samples = options.pupil_samples;
   wave.threads = options.trace.threads;
+  wave.wavelength_weights = lens_wavelength_weights(ctx.lens, sys.wavelength_count);
   const double f_number = sys.efl_mm / sys.epd_mm;
-  double lambda_min = 1e9;
-  for (int w = 0; w < sys.wavelength_count; ++w)
-    lambda_min = std::min(lambda_min, sys.lens.wavelengths_nm[w]);
   const double lambda_ref_mm = kWavelengthD_nm * 1e-6;
   switch (options.kind) {
     case PlotKind::kMtf: {
-      const double cutoff = 1.0 / (lambda_min * 1e-6 * f_number);
-      std::vector<double> freqs;
-      for (int k = 0; k <= 60; ++k) freqs.push_back(cutoff * k / 60.0);
-      wave.geometric = false;
-      const WaveReport r = analyze_wave(sys, wave, freqs, fields);
-      draw_mtf_curves(c, area, r,
-                      fmt::format("polychromatic diffraction MTF ({} x {} pupil, FFT {})",
-                                  r.pupil_samples, r.pupil_samples, r.fft_n),
-                      font_px);
+      const WaveReport r = compute_mtf_curves(ctx, options);
+      draw_mtf_curves(c, area, r, mtf_title(r), font_px);
       break;
     }
     case PlotKind::kThroughFocus: {
@@ -250,6 +265,7 @@ struct PageData {
   std::optional<FanData> fans, fans_cmp;
   std::optional<FieldCurveData> field, field_cmp;
   std::optional<PsfStrip> psf, psf_cmp;
+  std::optional<WaveReport> mtf, mtf_cmp;  // the report's MTF chart
   std::vector<const SpotData*> spot_rows;
   std::vector<const PsfStrip*> psf_rows;
   double box_um = 0.0;  // the spot diagrams' box
@@ -285,6 +301,10 @@ PageData compute_page_data(const PlotContext& ctx, const PlotContext* cmp,
     d.psf = compute_psf_strip(ctx);
     if (cmp) d.psf_cmp = compute_psf_strip(*cmp);
   }
+  if (report) {
+    d.mtf = compute_mtf_curves(ctx, options);
+    if (cmp) d.mtf_cmp = compute_mtf_curves(*cmp, options);
+  }
   if (d.spots) d.spot_rows.push_back(&*d.spots);
   if (d.spots_cmp) d.spot_rows.push_back(&*d.spots_cmp);
   d.box_um = d.spots
@@ -300,6 +320,7 @@ struct PageSize {
   double height = 0;
   double spot_h = 0, psf_h = 0;                   // spot and PSF sections, all rows
   double layout_h = 0, top_row_h = 0, fan_h = 0;  // the report's
+  double mtf_h = 0;
 };
 
 PageSize page_size(PlotKind kind, const PageData& d, int rows, double width, double font_px,
@@ -330,7 +351,8 @@ PageSize page_size(PlotKind kind, const PageData& d, int rows, double width, dou
       p.layout_h = layout_height(*d.layout, lc, 0.58 * width, font_px);
       p.top_row_h = std::max(p.layout_h, 0.30 * width);
       p.fan_h = 0.36 * width;
-      p.height = header_h + p.top_row_h + p.spot_h + p.fan_h + p.psf_h + 10;
+      p.mtf_h = 0.36 * width;
+      p.height = header_h + p.top_row_h + p.spot_h + p.fan_h + p.psf_h + p.mtf_h + 10;
       break;
     case PlotKind::kMtf:
     case PlotKind::kThroughFocus:
@@ -372,6 +394,15 @@ void draw_report(Canvas& c, double top, double width, double font_px, const Page
   s0 = section("sampled PSFs", y);
   draw_psf_strips(c, Rect{0, s0, width, p.psf_h - (s0 - y)}.inset(10, 0, 10, 0), d.psf_rows,
                   font_px);
+  y += p.psf_h;
+  s0 = section("diffraction MTF (tangential solid, sagittal dashed)", y);
+  // One chart, or the lens and the comparison lens side by side.
+  const double chart_w = d.mtf_cmp ? width / 2 : width;
+  draw_mtf_curves(c, Rect{0, s0, chart_w, p.mtf_h - (s0 - y)}.inset(10, 0, 14, 0), *d.mtf,
+                  mtf_title(*d.mtf), font_px);
+  if (d.mtf_cmp)
+    draw_mtf_curves(c, Rect{chart_w, s0, chart_w, p.mtf_h - (s0 - y)}.inset(10, 0, 14, 0),
+                    *d.mtf_cmp, mtf_title(*d.mtf_cmp), font_px);
 }
 
 // The page's body below the header.

@@ -33,9 +33,12 @@ bool label(FloatImage& img, int x, int y, const std::string& text, int size) {
 
 // psf/field_NN.exr (the field PSFs, G x G, RGB) and psf_sheet.png (peak-normalized, gamma 1/2.2,
 // labelled with the field angle).
-void write_field_psfs(const ImagingModel& model, const fs::path& dir, ExportSummary& summary) {
+// `suffix` ("" or "_diffraction") names the files of `psfs` (the model's, or its diffraction
+// PSFs).
+void write_field_psfs(const ImagingModel& model, const PsfSet<double>& psfs,
+                      const std::string& suffix, const fs::path& dir, ExportSummary& summary) {
   auto wrote = [&](const fs::path& p) { summary.files.push_back(p); };
-  const int g = model.psfs.options.grid_size;
+  const int g = psfs.options.grid_size;
   const int field_count = static_cast<int>(model.fields_deg.size());
   constexpr int kScale = 3, kColumns = 7, kMargin = 8, kLabel = 22;
   const int tile = g * kScale;
@@ -44,7 +47,7 @@ void write_field_psfs(const ImagingModel& model, const fs::path& dir, ExportSumm
                    kMargin + rows * (tile + kLabel + kMargin), 3, 0.0f);
   summary.labels_drawn = true;
   for (int h = 0; h < field_count; ++h) {
-    const FieldPsf<double>& f = model.psfs.fields[h];
+    const FieldPsf<double>& f = psfs.fields[h];
     FloatImage img(g, g, 3);
     float peak = 0;
     for (int c = 0; c < 3; ++c)
@@ -52,7 +55,7 @@ void write_field_psfs(const ImagingModel& model, const fs::path& dir, ExportSumm
         img.pixels[static_cast<std::size_t>(i) * 3 + c] = static_cast<float>(f.psf[c][i]);
         peak = std::max(peak, static_cast<float>(f.psf[c][i]));
       }
-    const fs::path path = dir / "psf" / fmt::format("field_{:02d}.exr", h);
+    const fs::path path = dir / "psf" / fmt::format("field_{:02d}{}.exr", h, suffix);
     write_float_image(path, img);
     wrote(path);
     const int x0 = kMargin + (h % kColumns) * (tile + kMargin);
@@ -64,8 +67,9 @@ void write_field_psfs(const ImagingModel& model, const fs::path& dir, ExportSumm
     summary.labels_drawn &=
         label(sheet, x0, y0 - 6, fmt::format("{:.2f} deg", model.fields_deg[h]), 15);
   }
-  write_image(dir / "psf_sheet.png", sheet);
-  wrote(dir / "psf_sheet.png");
+  const fs::path sheet_path = dir / fmt::format("psf_sheet{}.png", suffix);
+  write_image(sheet_path, sheet);
+  wrote(sheet_path);
 }
 
 // psf_grid.exr (the 9 x 9 patch kernels at the pixel pitch, each centred in a tile of the
@@ -149,7 +153,8 @@ void write_relative_illumination(const ImagingModel& model, const ExportOptions&
 
 // fields.json: the per-field values, the PSF sampling and the grid's layout.
 void write_fields_json(const ImagingModel& model, const ExportOptions& options, const PsfGrid& grid,
-                       bool invertible, const fs::path& dir, ExportSummary& summary) {
+                       bool invertible, const DiffractionPsfs* diffraction, const fs::path& dir,
+                       ExportSummary& summary) {
   const PsfOptions& popt = model.psfs.options;
   const int g = popt.grid_size;
   const int field_count = static_cast<int>(model.fields_deg.size());
@@ -171,6 +176,13 @@ void write_fields_json(const ImagingModel& model, const ExportOptions& options, 
          {"traced_rays_rgb", {f.traced_rays[0], f.traced_rays[1], f.traced_rays[2]}},
          {"failed_rays", f.failed_rays},
          {"psf", fmt::format("psf/field_{:02d}.exr", h)}});
+    if (diffraction) {
+      const FieldPsf<double>& d = diffraction->psfs.fields[h];
+      json& o = fields.back();
+      o["psf_diffraction"] = fmt::format("psf/field_{:02d}_diffraction.exr", h);
+      o["strehl"] = diffraction->strehl[h];
+      o["diffraction_energy_share_rgb"] = {d.energy_share[0], d.energy_share[1], d.energy_share[2]};
+    }
   }
   json patches = json::array();
   for (int q = 0; q < n * n; ++q) {
@@ -221,7 +233,8 @@ void ExportOptions::validate() const {
     throw Error(fmt::format("resolution factor {} must be 1 or 2", res_factor));
 }
 
-ExportSummary export_imaging_model(const ImagingModel& model, const ExportOptions& options) {
+ExportSummary export_imaging_model(const ImagingModel& model, const ExportOptions& options,
+                                   const DiffractionPsfs* diffraction) {
   options.validate();
   ExportSummary summary;
   const fs::path& dir = options.output_dir;
@@ -231,12 +244,13 @@ ExportSummary export_imaging_model(const ImagingModel& model, const ExportOption
     throw Error(SourceLocation{dir.string()},
                 fmt::format("cannot create the output directory: {}", ec.message()));
   }
-  write_field_psfs(model, dir, summary);
+  write_field_psfs(model, model.psfs, "", dir, summary);
+  if (diffraction) write_field_psfs(model, diffraction->psfs, "_diffraction", dir, summary);
   const PsfGrid grid = make_psf_grid(model, options.width, options.height, options.res_factor);
   write_psf_grid(grid, dir, summary);
   const bool invertible = write_distortion_map(model, options, grid.geometry, dir, summary);
   write_relative_illumination(model, options, dir, summary);
-  write_fields_json(model, options, grid, invertible, dir, summary);
+  write_fields_json(model, options, grid, invertible, diffraction, dir, summary);
   return summary;
 }
 

@@ -1,6 +1,8 @@
 #!/usr/bin/env bash
 # End-to-end tests of the wave optics (issue 17): `analyze --wave` text and JSON (no NaN, MTF at
-# the asked frequencies, values in range), the wave-optics plot kinds, `bench --wave`.
+# the asked frequencies, values in range), Zernike fits, the wave-optics plot kinds and the
+# report's MTF, `bench --wave`, `optimize --merit wavefront`, `export --diffraction` and
+# `render --psf diffraction|auto` (the default geometric output unchanged).
 set -euo pipefail
 lensopt="$1"
 tmp=$(mktemp -d)
@@ -39,4 +41,64 @@ done
 "$lensopt" bench --wave --pupil-samples 32 --repeats 1 --json > "$tmp/bench.json"
 python3 -c "import json,sys; r=json.load(open(sys.argv[1])); assert r['fields']==21 and r['wavelengths']==3 and r['diffraction_mtf_ms']>0" "$tmp/bench.json" \
   || fail "bench --wave"
+# Zernike fits in the JSON and the text.
+"$lensopt" analyze lenses/cooke.toml --fields 2 --rings 4 --pupil-samples 32 --zernike 9 \
+  --zernike-order standard --json > "$tmp/zernike.json"
+python3 - "$tmp/zernike.json" <<'PY' || fail "analyze --zernike --json"
+import json, sys
+def no_nan(x): raise ValueError("NaN or Infinity in JSON: " + x)
+w = json.load(open(sys.argv[1]), parse_constant=no_nan)["wave"]
+assert w["zernike_terms"] == 9 and w["zernike_ordering"] == "standard"
+for f in w["fields"]:
+    for m in f["per_wavelength"]:
+        assert len(m["zernike_waves"]) == 9, m
+        assert m["zernike_residual_rms_waves"] >= 0
+PY
+"$lensopt" analyze lenses/cooke.toml --fields 2 --rings 4 --pupil-samples 32 --zernike 5 \
+  > "$tmp/zernike.txt" || fail "analyze --zernike"
+grep -q "Zernike fringe coefficients" "$tmp/zernike.txt" || fail "analyze --zernike text"
+
+# The report page carries the MTF chart.
+"$lensopt" plot lenses/cooke.toml --kind report --pupil-samples 16 -o "$tmp/report.svg" 2> /dev/null \
+  || fail "plot --kind report"
+grep -q "diffraction MTF" "$tmp/report.svg" || fail "the report lacks the MTF chart"
+
+# optimize --merit wavefront lowers the RMS wavefront (a short run).
+"$lensopt" optimize lenses/zmx/achromat_ac254_100.zmx -o "$tmp/achromat.toml" --merit wavefront \
+  --fields 3 --rings 4 --max-iterations 5 --wavefront-pupil-samples 8 --json -q > "$tmp/opt.json" \
+  || fail "optimize --merit wavefront"
+python3 - "$tmp/opt.json" <<'PY' || fail "optimize --merit wavefront JSON"
+import json, sys
+r = json.load(open(sys.argv[1]))
+assert r["merit"] == "wavefront"
+assert 0 < r["final_mean_rms_wavefront_waves"] < r["start_mean_rms_wavefront_waves"], r
+PY
+
+# export --diffraction writes the diffraction PSFs beside the geometric ones.
+"$lensopt" export lenses/tessar.toml -o "$tmp/export" --image-size 96x64 --diffraction \
+  --pupil-samples 32 > /dev/null 2> "$tmp/export.err" || fail "export --diffraction"
+for f in psf/field_00.exr psf/field_00_diffraction.exr psf_sheet.png psf_sheet_diffraction.png; do
+  [ -f "$tmp/export/$f" ] || fail "export --diffraction: missing $f"
+done
+python3 - "$tmp/export/fields.json" <<'PY' || fail "export --diffraction fields.json"
+import json, sys
+r = json.load(open(sys.argv[1]))
+for f in r["fields"]:
+    assert f["psf_diffraction"].endswith("_diffraction.exr")
+    assert 0 < f["strehl"] <= 1 and all(0 < e <= 1 + 1e-9 for e in f["diffraction_energy_share_rgb"])
+PY
+
+# render: the default equals --psf geometric byte for byte; diffraction and auto render and differ.
+mkdir -p "$tmp/in"
+"$lensopt" chart -o "$tmp/in/chart.png" --size 96x64 > /dev/null
+for psf in default geometric diffraction auto; do
+  opt=(); [ "$psf" = default ] || opt=(--psf "$psf" --pupil-samples 32)
+  "$lensopt" render lenses/tessar.toml "$tmp/in/chart.png" -o "$tmp/render-$psf" -q "${opt[@]}" \
+    > /dev/null 2> "$tmp/render-$psf.err" || fail "render --psf $psf: $(cat "$tmp/render-$psf.err")"
+done
+cmp -s "$tmp/render-default/chart.png" "$tmp/render-geometric/chart.png" \
+  || fail "render --psf geometric differs from the default"
+cmp -s "$tmp/render-default/chart.png" "$tmp/render-diffraction/chart.png" \
+  && fail "render --psf diffraction equals the geometric image"
+grep -q "diffraction PSFs" "$tmp/render-auto.err" || fail "render --psf auto: no summary"
 echo "wave e2e: ok"

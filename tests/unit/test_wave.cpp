@@ -9,6 +9,8 @@
 
 #include "lensopt/analysis/wave.h"
 #include "lensopt/analysis/wavefront.h"
+#include "lensopt/analysis/zernike.h"
+#include "lensopt/core/error.h"
 #include "lensopt/formats/lens_file.h"
 #include "lensopt/lens/lens_io.h"
 #include "test_support.h"
@@ -206,4 +208,160 @@ TEST_CASE("wave: RMS wavefront derivatives match central finite differences") {
     INFO("d/d", v.name(), ": jet ", value.v[j], " fd ", fd);
     CHECK(std::abs(value.v[j] - fd) <= 1e-6 * std::max(std::abs(fd), 1e-3));
   }
+}
+
+TEST_CASE("wave: Zernike orderings follow Noll (Standard) and the Fringe table") {
+  const double x = 0.3, y = -0.5;
+  const double r2 = x * x + y * y, r = std::sqrt(r2), t = std::atan2(y, x);
+  using Z = ZernikeOrdering;
+  // Standard (Noll): Z2 = 2 r cos, Z3 = 2 r sin, Z4 = sqrt3 (2r^2-1), Z5 = sqrt6 r^2 sin 2t,
+  // Z6 = sqrt6 r^2 cos 2t, Z7 = sqrt8 (3r^3-2r) sin t, Z11 = sqrt5 (6r^4-6r^2+1).
+  CHECK(zernike_value(Z::kStandard, 1, x, y) == doctest::Approx(1.0));
+  CHECK(zernike_value(Z::kStandard, 2, x, y) == doctest::Approx(2 * r * std::cos(t)));
+  CHECK(zernike_value(Z::kStandard, 3, x, y) == doctest::Approx(2 * r * std::sin(t)));
+  CHECK(zernike_value(Z::kStandard, 4, x, y) == doctest::Approx(std::sqrt(3.0) * (2 * r2 - 1)));
+  CHECK(zernike_value(Z::kStandard, 5, x, y) ==
+        doctest::Approx(std::sqrt(6.0) * r2 * std::sin(2 * t)));
+  CHECK(zernike_value(Z::kStandard, 6, x, y) ==
+        doctest::Approx(std::sqrt(6.0) * r2 * std::cos(2 * t)));
+  CHECK(zernike_value(Z::kStandard, 7, x, y) ==
+        doctest::Approx(std::sqrt(8.0) * (3 * r2 * r - 2 * r) * std::sin(t)));
+  CHECK(zernike_value(Z::kStandard, 11, x, y) ==
+        doctest::Approx(std::sqrt(5.0) * (6 * r2 * r2 - 6 * r2 + 1)));
+  // Fringe: Z4 = 2r^2-1, Z5 = r^2 cos 2t, Z9 = 6r^4-6r^2+1, Z10 = r^3 cos 3t, Z16 = R_6^0,
+  // Z36 = R_10^0, Z37 = R_12^0 (the set ends there).
+  CHECK(zernike_value(Z::kFringe, 4, x, y) == doctest::Approx(2 * r2 - 1));
+  CHECK(zernike_value(Z::kFringe, 5, x, y) == doctest::Approx(r2 * std::cos(2 * t)));
+  CHECK(zernike_value(Z::kFringe, 9, x, y) == doctest::Approx(6 * r2 * r2 - 6 * r2 + 1));
+  CHECK(zernike_value(Z::kFringe, 10, x, y) == doctest::Approx(r2 * r * std::cos(3 * t)));
+  CHECK(zernike_value(Z::kFringe, 16, x, y) ==
+        doctest::Approx(20 * std::pow(r, 6) - 30 * r2 * r2 + 12 * r2 - 1));
+  const ZernikeTerm z37 = zernike_term(Z::kFringe, 37);
+  CHECK(z37.n == 12);
+  CHECK(z37.m == 0);
+  const ZernikeTerm z36 = zernike_term(Z::kFringe, 36);
+  CHECK(z36.n == 10);
+  CHECK(z36.m == 0);
+  const ZernikeTerm z35 = zernike_term(Z::kFringe, 35);  // R_9^1 sin
+  CHECK(z35.n == 9);
+  CHECK(z35.m == 1);
+  CHECK(z35.sine);
+  CHECK_THROWS_AS(zernike_term(Z::kFringe, 38), Error);
+  CHECK(zernike_term(Z::kStandard, 38).n == 8);  // Noll goes on: Z37 = R_8^0, Z38 = R_8^2
+  CHECK_THROWS_AS(zernike_term(Z::kFringe, 0), Error);
+  CHECK_THROWS_AS(parse_zernike_ordering("zygo"), Error);
+  // Standard terms have unit RMS over the disk (fine grid, area weights).
+  const PupilGrid grid = make_pupil_grid(256);
+  for (int j : {1, 4, 8, 11, 22, 36}) {
+    double s = 0, a = 0;
+    for (std::size_t i = 0; i < grid.size(); ++i) {
+      const double v = zernike_value(Z::kStandard, j, grid.samples.x[i], grid.samples.y[i]);
+      s += grid.weight[i] * v * v;
+      a += grid.weight[i];
+    }
+    CAPTURE(j);
+    CHECK(std::sqrt(s / a) == doctest::Approx(1.0).epsilon(2e-3));
+  }
+}
+
+TEST_CASE("wave: a wavefront made of known Zernike terms is recovered to 1e-10") {
+  const PupilGrid grid = make_pupil_grid(48);
+  for (const ZernikeOrdering ordering : {ZernikeOrdering::kFringe, ZernikeOrdering::kStandard}) {
+    const int terms = ordering == ZernikeOrdering::kFringe ? 37 : 45;
+    Wavefront<double> wf;
+    wf.opd_waves.assign(grid.size(), 0.0);
+    wf.ok.assign(grid.size(), 1);
+    std::vector<double> truth(terms);
+    for (int j = 1; j <= terms; ++j) truth[j - 1] = 0.3 * std::sin(1.7 * j) / j;
+    int excluded = 0;
+    for (std::size_t i = 0; i < grid.size(); ++i) {
+      // A vignetted top edge: its values are garbage and must not enter the fit.
+      if (grid.samples.y[i] > 0.85) {
+        wf.ok[i] = 0;
+        wf.opd_waves[i] = 1e6;
+        ++excluded;
+        continue;
+      }
+      for (int j = 1; j <= terms; ++j)
+        wf.opd_waves[i] +=
+            truth[j - 1] * zernike_value(ordering, j, grid.samples.x[i], grid.samples.y[i]);
+    }
+    REQUIRE(excluded > 0);
+    const ZernikeFit fit = fit_zernike(wf, grid, terms, ordering);
+    CAPTURE(zernike_ordering_name(ordering));
+    CHECK(fit.samples == static_cast<int>(grid.size()) - excluded);
+    double worst = 0;
+    for (int j = 0; j < terms; ++j)
+      worst = std::max(worst, std::abs(fit.coefficients_waves[j] - truth[j]));
+    INFO("worst coefficient error ", worst);
+    CHECK(worst < 1e-10);
+    CHECK(fit.residual_rms_waves < 1e-10);
+    // Fewer terms than the wavefront holds leave a misfit.
+    CHECK(fit_zernike(wf, grid, 10, ordering).residual_rms_waves > 1e-3);
+  }
+}
+
+TEST_CASE("wave: a known defocus gives the Zernike defocus term of the OPD's quadratic term") {
+  const Lens lens = slow_singlet();
+  const TraceSystem<double> sys = prepare(lens);
+  const double lambda_mm = 587.56e-6;
+  const double sin_u = 1.0 / (2.0 * lens.specs.f_number);
+  const double cos_u = std::sqrt(1.0 - sin_u * sin_u);
+  const double focus = sys.bfl_mm - sys.lens.thickness_mm.back();
+  const double radius = focus - exit_pupil_from_image_mm(sys.lens, 587.56);
+  const PupilGrid grid = make_pupil_grid(64);
+  RayBundle<double> rays;
+  RayRecord<double> record;
+  auto wavefront = [&](double shift) {
+    const ReferenceSphere<double> sphere = reference_sphere(sys, 0, shift);
+    return compute_wavefront(sys, 0, 0, grid, sphere, shift, rays, record);
+  };
+  // The least squares W = a + b rho^2 (the OPD's quadratic term b).
+  auto quadratic = [&](const Wavefront<double>& wf) {
+    double s0 = 0, s1 = 0, s2 = 0, t0 = 0, t1 = 0;
+    for (std::size_t i = 0; i < grid.size(); ++i) {
+      if (!wf.ok[i]) continue;
+      const double r2 =
+          grid.samples.x[i] * grid.samples.x[i] + grid.samples.y[i] * grid.samples.y[i];
+      const double a = grid.weight[i];
+      s0 += a;
+      s1 += a * r2;
+      s2 += a * r2 * r2;
+      t0 += a * wf.opd_waves[i];
+      t1 += a * r2 * wf.opd_waves[i];
+    }
+    return (s0 * t1 - s1 * t0) / (s0 * s2 - s1 * s1);
+  };
+  const Wavefront<double> at_focus = wavefront(focus);
+  const double c4_focus =
+      fit_zernike(at_focus, grid, 4, ZernikeOrdering::kFringe).coefficients_waves[3];
+  const double dz = 0.3 * lambda_mm / (1.0 - cos_u);
+  const double t =
+      -dz * cos_u + std::sqrt(dz * dz * cos_u * cos_u + radius * radius + 2 * radius * dz);
+  const double w020 = (t - radius) / lambda_mm;
+  const Wavefront<double> defocused = wavefront(focus + dz);
+  const double b = quadratic(defocused);
+  // On axis the 4-term fit spans {1, x, y, rho^2}: Fringe Z4 = 2 rho^2 - 1 gives b = 2 c4,
+  // Standard Z4 = sqrt3 (2 rho^2 - 1) gives b = 2 sqrt3 c4.
+  const ZernikeFit fringe = fit_zernike(defocused, grid, 4, ZernikeOrdering::kFringe);
+  const ZernikeFit standard = fit_zernike(defocused, grid, 4, ZernikeOrdering::kStandard);
+  CHECK(2 * fringe.coefficients_waves[3] == doctest::Approx(b).epsilon(1e-9));
+  CHECK(2 * std::sqrt(3.0) * standard.coefficients_waves[3] == doctest::Approx(b).epsilon(1e-9));
+  // And the defocus added is the closed form's W020 (the singlet's own spherical removed).
+  CAPTURE(w020);
+  CHECK(-2 * (fringe.coefficients_waves[3] - c4_focus) == doctest::Approx(w020).epsilon(0.01));
+
+  // analyze_wave reports the same fit per field and wavelength.
+  WaveOptions options;
+  options.pupil_samples = 64;
+  options.focus_shift_mm = focus + dz;
+  options.zernike_terms = 4;
+  const WaveReport r = analyze_wave(sys, options, {}, {0});
+  REQUIRE(r.fields[0].mono[0].zernike_waves.size() == 4);
+  CHECK(r.fields[0].mono[0].zernike_waves[3] ==
+        doctest::Approx(fringe.coefficients_waves[3]).epsilon(1e-12));
+  const std::string json = format_wave_json(r);
+  CHECK(json.find("\"zernike_waves\"") != std::string::npos);
+  CHECK(json.find("\"zernike_ordering\":\"fringe\"") != std::string::npos);
+  CHECK(format_wave_text(r).find("Zernike fringe coefficients") != std::string::npos);
 }

@@ -30,6 +30,8 @@
 #include <vector>
 
 #include "lensopt/analysis/wavefront.h"
+#include "lensopt/analysis/zernike.h"
+#include "lensopt/lens/lens.h"
 #include "lensopt/trace/system.h"
 
 namespace lensopt {
@@ -42,6 +44,8 @@ struct WaveOptions {
   bool keep_psf = false;                   // keep each monochromatic PSF (plots, export)
   bool geometric = true;                   // also the geometric MTF
   int threads = 0;                         // fields in parallel; 0: all cores
+  int zernike_terms = 0;                   // Zernike fit of each wavefront (0: none; Fringe <= 37)
+  ZernikeOrdering zernike_ordering = ZernikeOrdering::kFringe;
 
   // Throws Error for out-of-range values.
   void validate(int wavelength_count) const;
@@ -66,15 +70,19 @@ struct MonoWave {
   bool ok = false;                // the chief ray arrived and some rays did
   std::vector<std::complex<double>> otf_t, otf_s;  // at the requested frequencies
   std::vector<std::complex<double>> geo_t, geo_s;
+  std::vector<double>
+      zernike_waves;  // WaveOptions::zernike_terms coefficients (analysis/zernike.h)
+  double zernike_residual_rms_waves = 0;
   int fft_n = 0;
   std::vector<float> psf;  // fft_n x fft_n, centred (row 0 = most negative y), if kept
 };
 
 struct WaveField {
   double field_deg = 0;
-  std::vector<MonoWave> mono;        // per spec wavelength
-  double rms_waves = 0;              // sqrt(sum omega RMS^2 / sum omega)
-  double strehl = 0;                 // weighted mean
+  double reference_x_mm = 0, reference_y_mm = 0;  // C: the reference chief ray's image point
+  std::vector<MonoWave> mono;                     // per spec wavelength
+  double rms_waves = 0;                           // sqrt(sum omega RMS^2 / sum omega)
+  double strehl = 0;                              // weighted mean
   std::vector<double> mtf_t, mtf_s;  // polychromatic diffraction MTF at the frequencies
   std::vector<double> geo_mtf_t, geo_mtf_s;
 };
@@ -84,6 +92,8 @@ struct WaveReport {
   int fft_n = 0;
   int padding = 0;
   double focus_shift_mm = 0;
+  int zernike_terms = 0;
+  ZernikeOrdering zernike_ordering = ZernikeOrdering::kFringe;
   std::vector<double> frequencies_cyc_mm;
   std::vector<double> wavelengths_nm;
   std::vector<double> weights;
@@ -93,6 +103,10 @@ struct WaveReport {
   double mean_strehl = 0;
   std::vector<std::string> warnings;  // e.g. undersampled wavefronts
 };
+
+// The wavelength weights of a lens for the polychromatic sums: its [specs] wavelength_weights
+// (a .zmx's WAVM weights) when it has one per traced wavelength, else empty (equal weights).
+std::vector<double> lens_wavelength_weights(const Lens& lens, int wavelength_count);
 
 // Wavefront, Strehl and MTFs of every field (or only `field_indices`, when not empty).
 WaveReport analyze_wave(const TraceSystem<double>& sys, const WaveOptions& options,
@@ -108,9 +122,19 @@ std::string format_wave_json(const WaveReport& report);
 // The aberration-free MTF of a circular pupil: (2/pi)(phi - cos phi sin phi), phi = acos(nu/nu_c).
 double diffraction_limited_mtf(double nu_over_cutoff);
 
-// A polychromatic diffraction PSF of one field resampled (bilinear) onto a common grid of
-// `pixels` x `pixels` samples spaced `spacing_um`, centred on the reference point; row 0 is +y
-// (top). Values are in units of the aberration-free peak (weighted). `field` must hold PSFs
+// One monochromatic PSF (WaveOptions::keep_psf) integrated over the cells of a grid of `pixels`
+// x `pixels` square cells of side `spacing_um` whose centre lies at (centre_x_um, centre_y_um)
+// from the reference point C; row 0 is +y (top). Each cell holds the integral over it of the
+// bilinear interpolation of the samples, exactly (the overlaps of the cell with the samples' hat
+// functions, per axis), as a fraction of the whole PSF's energy (sum_k I_k): the cells sum to 1
+// when they cover the FFT window (and a sample beyond); what lies outside is lost.
+// All zeros for a PSF that failed (!ok) or was not kept.
+std::vector<double> psf_cell_energies(const MonoWave& mono, int pixels, double spacing_um,
+                                      double centre_x_um, double centre_y_um);
+
+// A polychromatic diffraction PSF of one field on a common grid of `pixels` x `pixels` cells of
+// `spacing_um`, centred on the reference point; row 0 is +y (top): sum_w omega_w
+// psf_cell_energies(w), divided by its peak (for display). `field` must hold PSFs
 // (WaveOptions::keep_psf).
 std::vector<float> polychromatic_psf(const WaveField& field, int pixels, double spacing_um);
 

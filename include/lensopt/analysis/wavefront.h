@@ -28,6 +28,11 @@
 // centre at (-1 + (i + 1/2) 2/n, -1 + (j + 1/2) 2/n) and takes part when it overlaps the unit
 // circle, with amplitude weight = the cell's area fraction inside the circle (so the pupil edge
 // is anti-aliased). A ray that fails (missed surface, TIR, vignetted) has amplitude 0.
+// Half grid (make_half_pupil_grid, for systems symmetric about the meridional plane, as the
+// tracer's half-pupil spots assume): only the cells with x_p > 0, each weighted twice (it
+// stands for its mirror (-x_p, y_p), whose W is the same), and the x_p = 0 column of an odd n
+// once. The full grid's sums follow: the x-tilt is 0 and the piston and y-tilt fits, RMS and P-V
+// are those of the full grid, at half the rays.
 #pragma once
 
 #include <algorithm>
@@ -47,11 +52,14 @@ struct PupilGrid {
   std::vector<int> row;        // iy of each sample (iy = 0 at y_p = -1)
   std::vector<double> weight;  // area fraction inside the unit circle, (0, 1]
   PupilSamples samples;        // normalized pupil coordinates (x_p, y_p)
+  bool mirrored = false;       // a half grid (see the header)
   std::size_t size() const { return weight.size(); }
 };
 
 // The grid of n x n cells (n >= 2), edge cells weighted by their area inside the circle.
 PupilGrid make_pupil_grid(int n);
+// Its half x_p >= 0 with the weights of the header (mirrored).
+PupilGrid make_half_pupil_grid(int n);
 
 // The exit pupil's axial position relative to the image plane (mm, negative: in front of the
 // image), paraxial at `wavelength_nm`: the stop centre imaged by the surfaces after the stop.
@@ -138,6 +146,13 @@ struct Wavefront {
   bool chief_ok = false;
 };
 
+// W_i with the fitted piston and tilt removed (the residual the RMS and P-V are taken of).
+template <typename T>
+T tilt_removed_opd(const Wavefront<T>& wf, const PupilGrid& grid, std::size_t i) {
+  return wf.opd_waves[i] - wf.piston_waves - wf.tilt_x_waves * K<T>(grid.samples.x[i]) -
+         wf.tilt_y_waves * K<T>(grid.samples.y[i]);
+}
+
 // Traces the grid at field h, wavelength w (an index of sys.lens.wavelengths_nm) and returns
 // its wavefront against `sphere` (reference_sphere of the same field and focus shift).
 // `rays` and `record` are scratch (reused between calls).
@@ -204,18 +219,20 @@ Wavefront<T> compute_wavefront(const TraceSystem<T>& sys, int h, int w, const Pu
     const double px = grid.samples.x[i], py = grid.samples.y[i];
     const double basis[3] = {1.0, px, py};
     for (int u = 0; u < 3; ++u) {
-      for (int v = 0; v < 3; ++v) s[u][v] += a * basis[u] * basis[v];
-      rhs[u] = rhs[u] + K<T>(a * basis[u]) * wv;
+      // A half grid: the mirror cancels every sum odd in x_p (x_p alone, x_p y_p, x_p W).
+      for (int v = 0; v < 3; ++v)
+        if (!grid.mirrored || (u == 1) == (v == 1)) s[u][v] += a * basis[u] * basis[v];
+      if (!grid.mirrored || u != 1) rhs[u] = rhs[u] + K<T>(a * basis[u]) * wv;
     }
     out.valid_weight += a;
     const double l = value_of(rays.l[i]), m = value_of(rays.m[i]);
-    sl[1] += a * px;
+    if (!grid.mirrored) sl[1] += a * px;  // (and l is odd in x_p: sum a l = 0 mirrored)
     sl[2] += a * px * px;
     sl[3] += a * px * l;
     sm[1] += a * py;
     sm[2] += a * py * py;
     sm[3] += a * py * m;
-    sum_l += a * l;
+    if (!grid.mirrored) sum_l += a * l;
     sum_m += a * m;
   }
   out.piston_waves = out.tilt_x_waves = out.tilt_y_waves = zero;
@@ -248,8 +265,7 @@ Wavefront<T> compute_wavefront(const TraceSystem<T>& sys, int h, int w, const Pu
   T lo = zero, hi = zero;
   for (std::size_t i = 0; i < count; ++i) {
     if (!out.ok[i]) continue;
-    const T res = out.opd_waves[i] - coef[0] - coef[1] * K<T>(grid.samples.x[i]) -
-                  coef[2] * K<T>(grid.samples.y[i]);
+    const T res = tilt_removed_opd(out, grid, i);
     sum_sq = sum_sq + K<T>(grid.weight[i]) * res * res;
     if (first || value_of(res) < value_of(lo)) lo = res;
     if (first || value_of(res) > value_of(hi)) hi = res;
@@ -261,6 +277,45 @@ Wavefront<T> compute_wavefront(const TraceSystem<T>& sys, int h, int w, const Pu
   return out;
 }
 
+// The least-squares residuals of the RMS wavefront: r_i = sqrt(a_i / sum a) (W_i - piston - tilt)
+// for every grid sample (0 where the ray did not arrive), so sum r_i^2 = rms_waves^2. The
+// optimizer's wavefront merit (optimize/design_loss.h) uses them as its residuals: their Jets
+// carry the exact Jacobian of the RMS wavefront.
+template <typename T>
+void rms_wavefront_residuals(const Wavefront<T>& wf, const PupilGrid& grid, T* residuals) {
+  for (std::size_t i = 0; i < grid.size(); ++i) {
+    if (!wf.ok[i] || !(wf.valid_weight > 0.0)) {
+      residuals[i] = K<T>(0.0);
+      continue;
+    }
+    residuals[i] =
+        K<T>(std::sqrt(grid.weight[i] / wf.valid_weight)) * tilt_removed_opd(wf, grid, i);
+  }
+}
+
+// The polychromatic RMS wavefront of field h (waves):
+//   W_h = sqrt( sum_w omega_w RMS_{h,w}^2 / sum_w omega_w )
+// over the spec wavelengths (omega: `weights`, empty = equal). `each` (may be null) is called
+// with (w, wavefront) for every wavelength (the optimizer takes its residuals there).
+template <typename T, typename Each>
+T field_rms_wavefront(const TraceSystem<T>& sys, int h, const PupilGrid& grid,
+                      const std::vector<double>& weights, RayBundle<T>& rays, RayRecord<T>& record,
+                      Each&& each) {
+  using std::sqrt;
+  const ReferenceSphere<T> sphere = reference_sphere(sys, h);
+  T sum = K<T>(0.0);
+  double wsum = 0;
+  for (int w = 0; w < sys.wavelength_count; ++w) {
+    const double omega = weights.empty() ? 1.0 : weights[w];
+    const Wavefront<T> wf = compute_wavefront(sys, h, w, grid, sphere, 0.0, rays, record);
+    each(w, wf);
+    sum = sum + K<T>(omega) * wf.rms_waves * wf.rms_waves;
+    wsum += omega;
+  }
+  const T mean = sum / K<T>(wsum);
+  return value_of(mean) > 0.0 ? sqrt(mean) : K<T>(0.0);
+}
+
 // The wavefront merit: mean over fields of the polychromatic RMS wavefront
 //   W_h = sqrt( sum_w omega_w RMS_{h,w}^2 / sum_w omega_w )  (waves, piston and tilt removed)
 // over the spec wavelengths (omega: `weights`, empty = equal). A field or wavelength whose
@@ -268,24 +323,13 @@ Wavefront<T> compute_wavefront(const TraceSystem<T>& sys, int h, int w, const Pu
 template <typename T>
 T mean_rms_wavefront(const TraceSystem<T>& sys, const PupilGrid& grid,
                      const std::vector<double>& weights = {}) {
-  using std::sqrt;
   const int field_count = static_cast<int>(sys.fields_deg.size());
   RayBundle<T> rays;
   RayRecord<T> record;
   T total = K<T>(0.0);
-  for (int h = 0; h < field_count; ++h) {
-    const ReferenceSphere<T> sphere = reference_sphere(sys, h);
-    T sum = K<T>(0.0);
-    double wsum = 0;
-    for (int w = 0; w < sys.wavelength_count; ++w) {
-      const double omega = weights.empty() ? 1.0 : weights[w];
-      const Wavefront<T> wf = compute_wavefront(sys, h, w, grid, sphere, 0.0, rays, record);
-      sum = sum + K<T>(omega) * wf.rms_waves * wf.rms_waves;
-      wsum += omega;
-    }
-    const T mean = sum / K<T>(wsum);
-    if (value_of(mean) > 0.0) total = total + sqrt(mean);
-  }
+  for (int h = 0; h < field_count; ++h)
+    total = total + field_rms_wavefront(sys, h, grid, weights, rays, record,
+                                        [](int, const Wavefront<T>&) {});
   return total / K<T>(field_count);
 }
 

@@ -25,6 +25,17 @@
 // coarse ring pattern misses; they enter the penalties and extremes, not the spot.
 // Failed rays: spot residuals 0; their zeta/zeta' up to the failing surface do enter the angle
 // penalty (a miss has zeta < 0), so the penalties pull failing rays back.
+// Wavefront merit (DesignMerit::kWavefront, `optimize --merit wavefront`): l_S is replaced by
+//   l_W  = mean_h W_h,  W_h = sqrt(sum_w omega_w RMS_{h,w}^2 / sum_w omega_w)     (waves)
+// the RMS wavefront with piston and tilt removed (analysis/wavefront.h, the same code as
+// `analyze --wave`) on the half x_p >= 0 of an n x n pupil grid (wavefront_pupil_samples; the
+// mirrored half grid of wavefront.h, exact for the meridionally symmetric systems the tracer
+// assumes), omega the lens's wavelength weights. Its residuals, one per (field, wavelength, grid
+// cell):
+//   r = sqrt(a_h omega_w / sum omega) sqrt(g_i / sum g) (W_i - piston - tilt)
+// (rms_wavefront_residuals), so sum of squares = sum_h a_h W_h^2 = l_W at W = W_0 with the
+// reweighting above. The grid rays (and each wavelength's chief ray) also carry the path and
+// angle penalties in place of the ring rays; l_S is still reported, from the grid rays.
 #pragma once
 
 #include <omp.h>
@@ -34,6 +45,7 @@
 #include <limits>
 #include <vector>
 
+#include "lensopt/analysis/wavefront.h"
 #include "lensopt/core/threads.h"
 #include "lensopt/optimize/variables.h"
 #include "lensopt/trace/system.h"
@@ -42,6 +54,9 @@ namespace lensopt {
 
 inline constexpr int kEdgeRays = 9;
 inline constexpr int kConstraintFields = 21;
+
+// What the least squares minimizes besides the penalties (header).
+enum class DesignMerit { kSpot, kWavefront };
 
 // Weights and bounds of the design loss (paper values by default).
 struct DesignLossOptions {
@@ -64,6 +79,10 @@ struct DesignLossOptions {
   // kPaperHingeSmoothing of the bound so LM has a derivative), fixed weights; a design may then
   // cross a bound where the trade-off pays, as the paper's own baselines do.
   bool paper_penalties = false;
+  // The merit: the paper's RMS spot, or the RMS wavefront (weight_spot weighs it) on a grid of
+  // wavefront_pupil_samples cells across the pupil.
+  DesignMerit merit = DesignMerit::kSpot;
+  int wavefront_pupil_samples = 12;
 
   void validate() const;  // throws Error naming the bad value
 };
@@ -77,8 +96,19 @@ struct DesignLoss {
   T glass;        // l_GV
   T total;        // l_lens with the options' weights
   std::vector<T> field_rms_mm;
+  // The wavefront merit (DesignMerit::kWavefront only, else empty / 0): l_W and W_h (waves).
+  T wavefront_waves = K<T>(0.0);
+  std::vector<T> field_wavefront_waves;
+  DesignMerit merit = DesignMerit::kSpot;
   int failed_rays = 0;
   int rays = 0;
+  // The optimized merit: l_S (mm) or l_W (waves), and its per-field values.
+  const T& merit_value() const {
+    return merit == DesignMerit::kWavefront ? wavefront_waves : spot_mm;
+  }
+  const std::vector<T>& field_merit() const {
+    return merit == DesignMerit::kWavefront ? field_wavefront_waves : field_rms_mm;
+  }
 };
 
 // Extremes over every traced ray, for the constraint report: per space k the smallest and
@@ -94,6 +124,23 @@ struct DesignExtremes {
 inline int design_residual_count(int fields, int constraint_fields, int wavelengths, int rays,
                                  int surfaces, int glasses) {
   return fields * wavelengths * rays * 2 + constraint_fields * surfaces * 3 + glasses * 2;
+}
+
+// The merit's residuals per spot field: 2 per ring ray and wavelength (spot), or one per grid
+// cell and wavelength (wavefront).
+inline int merit_residuals_per_field(const DesignLossOptions& options, int wavelengths, int rays) {
+  if (options.merit == DesignMerit::kWavefront)
+    return wavelengths *
+           static_cast<int>(make_half_pupil_grid(options.wavefront_pupil_samples).size());
+  return wavelengths * rays * 2;
+}
+
+// design_residual_count for the merit of `options`.
+inline int design_residual_count(const DesignLossOptions& options, int fields,
+                                 int constraint_fields, int wavelengths, int rays, int surfaces,
+                                 int glasses) {
+  return fields * merit_residuals_per_field(options, wavelengths, rays) +
+         constraint_fields * surfaces * 3 + glasses * 2;
 }
 
 // The constraint field count used with `fields` spot fields (see evaluate_design).
@@ -155,9 +202,19 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
   const int field_stride = topt.fields > 1 ? (all_fields - 1) / (topt.fields - 1) : 1;
   const int field_count = topt.fields > 1 ? topt.fields : 1;
   const int wl = sys.wavelength_count;
-  const int rays = static_cast<int>(sys.pupil.size());
+  const bool wavefront = options.merit == DesignMerit::kWavefront;
+  // The half grid: the lens is symmetric about the meridional plane (as the half-pupil spot).
+  const PupilGrid grid =
+      wavefront ? make_half_pupil_grid(options.wavefront_pupil_samples) : PupilGrid{};
+  // Rays per field and wavelength that carry the merit (and the spot).
+  const int rays = wavefront ? static_cast<int>(grid.size()) : static_cast<int>(sys.pupil.size());
   const int k_count = lens.surface_count();
   const double n_r = static_cast<double>(field_count) * wl * rays;
+  // The wavelength weights (the lens's; all 1 when it has none).
+  std::vector<double> omega(wl, 1.0);
+  if (static_cast<int>(specs.wavelength_weights.size()) == wl) omega = specs.wavelength_weights;
+  double omega_sum = 0;
+  for (double v : omega) omega_sum += v;
   const PupilSamples edge = pupil_edge_samples(kEdgeRays);
   const double cos2_max = std::pow(std::cos(options.max_ray_angle_deg * kPi / 180.0), 2);
   // Bounds per space: air >= min_air; glass in [min, max]; the last (image) >= clearance.
@@ -176,6 +233,7 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
   }
 
   std::vector<T> field_rms(field_count, K<T>(0.0));
+  std::vector<T> field_wave(wavefront ? field_count : 0, K<T>(0.0));
   std::vector<T> path_linear(all_fields, K<T>(0.0)), angle_linear(all_fields, K<T>(0.0));
   std::vector<int> failed(all_fields, 0);
   std::vector<DesignExtremes> field_extremes(all_fields);
@@ -183,7 +241,7 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
     e.min_travel_mm.assign(k_count, std::numeric_limits<double>::infinity());
     e.max_travel_mm.assign(k_count, -std::numeric_limits<double>::infinity());
   }
-  const int spot_block = wl * rays * 2;
+  const int spot_block = merit_residuals_per_field(options, wl, rays);
   const int path_offset = field_count * spot_block;
   const int angle_offset = path_offset + all_fields * k_count;
   const int glass_offset = angle_offset + all_fields * k_count * 2;
@@ -241,8 +299,35 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
           }
         }
       };
+      if (spot_field && wavefront) {
+        // The wavefront merit: the grid rays of every wavelength, against the field's sphere.
+        const double a_h = field_weights ? (*field_weights)[h] : 1.0 / field_count;
+        T* r = residuals ? residuals + static_cast<std::size_t>(h) * spot_block : nullptr;
+        field_wave[h] = field_rms_wavefront(
+            sys, hf, grid, omega, bundle, record, [&](int w, const Wavefront<T>& wf) {
+              for (int p = 0; p < rays; ++p) {
+                const std::size_t i = static_cast<std::size_t>(w) * rays + p;
+                const bool traced = bundle.status[p] == kRayOk;
+                ok[i] = traced;
+                if (traced) {
+                  ys[i] = bundle.y[p];
+                  xs[i] = bundle.x[p];
+                } else {
+                  ++failed[hf];
+                }
+              }
+              failed[hf] += bundle.status[rays] != kRayOk;  // the chief ray
+              add_constraints(bundle, record);
+              if (r) {
+                T* rw = r + static_cast<std::size_t>(w) * rays;
+                rms_wavefront_residuals(wf, grid, rw);
+                const T scale = K<T>(std::sqrt(options.weight_spot * a_h * omega[w] / omega_sum));
+                for (int p = 0; p < rays; ++p) rw[p] = scale * rw[p];
+              }
+            });
+      }
       for (int w = 0; w < wl; ++w) {
-        if (spot_field) {
+        if (spot_field && !wavefront) {
           start_rays(sys, hf, w, bundle);
           record.resize(k_count, bundle.size());
           trace_bundle(sys.lens, w, k_count, true, bundle, &record);
@@ -299,7 +384,7 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
           s2 = s2 + dy * dy + xs[i] * xs[i];
         }
       field_rms[h] = count > 0 ? detail::safe_norm(s2 / K<T>(count)) : K<T>(0.0);
-      if (residuals) {
+      if (residuals && !wavefront) {
         const double a_h = field_weights ? (*field_weights)[h] : 1.0 / field_count;
         const T scale =
             K<T>(std::sqrt(options.weight_spot * a_h / (static_cast<double>(wl) * rays)));
@@ -332,7 +417,11 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
 
   T spot = K<T>(0.0), path = K<T>(0.0), angle = K<T>(0.0);
   int failed_total = 0;
+  T wave = K<T>(0.0);
   for (int h = 0; h < field_count; ++h) spot = spot + field_rms[h];
+  for (const T& v : field_wave) wave = wave + v;
+  wave = wave / K<T>(field_count);
+  const T merit = wavefront ? wave : spot / K<T>(field_count);
   for (int hf = 0; hf < all_fields; ++hf) {
     path = path + path_linear[hf];
     angle = angle + angle_linear[hf];
@@ -359,14 +448,17 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
     loss->ray_path_mm = path;
     loss->ray_angle = angle;
     loss->glass = glass_loss;
-    loss->total = K<T>(options.weight_spot) * spot + K<T>(options.weight_ray_path) * path +
+    loss->total = K<T>(options.weight_spot) * merit + K<T>(options.weight_ray_path) * path +
                   K<T>(options.weight_ray_angle) * angle + K<T>(options.weight_glass) * glass_loss;
     loss->field_rms_mm = field_rms;
+    loss->merit = options.merit;
+    loss->wavefront_waves = wave;
+    loss->field_wavefront_waves = field_wave;
     loss->failed_rays = failed_total;
     loss->rays = static_cast<int>(n_r);
   }
   const double total_value =
-      value_of(spot) + value_of(path) + value_of(angle) + value_of(glass_loss);
+      value_of(merit) + value_of(path) + value_of(angle) + value_of(glass_loss);
   return std::isfinite(total_value);
 }
 

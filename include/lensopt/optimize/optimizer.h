@@ -77,6 +77,9 @@ struct OptimizeResult {
   double start_spot_um = 0;  // full sampling
   double final_spot_um = 0;  // full sampling
   std::vector<double> start_field_spot_um, final_field_spot_um;
+  // With the wavefront merit: the mean RMS wavefront (waves, piston and tilt removed) at full
+  // sampling (the lens's spec mode, 32 x 32 pupil grid); 0 with the spot merit.
+  double start_wavefront_waves = 0, final_wavefront_waves = 0;
   ConstraintReport start_constraints, final_constraints;
   std::vector<std::string> glasses;  // per element
   int iterations = 0;                // LM iterations, all phases

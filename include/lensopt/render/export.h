@@ -13,6 +13,11 @@
 //   relative_illumination.exr   per pixel, the factor R(r) (channel Y)
 //   fields.json            per field: angle, y_ref, centroid, D_h, R_h, energy share per channel,
 //                          traced and failed rays; the grid's pitch, patches, weights, azimuths
+// With diffraction PSFs (`export --diffraction`, render/diffraction_psf.h), beside these:
+//   psf/field_HH_diffraction.exr   the diffraction PSF of field HH on the same bins (sums to 1
+//                          per channel), psf_sheet_diffraction.png its contact sheet, and in
+//                          fields.json per field "psf_diffraction", "strehl" and
+//                          "diffraction_energy_share_rgb" (the part of the PSF inside the grid)
 // Every file is written atomically.
 #pragma once
 
@@ -20,6 +25,7 @@
 #include <string>
 #include <vector>
 
+#include "lensopt/render/diffraction_psf.h"
 #include "lensopt/render/render.h"
 
 namespace lensopt {
@@ -41,6 +47,9 @@ struct ExportSummary {
   bool labels_drawn = false;
 };
 
-ExportSummary export_imaging_model(const ImagingModel& model, const ExportOptions& options);
+// `diffraction` (may be null): the model's diffraction PSFs (model_diffraction_psfs), written
+// beside the geometric ones.
+ExportSummary export_imaging_model(const ImagingModel& model, const ExportOptions& options,
+                                   const DiffractionPsfs* diffraction = nullptr);
 
 }  // namespace lensopt
