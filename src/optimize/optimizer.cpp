@@ -19,6 +19,7 @@
 #include "lensopt/core/jet_width.h"
 #include "lensopt/core/text.h"
 #include "lensopt/optimize/design_gradient.h"
+#include "lensopt/optimize/free_jacobian.h"
 #include "lensopt/optimize/profile_bounds.h"
 
 namespace lensopt {
@@ -145,20 +146,6 @@ struct Counters {
   std::string termination;
 };
 
-template <int kWidth>
-ceres::CostFunction* make_cost(DesignFunctor* functor, int n, int residuals) {
-  auto* cost = new ceres::DynamicAutoDiffCostFunction<DesignFunctor, kWidth>(functor);
-  cost->AddParameterBlock(n);
-  cost->SetNumResiduals(residuals);
-  return cost;
-}
-
-ceres::CostFunction* make_cost_for(DesignFunctor* functor, int n, int residuals) {
-  // Ceres' dynamic cost function takes any n in blocks of the width.
-  return with_jet_width<8, 12, 16, 20, 24>(
-      n, [&](auto width) { return make_cost<decltype(width)::value>(functor, n, residuals); });
-}
-
 int residual_count(const LensParameterization& param, const TraceOptions& sampling,
                    const DesignLossOptions& loss) {
   const Specs& specs = param.structure().specs;
@@ -220,8 +207,8 @@ DesignLoss<double> run_phase(const LensParameterization& param, std::vector<doub
                                       &counters.trajectory};
     ceres::Problem problem;
     problem.AddResidualBlock(
-        make_cost_for(functor, n, residual_count(param, options.sampling, loss)), nullptr,
-        x.data());
+        make_free_jacobian_cost(functor, n, residual_count(param, options.sampling, loss), frozen),
+        nullptr, x.data());
     // The profile bounds, at the clear semi-apertures of this round's start.
     const ProfileBoundSetup bounds = profile_bound_setup(param, x, mode, fixed);
     if (bounds.count > 0) {

@@ -442,14 +442,16 @@ TrialResult ToleranceModel::evaluate(const std::vector<double>& perturbations) c
 
   std::vector<ThroughFocusSpot> moments(field_count);
   RayBundle<double> rays;
+  std::vector<double> slopes;
   const int k_count = sys.lens.surface_count();
   for (int h = 0; h < field_count; ++h) {
     for (int w = 0; w < sys.wavelength_count; ++w) {
       start_rays(sys, h, w, rays);
       trace_bundle(sys.lens, w, k_count, true, rays, static_cast<RayRecord<double>*>(nullptr));
-      for (std::size_t i = 0; i < rays.size(); ++i)
-        if (rays.status[i] != kRayOk) ++r.ray_failures;
-      moments[h].add(rays);
+      int failures = 0;  // a local count (the status bytes may alias the result's fields)
+      for (std::size_t i = 0; i < rays.size(); ++i) failures += rays.status[i] != kRayOk;
+      r.ray_failures += failures;
+      moments[h].add(rays, slopes);
     }
     if (moments[h].count() == 0) r.valid = false;
   }

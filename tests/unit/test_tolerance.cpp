@@ -12,6 +12,7 @@
 #include <string>
 
 #include "lensopt/analysis/analyze.h"
+#include "lensopt/analysis/spot.h"
 #include "lensopt/core/atomic_file.h"
 #include "lensopt/core/error.h"
 #include "lensopt/formats/lens_file.h"
@@ -428,4 +429,60 @@ TEST_CASE("tolerance: a trial whose elements intersect is a failure, not a yield
   const ToleranceReport held = run_tolerance(lens, o);
   CHECK(held.trials_with_collisions == 0);
   CHECK(*held.yield == 1.0);
+}
+
+TEST_CASE("tolerance: through-focus moments equal the per-ray sums, failed rays left out") {
+  // ThroughFocusSpot::add divides the slopes in a vectorized pass; the sums must equal the
+  // scalar loop's bit for bit, in the same order, skipping failed rays.
+  RayBundle<double> rays;
+  rays.resize(41);
+  for (std::size_t i = 0; i < rays.size(); ++i) {
+    const double u = static_cast<double>(i) / rays.size();
+    rays.x[i] = 0.01 * std::sin(7.0 * u);
+    rays.y[i] = 3.0 + 0.02 * std::cos(5.0 * u);
+    rays.l[i] = 0.05 * u;
+    rays.m[i] = 0.3 - 0.1 * u;
+    rays.n[i] = std::sqrt(1.0 - rays.l[i] * rays.l[i] - rays.m[i] * rays.m[i]);
+  }
+  rays.status[0] = kRayVignetted;  // the first arrived ray (1) becomes the reference
+  rays.status[17] = kRayMissedSurface;
+  ThroughFocusSpot moments;
+  std::vector<double> scratch;
+  moments.add(rays, scratch);
+  moments.add(rays);  // the overload without a scratch buffer: a second wavelength
+  double y0 = 0, sy0 = 0, sum_dy = 0, sum_dy2 = 0, sum_x2 = 0, sum_ds = 0, sum_dyds = 0;
+  double sum_ds2 = 0, sum_xsx = 0, sum_sx2 = 0;
+  int count = 0;
+  for (int pass = 0; pass < 2; ++pass) {
+    for (std::size_t i = 0; i < rays.size(); ++i) {
+      if (rays.status[i] != kRayOk) continue;
+      const double sy = rays.m[i] / rays.n[i];
+      const double sx = rays.l[i] / rays.n[i];
+      if (count == 0) y0 = rays.y[i], sy0 = sy;
+      const double dy = rays.y[i] - y0;
+      const double ds = sy - sy0;
+      sum_dy += dy;
+      sum_dy2 += dy * dy;
+      sum_x2 += rays.x[i] * rays.x[i];
+      sum_ds += ds;
+      sum_dyds += dy * ds;
+      sum_ds2 += ds * ds;
+      sum_xsx += rays.x[i] * sx;
+      sum_sx2 += sx * sx;
+      ++count;
+    }
+  }
+  CHECK(moments.count() == 2 * 39);
+  CHECK(count == 2 * 39);
+  CHECK(moments.spot.y0 == rays.y[1]);
+  CHECK(moments.sy0 == rays.m[1] / rays.n[1]);
+  CHECK(moments.spot.sum_dy == sum_dy);
+  CHECK(moments.spot.sum_dy2 == sum_dy2);
+  CHECK(moments.spot.sum_x2 == sum_x2);
+  CHECK(moments.sum_ds == sum_ds);
+  CHECK(moments.sum_dyds == sum_dyds);
+  CHECK(moments.sum_ds2 == sum_ds2);
+  CHECK(moments.sum_xsx == sum_xsx);
+  CHECK(moments.sum_sx2 == sum_sx2);
+  CHECK(moments.rms(0.0) > 0.0);
 }

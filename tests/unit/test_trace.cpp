@@ -188,3 +188,53 @@ TEST_CASE("trace: paper pupil sampling has 1024 rays on the half pupil, within t
   CHECK(fields[20] == 25.0);
   CHECK(fields[1] == doctest::Approx(1.25));
 }
+
+TEST_CASE("trace: a failed ray in the bundle leaves the other rays' bits unchanged") {
+  // trace_bundle skips its per-ray status loops when no ray failed (and transfers to the image
+  // without the per-ray branch): the rays of a bundle with a failure (the full bookkeeping) must
+  // come out bit-identical to the same rays traced alone (the skipping path).
+  const TraceLens<double> lens = make_trace_lens(make_lens(
+      {{0.05, 3.0, 1.6}, {-0.02, 2.0, 0}, {0.0, 2.0, 0}, {0.03, 2.5, 1.7}, {0, 30, 0}}, 2));
+  const int k_count = lens.surface_count();
+  auto start = [](RayBundle<double>& b, std::size_t count) {
+    b.resize(count);
+    for (std::size_t i = 0; i < count; ++i) {
+      const double u = static_cast<double>(i) / 40.0;
+      b.x[i] = 0.3 * u;
+      b.y[i] = -2.0 + 4.0 * u;
+      b.z[i] = -1.0;
+      b.l[i] = 0.0;
+      b.m[i] = std::sin(0.2 * u);
+      b.n[i] = std::cos(0.2 * u);
+    }
+  };
+  RayBundle<double> alone, mixed;
+  start(alone, 37);
+  start(mixed, 38);
+  // Ray 37 of `mixed` travels backwards; ray 5 is sent far off axis and misses a surface.
+  mixed.l[37] = 0.0;
+  mixed.m[37] = 0.6;
+  mixed.n[37] = -0.8;
+  RayBundle<double> far = mixed;
+  far.y[5] = 200.0;
+  trace_bundle(lens, 0, k_count, true, alone, static_cast<RayRecord<double>*>(nullptr));
+  trace_bundle(lens, 0, k_count, true, mixed, static_cast<RayRecord<double>*>(nullptr));
+  trace_bundle(lens, 0, k_count, true, far, static_cast<RayRecord<double>*>(nullptr));
+  CHECK(mixed.status[37] == kRayBackwards);
+  CHECK(mixed.failed_surface[37] == 0);
+  CHECK(far.status[5] == kRayMissedSurface);
+  for (std::size_t i = 0; i < 37; ++i) {
+    INFO("ray ", i);
+    REQUIRE(alone.status[i] == kRayOk);
+    CHECK(mixed.status[i] == kRayOk);
+    CHECK(mixed.x[i] == alone.x[i]);
+    CHECK(mixed.y[i] == alone.y[i]);
+    CHECK(mixed.l[i] == alone.l[i]);
+    CHECK(mixed.m[i] == alone.m[i]);
+    CHECK(mixed.n[i] == alone.n[i]);
+    if (i == 5) continue;
+    CHECK(far.status[i] == kRayOk);
+    CHECK(far.y[i] == alone.y[i]);
+    CHECK(far.x[i] == alone.x[i]);
+  }
+}

@@ -72,6 +72,16 @@ struct SpotAccumulator {
   T centroid() const { return count == 0 ? K<T>(0.0) : y0 + sum_dy * K<T>(1.0 / count); }
 };
 
+namespace detail {
+
+// The ray slopes sx[i] = l[i] / n[i], sy[i] = m[i] / n[i] of `count` rays, built for several
+// x86-64 levels (src/analysis/spot_moments.cpp). Each quotient is correctly rounded, so every
+// build gives the same bits as the scalar division.
+void ray_slopes(const double* l, const double* m, const double* n, std::size_t count, double* sx,
+                double* sy);
+
+}  // namespace detail
+
 // The spot of one field through focus: SpotAccumulator's sums plus those of the ray slopes, so the
 // spot on a plane shifted by tau (mm) along the axis follows without tracing again. A ray at
 // (x, y) on the reference plane with slopes (sx, sy) = (l/n, m/n) lands at (x + tau sx,
@@ -85,10 +95,20 @@ struct ThroughFocusSpot {
 
   int count() const { return spot.count; }
   void add(const RayBundle<double>& rays) {
-    for (std::size_t i = 0; i < rays.size(); ++i) {
+    std::vector<double> slopes;
+    add(rays, slopes);
+  }
+  // The same with a scratch buffer for the slopes (reused across calls, no allocation).
+  void add(const RayBundle<double>& rays, std::vector<double>& slopes) {
+    const std::size_t count = rays.size();
+    slopes.resize(2 * count);
+    double* slope_x = slopes.data();
+    double* slope_y = slope_x + count;
+    detail::ray_slopes(rays.l.data(), rays.m.data(), rays.n.data(), count, slope_x, slope_y);
+    for (std::size_t i = 0; i < count; ++i) {
       if (rays.status[i] != kRayOk) continue;
-      const double sy = rays.m[i] / rays.n[i];
-      const double sx = rays.l[i] / rays.n[i];
+      const double sy = slope_y[i];
+      const double sx = slope_x[i];
       if (!spot.has_reference) sy0 = sy;
       spot.add_ray(rays.x[i], rays.y[i]);
       const double dy = rays.y[i] - spot.y0;

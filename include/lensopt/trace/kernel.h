@@ -85,10 +85,15 @@ struct RayRecord {
   std::vector<T> optical_path_mm;
   std::vector<T> path_start_z, path_start_n;  // kernel scratch for the optical path
 
+  // Every array zeroed; a record resized again to the same shape reuses its memory.
   void resize(int surface_count, std::size_t ray_count, bool optical_path = false) {
-    axial_travel_mm.assign(surface_count, std::vector<T>(ray_count));
-    cos2_incidence.assign(surface_count, std::vector<T>(ray_count));
-    cos2_refraction.assign(surface_count, std::vector<T>(ray_count));
+    auto fit = [&](std::vector<std::vector<T>>& arrays) {
+      arrays.resize(surface_count);
+      for (std::vector<T>& a : arrays) a.assign(ray_count, K<T>(0.0));
+    };
+    fit(axial_travel_mm);
+    fit(cos2_incidence);
+    fit(cos2_refraction);
     optical_path_mm.assign(optical_path ? ray_count : 0, K<T>(0.0));
     path_start_z.resize(optical_path ? ray_count : 0);
     path_start_n.resize(optical_path ? ray_count : 0);
@@ -156,6 +161,25 @@ void trace_surface_double(double c, double shift, double mu, std::size_t count, 
 
 }  // namespace detail
 
+namespace detail {
+
+// Whether some direction cosine n[i] is not > 0 (or NaN): a ray that cannot travel forwards.
+template <typename T>
+bool any_not_forward(const T* n, std::size_t count) {
+  if constexpr (std::is_same_v<T, double>) {
+    // Branch-free count (vectorizes): !(n > 0) is true for n <= 0 and for NaN.
+    std::size_t bad = 0;
+    for (std::size_t i = 0; i < count; ++i) bad += !(n[i] > 0.0);
+    return bad != 0;
+  } else {
+    for (std::size_t i = 0; i < count; ++i)
+      if (!(n[i] > K<T>(0.0))) return true;
+    return false;
+  }
+}
+
+}  // namespace detail
+
 // Traces every ray of `rays` through surfaces [0, end) at wavelength number w (end = K for the
 // whole lens), leaving positions relative to vertex end-1 on that surface. If `to_image`, rays
 // continue to the image plane (end must be K) and end with z = 0 relative to the image plane.
@@ -183,12 +207,16 @@ void trace_bundle(const TraceLens<T>& lens, int w, int end, bool to_image, RayBu
   T* start_z = path ? record->path_start_z.data() : nullptr;
   T* start_n = path ? record->path_start_n.data() : nullptr;
 
-  // A ray must travel forwards.
-  for (std::size_t i = 0; i < count; ++i) {
-    if (!(n[i] > zero) && status[i] == kRayOk) {
-      status[i] = kRayBackwards;
-      failed_at[i] = 0;
-      n[i] = one;
+  // A ray must travel forwards. The checks below first ask whether any ray needs the
+  // bookkeeping (a reduction that vectorizes), so a bundle without failures, the usual case,
+  // skips the per-ray status loops.
+  if (detail::any_not_forward(n, count)) {
+    for (std::size_t i = 0; i < count; ++i) {
+      if (!(n[i] > zero) && status[i] == kRayOk) {
+        status[i] = kRayBackwards;
+        failed_at[i] = 0;
+        n[i] = one;
+      }
     }
   }
 
@@ -257,10 +285,14 @@ void trace_bundle(const TraceLens<T>& lens, int w, int end, bool to_image, RayBu
         opl[i] = opl[i] + n_before * (z[i] - start_z[i]) / start_n[i];
     }
     // The first failure of a ray wins.
-    for (std::size_t i = 0; i < count; ++i) {
-      if (failure[i] != kRayOk && status[i] == kRayOk) {
-        status[i] = static_cast<std::uint8_t>(failure[i]);
-        failed_at[i] = static_cast<std::int8_t>(k);
+    std::int32_t any_failure = 0;
+    for (std::size_t i = 0; i < count; ++i) any_failure |= failure[i];
+    if (any_failure != 0) {
+      for (std::size_t i = 0; i < count; ++i) {
+        if (failure[i] != kRayOk && status[i] == kRayOk) {
+          status[i] = static_cast<std::uint8_t>(failure[i]);
+          failed_at[i] = static_cast<std::int8_t>(k);
+        }
       }
     }
   }
@@ -270,6 +302,16 @@ void trace_bundle(const TraceLens<T>& lens, int w, int end, bool to_image, RayBu
     const T t = lens.thickness_mm[last];
     T* travel = record ? record->axial_travel_mm[last].data() : nullptr;
     const T n_image = path ? lens.index(last, w) : one;
+    if (!travel && !path && !detail::any_not_forward(n, count)) {
+      // Every ray travels forwards: the same transfer without the per-ray branch.
+      for (std::size_t i = 0; i < count; ++i) {
+        const T s = -(z[i] - t) / n[i];
+        x[i] = x[i] + s * l[i];
+        y[i] = y[i] + s * m[i];
+        z[i] = zero;
+      }
+      return;
+    }
     for (std::size_t i = 0; i < count; ++i) {
       const T z_rel = z[i] - t;
       if (travel) travel[i] = -z_rel;

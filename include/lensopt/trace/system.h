@@ -146,9 +146,10 @@ namespace detail {
 template <typename T, typename System>
 void trace_aiming_rays(const TraceLens<ceres::Jet<T, 1>>& lens_a, int w, const System& sys, int h,
                        const T& r_ep, const T& z_ep, const PupilMap<T>& map, T stop_coord[3],
-                       T stop_derivative[3]) {
+                       T stop_derivative[3], RayBundle<ceres::Jet<T, 1>>* scratch = nullptr) {
   using J = ceres::Jet<T, 1>;
-  RayBundle<J> rays;
+  RayBundle<J> local;
+  RayBundle<J>& rays = scratch ? *scratch : local;  // a reused bundle allocates nothing
   rays.resize(3);
   // Pupil coordinates (x_p, y_p) as inner Jets: top and bottom seed y_p, the sagittal x_p.
   const J top_y(map.offset_y + map.scale_y, 0);
@@ -349,13 +350,14 @@ TraceSystem<T> prepare_system(const TraceLens<T>& lens_in, const SystemSetup& se
   const TraceLens<J> lens_a =
       convert_trace_lens<J>(sys.lens, {}, 0, 0, [](double v, int) { return K<J>(v); });
   const T r_s = sys.stop_radius_mm;
+  RayBundle<J> aiming_rays;
   for (int h = 0; h < field_count; ++h) {
     // On axis the pupil is not aberrated by the definition of R_s (unless R_s is given).
     if (sys.fields_deg[h] == 0.0 && setup.aperture_type != ApertureType::kFloatByStop) continue;
     for (int w = 0; w < wl; ++w) {
       T coord[3], deriv[3];
       detail::trace_aiming_rays<T>(lens_a, w, sys, h, r_ep, sys.entrance_pupil_z_mm, identity,
-                                   coord, deriv);
+                                   coord, deriv, &aiming_rays);
       const T top = K<T>(1.0) + (r_s - coord[0]) / deriv[0];
       const T bottom = K<T>(-1.0) + (-r_s - coord[1]) / deriv[1];
       const T side = K<T>(1.0) + (r_s - coord[2]) / deriv[2];
