@@ -8,6 +8,8 @@
 #include <vector>
 
 #include "lensopt/analysis/gradient.h"
+#include "lensopt/core/constants.h"
+#include "lensopt/core/random.h"
 #include "lensopt/formats/lens_file.h"
 #include "lensopt/lens/lens_io.h"
 #include "lensopt/trace/kernel.h"
@@ -357,4 +359,49 @@ TEST_CASE("scaling a lens scales every sag") {
     for (double r : {0.5, 2.0, 3.5})
       CHECK(big.surfaces[k].sag_mm(2.5 * r) ==
             doctest::Approx(2.5 * lens.surfaces[k].sag_mm(r)).epsilon(1e-13));
+}
+
+TEST_CASE("asphere intersection finds every steep ray that meets the surface below 80 deg") {
+  // A large, strongly aspheric surface (R = 60 mm, k = -0.8, a4, a6) and rays through known
+  // points of it from every direction up to 80 deg off axis: each point P on the surface and a
+  // direction d give the vertex-plane start P - (z_P / n) d, so the path s = z_P / n is a root.
+  // Newton (chunked and scalar) must find a hit wherever the incidence there is below 80 deg
+  // (cos I >= 0.17); nearer grazing, g(s) has a near-double root and a miss is allowed.
+  const double c = 1.0 / 60.0, one_plus_k = 0.2;
+  const double a[8] = {0.0, 2e-6, -1e-9, 0.0, 0.0, 0.0, 0.0, 0.0};
+  Rng rng(2026);
+  auto uniform = [&rng] { return unit_interval(rng); };
+  int checked = 0, hits = 0;
+  for (int i = 0; i < 20000; ++i) {
+    const double r = 45.0 * std::sqrt(uniform()), phi = 2.0 * kPi * uniform();
+    const double x = r * std::cos(phi), y = r * std::sin(phi);
+    const double theta = 80.0 * kPi / 180.0 * uniform(), psi = 2.0 * kPi * uniform();
+    const double l = std::sin(theta) * std::cos(psi), m = std::sin(theta) * std::sin(psi),
+                 n = std::cos(theta);
+    double sag = 0, slope = 0;
+    detail::asphere_sag(c, one_plus_k, a, x * x + y * y, sag, slope);
+    const double dg = n - 2.0 * slope * (x * l + y * m);  // d . (-2x S', -2y S', 1)
+    const double cos_i = dg / std::sqrt(1.0 + 4.0 * (x * x + y * y) * slope * slope);
+    if (cos_i < 0.17) continue;
+    ++checked;
+    const double x1 = x - sag / n * l, y1 = y - sag / n * m;
+    double s_scalar = 0.0;
+    const bool scalar_hit = detail::asphere_newton(c, one_plus_k, a, x1, y1, l, m, n, s_scalar);
+    double s_chunk = 0.0;
+    std::int32_t failure = -1;
+    detail::asphere_intersect_chunk(c, one_plus_k, a, 1, &x1, &y1, &l, &m, &n, &s_chunk, &failure);
+    // The hit is a root of g (another, nearer root is a valid first intersection too).
+    auto residual = [&](double s) {
+      const double xs = x1 + s * l, ys = y1 + s * m;
+      double sg = 0, sl = 0;
+      detail::asphere_sag(c, one_plus_k, a, xs * xs + ys * ys, sg, sl);
+      return std::abs(s * n - sg);
+    };
+    if (scalar_hit && failure == kRayOk && residual(s_scalar) < 1e-10 &&
+        residual(s_chunk) < 1e-10)
+      ++hits;
+  }
+  MESSAGE(checked, " rays below 80 deg incidence, ", hits, " found by both Newton stages");
+  CHECK(checked > 15000);
+  CHECK(hits == checked);
 }

@@ -28,6 +28,10 @@
 //   (b) the rays not converged in (a) (rare: steep or far-from-conic rays) run the safeguarded
 //       scalar Newton from the start: a step that leaves the domain is halved until it does not;
 //       g' <= 0 (grazing or from behind) or no convergence in kNewtonIterations steps is a miss.
+//   Measured (test "asphere intersection finds every steep ray ..."): on a strongly aspheric
+//   R = 60 mm surface, every ray that meets it at an incidence below 80 deg is found by both
+//   stages; nearer grazing g has a near-double root (g' -> 0 at the hit), Newton converges
+//   linearly or crosses g' = 0, and about 0.3 % of such rays are reported as misses.
 // For a Jet type the
 // converged s is then refined by Newton steps in the Jet type itself (one per level of Jet
 // nesting): from an exact value one step makes first derivatives exact (implicit
