@@ -58,7 +58,10 @@ __all__ = [
 
 
 def _numpy_x(x: torch.Tensor) -> np.ndarray:
-    return x.detach().to("cpu", torch.float64).contiguous().numpy()
+    # A copy: for a CPU float64 x the numpy view would share x's memory, and an in-place update
+    # of x (an optimizer step, gradcheck's perturbation) would then also change the values the
+    # module compares with to decide whether the optics must be sampled again.
+    return np.array(x.detach().to("cpu", torch.float64).numpy(), dtype=np.float64, copy=True)
 
 
 def _fft_size(n: int) -> int:
