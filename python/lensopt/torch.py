@@ -7,12 +7,22 @@ variables per glass; lensopt.Parameterization names them). Its forward takes B x
 images: the spatially varying PSF blur, relative illumination and distortion of the lens, as
 `lensopt render` forms them. The full image spans the sensor diagonal.
 
-How the gradient flows: the optics (PSFs, relative illumination, distortion nodes) and their
-exact derivatives wrt x come from lensopt's Jets (forward-mode, in C++); the image operations and
-their adjoints (wrt the PSFs and maps, and wrt the input image) run in lensopt's C++ renderer on
-the CPU (FFT convolution per patch). A torch.autograd.Function chains torch's gradient of the
-output into dL/dx and dL/dimage; images are moved to the CPU for the optics and the result back
-to the input's device, so the rest of a network stays on its GPU.
+How the gradient flows: the optics (field PSFs P_h, paraxial heights y_ref,h, centroid heights
+ybar_h, relative illumination R_h) and their exact derivatives wrt x come from lensopt's Jets
+(forward-mode, in C++ on the CPU); they enter torch as tensors on the images' device through one
+torch.autograd.Function, whose backward contracts torch's gradients wrt the PSFs and maps with the
+Jets' derivative parts (Imaging.optics_backward). The image operations run in torch on the
+images' device, as lensopt's renderer forms them (render/render.h), so autograd differentiates
+them wrt the images and the optics:
+  - patch kernels K_q = L_q(sum_h a_qh P_h) / T (9 x 9 patches; the layout, field weights a_qh
+    and the PSF-to-pixel resampling L_q from Imaging.layout),
+  - the overlap-add blur B = sum_q w_q (K_q * S_ext) by FFT per patch block (S_ext the images
+    extended by symmetric reflection),
+  - relative illumination B R(r), R piecewise linear through (y_ref,h, R_h),
+  - the distortion warp: bicubic (Keys) samples at the inverse map through (ybar_h, y_ref,h).
+Only integer choices (the patch layout, kernel radii, interpolation pieces, warp taps and which
+samples are black) are fixed from the optics' values, as the C++ renderer fixes them; no image is
+copied to the CPU, so a network on a GPU keeps its images there.
 
 Glasses (glass_mode="quantized", the paper's): the forward pass uses the nearest catalog glass
 and the gradient passes straight through to the continuous g; l_GV pulls g towards its glass.
@@ -48,53 +58,93 @@ __all__ = [
 
 
 def _numpy_x(x: torch.Tensor) -> np.ndarray:
-    return x.detach().to("cpu", torch.float64).contiguous().numpy()
+    # A copy: for a CPU float64 x the numpy view would share x's memory, and an in-place update
+    # of x (an optimizer step, gradcheck's perturbation) would then also change the values the
+    # module compares with to decide whether the optics must be sampled again.
+    return np.array(x.detach().to("cpu", torch.float64).numpy(), dtype=np.float64, copy=True)
 
 
-class _ImageFormationFunction(torch.autograd.Function):
-    """images' = A(x) images: forward by lensopt's renderer, backward by its adjoints."""
+def _fft_size(n: int) -> int:
+    """The smallest m >= n with no prime factor above 7 (a fast FFT length)."""
+    m = max(int(n), 1)
+    while True:
+        k = m
+        for p in (2, 3, 5, 7):
+            while k % p == 0:
+                k //= p
+        if k == 1:
+            return m
+        m += 1
+
+
+def _reflect(i: np.ndarray, n: int) -> np.ndarray:
+    """Symmetric reflection of indices into [0, n): x_{-1-i} = x_i (and periodically beyond)."""
+    m = np.mod(i, 2 * n)
+    return np.where(m < n, m, 2 * n - 1 - m)
+
+
+def _piece(xs: np.ndarray, x: np.ndarray):
+    """The piece k (xs[k] <= x < xs[k+1], the end pieces beyond) of piecewise-linear
+    interpolation through nodes xs, and where x lies at or below xs[0] / at or above xs[-1]."""
+    k = np.searchsorted(xs, x, side="right") - 1
+    low, high = x <= xs[0], x >= xs[-1]
+    k = np.where(low, 0, np.where(high, len(xs) - 2, k))
+    return k, low, high
+
+
+def _lerp(xs: torch.Tensor, ys: torch.Tensor, x: torch.Tensor, k: torch.Tensor) -> torch.Tensor:
+    """ys[k] + t (ys[k+1] - ys[k]), t = (x - xs[k]) / (xs[k+1] - xs[k]): differentiable in the
+    nodes (and x), the piece k fixed (core/interpolate.h's linear_piece)."""
+    x0, x1, y0, y1 = xs[k], xs[k + 1], ys[k], ys[k + 1]
+    return y0 + (x - x0) / (x1 - x0) * (y1 - y0)
+
+
+def _keys(t: torch.Tensor) -> torch.Tensor:
+    """Keys cubic weights (a = -1/2) of the taps at -1, 0, 1, 2 for fractions t: (..., 4)."""
+    t2 = t * t
+    t3 = t2 * t
+    return torch.stack((-0.5 * t3 + t2 - 0.5 * t, 1.5 * t3 - 2.5 * t2 + 1.0,
+                        -1.5 * t3 + 2.0 * t2 + 0.5 * t, 0.5 * t3 - 0.5 * t2), dim=-1)
+
+
+class _OpticsFunction(torch.autograd.Function):
+    """x -> (PSFs F x 3 x G x G, y_ref F, ybar F, RI F) as float64 tensors on `device`, sampled
+    by lensopt's Jets; the backward contracts their gradients with the Jets' derivative parts
+    (Imaging.optics_backward, on the CPU: only the optics' gradients, never an image, go there)."""
 
     @staticmethod
-    def forward(ctx, x, images, module, crop=None):
-        if images.dim() != 4:
-            raise ValueError("images must be B x C x H x W")
-        module._prepare(x, derivatives=module._derivatives)
-        scenes = images.detach().to("cpu", torch.float64).permute(0, 2, 3, 1).contiguous().numpy()
-        rendered = [module.imaging.render(scene, crop) for scene in scenes]
-        out = torch.from_numpy(np.stack(rendered)).permute(0, 3, 1, 2)
+    def forward(ctx, x, module, derivatives, device):
+        module._prepare(x, derivatives=derivatives)
         ctx.module = module
-        ctx.crop = crop
         ctx.x = x.detach().clone()
-        ctx.save_for_backward(images)
-        return out.to(device=images.device, dtype=images.dtype).contiguous()
+        # Fresh tensors per call (autograd attaches this call's node to them).
+        return tuple(t.clone() for t in module._optics_tensors(device))
 
     @staticmethod
-    def backward(ctx, grad_output):
-        (images,) = ctx.saved_tensors
+    def backward(ctx, g_psf, g_ref, g_centroid, g_ri):
         module = ctx.module
-        need_x, need_images = ctx.needs_input_grad[0], ctx.needs_input_grad[1]
-        # The adjoints need the optics' derivatives (the lens part is what costs; the scene
-        # part alone is the correlation with the patch kernels).
         module._prepare(ctx.x, derivatives=True)
-        scenes = images.detach().to("cpu", torch.float64).permute(0, 2, 3, 1).contiguous().numpy()
-        grads = grad_output.detach().to("cpu", torch.float64).permute(0, 2, 3, 1).contiguous().numpy()
-        grad_x = np.zeros(module.param.size)
-        grad_images = []
-        for scene, grad in zip(scenes, grads):
-            gx, gs = module.imaging.backward(scene, ctx.crop, grad, need_images)
-            grad_x += gx
-            if need_images:
-                grad_images.append(gs)
-        gx_t = None
-        if need_x:
-            gx_t = torch.from_numpy(grad_x).to(device=ctx.x.device, dtype=ctx.x.dtype)
-        gi_t = None
-        if need_images:
-            gi_t = torch.from_numpy(np.stack(grad_images)).permute(0, 3, 1, 2)
-            gi_t = gi_t.to(device=images.device, dtype=images.dtype).contiguous()
-        return gx_t, gi_t, None, None
+
+        def host(g):
+            return g.detach().to("cpu", torch.float64).contiguous().numpy()
+
+        gx = module.imaging.optics_backward(host(g_psf), host(g_ref), host(g_centroid),
+                                            host(g_ri))
+        return torch.from_numpy(gx).to(device=ctx.x.device, dtype=ctx.x.dtype), None, None, None
 
 
+class _Plan:
+    """The constants of one image operation (full size W x H, crop, channel count) under one
+    prepare(): the blur's patch tasks, gather and scatter indices, windows and PSF resampling;
+    the RI's radii and pieces; the warp's pieces, tap indices and validity. Integer choices come
+    from the optics' values as in lensopt's renderer; every differentiable quantity is computed
+    in torch from the optics tensors."""
+
+
+# Patches per row / column of the overlap-add blur (PsfGrid::kPatches).
+_PATCHES = 9
+# The blur processes patch rows in chunks of at most this many block elements.
+_CHUNK_ELEMENTS = 1 << 24
 class _LensLossFunction(torch.autograd.Function):
     """(l_S, l_RP, l_RA, l_GV) of x; the backward is the gradient of sum_i w_i l_i with the
     incoming gradients as weights (one Jet evaluation per sign)."""
@@ -173,10 +223,10 @@ class ImageFormation(nn.Module):
         relative_illumination, distortion: apply (and differentiate) them.
         freeze: variable names or groups ("curvatures", "spacings", "glasses", "c3") whose
             gradient is zeroed.
-        threads: threads of the C++ optics and rendering (0: all cores).
+        threads: threads of the C++ optics (0: all cores); the image operations use torch's.
 
-    forward(images, crop=None): B x C x H x W -> B x C x H x W (or the crop's h x w), same
-    device and dtype.
+    forward(images, crop=None): B x C x H x W -> B x C x H x W (or the crop's h x w), on the
+    images' device, in their dtype (computed in float64 for float64 images, else float32).
     """
 
     def __init__(self, lens, *, catalog: str = "", glass_mode: str = "quantized", rings: int = 8,
@@ -185,9 +235,13 @@ class ImageFormation(nn.Module):
                  relative_illumination: bool = True, distortion: bool = True,
                  paraxial_image_solve: bool = True, freeze=(), threads: int = 0):
         super().__init__()
+        if fields < 2:
+            raise ValueError(f"fields = {fields}: the image formation needs at least 2 fields")
         self.param = _lensopt.Parameterization(lens, catalog=catalog,
                                                paraxial_image_solve=paraxial_image_solve)
         self.glass_mode = glass_mode
+        self.relative_illumination = relative_illumination
+        self.distortion = distortion
         self.imaging = _lensopt.Imaging(
             self.param, glass_mode=glass_mode, rings=rings, fields=fields, grid_size=grid_size,
             bin_um=bin_um, sigma_bins=sigma_bins, support_bins=support_bins,
@@ -199,7 +253,9 @@ class ImageFormation(nn.Module):
             self.x.register_hook(lambda g: g * self.frozen_mask.to(g))
         self.register_buffer("frozen_mask", mask, persistent=False)
         self._prepared = None  # (x values, with derivatives)
-        self._derivatives = True
+        self._generation = 0   # counts the samplings of the optics
+        self._values = None    # the optics' values (numpy) of the last sampling
+        self._cache = {}       # per generation: optics tensors, layouts and plans
 
     @property
     def names(self):
@@ -213,16 +269,243 @@ class ImageFormation(nn.Module):
             return
         self.imaging.prepare(v, derivatives)
         self._prepared = (v, derivatives)
+        self._generation += 1
+        self._values = self.imaging.optics(jacobians=False)
+        self._cache = {}
+
+    def _optics_tensors(self, device):
+        key = ("optics", str(device))
+        if key not in self._cache:
+            o = self._values
+            self._cache[key] = tuple(
+                torch.from_numpy(np.ascontiguousarray(o[name])).to(device)
+                for name in ("psf", "reference_y_mm", "centroid_y_mm", "relative_illumination"))
+        return self._cache[key]
+
+    def _layout(self, width: int, height: int):
+        key = ("layout", width, height)
+        if key not in self._cache:
+            self._cache[key] = self.imaging.layout(width, height)
+        return self._cache[key]
+
+    def _plan(self, width, height, crop, channels, device):
+        key = ("plan", width, height, crop, channels, str(device))
+        if key in self._cache:
+            return self._cache[key]
+        L = self._layout(width, height)
+        o = self._values
+        yref, ybar = o["reference_y_mm"], o["centroid_y_mm"]
+        cx0, cy0, cw, ch = crop
+        p = _Plan()
+        p.colours = 3 if channels >= 3 else 1
+        p.crop = crop
+        ax, ay, pitch = L["axis_x"], L["axis_y"], L["pitch_mm"]
+
+        def dev(a, dtype=None):
+            t = torch.from_numpy(np.ascontiguousarray(a))
+            return t.to(device=device, dtype=dtype) if dtype is not None else t.to(device)
+
+        # The warp: per crop pixel its sample position (render/distortion_warp.h), black
+        # outside the image; the blurred region is what the valid samples' taps reach.
+        p.warp = self.distortion
+        if p.warp:
+            for h in range(1, len(ybar)):
+                if not ybar[h] > ybar[h - 1]:
+                    f = o["fields_deg"]
+                    raise ValueError(
+                        f"cannot apply distortion: the image heights of fields {f[h - 1]:.2f} "
+                        f"and {f[h]:.2f} deg do not increase ({ybar[h - 1]:.6f}, "
+                        f"{ybar[h]:.6f} mm)")
+            jj, ii = np.mgrid[0:ch, 0:cw]
+            dx = (cx0 + ii) + 0.5 - ax
+            dy = (cy0 + jj) + 0.5 - ay
+            r_out = pitch * np.sqrt(dx * dx + dy * dy)
+            k, _, _ = _piece(ybar, r_out)
+            rho = yref[k] + (r_out - ybar[k]) / (ybar[k + 1] - ybar[k]) * (yref[k + 1] - yref[k])
+            on_axis = ~(r_out > 1e-12)
+            axis_scale = (yref[1] - yref[0]) / (ybar[1] - ybar[0])
+            scale = np.where(on_axis, axis_scale, rho / np.where(on_axis, 1.0, r_out))
+            sx, sy = ax + dx * scale, ay + dy * scale
+            valid = (sx >= 0.0) & (sx <= width) & (sy >= 0.0) & (sy <= height)
+            fx0 = np.floor(sx - 0.5).astype(np.int64)
+            fy0 = np.floor(sy - 0.5).astype(np.int64)
+            if valid.any():
+                x_lo = int(np.clip(fx0[valid] - 1, 0, width - 1).min())
+                x_hi = int(np.clip(fx0[valid] + 2, 0, width - 1).max()) + 1
+                y_lo = int(np.clip(fy0[valid] - 1, 0, height - 1).min())
+                y_hi = int(np.clip(fy0[valid] + 2, 0, height - 1).max()) + 1
+            else:  # every sample black
+                x_lo, x_hi, y_lo, y_hi = cx0, cx0 + 1, cy0, cy0 + 1
+        else:
+            x_lo, x_hi, y_lo, y_hi = cx0, cx0 + cw, cy0, cy0 + ch
+        p.rx0, p.ry0, p.rw, p.rh = x_lo, y_lo, x_hi - x_lo, y_hi - y_lo
+        if p.warp:
+            t = np.arange(4)
+            rows = np.clip(fy0[..., None] - 1 + t, 0, height - 1) - p.ry0  # ch x cw x 4
+            cols = np.clip(fx0[..., None] - 1 + t, 0, width - 1) - p.rx0
+            index = rows[..., :, None] * p.rw + cols[..., None, :]  # ch x cw x 4 x 4
+            index = np.where(valid[..., None, None], index, 0)
+            p.warp_index = dev(index.reshape(-1))
+            p.warp_piece = dev(k.reshape(-1))
+            p.warp_dx, p.warp_dy = dev(dx.reshape(-1)), dev(dy.reshape(-1))
+            p.warp_r = dev(np.where(on_axis, 1.0, r_out).reshape(-1))
+            p.warp_axis = dev(on_axis.reshape(-1))
+            p.warp_floor_x = dev(fx0.reshape(-1).astype(np.float64))
+            p.warp_floor_y = dev(fy0.reshape(-1).astype(np.float64))
+            p.warp_valid = dev(valid.reshape(-1).astype(np.float64))
+            p.axis = (ax, ay)
+        # Relative illumination over the region: the radius of each pixel and its piece.
+        p.ri = self.relative_illumination
+        if p.ri:
+            jj, ii = np.mgrid[p.ry0:p.ry0 + p.rh, p.rx0:p.rx0 + p.rw]
+            dx, dy = ii + 0.5 - ax, jj + 0.5 - ay
+            r = pitch * np.sqrt(dx * dx + dy * dy)
+            k, low, high = _piece(yref, r)
+            p.ri_radius, p.ri_piece = dev(r), dev(k)
+            p.ri_low, p.ri_high = dev(low), dev(high)
+        # The blur: the patches whose windows meet the region, blocks at a common radius R.
+        n = _PATCHES
+        rx1, ry1 = p.rx0 + p.rw, p.ry0 + p.rh
+        xs = [(q, max(L["lo_x"][q], p.rx0), min(L["hi_x"][q], rx1)) for q in range(n)]
+        ys = [(q, max(L["lo_y"][q], p.ry0), min(L["hi_y"][q], ry1)) for q in range(n)]
+        xs = [t for t in xs if t[2] > t[1]]
+        ys = [t for t in ys if t[2] > t[1]]
+        patches = np.array([py * n + px for py, _, _ in ys for px, _, _ in xs])
+        radii = L["radius"][patches]
+        R = int(radii.max())
+        ex = max(x1 - x0 for _, x0, x1 in xs)
+        ey = max(y1 - y0 for _, y0, y1 in ys)
+        p.R, p.ex, p.ey = R, ex, ey
+        p.nx, p.ny = _fft_size(ex + 2 * R), _fft_size(ey + 2 * R)
+        p.npx, p.npy = len(xs), len(ys)
+        p.cols = dev(np.stack([_reflect(x0 - R + np.arange(p.nx), width) for _, x0, _ in xs]))
+        p.rows = dev(np.stack([_reflect(y0 - R + np.arange(p.ny), height) for _, y0, _ in ys]))
+
+        def windows(spans, w, e):
+            out = np.zeros((len(spans), e))
+            for a, (q, x0, x1) in enumerate(spans):
+                out[a, :x1 - x0] = w[q, x0:x1]
+            return out
+
+        wx = windows(xs, L["window_x"], ex)
+        wy = windows(ys, L["window_y"], ey)
+        p.window_np = wy[:, None, :, None] * wx[None, :, None, :]  # npy x npx x ey x ex
+        tx = np.array([x0 for _, x0, _ in xs])[:, None] + np.arange(ex) - p.rx0  # npx x ex
+        ty = np.array([y0 for _, y0, _ in ys])[:, None] + np.arange(ey) - p.ry0
+        tx, ty = np.clip(tx, 0, p.rw - 1), np.clip(ty, 0, p.rh - 1)
+        p.target = dev((ty[:, None, :, None] * p.rw + tx[None, :, None, :]).reshape(-1))
+        # PSF bins -> pixel kernels of radius R (render/psf_resample.h): the four taps.
+        size_q = 2 * radii + 1
+        S = 2 * R + 1
+        corner = L["corner"][patches]
+        ok = corner >= 0
+        cy, cx = np.divmod(np.where(ok, corner, 0), size_q[:, None])
+        shift = (R - radii)[:, None]
+        base = np.where(ok, (cy + shift) * S + (cx + shift), 0).astype(np.int64)
+        fx, fy = L["fx"][patches], L["fy"][patches]
+        p.kernel_index = dev(np.concatenate([base, base + 1, base + S, base + S + 1], axis=1))
+        p.kernel_weight = dev(np.concatenate([(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy,
+                                              fx * fy], axis=1))
+        p.bin_ok = dev(ok)
+        p.field_weights = dev(L["field_weights"][patches])
+        p.window_t = {}
+        self._cache[key] = p
+        return p
+
+    def _blur(self, images, psf, p, cdtype):
+        """B = sum_q w_q (K_q * S_ext) over the plan's region (colour channels), B x Cc x rh x rw,
+        by FFT per patch block at the common radius R; K_q the patch kernels from the PSFs."""
+        device = images.device
+        B = images.shape[0]
+        F, _, G, _ = psf.shape
+        nq = p.npx * p.npy
+        R, S = p.R, 2 * p.R + 1
+        # Patch kernels K_q[c] = L_q(sum_h a_qh P_h[c]) / T in float64.
+        mixed = torch.einsum("qf,fcb->qcb", p.field_weights, psf.reshape(F, 3, G * G))
+        m = mixed * ((mixed.detach() > 0) & p.bin_ok[:, None, :])
+        total = m.sum(-1, keepdim=True)
+        src = m.repeat(1, 1, 4) * p.kernel_weight[:, None, :]
+        index = p.kernel_index[:, None, :].expand(nq, 3, p.kernel_index.shape[-1])
+        kernel = torch.zeros(nq, 3, S * S, dtype=src.dtype, device=device).scatter_add(
+            2, index, src)
+        unit = torch.zeros(S * S, dtype=src.dtype, device=device)
+        unit[R * S + R] = 1.0
+        has_energy = total > 0
+        kernel = torch.where(has_energy, kernel / torch.where(has_energy, total, torch.ones_like(total)),
+                             unit)
+        if p.colours == 1:
+            kernel = kernel.mean(1, keepdim=True)
+        cc = kernel.shape[1]
+        kernel = kernel.reshape(nq, cc, S, S).to(cdtype)
+        placed = nn.functional.pad(kernel, (0, p.nx - S, 0, p.ny - S))
+        placed = torch.roll(placed, shifts=(-R, -R), dims=(-2, -1))
+        spectra = torch.fft.rfft2(placed)  # nq x Cc x ny x nh
+        spectra = spectra.reshape(p.npy, p.npx, cc, p.ny, -1).permute(2, 0, 1, 3, 4)
+        key = (str(device), cdtype)
+        if key not in p.window_t:
+            p.window_t[key] = torch.from_numpy(p.window_np).to(device=device, dtype=cdtype)
+        window = p.window_t[key]
+        scene = images[:, :p.colours].to(cdtype)
+        region = torch.zeros(B, cc, p.rh * p.rw, dtype=cdtype, device=device)
+        per_row = B * cc * p.npx * p.ny * p.nx
+        step = max(1, _CHUNK_ELEMENTS // per_row)
+        target = p.target.reshape(p.npy, -1)
+        for a in range(0, p.npy, step):
+            b = min(p.npy, a + step)
+            rows = p.rows[a:b]
+            blocks = scene[:, :, rows[:, :, None, None], p.cols[None, None, :, :]]
+            blocks = blocks.permute(0, 1, 2, 4, 3, 5)  # B x Cc x rows x npx x ny x nx
+            conv = torch.fft.irfft2(torch.fft.rfft2(blocks) * spectra[:, a:b], s=(p.ny, p.nx))
+            conv = conv[..., R:R + p.ey, R:R + p.ex] * window[a:b]
+            region = region.index_add(2, target[a:b].reshape(-1), conv.reshape(B, cc, -1))
+        return region.reshape(B, cc, p.rh, p.rw)
+
+    def _form(self, x: torch.Tensor, images: torch.Tensor, crop=None) -> torch.Tensor:
+        """The image formation of lens variables x (the module's or another tensor, e.g. for
+        gradcheck): forward() with an explicit x."""
+        if images.dim() != 4:
+            raise ValueError("images must be B x C x H x W")
+        B, C, H, W = images.shape
+        crop = (0, 0, W, H) if crop is None else tuple(int(v) for v in crop)
+        cx0, cy0, cw, ch = crop
+        if cw <= 0 or ch <= 0 or cx0 < 0 or cy0 < 0 or cx0 + cw > W or cy0 + ch > H:
+            raise ValueError(f"crop {cw}x{ch} at ({cx0}, {cy0}) is not inside the {W}x{H} "
+                             "images")
+        device = images.device
+        cdtype = torch.float64 if images.dtype == torch.float64 else torch.float32
+        derivatives = torch.is_grad_enabled() and x.requires_grad
+        psf, yref, ybar, ri_nodes = _OpticsFunction.apply(x, self, derivatives, device)
+        p = self._plan(W, H, crop, C, device)
+        out = self._blur(images, psf, p, cdtype)
+        if p.ri:
+            k = p.ri_piece
+            ri = _lerp(yref, ri_nodes, p.ri_radius, k)
+            ri = torch.where(p.ri_low, ri_nodes[0], torch.where(p.ri_high, ri_nodes[-1], ri))
+            out = out * ri.to(cdtype)
+        if C > p.colours:  # further channels (alpha): neither blurred nor dimmed
+            extra = images[:, p.colours:, p.ry0:p.ry0 + p.rh, p.rx0:p.rx0 + p.rw]
+            out = torch.cat((out, extra.to(cdtype)), dim=1)
+        if p.warp:
+            k = p.warp_piece
+            rho = _lerp(ybar, yref, p.warp_r, k)
+            axis_scale = (yref[1] - yref[0]) / (ybar[1] - ybar[0])
+            scale = torch.where(p.warp_axis, axis_scale, rho / p.warp_r)
+            u = p.axis[0] + p.warp_dx * scale - 0.5
+            v = p.axis[1] + p.warp_dy * scale - 0.5
+            wx = _keys(u - p.warp_floor_x)
+            wy = _keys(v - p.warp_floor_y)
+            weights = (wy[:, :, None] * wx[:, None, :]) * p.warp_valid[:, None, None]
+            taps = out.reshape(B, C, -1)[:, :, p.warp_index].reshape(B, C, ch * cw, 16)
+            out = (taps * weights.reshape(-1, 16).to(cdtype)).sum(-1).reshape(B, C, ch, cw)
+        return out.to(images.dtype)
 
     def forward(self, images: torch.Tensor, crop=None) -> torch.Tensor:
         """The aberrated images (B x C x H x W), or with crop = (x0, y0, w, h) only that crop of
         them (B x C x h x w): the full images then set the sensor geometry (their diagonal spans
         the sensor's), so a crop sees the PSFs of where it lies, and only the crop (plus the
-        PSFs' reach) is computed."""
-        # Sample the optics with derivatives only when a backward pass may follow.
-        self._derivatives = torch.is_grad_enabled() and self.x.requires_grad
-        return _ImageFormationFunction.apply(self.x, images, self,
-                                             None if crop is None else tuple(crop))
+        PSFs' reach) is computed. Runs on the images' device; the optics are sampled (with
+        derivatives when a backward pass may follow) by lensopt on the CPU."""
+        return self._form(self.x, images, crop)
 
     def lens(self):
         """The current lens (a lensopt.Lens; catalog glasses when quantized)."""
@@ -236,7 +519,7 @@ class ImageFormation(nn.Module):
         """The sampled optics of the current x (lensopt.Imaging.optics: PSFs, y_ref, ybar, RI
         and, with derivatives, their Jacobians wrt x) as numpy arrays."""
         self._prepare(self.x, derivatives)
-        return self.imaging.optics()
+        return self.imaging.optics(jacobians=derivatives)
 
     def lens_loss_terms(self, **options) -> torch.Tensor:
         """(l_S, l_RP, l_RA, l_GV) of the current x, differentiable."""

@@ -18,6 +18,8 @@ class ImageFormation(nn.Module):
     x: nn.Parameter
     param: Parameterization
     glass_mode: str
+    relative_illumination: bool
+    distortion: bool
     def __init__(self, lens: Lens, *, catalog: str = "", glass_mode: str = "quantized",
                  rings: int = 8, fields: int = 21, grid_size: int = 65, bin_um: float = 4.0,
                  sigma_bins: float = 0.5, support_bins: int = 3,

@@ -159,9 +159,10 @@ void bind_imaging(py::module_& m) {
           "precision). dL/dscene is None unless scene_gradient.")
       .def(
           "optics",
-          [](const PyImaging& p) {
+          [](const PyImaging& p, bool jacobians) {
             const ImagingOptics& o = p.imaging->optics();
-            const int f = static_cast<int>(o.fields_deg.size()), n = o.variables, g = p.grid_size;
+            const int f = static_cast<int>(o.fields_deg.size()), g = p.grid_size;
+            const int n = jacobians ? o.variables : 0;
             const std::size_t cells = static_cast<std::size_t>(g) * g;
             std::vector<double> psf(f * kColourChannels * cells, 0.0);
             std::vector<double> d_psf(n > 0 ? psf.size() * n : 0, 0.0);
@@ -198,9 +199,121 @@ void bind_imaging(py::module_& m) {
             out["ray_failures"] = o.ray_failures;
             return out;
           },
+          py::arg("jacobians") = true,
           "The optics of the last prepare(): per field the PSFs (F x 3 x G x G), y_ref, ybar and "
           "relative illumination, with their Jacobians wrt the lens variables (d_psf F x 3 x G x "
-          "G x n, the others F x n) after a prepare with derivatives.")
+          "G x n, the others F x n) after a prepare with derivatives, unless jacobians=False.")
+      .def(
+          "optics_backward",
+          [](const PyImaging& p, const DoubleArray& grad_psf, const DoubleArray& grad_reference,
+             const DoubleArray& grad_centroid, const DoubleArray& grad_illumination) {
+            const ImagingOptics& o = p.imaging->optics();
+            const int f = static_cast<int>(o.fields_deg.size()), n = o.variables, g = p.grid_size;
+            if (n != p.variables)
+              throw Error("Imaging.optics_backward needs a prepare(x) with derivatives");
+            if (grad_psf.ndim() != 4 || grad_psf.shape(0) != f ||
+                grad_psf.shape(1) != kColourChannels || grad_psf.shape(2) != g ||
+                grad_psf.shape(3) != g)
+              throw Error("grad_psf must be " + std::to_string(f) + " x 3 x " + std::to_string(g) +
+                          " x " + std::to_string(g));
+            for (const DoubleArray* a : {&grad_reference, &grad_centroid, &grad_illumination})
+              if (a->ndim() != 1 || a->shape(0) != f)
+                throw Error("the field gradients must have " + std::to_string(f) + " entries");
+            std::vector<double> gx(n, 0.0);
+            const double* gp = grad_psf.data();
+            const double *gr = grad_reference.data(), *gc = grad_centroid.data(),
+                         *gi = grad_illumination.data();
+            {
+              py::gil_scoped_release release;
+              const std::size_t cells = static_cast<std::size_t>(g) * g;
+              for (int h = 0; h < f; ++h) {
+                for (int c = 0; c < kColourChannels; ++c) {
+                  const double* gpc =
+                      gp + (static_cast<std::size_t>(h) * kColourChannels + c) * cells;
+                  const auto& box = o.support[h][c];
+                  const double* d = o.d_psf[h][c].data();
+                  for (int r = box[0]; r < box[1]; ++r)
+                    for (int i = box[2]; i < box[3]; ++i, d += n) {
+                      const double v = gpc[static_cast<std::size_t>(r) * g + i];
+                      if (v == 0.0) continue;
+                      for (int j = 0; j < n; ++j) gx[j] += v * d[j];
+                    }
+                }
+                for (int j = 0; j < n; ++j) {
+                  const std::size_t k = static_cast<std::size_t>(h) * n + j;
+                  gx[j] += gr[h] * o.d_reference[k] + gc[h] * o.d_centroid[k] +
+                           gi[h] * o.d_illumination[k];
+                }
+              }
+            }
+            return to_numpy(std::move(gx), {n});
+          },
+          py::arg("grad_psf"), py::arg("grad_reference_y"), py::arg("grad_centroid_y"),
+          py::arg("grad_illumination"),
+          "dL/dx (n) for dL/d(the optics of the last prepare()): dL/dpsf (F x 3 x G x G) and "
+          "dL/dy_ref, dL/dybar, dL/dRI (F each), by the Jets' derivative parts (needs a prepare "
+          "with derivatives). lensopt.torch chains torch's gradients of the PSFs and maps with it.")
+      .def(
+          "layout",
+          [](const PyImaging& p, int width, int height) {
+            ImagingLayout l;
+            {
+              py::gil_scoped_release release;
+              l = p.imaging->layout(width, height);
+            }
+            const int q = static_cast<int>(l.patches.size());
+            const int f = q > 0 ? static_cast<int>(l.patches[0].field_weights.size()) : 0;
+            const std::size_t cells = static_cast<std::size_t>(p.grid_size) * p.grid_size;
+            std::vector<int> radius(q), corner(q * cells);
+            std::vector<double> azimuth(q), weights(static_cast<std::size_t>(q) * f), fx(q * cells),
+                fy(q * cells);
+            for (int k = 0; k < q; ++k) {
+              const ImagingPatchLayout& pl = l.patches[k];
+              radius[k] = pl.radius;
+              azimuth[k] = pl.azimuth_rad;
+              std::copy(pl.field_weights.begin(), pl.field_weights.end(),
+                        weights.begin() + static_cast<std::size_t>(k) * f);
+              std::copy(pl.corner.begin(), pl.corner.end(), corner.begin() + k * cells);
+              std::copy(pl.fx.begin(), pl.fx.end(), fx.begin() + k * cells);
+              std::copy(pl.fy.begin(), pl.fy.end(), fy.begin() + k * cells);
+            }
+            auto rows = [](const std::vector<std::vector<double>>& w, int extent) {
+              std::vector<double> v;
+              for (const auto& row : w) v.insert(v.end(), row.begin(), row.end());
+              return to_numpy(std::move(v), {static_cast<py::ssize_t>(w.size()), extent});
+            };
+            auto ints = [](std::vector<int> v) {
+              const auto size = static_cast<py::ssize_t>(v.size());
+              return to_numpy(std::move(v), {size});
+            };
+            const auto g = static_cast<py::ssize_t>(p.grid_size);
+            py::dict out;
+            out["width"] = l.width;
+            out["height"] = l.height;
+            out["pitch_mm"] = l.pitch_mm;
+            out["axis_x"] = l.axis_x;
+            out["axis_y"] = l.axis_y;
+            out["window_x"] = rows(l.window_x, l.width);
+            out["window_y"] = rows(l.window_y, l.height);
+            out["lo_x"] = ints(l.lo_x);
+            out["hi_x"] = ints(l.hi_x);
+            out["lo_y"] = ints(l.lo_y);
+            out["hi_y"] = ints(l.hi_y);
+            out["max_radius"] = l.max_radius;
+            out["radius"] = ints(std::move(radius));
+            out["azimuth_rad"] = to_numpy(std::move(azimuth), {q});
+            out["field_weights"] = to_numpy(std::move(weights), {q, f});
+            out["corner"] = to_numpy(std::move(corner), {q, g * g});
+            out["fx"] = to_numpy(std::move(fx), {q, g * g});
+            out["fy"] = to_numpy(std::move(fy), {q, g * g});
+            return out;
+          },
+          py::arg("width"), py::arg("height"),
+          "The layout render() uses for a width x height full image under the last prepare(): "
+          "sensor geometry (pitch_mm, axis_x, axis_y), the 9 x 9 patches' overlap windows "
+          "(window_x 9 x W, window_y 9 x H, their extents lo/hi), and per patch q = py * 9 + px "
+          "its kernel radius, azimuth, field weights a_qh (81 x F) and PSF-to-pixel resampling "
+          "(corner, fx, fy: 81 x G^2, corner -1 for bins out of reach).")
       .def_property_readonly("timings", [](const PyImaging& p) {
         const ImagingTimings& t = p.imaging->timings();
         py::dict d;

@@ -370,4 +370,35 @@ const ImagingOptics& DifferentiableImaging::optics() const {
   return state_->optics;
 }
 
+ImagingLayout DifferentiableImaging::layout(int width, int height) const {
+  if (width <= 0 || height <= 0)
+    throw Error(fmt::format("joint imaging: image size {}x{} must be positive", width, height));
+  const std::shared_ptr<Geometry> g = state_->geometry(width, height);
+  ImagingLayout l;
+  l.width = width;
+  l.height = height;
+  l.pitch_mm = g->layout.geometry.pitch_mm;
+  l.axis_x = g->layout.geometry.axis_x;
+  l.axis_y = g->layout.geometry.axis_y;
+  l.window_x = g->window_x;
+  l.window_y = g->window_y;
+  l.lo_x = g->lo_x;
+  l.hi_x = g->hi_x;
+  l.lo_y = g->lo_y;
+  l.hi_y = g->hi_y;
+  l.max_radius = g->max_radius;
+  l.patches.resize(g->patches.size());
+  for (std::size_t q = 0; q < g->patches.size(); ++q) {
+    const PatchKernels& pk = g->patches[q];
+    ImagingPatchLayout& p = l.patches[q];
+    p.radius = pk.radius;
+    p.azimuth_rad = g->layout.azimuth_rad[q];
+    p.field_weights = g->layout.field_weights[q];
+    p.corner = pk.resampling.corner;
+    p.fx = pk.resampling.fx;
+    p.fy = pk.resampling.fy;
+  }
+  return l;
+}
+
 }  // namespace lensopt

@@ -99,6 +99,28 @@ struct ImagingOptics {
   int ray_failures = 0;
 };
 
+// The patch layout of a width x height full image under the last prepare(): what render() blurs,
+// dims and warps with, for implementations of the image operations elsewhere (lensopt.torch runs
+// them in torch on the input's device). Patch q = py * PsfGrid::kPatches + px.
+struct ImagingPatchLayout {
+  int radius = 0;                     // kernel radius r_q (px), shared by the channels
+  double azimuth_rad = 0;             // direction of the PSF's +y (render/render.h)
+  std::vector<double> field_weights;  // a_qh
+  // L_q (render/psf_resample.h, PsfResampling at radius r_q): per PSF bin the kernel index of its
+  // top-left tap (-1: out of reach) and the bilinear fractions.
+  std::vector<int> corner;
+  std::vector<double> fx, fy;
+};
+
+struct ImagingLayout {
+  int width = 0, height = 0;
+  double pitch_mm = 0, axis_x = 0, axis_y = 0;          // SensorGeometry
+  std::vector<std::vector<double>> window_x, window_y;  // [patch column / row][pixel]
+  std::vector<int> lo_x, hi_x, lo_y, hi_y;              // where each window is non-zero
+  std::vector<ImagingPatchLayout> patches;              // [q]
+  int max_radius = 0;
+};
+
 class DifferentiableImaging {
  public:
   // `param` must outlive this object. `fixed_glasses` is used with GlassMode::kFixed.
@@ -135,6 +157,10 @@ class DifferentiableImaging {
 
   // The optics of the last prepare() (throws Error before the first).
   const ImagingOptics& optics() const;
+
+  // The layout render() uses for a width x height full image (throws Error before prepare(), or
+  // if the image is smaller than a PSF).
+  ImagingLayout layout(int width, int height) const;
 
   // Of the last calls. render() and backward() may run from several threads at once (the patch
   // kernels of an image size are made once, under a lock); prepare() may not overlap them.
