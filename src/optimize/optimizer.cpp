@@ -521,226 +521,284 @@ double design_spot_mm(const LensParameterization& param, const std::vector<doubl
   return evaluate_double(param, x, mode, fixed_glasses, options.sampling, options.loss).spot_mm;
 }
 
-OptimizeResult optimize_lens(const Lens& start, const OptimizeOptions& options) {
-  options.validate();
-  const auto clock_start = std::chrono::steady_clock::now();
-  OptimizeResult result;
-  const LensParameterization param(start, glass_space_for(start), options.vary);
-  std::vector<double> x = param.from_lens(start);
-  Counters counters;
+namespace {
+
+// optimize_lens in named steps (its header comment states the order): the state every step
+// shares, one method per phase.
+class LensOptimization {
+ public:
+  LensOptimization(const Lens& start, const OptimizeOptions& options)
+      : start_(start),
+        options_(options),
+        param_(start, glass_space_for(start), options.vary),
+        x_(param_.from_lens(start)),
+        wavefront_(options.loss.merit == DesignMerit::kWavefront),
+        soft_(options.loss.paper_penalties) {
+    frozen_user_ = param_.select(options.freeze);
+    for (int i = 0; i < param_.size(); ++i) {
+      const auto kind = param_.variables()[i].kind;
+      if (kind == LensVariable::Kind::kGlass0 || kind == LensVariable::Kind::kGlass1)
+        glass_indices_.push_back(i);
+    }
+    frozen_all_ = frozen_user_;
+    frozen_all_.insert(frozen_all_.end(), glass_indices_.begin(), glass_indices_.end());
+    std::sort(frozen_all_.begin(), frozen_all_.end());
+    frozen_all_.erase(std::unique(frozen_all_.begin(), frozen_all_.end()), frozen_all_.end());
+    const bool glasses_frozen_by_user =
+        std::all_of(glass_indices_.begin(), glass_indices_.end(), [&](int i) {
+          return std::find(frozen_user_.begin(), frozen_user_.end(), i) != frozen_user_.end();
+        });
+    search_ = options.glass_search != GlassSearch::kNone && !glasses_frozen_by_user;
+    loss_ = soft_ ? options.loss : with_margin(options.loss);
+  }
+
+  OptimizeResult run() {
+    const auto clock_start = std::chrono::steady_clock::now();
+    measure_start();
+    // Phase A: the start's glasses, snapped to the catalog and held; LM on the rest, with the
+    // bounds the start violates tightened in stages from its own values to the targets.
+    fixed_ = param_.nearest_glasses(x_.data());
+    set_glasses(x_, fixed_);
+    focus();
+    soft_start();
+    fixed_glasses();
+    if (search_ && !interrupted()) continuous_glasses();
+    if (search_ && options_.glass_search == GlassSearch::kNeighbours &&
+        options_.glass_neighbours > 0)
+      neighbour_glasses();
+    finish();
+    result_.seconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - clock_start).count();
+    return std::move(result_);
+  }
+
+ private:
+  bool interrupted() const { return options_.interrupt && options_.interrupt->load(); }
+  // With the paper's soft penalties a candidate is judged by l_lens; strictly, by the merit
+  // among designs that meet every constraint.
+  bool feasible(const DesignLoss<double>& l) const { return soft_ || constraints_met(l); }
+  bool better(const DesignLoss<double>& a, const DesignLoss<double>& b) const {
+    return soft_ ? a.total < b.total * (1 - 1e-4) : a.merit_value() < b.merit_value() * (1 - 1e-3);
+  }
+  // Puts the whitened points of catalog glasses `glasses` into the glass variables of xs.
+  void set_glasses(std::vector<double>& xs, const std::vector<int>& glasses) const {
+    for (std::size_t pair = 0; 2 * pair < glass_indices_.size(); ++pair) {
+      const Eigen::Vector2d p = param_.glass_space().glass_point(glasses[pair]);
+      xs[glass_indices_[2 * pair]] = p[0];
+      xs[glass_indices_[2 * pair + 1]] = p[1];
+    }
+  }
+  DesignLoss<double> phase(std::vector<double>& x, GlassMode mode, const std::vector<int>& fixed,
+                           const std::vector<int>& frozen, DesignLossOptions& loss,
+                           const std::string& name, int rounds, int iterations,
+                           double glass_weight_growth = 1.0) {
+    return run_phase(param_, x, mode, fixed, frozen, options_, loss, name, rounds, iterations,
+                     counters_, glass_weight_growth);
+  }
 
   // The start at full sampling.
-  AnalyzeOptions full;
-  const AnalysisReport start_report = analyze_lens(start, full);
-  result.start_spot_um =
-      start_report.mean_rms_spot_um.value_or(std::numeric_limits<double>::infinity());
-  for (const FieldReport& f : start_report.fields)
-    result.start_field_spot_um.push_back(f.rms_spot_um.value_or(0.0));
-  result.start_constraints = check_constraints(start, options.loss, full.trace);
-  const bool wavefront = options.loss.merit == DesignMerit::kWavefront;
-  if (wavefront) result.start_wavefront_waves = full_wavefront_waves(start, full.trace);
-
-  const std::vector<int> frozen_user = param.select(options.freeze);
-  std::vector<int> glass_indices;
-  for (int i = 0; i < param.size(); ++i) {
-    const auto kind = param.variables()[i].kind;
-    if (kind == LensVariable::Kind::kGlass0 || kind == LensVariable::Kind::kGlass1)
-      glass_indices.push_back(i);
+  void measure_start() {
+    const AnalysisReport start_report = analyze_lens(start_, full_);
+    result_.start_spot_um =
+        start_report.mean_rms_spot_um.value_or(std::numeric_limits<double>::infinity());
+    for (const FieldReport& f : start_report.fields)
+      result_.start_field_spot_um.push_back(f.rms_spot_um.value_or(0.0));
+    result_.start_constraints = check_constraints(start_, options_.loss, full_.trace);
+    if (wavefront_) result_.start_wavefront_waves = full_wavefront_waves(start_, full_.trace);
   }
-  auto merged = [](std::vector<int> a, const std::vector<int>& b) {
-    a.insert(a.end(), b.begin(), b.end());
-    std::sort(a.begin(), a.end());
-    a.erase(std::unique(a.begin(), a.end()), a.end());
-    return a;
-  };
-  const bool glasses_frozen_by_user =
-      std::all_of(glass_indices.begin(), glass_indices.end(), [&](int i) {
-        return std::find(frozen_user.begin(), frozen_user.end(), i) != frozen_user.end();
-      });
 
-  DesignLossOptions loss = options.loss.paper_penalties ? options.loss : with_margin(options.loss);
-  // With the paper's soft penalties a candidate is judged by l_lens; strictly, by the spot among
-  // designs that meet every constraint.
-  const bool soft = options.loss.paper_penalties;
-  auto feasible = [&](const DesignLoss<double>& l) { return soft || constraints_met(l); };
-  auto better = [&](const DesignLoss<double>& a, const DesignLoss<double>& b) {
-    return soft ? a.total < b.total * (1 - 1e-4) : a.merit_value() < b.merit_value() * (1 - 1e-3);
-  };
-  const auto interrupted = [&] { return options.interrupt && options.interrupt->load(); };
-  const std::vector<int> frozen_all = merged(frozen_user, glass_indices);
-  // Puts the whitened points of catalog glasses `glasses` into the glass variables of x.
-  auto set_glasses = [&](std::vector<double>& xs, const std::vector<int>& glasses) {
-    for (std::size_t pair = 0; 2 * pair < glass_indices.size(); ++pair) {
-      const Eigen::Vector2d p = param.glass_space().glass_point(glasses[pair]);
-      xs[glass_indices[2 * pair]] = p[0];
-      xs[glass_indices[2 * pair + 1]] = p[1];
-    }
-  };
-  const int rounds = options.max_rounds;
-  const int iterations = options.max_iterations;
-
-  // Phase A: the start's glasses, snapped to the catalog and held; LM on the rest, with the
-  // bounds the start violates tightened in stages from its own values to the targets.
-  std::vector<int> fixed = param.nearest_glasses(x.data());
-  set_glasses(x, fixed);
   // Focus first: a start far from focus (a perturbed last spacing is a defocus of a tenth of the
   // back focal length) has a spot dominated by defocus, and LM's first steps on all variables
   // then bend the curvatures to compensate and land in a poor basin. The defocus alone is
   // nearly quadratic, so one short LM round on it (soft penalties) removes it first.
-  if (!interrupted()) {
+  void focus() {
+    if (interrupted()) return;
     std::vector<int> all_but_defocus;
     bool defocus_free = false;
-    for (int i = 0; i < param.size(); ++i) {
-      const bool frozen = std::binary_search(frozen_all.begin(), frozen_all.end(), i);
-      if (param.variables()[i].kind == LensVariable::Kind::kDefocus && !frozen)
+    for (int i = 0; i < param_.size(); ++i) {
+      const bool frozen = std::binary_search(frozen_all_.begin(), frozen_all_.end(), i);
+      if (param_.variables()[i].kind == LensVariable::Kind::kDefocus && !frozen)
         defocus_free = true;
       else
         all_but_defocus.push_back(i);
     }
-    if (defocus_free) {
-      DesignLossOptions focus_loss = options.loss;
-      focus_loss.paper_penalties = true;
-      const DesignLoss<double> f = run_phase(param, x, GlassMode::kFixed, fixed, all_but_defocus,
-                                             options, focus_loss, "focus", 1, iterations, counters);
-      result.log.push_back(fmt::format("focus: {} (optimization sampling)", merit_text(f)));
-    }
+    if (!defocus_free) return;
+    DesignLossOptions focus_loss = options_.loss;
+    focus_loss.paper_penalties = true;
+    const DesignLoss<double> f = phase(x_, GlassMode::kFixed, fixed_, all_but_defocus, focus_loss,
+                                       "focus", 1, options_.max_iterations);
+    result_.log.push_back(fmt::format("focus: {} (optimization sampling)", merit_text(f)));
   }
+
   // Phase 0 (strict constraints only): the paper's soft penalties first. Squared hinges summed
   // over rays push a start that crosses a bound straight back inside, often into a worse basin
   // (the Cooke baseline: 30.6 -> 40.0 um); the soft loss first finds the good basin, where the
-  // design crosses its bounds only slightly, and the continuation below then walks it inside.
-  if (!soft && options.soft_start && !interrupted()) {
-    DesignLossOptions soft_loss = options.loss;
+  // design crosses its bounds only slightly, and the continuation then walks it inside.
+  void soft_start() {
+    if (soft_ || !options_.soft_start || interrupted()) return;
+    DesignLossOptions soft_loss = options_.loss;
     soft_loss.paper_penalties = true;
     const DesignLoss<double> s =
-        run_phase(param, x, GlassMode::kFixed, fixed, frozen_all, options, soft_loss,
-                  "soft penalties", rounds, iterations, counters);
-    result.log.push_back(fmt::format("soft penalties: {} (optimization sampling)", merit_text(s)));
+        phase(x_, GlassMode::kFixed, fixed_, frozen_all_, soft_loss, "soft penalties",
+              options_.max_rounds, options_.max_iterations);
+    result_.log.push_back(fmt::format("soft penalties: {} (optimization sampling)", merit_text(s)));
   }
-  DesignExtremes start_extremes;
-  evaluate_double(param, x, GlassMode::kFixed, fixed, options.sampling, loss, &start_extremes);
-  const DesignLossOptions target_loss = loss;
-  for (double t : {0.25, 0.5, 0.75}) {
-    if (interrupted() || soft) break;
-    DesignLossOptions stage = continued_bounds(target_loss, start_extremes, start, t);
-    run_phase(param, x, GlassMode::kFixed, fixed, frozen_all, options, stage,
-              fmt::format("constraints {:.0f}%", 100 * t), 1, std::min(iterations, 20), counters);
-    loss.weight_ray_path = std::max(loss.weight_ray_path, stage.weight_ray_path);
-    loss.weight_ray_angle = std::max(loss.weight_ray_angle, stage.weight_ray_angle);
-  }
-  DesignLoss<double> best = run_phase(param, x, GlassMode::kFixed, fixed, frozen_all, options, loss,
-                                      "fixed glasses", rounds, iterations, counters);
-  result.log.push_back(fmt::format("fixed glasses: {} (optimization sampling)", merit_text(best)));
 
-  const bool search = options.glass_search != GlassSearch::kNone && !glasses_frozen_by_user;
+  // The bounds continued from the start's extremes to the targets (25, 50, 75 %), then LM with
+  // the fixed glasses at the target bounds: the design every later phase must beat.
+  void fixed_glasses() {
+    DesignExtremes start_extremes;
+    evaluate_double(param_, x_, GlassMode::kFixed, fixed_, options_.sampling, loss_,
+                    &start_extremes);
+    const DesignLossOptions target_loss = loss_;
+    for (double t : {0.25, 0.5, 0.75}) {
+      if (interrupted() || soft_) break;
+      DesignLossOptions stage = continued_bounds(target_loss, start_extremes, start_, t);
+      phase(x_, GlassMode::kFixed, fixed_, frozen_all_, stage,
+            fmt::format("constraints {:.0f}%", 100 * t), 1, std::min(options_.max_iterations, 20));
+      loss_.weight_ray_path = std::max(loss_.weight_ray_path, stage.weight_ray_path);
+      loss_.weight_ray_angle = std::max(loss_.weight_ray_angle, stage.weight_ray_angle);
+    }
+    best_ = phase(x_, GlassMode::kFixed, fixed_, frozen_all_, loss_, "fixed glasses",
+                  options_.max_rounds, options_.max_iterations);
+    result_.log.push_back(
+        fmt::format("fixed glasses: {} (optimization sampling)", merit_text(best_)));
+  }
+
   // Phase B: continuous glasses with an annealed glass-variable loss (its weight grows tenfold
   // per round, pulling each g onto a catalog glass), then snapped and re-optimized; kept only if
   // it beats phase A.
-  if (search && !interrupted()) {
-    std::vector<double> xc = x;
-    DesignLossOptions continuous_loss = loss;
-    run_phase(param, xc, GlassMode::kContinuous, {}, frozen_user, options, continuous_loss,
-              "continuous glasses", 4, iterations, counters, 10.0);
-    std::vector<int> snapped = param.nearest_glasses(xc.data());
+  void continuous_glasses() {
+    std::vector<double> xc = x_;
+    DesignLossOptions continuous_loss = loss_;
+    phase(xc, GlassMode::kContinuous, {}, frozen_user_, continuous_loss, "continuous glasses", 4,
+          options_.max_iterations, 10.0);
+    std::vector<int> snapped = param_.nearest_glasses(xc.data());
     set_glasses(xc, snapped);
-    DesignLossOptions snapped_loss = loss;
-    const DesignLoss<double> b =
-        run_phase(param, xc, GlassMode::kFixed, snapped, frozen_all, options, snapped_loss,
-                  "snapped", rounds, iterations, counters);
-    result.log.push_back(fmt::format("continuous then snapped: {}", merit_text(b)));
-    if (feasible(b) && (!feasible(best) || better(b, best))) {
-      x = xc;
-      fixed = snapped;
-      best = b;
-      loss = snapped_loss;
-      result.log.push_back("kept the snapped continuous-glass design");
+    DesignLossOptions snapped_loss = loss_;
+    const DesignLoss<double> b = phase(xc, GlassMode::kFixed, snapped, frozen_all_, snapped_loss,
+                                       "snapped", options_.max_rounds, options_.max_iterations);
+    result_.log.push_back(fmt::format("continuous then snapped: {}", merit_text(b)));
+    if (feasible(b) && (!feasible(best_) || better(b, best_))) {
+      x_ = xc;
+      fixed_ = snapped;
+      best_ = b;
+      loss_ = snapped_loss;
+      result_.log.push_back("kept the snapped continuous-glass design");
     }
   }
 
-  // Phase C: neighbouring catalog glasses per element.
-  if (search && options.glass_search == GlassSearch::kNeighbours && options.glass_neighbours > 0) {
+  // Phase C: up to glass_neighbours nearest catalog glasses per element, in passes until none
+  // improves (at most 3), then a polish.
+  void neighbour_glasses() {
     for (int pass = 0; pass < 3 && !interrupted(); ++pass) {
       bool improved = false;
-      for (std::size_t m = 0; m < fixed.size() && !interrupted(); ++m) {
-        const std::vector<int> order =
-            param.glass_space().by_distance(param.glass_space().glass_point(fixed[m]));
-        int tried = 0;
-        for (int candidate : order) {
-          if (tried >= options.glass_neighbours || interrupted()) break;
-          if (candidate == fixed[m]) continue;
-          ++tried;
-          std::vector<int> trial_fixed = fixed;
-          trial_fixed[m] = candidate;
-          std::vector<double> trial_x = x;
-          set_glasses(trial_x, trial_fixed);
-          DesignLossOptions trial_loss = loss;
-          const DesignLoss<double> trial = run_phase(
-              param, trial_x, GlassMode::kFixed, trial_fixed, frozen_all, options, trial_loss,
-              fmt::format("element {} as {}", m + 1, param.glass_space().name(candidate)), 2,
-              std::max(10, iterations / 3), counters);
-          if (feasible(trial) && better(trial, best)) {
-            result.log.push_back(
-                fmt::format("element {}: {} -> {} ({})", m + 1, param.glass_space().name(fixed[m]),
-                            param.glass_space().name(candidate), merit_text(trial)));
-            fixed = trial_fixed;
-            x = trial_x;
-            best = trial;
-            loss = trial_loss;
-            improved = true;
-          }
-        }
-      }
+      for (std::size_t m = 0; m < fixed_.size() && !interrupted(); ++m)
+        improved = try_neighbours(m) || improved;
       if (!improved) break;
     }
-    if (!result.log.empty() && result.log.back().rfind("element", 0) == 0) {
-      best = run_phase(param, x, GlassMode::kFixed, fixed, frozen_all, options, loss, "polish",
-                       rounds, iterations, counters);
+    if (!result_.log.empty() && result_.log.back().rfind("element", 0) == 0)
+      best_ = phase(x_, GlassMode::kFixed, fixed_, frozen_all_, loss_, "polish",
+                    options_.max_rounds, options_.max_iterations);
+  }
+  // Element m's neighbouring glasses, nearest first; keeps each that beats the best design.
+  bool try_neighbours(std::size_t m) {
+    bool improved = false;
+    const std::vector<int> order =
+        param_.glass_space().by_distance(param_.glass_space().glass_point(fixed_[m]));
+    int tried = 0;
+    for (int candidate : order) {
+      if (tried >= options_.glass_neighbours || interrupted()) break;
+      if (candidate == fixed_[m]) continue;
+      ++tried;
+      std::vector<int> trial_fixed = fixed_;
+      trial_fixed[m] = candidate;
+      std::vector<double> trial_x = x_;
+      set_glasses(trial_x, trial_fixed);
+      DesignLossOptions trial_loss = loss_;
+      const DesignLoss<double> trial =
+          phase(trial_x, GlassMode::kFixed, trial_fixed, frozen_all_, trial_loss,
+                fmt::format("element {} as {}", m + 1, param_.glass_space().name(candidate)), 2,
+                std::max(10, options_.max_iterations / 3));
+      if (feasible(trial) && better(trial, best_)) {
+        result_.log.push_back(fmt::format("element {}: {} -> {} ({})", m + 1,
+                                          param_.glass_space().name(fixed_[m]),
+                                          param_.glass_space().name(candidate), merit_text(trial)));
+        fixed_ = trial_fixed;
+        x_ = trial_x;
+        best_ = trial;
+        loss_ = trial_loss;
+        improved = true;
+      }
     }
+    return improved;
   }
 
-  result.lens = param.to_lens(x.data(), GlassMode::kFixed, fixed);
-  result.lens.name = start.name;
-  result.lens.source_path = start.source_path;
-  // The glasses are the glass space's catalog glasses: name that catalog, so the lens reads back
-  // (a start with model glasses has none).
-  if (!glass_indices.empty()) result.lens.catalog_name = glass_catalog_for(start);
-  const AnalysisReport final_report = analyze_lens(result.lens, full);
-  result.final_spot_um =
-      final_report.mean_rms_spot_um.value_or(std::numeric_limits<double>::infinity());
-  for (const FieldReport& f : final_report.fields)
-    result.final_field_spot_um.push_back(f.rms_spot_um.value_or(0.0));
-  result.final_constraints = check_constraints(result.lens, options.loss, full.trace);
-  if (wavefront) result.final_wavefront_waves = full_wavefront_waves(result.lens, full.trace);
-  // Never return a worse lens than the start: designs are ordered by (every constraint met at
-  // full sampling, then the merit at full sampling: mean spot, or mean RMS wavefront); a start
-  // that is not behind the result in this order is returned instead (a feasible start is never
-  // traded for an infeasible result; an infeasible start only for a feasible result or a smaller
-  // merit), whatever its glasses.
-  const bool start_ok = result.start_constraints.all_pass();
-  const bool final_ok = result.final_constraints.all_pass();
-  const double start_merit = wavefront ? result.start_wavefront_waves : result.start_spot_um;
-  const double final_merit = wavefront ? result.final_wavefront_waves : result.final_spot_um;
-  const bool start_not_behind =
-      (start_ok && !final_ok) || (start_ok == final_ok && !(final_merit < start_merit));
-  if (start_not_behind || !std::isfinite(final_merit)) {
-    result.lens = start;
-    result.final_spot_um = result.start_spot_um;
-    result.final_field_spot_um = result.start_field_spot_um;
-    result.final_wavefront_waves = result.start_wavefront_waves;
-    result.final_constraints = result.start_constraints;
-    result.kept_start = true;
+  // The result at full sampling, never behind the start, and the counters.
+  void finish() {
+    result_.lens = param_.to_lens(x_.data(), GlassMode::kFixed, fixed_);
+    result_.lens.name = start_.name;
+    result_.lens.source_path = start_.source_path;
+    // The glasses are the glass space's catalog glasses: name that catalog, so the lens reads
+    // back (a start with model glasses has none).
+    if (!glass_indices_.empty()) result_.lens.catalog_name = glass_catalog_for(start_);
+    const AnalysisReport final_report = analyze_lens(result_.lens, full_);
+    result_.final_spot_um =
+        final_report.mean_rms_spot_um.value_or(std::numeric_limits<double>::infinity());
+    for (const FieldReport& f : final_report.fields)
+      result_.final_field_spot_um.push_back(f.rms_spot_um.value_or(0.0));
+    result_.final_constraints = check_constraints(result_.lens, options_.loss, full_.trace);
+    if (wavefront_) result_.final_wavefront_waves = full_wavefront_waves(result_.lens, full_.trace);
+    // Never return a worse lens than the start: designs are ordered by (every constraint met at
+    // full sampling, then the merit at full sampling: mean spot, or mean RMS wavefront); a start
+    // that is not behind the result in this order is returned instead (a feasible start is never
+    // traded for an infeasible result; an infeasible start only for a feasible result or a
+    // smaller merit), whatever its glasses.
+    const bool start_ok = result_.start_constraints.all_pass();
+    const bool final_ok = result_.final_constraints.all_pass();
+    const double start_merit = wavefront_ ? result_.start_wavefront_waves : result_.start_spot_um;
+    const double final_merit = wavefront_ ? result_.final_wavefront_waves : result_.final_spot_um;
+    const bool start_not_behind =
+        (start_ok && !final_ok) || (start_ok == final_ok && !(final_merit < start_merit));
+    if (start_not_behind || !std::isfinite(final_merit)) {
+      result_.lens = start_;
+      result_.final_spot_um = result_.start_spot_um;
+      result_.final_field_spot_um = result_.start_field_spot_um;
+      result_.final_wavefront_waves = result_.start_wavefront_waves;
+      result_.final_constraints = result_.start_constraints;
+      result_.kept_start = true;
+    }
+    for (const Surface& s : result_.lens.surfaces)
+      if (!s.material.is_air()) result_.glasses.push_back(s.material.label());
+    result_.iterations = counters_.iterations;
+    result_.loss_evaluations = counters_.evaluations.load();
+    result_.jacobian_evaluations = counters_.jacobians;
+    result_.spot_trajectory = std::move(counters_.trajectory);
+    result_.termination = interrupted() ? std::string("interrupted") : counters_.termination;
+    result_.interrupted = interrupted();
   }
-  for (const Surface& s : result.lens.surfaces)
-    if (!s.material.is_air()) result.glasses.push_back(s.material.label());
-  result.iterations = counters.iterations;
-  result.loss_evaluations = counters.evaluations.load();
-  result.jacobian_evaluations = counters.jacobians;
-  result.spot_trajectory = std::move(counters.trajectory);
-  result.termination = interrupted() ? std::string("interrupted") : counters.termination;
-  result.interrupted = interrupted();
-  result.seconds =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - clock_start).count();
-  return result;
+
+  const Lens& start_;
+  const OptimizeOptions& options_;
+  const LensParameterization param_;
+  std::vector<double> x_;
+  const bool wavefront_;
+  const bool soft_;
+  AnalyzeOptions full_;
+  std::vector<int> frozen_user_, glass_indices_, frozen_all_;
+  bool search_ = false;
+  DesignLossOptions loss_;
+  std::vector<int> fixed_;  // the catalog glass of each element
+  DesignLoss<double> best_;
+  Counters counters_;
+  OptimizeResult result_;
+};
+
+}  // namespace
+
+OptimizeResult optimize_lens(const Lens& start, const OptimizeOptions& options) {
+  options.validate();
+  return LensOptimization(start, options).run();
 }
 
 AdamResult adam_on_design_loss(const LensParameterization& param, std::vector<double> x,

@@ -397,8 +397,7 @@ TEST_CASE("asphere intersection finds every steep ray that meets the surface bel
       detail::asphere_sag(c, one_plus_k, a, xs * xs + ys * ys, sg, sl);
       return std::abs(s * n - sg);
     };
-    if (scalar_hit && failure == kRayOk && residual(s_scalar) < 1e-10 &&
-        residual(s_chunk) < 1e-10)
+    if (scalar_hit && failure == kRayOk && residual(s_scalar) < 1e-10 && residual(s_chunk) < 1e-10)
       ++hits;
   }
   MESSAGE(checked, " rays below 80 deg incidence, ", hits, " found by both Newton stages");

@@ -299,23 +299,27 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
           }
         }
       };
+      // The traced spot rays of wavelength w (in `bundle`): positions kept, failures counted.
+      auto keep_spot_rays = [&](int w) {
+        for (int p = 0; p < rays; ++p) {
+          const std::size_t i = static_cast<std::size_t>(w) * rays + p;
+          const bool traced = bundle.status[p] == kRayOk;
+          ok[i] = traced;
+          if (traced) {
+            ys[i] = bundle.y[p];
+            xs[i] = bundle.x[p];
+          } else {
+            ++failed[hf];
+          }
+        }
+      };
       if (spot_field && wavefront) {
         // The wavefront merit: the grid rays of every wavelength, against the field's sphere.
         const double a_h = field_weights ? (*field_weights)[h] : 1.0 / field_count;
         T* r = residuals ? residuals + static_cast<std::size_t>(h) * spot_block : nullptr;
         field_wave[h] = field_rms_wavefront(
             sys, hf, grid, omega, bundle, record, [&](int w, const Wavefront<T>& wf) {
-              for (int p = 0; p < rays; ++p) {
-                const std::size_t i = static_cast<std::size_t>(w) * rays + p;
-                const bool traced = bundle.status[p] == kRayOk;
-                ok[i] = traced;
-                if (traced) {
-                  ys[i] = bundle.y[p];
-                  xs[i] = bundle.x[p];
-                } else {
-                  ++failed[hf];
-                }
-              }
+              keep_spot_rays(w);
               failed[hf] += bundle.status[rays] != kRayOk;  // the chief ray
               add_constraints(bundle, record);
               if (r) {
@@ -331,17 +335,7 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
           start_rays(sys, hf, w, bundle);
           record.resize(k_count, bundle.size());
           trace_bundle(sys.lens, w, k_count, true, bundle, &record);
-          for (int p = 0; p < rays; ++p) {
-            const std::size_t i = static_cast<std::size_t>(w) * rays + p;
-            const bool traced = bundle.status[p] == kRayOk;
-            ok[i] = traced;
-            if (traced) {
-              ys[i] = bundle.y[p];
-              xs[i] = bundle.x[p];
-            } else {
-              ++failed[hf];
-            }
-          }
+          keep_spot_rays(w);
           add_constraints(bundle, record);
         }
         start_rays(sys, hf, w, edge_bundle, &edge);
