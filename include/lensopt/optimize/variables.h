@@ -181,6 +181,9 @@ class LensParameterization {
         }
         case LensVariable::Kind::kGlass1:
           break;  // handled with kGlass0
+        case LensVariable::Kind::kConic:
+        case LensVariable::Kind::kAsphere:
+          break;  // the surface profiles, below
       }
     }
     // Surface profiles: the structure's (normalized) terms, then the profile variables.
