@@ -6,6 +6,7 @@
 #include <cmath>
 #include <nlohmann/json.hpp>
 
+#include "core/json_number.h"
 #include "lensopt/analysis/field_maps.h"
 #include "lensopt/analysis/forms_image.h"
 #include "lensopt/analysis/spot.h"
@@ -230,7 +231,6 @@ std::string format_report_text(const AnalysisReport& r) {
 
 std::string format_report_json(const AnalysisReport& r) {
   using nlohmann::json;
-  auto finite_or_null = [](double v) { return std::isfinite(v) ? json(v) : json(nullptr); };
   json j;
   j["lens"] = r.lens_name;
   j["source"] = r.source_path;

@@ -11,6 +11,7 @@
 #include <nlohmann/json.hpp>
 
 #include "commands.h"
+#include "core/json_number.h"
 #include "lensopt/core/error.h"
 #include "lensopt/core/interrupt.h"
 #include "lensopt/core/output_checks.h"
@@ -232,19 +233,17 @@ void print_joint_json(const Lens& lens, const std::filesystem::path& out_path,
   j["task"] = options.task;
   j["metric"] = result.metric_name;
   const bool detection = !options.data.annotations.empty();
-  auto number = [](double v) {
-    return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr);
-  };
   nlohmann::json settings = nlohmann::json::array();
   for (const auto& s : result.settings) {
-    nlohmann::json row = {
-        {"name", s.name}, {"metric", number(s.metric)}, {"mean_spot_um", number(s.mean_spot_um)}};
+    nlohmann::json row = {{"name", s.name},
+                          {"metric", finite_or_null(s.metric)},
+                          {"mean_spot_um", finite_or_null(s.mean_spot_um)}};
     if (detection) {
-      row["ap"] = number(s.metric);
-      row["ap50"] = number(s.ap50);
-      row["ap75"] = number(s.ap75);
-      row["psnr_db"] = number(s.psnr_db);
-      row["ssim"] = number(s.ssim);
+      row["ap"] = finite_or_null(s.metric);
+      row["ap50"] = finite_or_null(s.ap50);
+      row["ap75"] = finite_or_null(s.ap75);
+      row["psnr_db"] = finite_or_null(s.psnr_db);
+      row["ssim"] = finite_or_null(s.ssim);
     }
     settings.push_back(row);
   }

@@ -11,6 +11,7 @@
 #include <nlohmann/json.hpp>
 #include <utility>
 
+#include "core/json_number.h"
 #include "lensopt/core/adam.h"
 #include "lensopt/core/atomic_file.h"
 #include "lensopt/core/constants.h"
@@ -97,10 +98,7 @@ double norm(const std::vector<double>& v) {
   return std::sqrt(s);
 }
 
-// A number, or null for NaN (JSON has no NaN), and back.
-nlohmann::json number_or_null(double v) {
-  return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr);
-}
+// A number read back (null, written by finite_or_null for NaN, reads as NaN).
 double number_of(const nlohmann::json& j, const char* key) {
   const auto it = j.find(key);
   return it != j.end() && it->is_number() ? it->get<double>() : NAN;
@@ -110,12 +108,12 @@ nlohmann::json settings_json(const std::vector<JointSettingResult>& settings) {
   nlohmann::json j = nlohmann::json::array();
   for (const auto& s : settings)
     j.push_back({{"name", s.name},
-                 {"metric", number_or_null(s.metric)},
-                 {"mean_spot_um", number_or_null(s.mean_spot_um)},
-                 {"ap50", number_or_null(s.ap50)},
-                 {"ap75", number_or_null(s.ap75)},
-                 {"psnr_db", number_or_null(s.psnr_db)},
-                 {"ssim", number_or_null(s.ssim)},
+                 {"metric", finite_or_null(s.metric)},
+                 {"mean_spot_um", finite_or_null(s.mean_spot_um)},
+                 {"ap50", finite_or_null(s.ap50)},
+                 {"ap75", finite_or_null(s.ap75)},
+                 {"psnr_db", finite_or_null(s.psnr_db)},
+                 {"ssim", finite_or_null(s.ssim)},
                  {"done", s.done}});
   return j;
 }

@@ -6,6 +6,8 @@
 #include <cmath>
 #include <limits>
 
+#include "core/json_number.h"
+
 namespace lensopt {
 namespace {
 
@@ -13,10 +15,6 @@ constexpr double kInf = std::numeric_limits<double>::infinity();
 
 double finite_or_inf(double um) {
   return std::isfinite(um) ? um : kInf;
-}
-
-nlohmann::json spot_json(double um) {
-  return std::isfinite(um) ? nlohmann::json(um) : nlohmann::json();
 }
 
 double spot_from_json(const nlohmann::json& j) {
@@ -51,8 +49,8 @@ OptimizeSummary summarize(const OptimizeResult& result) {
 }
 
 void add_summary_json(nlohmann::json& j, const OptimizeSummary& s) {
-  j["start_mean_rms_spot_um"] = spot_json(s.start_spot_um);
-  j["final_mean_rms_spot_um"] = spot_json(s.final_spot_um);
+  j["start_mean_rms_spot_um"] = finite_or_null(s.start_spot_um);
+  j["final_mean_rms_spot_um"] = finite_or_null(s.final_spot_um);
   j["constraints_met"] = s.constraints_met;
   j["failing_constraints"] = s.failing;
   j["glasses"] = s.glasses;
