@@ -327,10 +327,7 @@ void print_joint_text(const OptimizeShared& shared, const std::filesystem::path&
 }
 
 void run_joint(const JointCommand& cmd, const OptimizeShared& shared) {
-  if (!torch_available())
-    throw Error(
-        "--joint needs libtorch, and this lensopt was built without it (LENSOPT_WITH_TORCH=OFF); "
-        "install libtorch-dev and rebuild with -DLENSOPT_WITH_TORCH=ON");
+  require_torch();  // before any output: says why the libtorch module cannot be loaded
   check_joint_outputs(cmd, shared);
   const Lens lens = read_lens(shared.lens_path);
   const std::filesystem::path out_path = checked_output_path(shared);

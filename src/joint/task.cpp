@@ -1,4 +1,4 @@
-// TaskOptions, and the tasks of a build without libtorch (the libtorch ones are in torch/).
+// TaskOptions (the tasks are in torch/, loaded by torch_loader.cpp).
 #include "lensopt/joint/task.h"
 
 #include <fmt/format.h>
@@ -21,21 +21,5 @@ void TaskOptions::validate() const {
   if (threads < 1 || threads > 256)
     throw Error(fmt::format("task threads = {} must be 1 to 256", threads));
 }
-
-#ifndef LENSOPT_WITH_TORCH
-
-bool torch_available() {
-  return false;
-}
-
-std::unique_ptr<Task> make_task(const std::string& spec, const TaskOptions& options) {
-  options.validate();
-  throw Error(fmt::format(
-      "task '{}': lensopt was built without libtorch (LENSOPT_WITH_TORCH=OFF); rebuild with "
-      "-DLENSOPT_WITH_TORCH=ON and Debian's libtorch-dev for the joint optimization",
-      spec));
-}
-
-#endif
 
 }  // namespace lensopt

@@ -55,4 +55,13 @@ if "$lensopt" optimize lenses/doublet.toml --joint -o "$tmp/x.toml" "${tiny[@]}"
   fail "unknown task accepted"
 fi
 grep -q "unknown task 'frobnicate'" "$tmp/err.txt" || fail "unknown task message: $(cat "$tmp/err.txt")"
+# libtorch is a module loaded by --joint only (src/joint/torch_plugin.h): the executable does not
+# link it, and a module that cannot be loaded is a clear error before any output is written.
+if ldd "$lensopt" | grep -q "libtorch"; then fail "lensopt links libtorch: $(ldd "$lensopt" | grep libtorch)"; fi
+if LENSOPT_TORCH_PLUGIN="$tmp/missing.so" "$lensopt" optimize lenses/doublet.toml --joint \
+    -o "$tmp/missing.toml" "${tiny[@]}" 2> "$tmp/missing.txt"; then
+  fail "--joint with a missing libtorch module exited 0"
+fi
+grep -q "LENSOPT_TORCH_PLUGIN=$tmp/missing.so" "$tmp/missing.txt" || fail "no module path in: $(cat "$tmp/missing.txt")"
+[ -e "$tmp/missing.toml" ] && fail "a lens was written although the module did not load"
 echo "joint: ok"

@@ -43,4 +43,18 @@ f = 1.0 / ((n - 1) * (1 / r1 - 1 / r2 + (n - 1) * d / (n * r1 * r2)))
 got = float(sys.argv[1])
 assert abs(got - f) < 1e-6 * f, (got, f)
 PY
+# The libtorch module (when built): installed in <libdir>/lensopt, and the installed executable
+# loads that copy (found relative to itself), not the build tree's.
+if [ -f "$build/liblensopt_torch.so" ]; then
+  module=$(find "$tmp/prefix" -name liblensopt_torch.so | head -n 1)
+  [ -n "$module" ] || fail "liblensopt_torch.so was not installed"
+  LD_DEBUG=files "$tmp/prefix/bin/lensopt" optimize "$source/lenses/doublet.toml" --joint \
+    -o "$tmp/joint.toml" --task frobnicate --scenes 2 --scene-width 64 --scene-height 64 --crop 32 \
+    --batch 1 --eval-crops 1 --psf-rings 2 --psf-fields 3 --design-rings 2 --design-fields 3 \
+    --steps 1 -q > /dev/null 2> "$tmp/joint.txt" && fail "--task frobnicate was accepted"
+  grep -q "unknown task 'frobnicate'" "$tmp/joint.txt" ||
+    fail "the installed lensopt did not reach the module: $(grep -v '^ *[0-9]*:' "$tmp/joint.txt" | tail -n 5)"
+  grep -q "file=$module .*dynamically loaded" "$tmp/joint.txt" ||
+    fail "the installed lensopt loaded another module: $(grep 'liblensopt_torch' "$tmp/joint.txt" | head -n 3)"
+fi
 echo "package: find_package(lensopt) from $tmp/prefix: built and ran (EFL $efl_mm mm)"

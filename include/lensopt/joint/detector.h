@@ -41,15 +41,8 @@ namespace lensopt {
 // The detector's class count: the paper's six (detection/dataset.h).
 constexpr int kDetectorClasses = 6;
 
-std::unique_ptr<Task> make_detection_task(const TaskOptions& options,
-                                          int classes = kDetectorClasses);
-
-// A TorchScript detector by the contract above (the caller has checked forward's arity).
-std::unique_ptr<Task> make_torchscript_detection_task(const std::filesystem::path& model,
-                                                      const TaskOptions& options);
-
 // Whether a TorchScript file's forward takes (images, boxes, labels). Throws Error if the file
-// cannot be loaded.
+// cannot be loaded or libtorch is not available (require_torch in task.h).
 bool is_torchscript_detector(const std::filesystem::path& model);
 
 }  // namespace lensopt

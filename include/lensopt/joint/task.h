@@ -86,13 +86,18 @@ class Task {
   virtual void save_network(const std::filesystem::path& path) const = 0;
 };
 
-// Whether lensopt was built with libtorch (CMake option LENSOPT_WITH_TORCH).
+// Whether the libtorch tasks can be made: lensopt was built with libtorch (CMake option
+// LENSOPT_WITH_TORCH) and its module liblensopt_torch.so loads (joint/torch_loader.cpp says where
+// it is looked for; the environment variable LENSOPT_TORCH_PLUGIN names it explicitly).
 bool torch_available();
+// Throws Error saying why the libtorch tasks cannot be made (not built, module not found, or it
+// failed to load), if torch_available() is false.
+void require_torch();
 
 // "restoration" (the built-in small CNN), "detection" (the built-in detector, joint/detector.h)
 // or "torchscript:MODEL.pt" (a restoration-style module, or a detector by the contract of
 // joint/detector.h, told apart by forward's argument count). Throws Error if libtorch is
-// not built in, the model cannot be loaded, or the spec is unknown.
+// not available (require_torch), the model cannot be loaded, or the spec is unknown.
 std::unique_ptr<Task> make_task(const std::string& spec, const TaskOptions& options);
 
 }  // namespace lensopt

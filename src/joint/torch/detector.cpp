@@ -385,7 +385,7 @@ std::unique_ptr<Task> make_torchscript_detection_task(const std::filesystem::pat
   return std::make_unique<TorchScriptDetectionTask>(model, options);
 }
 
-bool is_torchscript_detector(const std::filesystem::path& model) {
+bool torchscript_forward_takes_boxes(const std::filesystem::path& model) {
   try {
     torch::jit::Module m = torch::jit::load(model.string());
     const auto method = m.find_method("forward");

@@ -1,5 +1,6 @@
 // The libtorch tasks of joint/task.h: the built-in restoration CNN and TorchScript user tasks.
-// This is the one file that includes libtorch's headers (they compile slowly).
+// This file and detector.cpp, built as the module liblensopt_torch.so (joint/torch_plugin.h), are
+// the only ones that include libtorch's headers.
 #include <fmt/format.h>
 #include <torch/script.h>
 #include <torch/torch.h>
@@ -7,6 +8,7 @@
 #include <cmath>
 #include <map>
 
+#include "joint/torch_plugin.h"
 #include "lensopt/core/atomic_file.h"
 #include "lensopt/core/error.h"
 #include "lensopt/joint/data.h"
@@ -228,18 +230,14 @@ class TorchScriptTask : public Task {
 
 }  // namespace
 
-bool torch_available() {
-  return true;
-}
-
-std::unique_ptr<Task> make_task(const std::string& spec, const TaskOptions& options) {
+std::unique_ptr<Task> make_torch_task(const std::string& spec, const TaskOptions& options) {
   options.validate();
   if (spec == "restoration") return std::make_unique<RestorationTask>(options);
   const std::string prefix = "torchscript:";
-  if (spec == "detection") return make_detection_task(options);
+  if (spec == "detection") return make_detection_task(options, kDetectorClasses);
   if (spec.rfind(prefix, 0) == 0 && spec.size() > prefix.size()) {
     const std::filesystem::path model = spec.substr(prefix.size());
-    if (std::filesystem::is_regular_file(model) && is_torchscript_detector(model))
+    if (std::filesystem::is_regular_file(model) && torchscript_forward_takes_boxes(model))
       return make_torchscript_detection_task(model, options);
     return std::make_unique<TorchScriptTask>(model, options);
   }
@@ -248,3 +246,12 @@ std::unique_ptr<Task> make_task(const std::string& spec, const TaskOptions& opti
 }
 
 }  // namespace lensopt
+
+// The module's one exported symbol (joint/torch_plugin.h).
+extern "C" __attribute__((visibility("default"))) const lensopt::TorchPlugin*
+lensopt_torch_plugin() {
+  static const lensopt::TorchPlugin plugin{lensopt::kTorchPluginAbi, sizeof(lensopt::TaskBatch),
+                                           sizeof(lensopt::TaskOptions), &lensopt::make_torch_task,
+                                           &lensopt::torchscript_forward_takes_boxes};
+  return &plugin;
+}

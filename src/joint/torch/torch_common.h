@@ -6,6 +6,7 @@
 #include <torch/torch.h>
 
 #include <filesystem>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -14,6 +15,14 @@
 #include "lensopt/joint/task.h"
 
 namespace lensopt {
+
+// The tasks' factories inside the module (task.h and detector.h say what they make).
+std::unique_ptr<Task> make_torch_task(const std::string& spec, const TaskOptions& options);
+std::unique_ptr<Task> make_detection_task(const TaskOptions& options, int classes);
+std::unique_ptr<Task> make_torchscript_detection_task(const std::filesystem::path& model,
+                                                      const TaskOptions& options);
+// Whether a TorchScript file's forward takes (images, boxes, labels): a detector.
+bool torchscript_forward_takes_boxes(const std::filesystem::path& model);
 
 inline torch::Dtype dtype_of(const TaskOptions& options) {
   return options.double_precision ? torch::kFloat64 : torch::kFloat32;
