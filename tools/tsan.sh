@@ -5,6 +5,11 @@
 # barriers as races. This build uses clang with LLVM's OpenMP runtime (libomp) and its TSan tool
 # Archer (libarcher.so, Debian package libomp-14-dev), which tells TSan about OpenMP's
 # synchronisation: the OpenMP regions run on several threads and are checked too.
+# The kernels' function multiversioning (GCC target_clones: an ifunc resolver picks the x86-64
+# level at load time) is turned off here: the dynamic loader runs the resolvers before TSan's
+# runtime is initialised, and their instrumented entry crashes the process (and clang does not
+# multiversion templates). `-Dtarget_clones(...)=unused` turns each such attribute into
+# __attribute__((unused)), so the baseline build of every kernel is what runs under TSan.
 # Usage: tools/tsan.sh [doctest filter, default 'render*,joint*']; JOBS=N for the build.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -13,7 +18,8 @@ archer=/usr/lib/llvm-14/lib/libarcher.so
 [ -f "$archer" ] || { echo "tsan: $archer missing (apt-get install libomp-14-dev clang)" >&2; exit 2; }
 cmake -S . -B build-tsan -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
   -DCMAKE_C_COMPILER=clang -DCMAKE_CXX_COMPILER=clang++ \
-  -DCMAKE_CXX_FLAGS="-fsanitize=thread" -DCMAKE_EXE_LINKER_FLAGS="-fsanitize=thread" \
+  -DCMAKE_CXX_FLAGS="-fsanitize=thread '-Dtarget_clones(...)=unused'" \
+  -DCMAKE_EXE_LINKER_FLAGS="-fsanitize=thread" \
   -DLENSOPT_WITH_PYTHON=OFF -DLENSOPT_WITH_TORCH=OFF >/dev/null
 cmake --build build-tsan -j "${JOBS:-2}" --target lensopt_tests_threads
 export OMP_TOOL_LIBRARIES="$archer"

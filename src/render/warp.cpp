@@ -24,16 +24,12 @@ namespace {
 // One output row of the warp: pixel i samples the input at (i + 1/2 + offset_x, j + 1/2 +
 // offset_y) bicubically (taps clamped to the image); NaN offsets give black. The channel count
 // is a template constant where it is small (NC = 0: any, from `channels`).
-// Built for x86-64-v3 and the baseline (GCC target_clones); clang, used for the ThreadSanitizer
-// build (tools/tsan.sh), does not multiversion templates, so it builds the baseline only.
-#if defined(__clang__)
-#define LENSOPT_WARP_CLONES
-#else
-#define LENSOPT_WARP_CLONES __attribute__((target_clones("arch=x86-64-v3", "default")))
-#endif
 template <int NC>
-LENSOPT_WARP_CLONES void warp_row(const float* src, int width, int height, int channels,
-                                  const float* offsets, int j, float* dst) {
+__attribute__((target_clones("arch=x86-64-v3", "default"))) void warp_row(const float* src,
+                                                                          int width, int height,
+                                                                          int channels,
+                                                                          const float* offsets,
+                                                                          int j, float* dst) {
   const int nc = NC > 0 ? NC : channels;
   for (int i = 0; i < width; ++i) {
     const float ox = offsets[2 * i], oy = offsets[2 * i + 1];
