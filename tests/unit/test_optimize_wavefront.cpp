@@ -55,15 +55,17 @@ int residuals_of(const LensParameterization& param, const TraceOptions& sampling
 // amount (name, dx).
 //
 // The differences. The merit is an RMS of optical path differences of ~f = 100 mm paths, so its
-// value carries rounding noise eps_f of a few 1e-12 waves (one ulp of 100 mm is 3e-11 waves at
-// 486 nm). A Richardson-extrapolated central difference R(h) = (4 D(h/2) - D(h)) / 3 errs by
-// truncation ~ h^4 plus rounding ~ 2 eps_f / (h |f'|), so no one step serves every variable: on
-// the AC254 the fixed step 2e-5 gave s1 (the lens moved against the stop in collimated space, f'
-// = 0.017 waves per f) 3e-5 relative and g2.1 2e-6, both rounding (the error grew as 1/h below
-// h = 1e-4, and at h = 1e-3 ... 1e-2 every variable agreed with its Jet within 1.1e-7), while the
-// Cooke's s5 (f' = 0.031 near a minimum) needs h <= 1e-3 against truncation (measured
-// 2026-11-25). So, as Ridders' method does, R is taken on the steps h_k = h_0 / 2^k, k = 0..9
-// (h_0 = 1e-2 of the variable's scale, or less where the merit would move by more than 1e-2
+// value carries rounding noise eps_f of a few 1e-12 waves (measured on the AC254: 3e-12, the
+// scatter about the tangent over steps of 1e-12; one ulp of 100 mm is 3e-11 waves at 486 nm). A
+// Richardson-extrapolated central difference R(h) = (4 D(h/2) - D(h)) / 3 errs by truncation
+// ~ h^4 plus rounding ~ 2 eps_f / (h |f'|), so no one step serves every variable: on the AC254
+// the old fixed step 2e-5 gave s1 (the lens moved against the stop in collimated space, f' =
+// 0.017 waves per f) 3e-5 relative and g2.1 2e-6, both rounding (the error grew as 1/h below
+// h = 1e-4, and at h = 1e-3 ... 1e-2 every variable but the steep defocus and a4_4 agreed with
+// its Jet within 1.1e-7), while the Cooke's s5 (f' = 0.031 near a minimum) needs h <= 1e-3
+// against truncation (measured 2026-11-25; with the steps below every variable of both lenses
+// agrees within 6e-8). So, as Ridders' method does, R is taken on the steps h_k = h_0 / 2^k, k =
+// 0..9 (h_0 = 1e-2 of the variable's scale, or less where the merit would move by more than 1e-2
 // waves), and the estimate is the one where two successive steps agree best; that agreement is
 // its error estimate, checked to be well below the tolerance (the check means something).
 void check_wavefront_derivatives(const LensParameterization& param,
