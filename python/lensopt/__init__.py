@@ -7,14 +7,17 @@ Lenses
     (read), Zemax .zmx. Lens, Surface, Material, Specs are edited in place
     (lens.surfaces[1].thickness_mm = 2.0; lens.specs.f_number = 2.8).
 Analysis
-    analyze(lens) -> AnalysisReport (report.to_dict() equals `lensopt analyze --json`),
+    analyze(lens) -> AnalysisReport (report.to_dict() equals `lensopt analyze --json`;
+    analyze(lens, wave=True, zernike_terms=J): report.wave, report.zernike_waves),
     trace_rays / trace_pupil (numpy in and out), spots, psfs, field_data.
 Rendering
     Renderer(lens).render(image) (H x W x C float32), Renderer.maps(width, height) (per-pixel
-    distortion and relative illumination), read_image / write_image.
+    distortion and relative illumination), Renderer(lens, psf="geometric|diffraction|auto")
+    and Renderer.psf (which PSFs it uses), read_image / write_image.
 Optimization
-    optimize(lens), tolerance(lens), Parameterization (the paper's lens variables, design loss and
-    its exact gradient), Imaging (differentiable image formation).
+    optimize(lens) (merit="spot" or "wavefront"), tolerance(lens), Parameterization (the paper's
+    lens variables, design loss and its exact gradient), Imaging (differentiable image
+    formation).
 PyTorch
     lensopt.torch (imported separately; needs python3-torch): ImageFormation (an nn.Module whose
     parameters are the lens variables), spot_loss and the lens-loss terms.
@@ -61,6 +64,6 @@ def render(lens, image, **options):
     """Renders an H x W x C (or H x W) linear-light image through `lens` (`lensopt render`).
 
     Options are Renderer's (rings, fields, res_factor, distortion, relative_illumination,
-    threads). Returns H x W x C float32. For several images build one Renderer and reuse it.
+    threads, psf, pupil_samples). Returns H x W x C float32. For several images build one Renderer and reuse it.
     """
     return Renderer(lens, **options).render(image)

@@ -117,12 +117,17 @@ class AnalysisReport:
     ray_failures: int
     failures_by_surface: List[int]
     max_aiming_error: float
+    wave: Optional[Dict[str, Any]]  # analyze(wave=True): `analyze --wave --json`'s wave section
+    zernike_waves: Optional[np.ndarray]  # zernike_terms > 0: [field, wavelength, term], waves
     def to_json(self) -> str: ...
     def to_text(self) -> str: ...
     def to_dict(self) -> Dict[str, Any]: ...
 
 def analyze(lens: Lens, *, rings: int = 32, fields: int = 21, ray_aiming: bool = True,
-            scale_to_spec: bool = True, dispersion: str = "", threads: int = 0) -> AnalysisReport: ...
+            scale_to_spec: bool = True, dispersion: str = "", threads: int = 0,
+            wave: bool = False, mtf_frequencies: Sequence[float] = (10.0, 30.0, 50.0),
+            pupil_samples: int = 64, wavelength_weights: Sequence[float] = (),
+            zernike_terms: int = 0, zernike_order: str = "fringe") -> AnalysisReport: ...
 def trace_rays(lens: Lens, positions: npt.ArrayLike, directions: npt.ArrayLike, *,
                wavelength: int = -1, scale_to_spec: bool = True,
                dispersion: str = "") -> Dict[str, np.ndarray]: ...
@@ -140,7 +145,7 @@ def field_data(lens: Lens, *, rings: int = 32, fields: int = 21, ray_aiming: boo
 class Renderer:
     def __init__(self, lens: Lens, *, rings: int = 32, fields: int = 21, res_factor: int = 1,
                  distortion: bool = True, relative_illumination: bool = True,
-                 threads: int = 0) -> None: ...
+                 threads: int = 0, psf: str = "geometric", pupil_samples: int = 64) -> None: ...
     def render(self, image: npt.ArrayLike) -> np.ndarray: ...
     def maps(self, width: int, height: int) -> Dict[str, Any]: ...
     fields_deg: List[float]
@@ -148,6 +153,9 @@ class Renderer:
     centroid_y_mm: List[float]
     distortion: List[float]
     relative_illumination: List[float]
+    # kind, diffraction (fields x 3 bool), diffraction_channels, pupil_samples, padding, fft_n,
+    # warnings
+    psf: Dict[str, Any]
 
 def read_image(path: str) -> np.ndarray: ...
 def write_image(path: str, image: npt.ArrayLike) -> None: ...
@@ -167,7 +175,8 @@ class Parameterization:
                     weight_ray_path: float = 100.0, weight_ray_angle: float = 100.0,
                     weight_glass: float = 0.01, rings: int = 8, fields: int = 11,
                     glass_mode: str = "quantized", paper_penalties: bool = False,
-                    gradient: bool = True) -> Dict[str, Any]: ...
+                    gradient: bool = True, merit: str = "spot",
+                    wavefront_pupil_samples: int = 12) -> Dict[str, Any]: ...
 
 class OptimizeResult:
     lens: Lens
@@ -175,6 +184,8 @@ class OptimizeResult:
     final_spot_um: float
     start_field_spot_um: List[float]
     final_field_spot_um: List[float]
+    start_wavefront_waves: float  # merit="wavefront" only, else 0
+    final_wavefront_waves: float
     glasses: List[str]
     iterations: int
     loss_evaluations: int
@@ -188,7 +199,8 @@ class OptimizeResult:
 def optimize(lens: Lens, *, max_iterations: int = 50, max_rounds: int = 4,
              freeze: Sequence[str] = ..., glass_search: str = "none", rings: int = 8,
              fields: int = 11, paper_penalties: bool = False,
-             verbose: bool = False) -> OptimizeResult: ...
+             verbose: bool = False, merit: str = "spot",
+             wavefront_pupil_samples: int = 12) -> OptimizeResult: ...
 
 class ToleranceReport:
     lens_name: str

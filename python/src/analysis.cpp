@@ -1,9 +1,13 @@
 // Analysis in Python: analyze (the CLI's report and JSON), ray tracing with numpy arrays, spots,
 // PSFs and the per-field distortion / relative-illumination data.
+#include <limits>
+#include <vector>
+
 #include "bindings.h"
 #include "lensopt/analysis/analyze.h"
 #include "lensopt/analysis/field_maps.h"
 #include "lensopt/analysis/spot.h"
+#include "lensopt/analysis/zernike.h"
 #include "lensopt/core/error.h"
 #include "lensopt/render/psf.h"
 
@@ -96,6 +100,37 @@ void bind_analysis(py::module_& m) {
       .def_readonly("ray_failures", &AnalysisReport::ray_failures)
       .def_readonly("failures_by_surface", &AnalysisReport::failures_by_surface)
       .def_readonly("max_aiming_error", &AnalysisReport::max_aiming_error)
+      .def_property_readonly(
+          "wave",
+          [](const AnalysisReport& r) -> py::object {
+            if (!r.wave) return py::none();
+            return py::module_::import("json").attr("loads")(format_wave_json(*r.wave));
+          },
+          "With analyze(wave=True) (or zernike_terms > 0): the wave section of `lensopt analyze "
+          "--wave --json` as a dict (sampling, per field the RMS wavefront, Strehl ratio, MTFs "
+          "and per wavelength the Zernike fit); else None.")
+      .def_property_readonly(
+          "zernike_waves",
+          [](const AnalysisReport& r) -> py::object {
+            if (!r.wave || r.wave->zernike_terms <= 0) return py::none();
+            const WaveReport& w = *r.wave;
+            const auto f = static_cast<py::ssize_t>(w.fields.size());
+            const auto wl = static_cast<py::ssize_t>(w.wavelengths_nm.size());
+            const auto n = static_cast<py::ssize_t>(w.zernike_terms);
+            std::vector<double> c(static_cast<std::size_t>(f * wl * n),
+                                  std::numeric_limits<double>::quiet_NaN());
+            for (py::ssize_t h = 0; h < f; ++h)
+              for (py::ssize_t k = 0;
+                   k < wl && k < static_cast<py::ssize_t>(w.fields[h].mono.size()); ++k) {
+                const std::vector<double>& z = w.fields[h].mono[k].zernike_waves;
+                for (py::ssize_t j = 0; j < n && j < static_cast<py::ssize_t>(z.size()); ++j)
+                  c[static_cast<std::size_t>((h * wl + k) * n + j)] = z[j];
+              }
+            return to_numpy(std::move(c), {f, wl, n});
+          },
+          "With a Zernike fit (analyze(zernike_terms=J)): the coefficients in waves, "
+          "[field, wavelength, term] (term 0 = Z1 of the ordering; NaN where a wavefront could "
+          "not be fitted); else None.")
       .def("to_json", &format_report_json, "The JSON text of `lensopt analyze --json`.")
       .def("to_text", &format_report_text, "The table `lensopt analyze` prints.")
       .def("to_dict",
@@ -107,9 +142,19 @@ void bind_analysis(py::module_& m) {
   m.def(
       "analyze",
       [](const Lens& lens, int rings, int fields, bool ray_aiming, bool scale_to_spec,
-         const std::string& dispersion, int threads) {
+         const std::string& dispersion, int threads, bool wave,
+         const std::vector<double>& mtf_frequencies, int pupil_samples,
+         const std::vector<double>& wavelength_weights, int zernike_terms,
+         const std::string& zernike_order) {
         AnalyzeOptions o;
         o.trace = trace_options(rings, fields, ray_aiming, scale_to_spec, threads);
+        o.wave = wave || zernike_terms > 0;
+        o.mtf_frequencies_cyc_mm = mtf_frequencies;
+        o.wave_options.pupil_samples = pupil_samples;
+        o.wave_options.wavelength_weights = wavelength_weights;
+        o.wave_options.zernike_terms = zernike_terms;
+        o.wave_options.zernike_ordering = parse_zernike_ordering(zernike_order);
+        o.wave_options.threads = threads;
         if (dispersion == "abbe")
           o.dispersion = DispersionModel::kAbbe;
         else if (dispersion == "catalog")
@@ -121,9 +166,19 @@ void bind_analysis(py::module_& m) {
       },
       py::arg("lens"), py::kw_only(), py::arg("rings") = 32, py::arg("fields") = 21,
       py::arg("ray_aiming") = true, py::arg("scale_to_spec") = true, py::arg("dispersion") = "",
-      py::arg("threads") = 0,
+      py::arg("threads") = 0, py::arg("wave") = false,
+      py::arg("mtf_frequencies") = std::vector<double>{10, 30, 50}, py::arg("pupil_samples") = 64,
+      py::arg("wavelength_weights") = std::vector<double>{}, py::arg("zernike_terms") = 0,
+      py::arg("zernike_order") = "fringe",
       "`lensopt analyze`: EFL, BFL, pupil, RMS spot per field, distortion, relative illumination, "
-      "ray failures and ray-aiming error, at the paper's sampling by default.");
+      "ray failures and ray-aiming error, at the paper's sampling by default. wave=True "
+      "(`--wave`) adds the wave optics (AnalysisReport.wave): RMS wavefront, Strehl ratio and "
+      "diffraction and geometric MTF at mtf_frequencies (cycles/mm, `--mtf-freqs`) on a "
+      "pupil_samples grid (`--pupil-samples`), wavelengths weighted by wavelength_weights (one "
+      "per spec wavelength; empty: the lens's own, else equal). zernike_terms = J > 0 "
+      "(`--zernike`, implies wave) fits each wavefront with J Zernike terms in zernike_order "
+      "'fringe' (unnormalized, J <= 37) or 'standard' (Noll, unit RMS) "
+      "(AnalysisReport.zernike_waves).");
 
   m.def(
       "trace_rays",

@@ -16,6 +16,13 @@ std::string group_catalog(const Lens& lens, const std::string& catalog) {
   return lens.catalog_name.empty() ? "ohara" : lens.catalog_name;
 }
 
+// "spot" or "wavefront" (optimize --merit).
+DesignMerit merit_of(const std::string& name) {
+  if (name == "spot") return DesignMerit::kSpot;
+  if (name == "wavefront") return DesignMerit::kWavefront;
+  throw Error("merit must be 'spot' or 'wavefront', not '" + name + "'");
+}
+
 }  // namespace
 
 GlassMode parse_glass_mode(const std::string& s) {
@@ -102,7 +109,8 @@ void bind_optimize(py::module_& m) {
           "design_loss",
           [](const LensParameterization& p, const DoubleArray& x, double weight_spot,
              double weight_ray_path, double weight_ray_angle, double weight_glass, int rings,
-             int fields, const std::string& mode, bool paper_penalties, bool gradient) {
+             int fields, const std::string& mode, bool paper_penalties, bool gradient,
+             const std::string& merit, int wavefront_pupil_samples) {
             const std::vector<double> v = vector_of(x, p.size());
             const TraceOptions sampling = trace_options(rings, fields, true, false, 0);
             DesignLossOptions o;
@@ -111,6 +119,8 @@ void bind_optimize(py::module_& m) {
             o.weight_ray_angle = weight_ray_angle;
             o.weight_glass = weight_glass;
             o.paper_penalties = paper_penalties;
+            o.merit = merit_of(merit);
+            o.wavefront_pupil_samples = wavefront_pupil_samples;
             o.validate();
             const GlassMode gm = parse_glass_mode(mode);
             const std::vector<int> fixed = p.nearest_glasses(v.data());
@@ -131,6 +141,11 @@ void bind_optimize(py::module_& m) {
             d["glass"] = r.loss.glass;
             d["total"] = r.loss.total;
             d["field_rms_mm"] = r.loss.field_rms_mm;
+            d["merit"] = merit;
+            if (o.merit == DesignMerit::kWavefront) {
+              d["wavefront_waves"] = r.loss.wavefront_waves;
+              d["field_wavefront_waves"] = r.loss.field_wavefront_waves;
+            }
             d["failed_rays"] = r.loss.failed_rays;
             d["finite"] = r.finite;
             if (gradient) {
@@ -143,10 +158,14 @@ void bind_optimize(py::module_& m) {
           py::arg("weight_ray_path") = 100.0, py::arg("weight_ray_angle") = 100.0,
           py::arg("weight_glass") = 0.01, py::arg("rings") = 8, py::arg("fields") = 11,
           py::arg("glass_mode") = "quantized", py::arg("paper_penalties") = false,
-          py::arg("gradient") = true,
+          py::arg("gradient") = true, py::arg("merit") = "spot",
+          py::arg("wavefront_pupil_samples") = 12,
           "The paper's l_lens = w_S l_S + w_RP l_RP + w_RA l_RA + w_GV l_GV at x (a dict of the "
           "terms: spot_mm, ray_path_mm, ray_angle, glass, total) and, with gradient, d total / dx "
-          "exactly (forward-mode Jets). Weights must be >= 0.");
+          "exactly (forward-mode Jets). Weights must be >= 0. merit='wavefront' (optimize "
+          "--merit wavefront): l_S is replaced by the mean RMS wavefront (waves, piston and tilt "
+          "removed) on a wavefront_pupil_samples grid across the pupil, given as wavefront_waves "
+          "and field_wavefront_waves.");
 
   py::class_<OptimizeResult>(m, "OptimizeResult", "The result of optimize().")
       .def_readonly("lens", &OptimizeResult::lens)
@@ -154,6 +173,11 @@ void bind_optimize(py::module_& m) {
       .def_readonly("final_spot_um", &OptimizeResult::final_spot_um)
       .def_readonly("start_field_spot_um", &OptimizeResult::start_field_spot_um)
       .def_readonly("final_field_spot_um", &OptimizeResult::final_field_spot_um)
+      .def_readonly("start_wavefront_waves", &OptimizeResult::start_wavefront_waves,
+                    "With merit='wavefront': the mean RMS wavefront (waves, piston and tilt "
+                    "removed) at full sampling before optimizing; 0 with the spot merit.")
+      .def_readonly("final_wavefront_waves", &OptimizeResult::final_wavefront_waves,
+                    "The same after optimizing.")
       .def_readonly("glasses", &OptimizeResult::glasses)
       .def_readonly("iterations", &OptimizeResult::iterations)
       .def_readonly("loss_evaluations", &OptimizeResult::loss_evaluations)
@@ -170,8 +194,11 @@ void bind_optimize(py::module_& m) {
       "optimize",
       [](const Lens& lens, int max_iterations, int max_rounds,
          const std::vector<std::string>& freeze, const std::string& glass_search, int rings,
-         int fields, bool paper_penalties, bool verbose) {
+         int fields, bool paper_penalties, bool verbose, const std::string& merit,
+         int wavefront_pupil_samples) {
         OptimizeOptions o;
+        o.loss.merit = merit_of(merit);
+        o.loss.wavefront_pupil_samples = wavefront_pupil_samples;
         o.max_iterations = max_iterations;
         o.max_rounds = max_rounds;
         o.freeze = freeze;
@@ -206,9 +233,12 @@ void bind_optimize(py::module_& m) {
       py::arg("lens"), py::kw_only(), py::arg("max_iterations") = 50, py::arg("max_rounds") = 4,
       py::arg("freeze") = std::vector<std::string>{}, py::arg("glass_search") = "none",
       py::arg("rings") = 8, py::arg("fields") = 11, py::arg("paper_penalties") = false,
-      py::arg("verbose") = false,
+      py::arg("verbose") = false, py::arg("merit") = "spot",
+      py::arg("wavefront_pupil_samples") = 12,
       "`lensopt optimize`: Levenberg-Marquardt on the paper's design loss. Ctrl-C stops it "
-      "(KeyboardInterrupt).");
+      "(KeyboardInterrupt). merit='wavefront' (`--merit wavefront`) minimizes the mean RMS "
+      "wavefront error (piston and tilt removed, exact Jacobian) on a wavefront_pupil_samples "
+      "grid instead of the RMS spot (`--wavefront-pupil-samples`).");
 
   py::class_<ToleranceReport>(m, "ToleranceReport", "The result of tolerance().")
       .def_readonly("lens_name", &ToleranceReport::lens_name)

@@ -4,9 +4,12 @@
 
 #include <cmath>
 #include <memory>
+#include <string>
+#include <vector>
 
 #include "bindings.h"
 #include "lensopt/core/error.h"
+#include "lensopt/render/diffraction_psf.h"
 #include "lensopt/render/image.h"
 
 namespace lensopt::python {
@@ -30,6 +33,7 @@ py::array_t<float> numpy_of(FloatImage&& img) {
 
 struct PyRenderer {
   std::unique_ptr<Renderer> renderer;
+  std::vector<std::string> psf_warnings;  // apply_psf_kind's (undersampled wavefronts)
 };
 
 }  // namespace
@@ -40,7 +44,8 @@ void bind_render(py::module_& m) {
       "Renders images through a lens (`lensopt render`): spatially varying PSF blur on 9 x 9 "
       "patches, relative illumination and distortion. The PSFs are sampled once here.")
       .def(py::init([](const Lens& lens, int rings, int fields, int res_factor, bool distortion,
-                       bool relative_illumination, int threads) {
+                       bool relative_illumination, int threads, const std::string& psf,
+                       int pupil_samples) {
              const TraceOptions t = trace_options(rings, fields, true, true, threads);
              RenderOptions o;
              o.res_factor = res_factor;
@@ -49,12 +54,25 @@ void bind_render(py::module_& m) {
              o.threads = threads;
              o.validate();
              lens.validate();
+             const PsfKind kind = parse_psf_kind(psf);
+             if (pupil_samples < 8 || pupil_samples > 1024)
+               throw Error("pupil_samples must be in [8, 1024], not " +
+                           std::to_string(pupil_samples));
+             WaveOptions wave;
+             wave.pupil_samples = pupil_samples;
+             wave.threads = threads;
              py::gil_scoped_release release;
-             return PyRenderer{std::make_unique<Renderer>(build_imaging_model(lens, t), o)};
+             ImagingModel model = build_imaging_model(lens, t);
+             const PsfChoice choice = apply_psf_kind(model, lens, kind, wave);
+             return PyRenderer{std::make_unique<Renderer>(std::move(model), o), choice.warnings};
            }),
            py::arg("lens"), py::kw_only(), py::arg("rings") = 32, py::arg("fields") = 21,
            py::arg("res_factor") = 1, py::arg("distortion") = true,
-           py::arg("relative_illumination") = true, py::arg("threads") = 0)
+           py::arg("relative_illumination") = true, py::arg("threads") = 0,
+           py::arg("psf") = "geometric", py::arg("pupil_samples") = 64,
+           "psf (`render --psf`): 'geometric' (ray density), 'diffraction' (FFT of the pupil "
+           "function on a pupil_samples grid, `--pupil-samples`) or 'auto' (per field and colour "
+           "channel the larger blur, by RMS radius); Renderer.psf says which were used.")
       .def(
           "render",
           [](const PyRenderer& r, const FloatArray& image) {
@@ -102,9 +120,37 @@ void bind_render(py::module_& m) {
                              [](const PyRenderer& r) { return r.renderer->model().centroid_y_mm; })
       .def_property_readonly("distortion",
                              [](const PyRenderer& r) { return r.renderer->model().distortion; })
-      .def_property_readonly("relative_illumination", [](const PyRenderer& r) {
-        return r.renderer->model().relative_illumination;
-      });
+      .def_property_readonly(
+          "relative_illumination",
+          [](const PyRenderer& r) { return r.renderer->model().relative_illumination; })
+      .def_property_readonly(
+          "psf",
+          [](const PyRenderer& r) {
+            const ImagingModel& model = r.renderer->model();
+            const auto f = static_cast<py::ssize_t>(model.psf_diffraction.size());
+            py::array_t<bool> used({f, static_cast<py::ssize_t>(kColourChannels)});
+            auto u = used.mutable_unchecked<2>();
+            int count = 0;
+            for (py::ssize_t h = 0; h < f; ++h)
+              for (int k = 0; k < kColourChannels; ++k) {
+                u(h, k) = model.psf_diffraction[h][k];
+                count += model.psf_diffraction[h][k];
+              }
+            py::dict d;
+            d["kind"] = model.psf_kind;
+            d["diffraction"] = used;
+            d["diffraction_channels"] = count;
+            d["pupil_samples"] = model.psf_pupil_samples;
+            d["padding"] = model.psf_padding;
+            d["fft_n"] = model.psf_fft_n;
+            d["warnings"] = r.psf_warnings;
+            return d;
+          },
+          "The PSFs the renderer uses (render_metrics.json's settings 'psf'): kind ('geometric', "
+          "'diffraction' or 'auto'), diffraction (fields x 3 bool: the diffraction PSF is used "
+          "for that field and colour channel R, G, B; auto: where its blur is the larger), "
+          "diffraction_channels (their count), the diffraction PSFs' pupil_samples, padding and "
+          "fft_n (0 for geometric) and the wave analysis's warnings.");
 
   m.def(
       "read_image",

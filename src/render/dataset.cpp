@@ -266,12 +266,39 @@ bool output_is_complete(const fs::path& output, const PreviousRecord& record) {
   return ok;
 }
 
+// The PSFs the model holds (ImagingModel::psf_kind): {"kind": "geometric"}; with diffraction
+// PSFs also their sampling, and for auto the choice per field (its angle) and channel.
+nlohmann::json psf_settings_json(const ImagingModel& m) {
+  nlohmann::json psf = {{"kind", m.psf_kind}};
+  if (m.psf_pupil_samples <= 0) return psf;
+  psf["pupil_samples"] = m.psf_pupil_samples;
+  psf["padding"] = m.psf_padding;
+  psf["fft_n"] = m.psf_fft_n;
+  if (m.psf_kind != "auto") return psf;
+  int used = 0;
+  nlohmann::json chosen = nlohmann::json::array();
+  static constexpr const char* kChannel[kColourChannels] = {"R", "G", "B"};
+  for (std::size_t h = 0; h < m.psf_diffraction.size(); ++h) {
+    nlohmann::json field = {{"field_deg", h < m.fields_deg.size() ? m.fields_deg[h] : 0.0}};
+    for (int k = 0; k < kColourChannels; ++k) {
+      field[kChannel[k]] = m.psf_diffraction[h][k] ? "diffraction" : "geometric";
+      used += m.psf_diffraction[h][k];
+    }
+    chosen.push_back(std::move(field));
+  }
+  psf["diffraction_channels"] = used;
+  psf["channels"] = static_cast<int>(m.psf_diffraction.size()) * kColourChannels;
+  psf["chosen"] = std::move(chosen);
+  return psf;
+}
+
 nlohmann::json settings_json(const Renderer& renderer) {
   const RenderOptions& o = renderer.options();
   return {{"lens", renderer.model().lens_name},
           {"res_factor", o.res_factor},
           {"distortion", o.distortion},
-          {"relative_illumination", o.relative_illumination}};
+          {"relative_illumination", o.relative_illumination},
+          {"psf", psf_settings_json(renderer.model())}};
 }
 
 void summarize(DatasetSummary& s) {

@@ -124,9 +124,15 @@ PsfChoice apply_psf_kind(ImagingModel& model, const Lens& lens, PsfKind kind,
   choice.kind = kind;
   const int field_count = static_cast<int>(model.psfs.fields.size());
   choice.channels = field_count * kColourChannels;
+  model.psf_kind = psf_kind_name(kind);
+  model.psf_diffraction.assign(field_count, {false, false, false});
+  model.psf_pupil_samples = model.psf_padding = model.psf_fft_n = 0;
   if (kind == PsfKind::kGeometric) return choice;
   DiffractionPsfs d = model_diffraction_psfs(model, lens, wave);
   choice.warnings = d.warnings;
+  model.psf_pupil_samples = d.pupil_samples;
+  model.psf_padding = wave.padding;
+  model.psf_fft_n = d.fft_n;
   for (int h = 0; h < field_count; ++h) {
     FieldPsf<double>& geo = model.psfs.fields[h];
     FieldPsf<double>& dif = d.psfs.fields[h];
@@ -138,6 +144,7 @@ PsfChoice apply_psf_kind(ImagingModel& model, const Lens& lens, PsfKind kind,
       geo.psf[k] = std::move(dif.psf[k]);
       geo.energy_share[k] = dif.energy_share[k];
       geo.support[k] = dif.support[k];
+      model.psf_diffraction[h][k] = true;
       ++choice.diffraction_channels;
     }
   }

@@ -69,6 +69,7 @@ assert j["rendered"] == 3 and j["failed"] == 1 and j["skipped"] == 0
 assert abs(j["mean_psnr_db"] - sum(psnrs) / 3) < 1e-3
 assert any("broken.jpg" in f for f in j["failed_inputs"])
 assert j["settings"]["res_factor"] == 1 and j["settings"]["distortion"] is True
+assert j["settings"]["psf"] == {"kind": "geometric"}, j["settings"]
 PY
 
 # Resume: nothing is rendered again, the metrics are kept.

@@ -37,6 +37,35 @@ class AnalyzeMatchesCli(unittest.TestCase):
                 self.assertEqual(report.efl_mm, expected["efl_mm"])
                 self.assertEqual([f.field_deg for f in report.fields], expected["fields_deg"])
                 self.assertEqual(report.mean_rms_spot_um, expected["mean_rms_spot_um"])
+                self.assertIsNone(report.wave)
+                self.assertIsNone(report.zernike_waves)
+
+    def test_wave_and_zernike_match_cli(self):
+        path = LENSES / "doublet.toml"
+        for order in ("fringe", "standard"):
+            with self.subTest(order=order):
+                expected = json.loads(cli("analyze", "--json", "--zernike", 9, "--zernike-order",
+                                          order, "--pupil-samples", 16, "--mtf-freqs", "10,40",
+                                          "--fields", 3, "--rings", 4, path))
+                report = lensopt.analyze(load(path), rings=4, fields=3, zernike_terms=9,
+                                         zernike_order=order, pupil_samples=16,
+                                         mtf_frequencies=[10, 40])
+                self.assertEqual(report.to_dict(), expected)
+                self.assertEqual(report.wave, expected["wave"])
+                self.assertEqual(report.wave["zernike_ordering"], order)
+                z = report.zernike_waves
+                wavelengths = len(expected["wave"]["wavelengths_nm"])
+                self.assertEqual(z.shape, (3, wavelengths, 9))  # fields, wavelengths, terms
+                for h, field in enumerate(expected["wave"]["fields"]):
+                    for w, mono in enumerate(field["per_wavelength"]):
+                        np.testing.assert_array_equal(z[h, w], mono["zernike_waves"])
+        # wave=True without a fit: the wave section, no coefficients.
+        report = lensopt.analyze(load(path), rings=4, fields=3, wave=True, pupil_samples=16)
+        self.assertGreater(report.wave["mean_strehl"], 0)
+        self.assertNotIn("zernike_terms", report.wave)
+        self.assertIsNone(report.zernike_waves)
+        with self.assertRaises(lensopt.LensoptError):
+            lensopt.analyze(load(path), zernike_terms=9, zernike_order="annular")
 
 
 class Lenses(unittest.TestCase):
@@ -132,6 +161,40 @@ class Rendering(unittest.TestCase):
         self.assertAlmostEqual(maps["distortion"][15, 20], 0.0, places=12)
         self.assertLess(maps["relative_illumination"][0, 0], 1.0)
 
+    def test_psf_kind(self):
+        lens = load(LENSES / "doublet.toml")
+        geometric = lensopt.Renderer(lens, rings=4, fields=3)
+        self.assertEqual(geometric.psf["kind"], "geometric")
+        self.assertEqual(geometric.psf["diffraction"].shape, (3, 3))
+        self.assertFalse(geometric.psf["diffraction"].any())
+        self.assertEqual(geometric.psf["pupil_samples"], 0)
+        diffraction = lensopt.Renderer(lens, rings=4, fields=3, psf="diffraction",
+                                       pupil_samples=16)
+        self.assertTrue(diffraction.psf["diffraction"].all())
+        self.assertEqual(diffraction.psf["pupil_samples"], 16)
+        self.assertGreaterEqual(diffraction.psf["fft_n"], 32)
+        auto = lensopt.Renderer(lens, rings=4, fields=3, psf="auto", pupil_samples=16)
+        self.assertEqual(auto.psf["kind"], "auto")
+        self.assertEqual(auto.psf["diffraction_channels"], int(auto.psf["diffraction"].sum()))
+        # The renderer holds the chosen PSFs: auto renders like geometric where it chose none,
+        # like diffraction where it chose all.
+        with tempfile.TemporaryDirectory() as tmp:
+            src = Path(tmp) / "in" / "scene.exr"
+            src.parent.mkdir()
+            lensopt.write_image(str(src), np.full((36, 48, 3), 0.5, dtype=np.float32))
+            cli("render", LENSES / "doublet.toml", src, "-o", Path(tmp) / "out", "-q", "--psf",
+                "auto", "--pupil-samples", 64)
+            settings = json.loads((Path(tmp) / "out" / "render_metrics.json").read_text())[
+                "settings"]
+        cli_auto = lensopt.Renderer(lens, psf="auto")
+        self.assertEqual(settings["psf"]["kind"], "auto")
+        self.assertEqual(settings["psf"]["diffraction_channels"],
+                         cli_auto.psf["diffraction_channels"])
+        chosen = [[f[c] == "diffraction" for c in "RGB"] for f in settings["psf"]["chosen"]]
+        np.testing.assert_array_equal(cli_auto.psf["diffraction"], chosen)
+        with self.assertRaises(lensopt.LensoptError):
+            lensopt.Renderer(lens, psf="wave")
+
     def test_render_matches_cli(self):
         rng = np.random.default_rng(3)
         image = rng.random((36, 48, 3), dtype=np.float32)
@@ -175,6 +238,39 @@ class Optimization(unittest.TestCase):
         self.assertEqual(len(report.trial_spots_um), 8)
         self.assertGreater(report.nominal_spot_um, 0)
         self.assertEqual(report.to_dict()["lens"], report.lens_name)
+
+    def test_wavefront_merit(self):
+        lens = load(LENSES / "doublet.toml")
+        param = lensopt.Parameterization(lens)
+        x = param.from_lens(lens)
+        opts = dict(rings=4, fields=3, glass_mode="continuous", merit="wavefront",
+                    wavefront_pupil_samples=8, weight_ray_path=0.0, weight_ray_angle=0.0,
+                    weight_glass=0.0)
+        d = param.design_loss(x, **opts)
+        self.assertEqual(d["merit"], "wavefront")
+        self.assertEqual(len(d["field_wavefront_waves"]), 3)
+        self.assertAlmostEqual(d["total"], d["wavefront_waves"], delta=1e-12)
+        self.assertAlmostEqual(d["wavefront_waves"], np.mean(d["field_wavefront_waves"]),
+                               delta=1e-12)
+        self.assertNotIn("wavefront_waves", param.design_loss(x, rings=4, fields=3))
+        for j in range(param.size):
+            h = 1e-4 * max(1.0, abs(x[j]))
+            xp, xm = x.copy(), x.copy()
+            xp[j] += h
+            xm[j] -= h
+            fd = (param.design_loss(xp, gradient=False, **opts)["total"]
+                  - param.design_loss(xm, gradient=False, **opts)["total"]) / (2 * h)
+            self.assertAlmostEqual(d["gradient"][j], fd, delta=1e-4 * max(1.0, abs(fd)),
+                                   msg=param.names[j])
+        with self.assertRaises(lensopt.LensoptError):
+            param.design_loss(x, merit="strehl")
+        lens.surfaces[-1].thickness_mm += 0.3
+        result = lensopt.optimize(lens, max_iterations=3, max_rounds=1, rings=4, fields=3,
+                                  merit="wavefront", wavefront_pupil_samples=8)
+        self.assertGreater(result.start_wavefront_waves, 0)
+        self.assertLess(result.final_wavefront_waves, result.start_wavefront_waves)
+        spot = lensopt.optimize(lens, max_iterations=1, max_rounds=1, rings=4, fields=3)
+        self.assertEqual(spot.start_wavefront_waves, 0)
 
 
 if __name__ == "__main__":

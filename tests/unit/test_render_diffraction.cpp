@@ -1,15 +1,23 @@
 // Diffraction PSFs for rendering (render/diffraction_psf.h): the bins of a PSF integrate its
 // energy (a grid covering the FFT window holds all of it), each channel sums to 1 with the part
 // inside the grid reported, the pixel kernels built from them conserve energy, the geometric
-// choice leaves the model untouched, and auto picks the larger blur.
+// choice leaves the model untouched, auto picks the larger blur, and the render metrics' settings
+// record which PSFs were used.
 #include <doctest/doctest.h>
+#include <unistd.h>
 
 #include <cmath>
+#include <filesystem>
+#include <nlohmann/json.hpp>
+#include <string>
 
 #include "lensopt/analysis/wave.h"
+#include "lensopt/core/atomic_file.h"
 #include "lensopt/core/error.h"
 #include "lensopt/formats/lens_file.h"
 #include "lensopt/lens/lens_io.h"
+#include "lensopt/render/chart.h"
+#include "lensopt/render/dataset.h"
 #include "lensopt/render/diffraction_psf.h"
 #include "lensopt/render/render.h"
 #include "test_support.h"
@@ -172,4 +180,82 @@ TEST_CASE("render diffraction: geometric leaves the model as it is; auto takes t
   apply_psf_kind(cooke_model, cooke, PsfKind::kAuto, wave);
   CHECK(cooke_model.psfs.fields.back().psf[1] == cooke_geometric.psfs.fields.back().psf[1]);
   CHECK_THROWS_AS(parse_psf_kind("wave"), Error);
+}
+
+TEST_CASE("render diffraction: the metrics' settings record the PSF kind and auto's choice") {
+  namespace fs = std::filesystem;
+  const Lens lens = fast_singlet();
+  const ImagingModel model = build_imaging_model(lens, small_trace());
+  CHECK(model.psf_kind == "geometric");  // as built: the ray-density PSFs
+  WaveOptions wave;
+  wave.pupil_samples = 32;
+  const fs::path dir =
+      fs::temp_directory_path() / ("lensopt-test-render-psf-kind-" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  ChartOptions chart;
+  chart.width = 96;
+  chart.height = 64;
+  chart.text = false;
+  write_image(dir / "chart.png", make_test_chart(chart).image);
+  RenderOptions ro;
+  ro.threads = 1;
+  // Renders the chart with `kind` into OUT/<kind> (or `out`) and returns the metrics' settings.
+  auto settings_of = [&](PsfKind kind, const std::string& out, PsfChoice& choice, ImagingModel& m,
+                         std::vector<std::string>* notes = nullptr) {
+    m = model;
+    choice = apply_psf_kind(m, lens, kind, wave);
+    const Renderer renderer(m, ro);
+    DatasetOptions d;
+    d.inputs = {dir / "chart.png"};
+    d.output_dir = dir / out;
+    d.jobs = 1;
+    const DatasetSummary s = render_dataset(renderer, d);
+    CHECK(s.failed == 0);
+    if (notes) *notes = s.notes;
+    return nlohmann::json::parse(read_file(dir / out / "render_metrics.json"))["settings"];
+  };
+  PsfChoice choice;
+  ImagingModel m;
+  const nlohmann::json geometric = settings_of(PsfKind::kGeometric, "geometric", choice, m);
+  CHECK(geometric["psf"] == nlohmann::json{{"kind", "geometric"}});
+  CHECK(geometric["lens"] == "f10-singlet");
+
+  const nlohmann::json diffraction = settings_of(PsfKind::kDiffraction, "diffraction", choice, m);
+  CHECK(diffraction["psf"]["kind"] == "diffraction");
+  CHECK(diffraction["psf"]["pupil_samples"] == 32);
+  CHECK(diffraction["psf"]["padding"] == wave.padding);
+  CHECK(diffraction["psf"]["fft_n"].get<int>() >= 2 * 32);
+  CHECK(!diffraction["psf"].contains("chosen"));
+
+  const nlohmann::json automatic = settings_of(PsfKind::kAuto, "auto", choice, m);
+  const nlohmann::json& psf = automatic["psf"];
+  CHECK(psf["kind"] == "auto");
+  CHECK(psf["diffraction_channels"] == choice.diffraction_channels);
+  CHECK(psf["channels"] == choice.channels);
+  REQUIRE(psf["chosen"].size() == m.psfs.fields.size());
+  int diffraction_channels = 0;
+  for (std::size_t h = 0; h < m.psfs.fields.size(); ++h) {
+    const nlohmann::json& field = psf["chosen"][h];
+    CHECK(field["field_deg"].get<double>() == m.fields_deg[h]);
+    const char* names[kColourChannels] = {"R", "G", "B"};
+    for (int k = 0; k < kColourChannels; ++k) {
+      // The choice recorded is the PSF the renderer holds.
+      const bool used = m.psfs.fields[h].psf[k] != model.psfs.fields[h].psf[k];
+      CHECK(m.psf_diffraction[h][k] == used);
+      CHECK(field[names[k]] == (used ? "diffraction" : "geometric"));
+      diffraction_channels += used;
+    }
+  }
+  CHECK(diffraction_channels == choice.diffraction_channels);
+  // Near the diffraction limit on axis (the test above): green is diffraction there.
+  CHECK(psf["chosen"][0]["G"] == "diffraction");
+
+  // Rendering the geometric folder again with auto: the settings differ, the image is kept.
+  std::vector<std::string> notes;
+  settings_of(PsfKind::kAuto, "geometric", choice, m, &notes);
+  bool noted = false;
+  for (const std::string& n : notes) noted |= n.find("other settings") != std::string::npos;
+  CHECK(noted);
+  fs::remove_all(dir);
 }

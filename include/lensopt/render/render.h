@@ -90,6 +90,13 @@ struct ImagingModel {
   PsfSet<double> psfs;
   TraceOptions trace;
   int ray_failures = 0;
+  // Which PSFs `psfs` holds (render/diffraction_psf.h apply_psf_kind, `render --psf`): the kind
+  // asked for ("geometric", "diffraction" or "auto"), per field and colour channel (R, G, B)
+  // whether the diffraction PSF is the one used (all false: geometric; auto: the larger blur),
+  // and the diffraction PSFs' pupil grid cells, padding and FFT size (0 when none was computed).
+  std::string psf_kind = "geometric";
+  std::vector<std::array<bool, kColourChannels>> psf_diffraction;
+  int psf_pupil_samples = 0, psf_padding = 0, psf_fft_n = 0;
 };
 
 // Traces the lens at `trace` sampling and computes its PSFs, distortion and relative
