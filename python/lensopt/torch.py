@@ -107,6 +107,62 @@ def _keys(t: torch.Tensor) -> torch.Tensor:
                         -1.5 * t3 + 2.0 * t2 + 0.5 * t, 0.5 * t3 - 0.5 * t2), dim=-1)
 
 
+# The warp gathers its taps in chunks of about this many values (cache-sized temporaries).
+_WARP_CHUNK_VALUES = 1 << 20
+
+
+def _warp_chunks(pixels: int, channels: int):
+    n = max(64, _WARP_CHUNK_VALUES // (16 * channels))
+    return [(a, min(pixels, a + n)) for a in range(0, pixels, n)]
+
+
+class _WarpFunction(torch.autograd.Function):
+    """The Keys warp's sampling as one operation: out[p, c] = sum_{m,t} wy[p, m] wx[p, t]
+    src[start[p, m] + t, c], src the padded region with its pixels as rows and the channels
+    (batch x channels) as columns, start[p, m] the first of the 4 consecutive pixels of tap row m
+    of output pixel p (so each tap row is one contiguous run of 4 x channels values). Gathered
+    and weighted chunk by chunk (no 16-fold temporary of the whole image, no autograd graph of
+    it); the backward scatters the weighted gradient to the taps (dL/dsrc) and contracts it
+    with the taps (dL/dwy, dL/dwx). The taps' positions are integers fixed by the plan."""
+
+    @staticmethod
+    def forward(ctx, src, wy, wx, start):
+        pixels, k = wy.shape[0], src.shape[1]
+        runs = src.as_strided((src.shape[0] - 3, 4 * k), (k, 1))
+        out = src.new_empty(pixels, k)
+        for a, b in _warp_chunks(pixels, k):
+            w = (wy[a:b, :, None] * wx[a:b, None, :]).reshape(b - a, 1, 16)
+            taps = runs.index_select(0, start[4 * a:4 * b]).view(b - a, 16, k)
+            torch.bmm(w, taps, out=out[a:b].view(b - a, 1, k))
+        ctx.save_for_backward(src, wy, wx, start)
+        return out
+
+    @staticmethod
+    def backward(ctx, grad):
+        src, wy, wx, start = ctx.saved_tensors
+        pixels, k = wy.shape[0], src.shape[1]
+        grad = grad.contiguous()
+        g_src = g_wy = g_wx = None
+        if ctx.needs_input_grad[0]:
+            flat = torch.zeros(src.numel(), dtype=src.dtype, device=src.device)
+            run = torch.arange(4 * k, device=src.device)
+            for a, b in _warp_chunks(pixels, k):
+                w = (wy[a:b, :, None] * wx[a:b, None, :]).reshape(b - a, 16, 1)
+                index = (start[4 * a:4 * b, None] * k + run).reshape(-1)
+                flat.scatter_add_(0, index, (w * grad[a:b, None, :]).reshape(-1))
+            g_src = flat.view(src.shape)
+        if ctx.needs_input_grad[1] or ctx.needs_input_grad[2]:
+            runs = src.as_strided((src.shape[0] - 3, 4 * k), (k, 1))
+            g_w = src.new_empty(pixels, 16)
+            for a, b in _warp_chunks(pixels, k):
+                taps = runs.index_select(0, start[4 * a:4 * b]).view(b - a, 16, k)
+                torch.bmm(taps, grad[a:b, :, None], out=g_w[a:b].view(b - a, 16, 1))
+            g_w = g_w.view(pixels, 4, 4)
+            g_wy = (g_w * wx[:, None, :]).sum(2)
+            g_wx = (g_w * wy[:, :, None]).sum(1)
+        return g_src, g_wy, g_wx, None
+
+
 class _OpticsFunction(torch.autograd.Function):
     """x -> (PSFs F x 3 x G x G, y_ref F, ybar F, RI F) as float64 tensors on `device`, sampled
     by lensopt's Jets; the backward contracts their gradients with the Jets' derivative parts
@@ -340,12 +396,19 @@ class ImageFormation(nn.Module):
             x_lo, x_hi, y_lo, y_hi = cx0, cx0 + cw, cy0, cy0 + ch
         p.rx0, p.ry0, p.rw, p.rh = x_lo, y_lo, x_hi - x_lo, y_hi - y_lo
         if p.warp:
-            t = np.arange(4)
-            rows = np.clip(fy0[..., None] - 1 + t, 0, height - 1) - p.ry0  # ch x cw x 4
-            cols = np.clip(fx0[..., None] - 1 + t, 0, width - 1) - p.rx0
-            index = rows[..., :, None] * p.rw + cols[..., None, :]  # ch x cw x 4 x 4
-            index = np.where(valid[..., None, None], index, 0)
-            p.warp_index = dev(index.reshape(-1))
+            # The taps of pixel p are rows fy0-1 .. fy0+2 and columns fx0-1 .. fx0+2 of the image,
+            # clamped to its border. The warp samples the region padded by 2 pixels on every side
+            # with its edge pixels repeated (pad_rows, pad_cols): where a tap lies beyond the
+            # image, the region reaches the image's border (it spans every valid sample's
+            # clamped taps), so the repeated edge is the clamp; elsewhere the taps lie inside the
+            # region. Tap row m of p is then the 4 consecutive padded pixels from
+            # warp_start[p, m] (0 for black samples, whose weights are 0).
+            padded_width = p.rw + 4
+            rows = fy0[..., None] - 1 + np.arange(4) - p.ry0 + 2  # ch x cw x 4
+            start = rows * padded_width + (fx0 - 1 - p.rx0 + 2)[..., None]
+            p.warp_start = dev(np.where(valid[..., None], start, 0).reshape(-1))
+            p.pad_rows = dev(np.clip(np.arange(-2, p.rh + 2), 0, p.rh - 1))
+            p.pad_cols = dev(np.clip(np.arange(-2, p.rw + 2), 0, p.rw - 1))
             p.warp_piece = dev(k.reshape(-1))
             p.warp_dx, p.warp_dy = dev(dx.reshape(-1)), dev(dy.reshape(-1))
             p.warp_r = dev(np.where(on_axis, 1.0, r_out).reshape(-1))
@@ -492,11 +555,13 @@ class ImageFormation(nn.Module):
             scale = torch.where(p.warp_axis, axis_scale, rho / p.warp_r)
             u = p.axis[0] + p.warp_dx * scale - 0.5
             v = p.axis[1] + p.warp_dy * scale - 0.5
-            wx = _keys(u - p.warp_floor_x)
-            wy = _keys(v - p.warp_floor_y)
-            weights = (wy[:, :, None] * wx[:, None, :]) * p.warp_valid[:, None, None]
-            taps = out.reshape(B, C, -1)[:, :, p.warp_index].reshape(B, C, ch * cw, 16)
-            out = (taps * weights.reshape(-1, 16).to(cdtype)).sum(-1).reshape(B, C, ch, cw)
+            # Positions in float64, the Keys weights of their fractions in the images' precision.
+            wx = _keys((u - p.warp_floor_x).to(cdtype))
+            wy = _keys((v - p.warp_floor_y).to(cdtype)) * p.warp_valid.to(cdtype)[:, None]
+            src = out.permute(2, 3, 0, 1).index_select(0, p.pad_rows).index_select(1, p.pad_cols)
+            src = src.reshape(-1, B * C).contiguous()
+            out = _WarpFunction.apply(src, wy, wx, p.warp_start)
+            out = out.t().reshape(B, C, ch, cw)
         return out.to(images.dtype)
 
     def forward(self, images: torch.Tensor, crop=None) -> torch.Tensor:
