@@ -99,12 +99,35 @@ def _lerp(xs: torch.Tensor, ys: torch.Tensor, x: torch.Tensor, k: torch.Tensor) 
     return y0 + (x - x0) / (x1 - x0) * (y1 - y0)
 
 
-def _keys(t: torch.Tensor) -> torch.Tensor:
-    """Keys cubic weights (a = -1/2) of the taps at -1, 0, 1, 2 for fractions t: (..., 4)."""
+def _keys(t: torch.Tensor):
+    """Keys cubic (a = -1/2) weights of the taps at -1, 0, 1, 2 for fractions t (n) and their
+    derivatives wrt t: n x 4 each."""
     t2 = t * t
     t3 = t2 * t
-    return torch.stack((-0.5 * t3 + t2 - 0.5 * t, 1.5 * t3 - 2.5 * t2 + 1.0,
-                        -1.5 * t3 + 2.0 * t2 + 0.5 * t, 0.5 * t3 - 0.5 * t2), dim=-1)
+    weights = torch.stack((-0.5 * t3 + t2 - 0.5 * t, 1.5 * t3 - 2.5 * t2 + 1.0,
+                           -1.5 * t3 + 2.0 * t2 + 0.5 * t, 0.5 * t3 - 0.5 * t2), dim=-1)
+    slopes = torch.stack((-1.5 * t2 + 2.0 * t - 0.5, 4.5 * t2 - 5.0 * t,
+                          -4.5 * t2 + 4.0 * t + 0.5, 1.5 * t2 - t), dim=-1)
+    return weights, slopes
+
+
+class _Rfft2Function(torch.autograd.Function):
+    """torch.fft.rfft2 over the last two dimensions (sizes ny x nx) with a cheaper adjoint than
+    torch's own (which fills a full complex spectrum and runs a complex FFT): for real x and
+    X = rfft2(x), dL/dx = ny nx irfft2(G') with G' the gradient G wrt X with the columns that
+    stand for two of the full spectrum's (0 < l < nx - l) halved."""
+
+    @staticmethod
+    def forward(ctx, x):
+        ctx.size = tuple(x.shape[-2:])
+        return torch.fft.rfft2(x)
+
+    @staticmethod
+    def backward(ctx, grad):
+        ny, nx = ctx.size
+        g = grad.clone()
+        g[..., 1:(nx + 1) // 2] *= 0.5
+        return torch.fft.irfft2(g, s=(ny, nx)) * float(ny * nx)
 
 
 # The warp gathers its taps in chunks of about this many values (cache-sized temporaries).
@@ -118,49 +141,60 @@ def _warp_chunks(pixels: int, channels: int):
 
 class _WarpFunction(torch.autograd.Function):
     """The Keys warp's sampling as one operation: out[p, c] = sum_{m,t} wy[p, m] wx[p, t]
-    src[start[p, m] + t, c], src the padded region with its pixels as rows and the channels
-    (batch x channels) as columns, start[p, m] the first of the 4 consecutive pixels of tap row m
-    of output pixel p (so each tap row is one contiguous run of 4 x channels values). Gathered
-    and weighted chunk by chunk (no 16-fold temporary of the whole image, no autograd graph of
-    it); the backward scatters the weighted gradient to the taps (dL/dsrc) and contracts it
-    with the taps (dL/dwy, dL/dwx). The taps' positions are integers fixed by the plan."""
+    src[start[p, m] + t, c] with wx = keys(fx[p]), wy = keys(fy[p]) valid[p]; src is the padded
+    region with its pixels as rows and the channels (batch x channels) as columns, start[p, m]
+    the first of the 4 consecutive pixels of tap row m of output pixel p (so each tap row is one
+    contiguous run of 4 x channels values). Gathered and weighted chunk by chunk (no 16-fold
+    temporary of the whole image, no autograd graph of the taps); the backward scatters the
+    weighted gradient to the taps (dL/dsrc) and contracts it with the taps and the weights'
+    slopes (dL/dfx, dL/dfy). The taps' positions (start) and valid are fixed by the plan."""
 
     @staticmethod
-    def forward(ctx, src, wy, wx, start):
-        pixels, k = wy.shape[0], src.shape[1]
+    def forward(ctx, src, fx, fy, valid, start):
+        pixels, k = fx.shape[0], src.shape[1]
         runs = src.as_strided((src.shape[0] - 3, 4 * k), (k, 1))
         out = src.new_empty(pixels, k)
+        wx, wy = _keys(fx)[0], _keys(fy)[0] * valid[:, None]
         for a, b in _warp_chunks(pixels, k):
             w = (wy[a:b, :, None] * wx[a:b, None, :]).reshape(b - a, 1, 16)
             taps = runs.index_select(0, start[4 * a:4 * b]).view(b - a, 16, k)
             torch.bmm(w, taps, out=out[a:b].view(b - a, 1, k))
-        ctx.save_for_backward(src, wy, wx, start)
+        ctx.save_for_backward(src, fx, fy, valid, start)
         return out
 
     @staticmethod
     def backward(ctx, grad):
-        src, wy, wx, start = ctx.saved_tensors
-        pixels, k = wy.shape[0], src.shape[1]
+        src, fx, fy, valid, start = ctx.saved_tensors
+        pixels, k = fx.shape[0], src.shape[1]
         grad = grad.contiguous()
-        g_src = g_wy = g_wx = None
-        if ctx.needs_input_grad[0]:
-            flat = torch.zeros(src.numel(), dtype=src.dtype, device=src.device)
-            run = torch.arange(4 * k, device=src.device)
-            for a, b in _warp_chunks(pixels, k):
-                w = (wy[a:b, :, None] * wx[a:b, None, :]).reshape(b - a, 16, 1)
-                index = (start[4 * a:4 * b, None] * k + run).reshape(-1)
-                flat.scatter_add_(0, index, (w * grad[a:b, None, :]).reshape(-1))
-            g_src = flat.view(src.shape)
-        if ctx.needs_input_grad[1] or ctx.needs_input_grad[2]:
+        need_src, need_fx, need_fy = ctx.needs_input_grad[:3]
+        g_src = g_fx = g_fy = None
+        if need_src:  # per channel plane: contiguous weight x gradient products and scatters
+            g_src = src.new_zeros(k, src.shape[0])
+            grad_t = grad.t().contiguous()
+        if need_fx or need_fy:
             runs = src.as_strided((src.shape[0] - 3, 4 * k), (k, 1))
             g_w = src.new_empty(pixels, 16)
-            for a, b in _warp_chunks(pixels, k):
-                taps = runs.index_select(0, start[4 * a:4 * b]).view(b - a, 16, k)
-                torch.bmm(taps, grad[a:b, :, None], out=g_w[a:b].view(b - a, 16, 1))
+        (wx, slope_x), (wy, slope_y) = _keys(fx), _keys(fy)
+        wy = wy * valid[:, None]
+        tap = torch.arange(4, device=src.device)
+        for a, b in _warp_chunks(pixels, k):
+            n = b - a
+            g = grad[a:b].view(n, k, 1)
+            if need_src:  # g_src[start + t] += w g
+                w = (wy[a:b, :, None] * wx[a:b, None, :]).reshape(n, 16)
+                index = (start[4 * a:4 * b, None] + tap).reshape(-1)
+                for c in range(k):
+                    g_src[c].scatter_add_(0, index, (w * grad_t[c, a:b, None]).reshape(-1))
+            if need_fx or need_fy:  # dL/dw = taps . g
+                taps = runs.index_select(0, start[4 * a:4 * b]).view(n, 16, k)
+                torch.bmm(taps, g, out=g_w[a:b].view(n, 16, 1))
+        if need_fx or need_fy:  # then the weights' slopes
             g_w = g_w.view(pixels, 4, 4)
-            g_wy = (g_w * wx[:, None, :]).sum(2)
-            g_wx = (g_w * wy[:, :, None]).sum(1)
-        return g_src, g_wy, g_wx, None
+            g_fx = (torch.bmm(wy[:, None, :], g_w).view(pixels, 4) * slope_x).sum(1)
+            g_wy = torch.bmm(g_w, wx[:, :, None]).view(pixels, 4)
+            g_fy = (g_wy * slope_y).sum(1) * valid
+        return None if g_src is None else g_src.t(), g_fx, g_fy, None, None
 
 
 class _OpticsFunction(torch.autograd.Function):
@@ -199,8 +233,8 @@ class _Plan:
 
 # Patches per row / column of the overlap-add blur (PsfGrid::kPatches).
 _PATCHES = 9
-# The blur processes patch rows in chunks of at most this many block elements.
-_CHUNK_ELEMENTS = 1 << 24
+
+
 class _LensLossFunction(torch.autograd.Function):
     """(l_S, l_RP, l_RA, l_GV) of x; the backward is the gradient of sum_i w_i l_i with the
     incoming gradients as weights (one Jet evaluation per sign)."""
@@ -442,7 +476,11 @@ class ImageFormation(nn.Module):
         p.nx, p.ny = _fft_size(ex + 2 * R), _fft_size(ey + 2 * R)
         p.npx, p.npy = len(xs), len(ys)
         p.cols = dev(np.stack([_reflect(x0 - R + np.arange(p.nx), width) for _, x0, _ in xs]))
-        p.rows = dev(np.stack([_reflect(y0 - R + np.arange(p.ny), height) for _, y0, _ in ys]))
+        # The rows of every block row (symmetrically reflected), once: block row a is rows
+        # row_offset[a] .. + ny of them.
+        first = [y0 - R for _, y0, _ in ys]
+        p.ext_rows = dev(_reflect(np.arange(min(first), max(first) + p.ny), height))
+        p.row_offset = [f - min(first) for f in first]
 
         def windows(spans, w, e):
             out = np.zeros((len(spans), e))
@@ -452,11 +490,11 @@ class ImageFormation(nn.Module):
 
         wx = windows(xs, L["window_x"], ex)
         wy = windows(ys, L["window_y"], ey)
-        p.window_np = wy[:, None, :, None] * wx[None, :, None, :]  # npy x npx x ey x ex
+        p.window_np = (wx, wy)  # the windows are separable: npx x ex and npy x ey
         tx = np.array([x0 for _, x0, _ in xs])[:, None] + np.arange(ex) - p.rx0  # npx x ex
         ty = np.array([y0 for _, y0, _ in ys])[:, None] + np.arange(ey) - p.ry0
         tx, ty = np.clip(tx, 0, p.rw - 1), np.clip(ty, 0, p.rh - 1)
-        p.target = dev((ty[:, None, :, None] * p.rw + tx[None, :, None, :]).reshape(-1))
+        p.target_x, p.target_y = dev(tx.reshape(-1)), dev(ty)
         # PSF bins -> pixel kernels of radius R (render/psf_resample.h): the four taps.
         size_q = 2 * radii + 1
         S = 2 * R + 1
@@ -502,26 +540,32 @@ class ImageFormation(nn.Module):
         kernel = kernel.reshape(nq, cc, S, S).to(cdtype)
         placed = nn.functional.pad(kernel, (0, p.nx - S, 0, p.ny - S))
         placed = torch.roll(placed, shifts=(-R, -R), dims=(-2, -1))
-        spectra = torch.fft.rfft2(placed)  # nq x Cc x ny x nh
-        spectra = spectra.reshape(p.npy, p.npx, cc, p.ny, -1).permute(2, 0, 1, 3, 4)
+        spectra = _Rfft2Function.apply(placed)  # nq x Cc x ny x nh
+        # Per patch row (unbind: their gradients are stacked, not added up at full size).
+        spectra = spectra.reshape(p.npy, p.npx, cc, p.ny, -1).transpose(1, 2).unbind(0)
         key = (str(device), cdtype)
         if key not in p.window_t:
-            p.window_t[key] = torch.from_numpy(p.window_np).to(device=device, dtype=cdtype)
-        window = p.window_t[key]
-        scene = images[:, :p.colours].to(cdtype)
-        region = torch.zeros(B, cc, p.rh * p.rw, dtype=cdtype, device=device)
-        per_row = B * cc * p.npx * p.ny * p.nx
-        step = max(1, _CHUNK_ELEMENTS // per_row)
-        target = p.target.reshape(p.npy, -1)
-        for a in range(0, p.npy, step):
-            b = min(p.npy, a + step)
-            rows = p.rows[a:b]
-            blocks = scene[:, :, rows[:, :, None, None], p.cols[None, None, :, :]]
-            blocks = blocks.permute(0, 1, 2, 4, 3, 5)  # B x Cc x rows x npx x ny x nx
-            conv = torch.fft.irfft2(torch.fft.rfft2(blocks) * spectra[:, a:b], s=(p.ny, p.nx))
-            conv = conv[..., R:R + p.ey, R:R + p.ex] * window[a:b]
-            region = region.index_add(2, target[a:b].reshape(-1), conv.reshape(B, cc, -1))
-        return region.reshape(B, cc, p.rh, p.rw)
+            p.window_t[key] = tuple(torch.from_numpy(w).to(device=device, dtype=cdtype)
+                                    for w in p.window_np)
+        window_x, window_y = p.window_t[key]
+        window_x = window_x[:, None, :]  # npx x 1 x ex
+        # The blocks' rows and columns of the images (B x Cc x rows x npx nx), gathered once.
+        scene = images[:, :p.colours].index_select(2, p.ext_rows)
+        scene = scene.index_select(3, p.cols.reshape(-1)).to(cdtype)
+        region = torch.zeros(B, cc, p.rh, p.rw, dtype=cdtype, device=device)
+        # One patch row at a time (small temporaries): its blocks B x Cc x npx x ny x nx, their
+        # convolutions' centres windowed and added along x into the row's band, then the band
+        # windowed and added along y into the region.
+        for a in range(p.npy):
+            blocks = scene.narrow(2, p.row_offset[a], p.ny)
+            blocks = blocks.reshape(B, cc, p.ny, p.npx, p.nx).transpose(2, 3)
+            conv = torch.fft.irfft2(torch.fft.rfft2(blocks) * spectra[a], s=(p.ny, p.nx))
+            conv = conv[..., R:R + p.ey, R:R + p.ex] * window_x  # B x Cc x npx x ey x ex
+            conv = conv.transpose(2, 3).reshape(B, cc, p.ey, p.npx * p.ex)
+            band = torch.zeros(B, cc, p.ey, p.rw, dtype=cdtype, device=device).index_add(
+                3, p.target_x, conv)
+            region = region.index_add(2, p.target_y[a], band * window_y[a, :, None])
+        return region
 
     def _form(self, x: torch.Tensor, images: torch.Tensor, crop=None) -> torch.Tensor:
         """The image formation of lens variables x (the module's or another tensor, e.g. for
@@ -556,11 +600,11 @@ class ImageFormation(nn.Module):
             u = p.axis[0] + p.warp_dx * scale - 0.5
             v = p.axis[1] + p.warp_dy * scale - 0.5
             # Positions in float64, the Keys weights of their fractions in the images' precision.
-            wx = _keys((u - p.warp_floor_x).to(cdtype))
-            wy = _keys((v - p.warp_floor_y).to(cdtype)) * p.warp_valid.to(cdtype)[:, None]
+            fx = (u - p.warp_floor_x).to(cdtype)
+            fy = (v - p.warp_floor_y).to(cdtype)
             src = out.permute(2, 3, 0, 1).index_select(0, p.pad_rows).index_select(1, p.pad_cols)
             src = src.reshape(-1, B * C).contiguous()
-            out = _WarpFunction.apply(src, wy, wx, p.warp_start)
+            out = _WarpFunction.apply(src, fx, fy, p.warp_valid.to(cdtype), p.warp_start)
             out = out.t().reshape(B, C, ch, cw)
         return out.to(images.dtype)
 
