@@ -197,6 +197,27 @@ class _WarpFunction(torch.autograd.Function):
         return None if g_src is None else g_src.t(), g_fx, g_fy, None, None
 
 
+class _GatherFunction(torch.autograd.Function):
+    """images[:, :channels, rows][..., cols] (rows, cols: index vectors) as one operation whose
+    backward adds the gradient straight into one zero gradient of the images' shape (autograd's
+    own chain of slice and two index_select backwards makes three full-size temporaries)."""
+
+    @staticmethod
+    def forward(ctx, images, channels, rows, cols):
+        ctx.shape, ctx.channels = images.shape, channels
+        ctx.save_for_backward(rows, cols)
+        return images[:, :channels].index_select(2, rows).index_select(3, cols)
+
+    @staticmethod
+    def backward(ctx, grad):
+        rows, cols = ctx.saved_tensors
+        B, _, _, W = ctx.shape
+        out = grad.new_zeros(ctx.shape)
+        band = grad.new_zeros(B, ctx.channels, rows.shape[0], W).index_add_(3, cols, grad)
+        out[:, :ctx.channels].index_add_(2, rows, band)
+        return out, None, None, None
+
+
 class _OpticsFunction(torch.autograd.Function):
     """x -> (PSFs F x 3 x G x G, y_ref F, ybar F, RI F) as float64 tensors on `device`, sampled
     by lensopt's Jets; the backward contracts their gradients with the Jets' derivative parts
@@ -550,8 +571,8 @@ class ImageFormation(nn.Module):
         window_x, window_y = p.window_t[key]
         window_x = window_x[:, None, :]  # npx x 1 x ex
         # The blocks' rows and columns of the images (B x Cc x rows x npx nx), gathered once.
-        scene = images[:, :p.colours].index_select(2, p.ext_rows)
-        scene = scene.index_select(3, p.cols.reshape(-1)).to(cdtype)
+        scene = _GatherFunction.apply(images, p.colours, p.ext_rows, p.cols.reshape(-1))
+        scene = scene.to(cdtype)
         region = torch.zeros(B, cc, p.rh, p.rw, dtype=cdtype, device=device)
         # One patch row at a time (small temporaries): its blocks B x Cc x npx x ny x nx, their
         # convolutions' centres windowed and added along x into the row's band, then the band
