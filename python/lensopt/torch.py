@@ -525,12 +525,12 @@ class ImageFormation(nn.Module):
         shift = (R - radii)[:, None]
         base = np.where(ok, (cy + shift) * S + (cx + shift), 0).astype(np.int64)
         fx, fy = L["fx"][patches], L["fy"][patches]
-        p.kernel_index = dev(np.concatenate([base, base + 1, base + S, base + S + 1], axis=1))
-        p.kernel_weight = dev(np.concatenate([(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy,
-                                              fx * fy], axis=1))
+        p.kernel_index = dev(np.stack([base, base + 1, base + S, base + S + 1]))  # 4 x nq x G^2
+        p.kernel_weight_np = np.stack([(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy, fx * fy])
         p.bin_ok = dev(ok)
         p.field_weights = dev(L["field_weights"][patches])
         p.window_t = {}
+        p.kernel_weight = {}
         self._cache[key] = p
         return p
 
@@ -542,15 +542,20 @@ class ImageFormation(nn.Module):
         F, _, G, _ = psf.shape
         nq = p.npx * p.npy
         R, S = p.R, 2 * p.R + 1
-        # Patch kernels K_q[c] = L_q(sum_h a_qh P_h[c]) / T in float64.
+        # Patch kernels K_q[c] = L_q(sum_h a_qh P_h[c]) / T in the images' precision (float64
+        # for float64 images): each bin's weight splat bilinearly onto 4 kernel pixels.
         mixed = torch.einsum("qf,fcb->qcb", p.field_weights, psf.reshape(F, 3, G * G))
-        m = mixed * ((mixed.detach() > 0) & p.bin_ok[:, None, :])
+        m = (mixed * ((mixed.detach() > 0) & p.bin_ok[:, None, :])).to(cdtype)
         total = m.sum(-1, keepdim=True)
-        src = m.repeat(1, 1, 4) * p.kernel_weight[:, None, :]
-        index = p.kernel_index[:, None, :].expand(nq, 3, p.kernel_index.shape[-1])
-        kernel = torch.zeros(nq, 3, S * S, dtype=src.dtype, device=device).scatter_add(
-            2, index, src)
-        unit = torch.zeros(S * S, dtype=src.dtype, device=device)
+        key = (str(device), cdtype)
+        if key not in p.kernel_weight:
+            p.kernel_weight[key] = torch.from_numpy(p.kernel_weight_np).to(device=device,
+                                                                           dtype=cdtype)
+        kernel = torch.zeros(nq, 3, S * S, dtype=cdtype, device=device)
+        for index, weight in zip(p.kernel_index, p.kernel_weight[key]):
+            kernel = kernel.scatter_add(2, index[:, None, :].expand(nq, 3, -1),
+                                        m * weight[:, None, :])
+        unit = torch.zeros(S * S, dtype=cdtype, device=device)
         unit[R * S + R] = 1.0
         has_energy = total > 0
         kernel = torch.where(has_energy, kernel / torch.where(has_energy, total, torch.ones_like(total)),
@@ -558,7 +563,7 @@ class ImageFormation(nn.Module):
         if p.colours == 1:
             kernel = kernel.mean(1, keepdim=True)
         cc = kernel.shape[1]
-        kernel = kernel.reshape(nq, cc, S, S).to(cdtype)
+        kernel = kernel.reshape(nq, cc, S, S)
         placed = nn.functional.pad(kernel, (0, p.nx - S, 0, p.ny - S))
         placed = torch.roll(placed, shifts=(-R, -R), dims=(-2, -1))
         spectra = _Rfft2Function.apply(placed)  # nq x Cc x ny x nh
