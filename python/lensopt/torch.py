@@ -157,7 +157,7 @@ class _WarpFunction(torch.autograd.Function):
         wx, wy = _keys(fx)[0], _keys(fy)[0] * valid[:, None]
         for a, b in _warp_chunks(pixels, k):
             w = (wy[a:b, :, None] * wx[a:b, None, :]).reshape(b - a, 1, 16)
-            taps = runs.index_select(0, start[4 * a:4 * b]).view(b - a, 16, k)
+            taps = runs[start[4 * a:4 * b]].view(b - a, 16, k)
             torch.bmm(w, taps, out=out[a:b].view(b - a, 1, k))
         ctx.save_for_backward(src, fx, fy, valid, start)
         return out
@@ -187,7 +187,7 @@ class _WarpFunction(torch.autograd.Function):
                 for c in range(k):
                     g_src[c].scatter_add_(0, index, (w * grad_t[c, a:b, None]).reshape(-1))
             if need_fx or need_fy:  # dL/dw = taps . g
-                taps = runs.index_select(0, start[4 * a:4 * b]).view(n, 16, k)
+                taps = runs[start[4 * a:4 * b]].view(n, 16, k)
                 torch.bmm(taps, g, out=g_w[a:b].view(n, 16, 1))
         if need_fx or need_fy:  # then the weights' slopes
             g_w = g_w.view(pixels, 4, 4)
