@@ -112,22 +112,24 @@ def _keys(t: torch.Tensor):
 
 
 class _Rfft2Function(torch.autograd.Function):
-    """torch.fft.rfft2 over the last two dimensions (sizes ny x nx) with a cheaper adjoint than
-    torch's own (which fills a full complex spectrum and runs a complex FFT): for real x and
-    X = rfft2(x), dL/dx = ny nx irfft2(G') with G' the gradient G wrt X with the columns that
-    stand for two of the full spectrum's (0 < l < nx - l) halved."""
+    """torch.fft.rfft2(x, s=(ny, nx)) over the last two dimensions (x zero-padded to ny x nx)
+    with a cheaper adjoint than torch's own (which fills a full complex spectrum and runs a
+    complex FFT): for real x and X = rfft2(x), dL/dx = ny nx irfft2(G') (cropped to x) with G'
+    the gradient G wrt X with the columns that stand for two of the full spectrum's
+    (0 < l < nx - l) halved."""
 
     @staticmethod
-    def forward(ctx, x):
-        ctx.size = tuple(x.shape[-2:])
-        return torch.fft.rfft2(x)
+    def forward(ctx, x, ny, nx):
+        ctx.size, ctx.shape = (ny, nx), tuple(x.shape[-2:])
+        return torch.fft.rfft2(x, s=(ny, nx))
 
     @staticmethod
     def backward(ctx, grad):
         ny, nx = ctx.size
         g = grad.clone()
         g[..., 1:(nx + 1) // 2] *= 0.5
-        return torch.fft.irfft2(g, s=(ny, nx)) * float(ny * nx)
+        gx = torch.fft.irfft2(g, s=(ny, nx)) * float(ny * nx)
+        return gx[..., :ctx.shape[0], :ctx.shape[1]], None, None
 
 
 # The warp gathers its taps in chunks of about this many values (cache-sized temporaries).
@@ -558,18 +560,13 @@ class ImageFormation(nn.Module):
         unit = torch.zeros(S * S, dtype=cdtype, device=device)
         unit[R * S + R] = 1.0
         has_energy = total > 0
-        kernel = torch.where(has_energy, kernel / torch.where(has_energy, total, torch.ones_like(total)),
-                             unit)
+        kernel = torch.where(
+            has_energy, kernel / torch.where(has_energy, total, torch.ones_like(total)), unit)
         if p.colours == 1:
             kernel = kernel.mean(1, keepdim=True)
         cc = kernel.shape[1]
-        kernel = kernel.reshape(nq, cc, S, S)
-        placed = nn.functional.pad(kernel, (0, p.nx - S, 0, p.ny - S))
-        placed = torch.roll(placed, shifts=(-R, -R), dims=(-2, -1))
-        spectra = _Rfft2Function.apply(placed)  # nq x Cc x ny x nh
         # Per patch row (unbind: their gradients are stacked, not added up at full size).
-        spectra = spectra.reshape(p.npy, p.npx, cc, p.ny, -1).transpose(1, 2).unbind(0)
-        key = (str(device), cdtype)
+        kernel = kernel.reshape(p.npy, p.npx, cc, S, S).unbind(0)
         if key not in p.window_t:
             p.window_t[key] = tuple(torch.from_numpy(w).to(device=device, dtype=cdtype)
                                     for w in p.window_np)
@@ -585,8 +582,12 @@ class ImageFormation(nn.Module):
         for a in range(p.npy):
             blocks = scene.narrow(2, p.row_offset[a], p.ny)
             blocks = blocks.reshape(B, cc, p.ny, p.npx, p.nx).transpose(2, 3)
-            conv = torch.fft.irfft2(torch.fft.rfft2(blocks) * spectra[a], s=(p.ny, p.nx))
-            conv = conv[..., R:R + p.ey, R:R + p.ex] * window_x  # B x Cc x npx x ey x ex
+            # The row's kernels at the blocks' origin (zero-padded to ny x nx): the centred
+            # output row i is then row i + R of the circular convolution, and the blocks'
+            # centres (rows R .. R + ey) rows 2R .. 2R + ey (< ny: no wrap-around).
+            spectra = _Rfft2Function.apply(kernel[a], p.ny, p.nx).transpose(0, 1)
+            conv = torch.fft.irfft2(torch.fft.rfft2(blocks) * spectra, s=(p.ny, p.nx))
+            conv = conv[..., 2 * R:2 * R + p.ey, 2 * R:2 * R + p.ex] * window_x  # B Cc npx ey ex
             conv = conv.transpose(2, 3).reshape(B, cc, p.ey, p.npx * p.ex)
             band = torch.zeros(B, cc, p.ey, p.rw, dtype=cdtype, device=device).index_add(
                 3, p.target_x, conv)
