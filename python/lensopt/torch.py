@@ -22,7 +22,13 @@ them wrt the images and the optics:
   - the distortion warp: bicubic (Keys) samples at the inverse map through (ybar_h, y_ref,h).
 Only integer choices (the patch layout, kernel radii, interpolation pieces, warp taps and which
 samples are black) are fixed from the optics' values, as the C++ renderer fixes them; no image is
-copied to the CPU, so a network on a GPU keeps its images there.
+copied to the CPU, so a network on a GPU keeps its images there. The blur works one patch row at
+a time and the warp (its own autograd Function) in chunks, so the temporaries stay small.
+
+On the CPU, glibc's malloc by default returns the memory a training step frees to the system, and
+the next step faults it in again (about a third of a step's CPU time for four 256 x 256 crops,
+BENCHMARKS.md); MALLOC_MMAP_THRESHOLD_=67108864 MALLOC_TRIM_THRESHOLD_=268435456 in the
+environment (both: either alone is worse), or jemalloc / tcmalloc, avoids that.
 
 Glasses (glass_mode="quantized", the paper's): the forward pass uses the nearest catalog glass
 and the gradient passes straight through to the continuous g; l_GV pulls g towards its glass.
