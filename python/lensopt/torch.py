@@ -375,6 +375,7 @@ class ImageFormation(nn.Module):
         self._generation = 0   # counts the samplings of the optics
         self._values = None    # the optics' values (numpy) of the last sampling
         self._cache = {}       # per generation: optics tensors, layouts and plans
+        self._geometry = {}    # pixel geometry of image and crop sizes (not x-dependent)
 
     @property
     def names(self):
@@ -407,6 +408,34 @@ class ImageFormation(nn.Module):
             self._cache[key] = self.imaging.layout(width, height)
         return self._cache[key]
 
+    def _image_geometry(self, width, height, ax, ay, pitch):
+        """The radius (mm) of every pixel centre of a width x height image (kept across the
+        samplings of the optics: it depends on the sensor geometry only)."""
+        key = ("image", width, height, ax, ay, pitch)
+        if key not in self._geometry:
+            dx = np.arange(width) + 0.5 - ax
+            dy = np.arange(height) + 0.5 - ay
+            self._geometry[key] = pitch * np.sqrt(dy[:, None] ** 2 + dx[None, :] ** 2)
+        return self._geometry[key]
+
+    def _crop_geometry(self, width, height, crop, ax, ay, pitch, device):
+        """Per crop pixel its offsets from the axis (pixels), radius (mm), whether it lies on the
+        axis, and those as flat tensors on the device (kept across samplings of the optics)."""
+        key = ("crop", width, height, crop, ax, ay, pitch, str(device))
+        if key not in self._geometry:
+            cx0, cy0, cw, ch = crop
+            jj, ii = np.mgrid[0:ch, 0:cw]
+            dx = (cx0 + ii) + 0.5 - ax
+            dy = (cy0 + jj) + 0.5 - ay
+            r = pitch * np.sqrt(dx * dx + dy * dy)
+            on_axis = ~(r > 1e-12)
+            r_safe = np.where(on_axis, 1.0, r)
+            tensors = tuple(torch.from_numpy(a.reshape(-1)).to(device)
+                            for a in (dx, dy, r_safe, on_axis))
+            self._geometry[key] = dict(dx=dx, dy=dy, r=r, on_axis=on_axis, r_safe=r_safe,
+                                       tensors=tensors)
+        return self._geometry[key]
+
     def _plan(self, width, height, crop, channels, device):
         key = ("plan", width, height, crop, channels, str(device))
         if key in self._cache:
@@ -435,15 +464,12 @@ class ImageFormation(nn.Module):
                         f"cannot apply distortion: the image heights of fields {f[h - 1]:.2f} "
                         f"and {f[h]:.2f} deg do not increase ({ybar[h - 1]:.6f}, "
                         f"{ybar[h]:.6f} mm)")
-            jj, ii = np.mgrid[0:ch, 0:cw]
-            dx = (cx0 + ii) + 0.5 - ax
-            dy = (cy0 + jj) + 0.5 - ay
-            r_out = pitch * np.sqrt(dx * dx + dy * dy)
+            g = self._crop_geometry(width, height, crop, ax, ay, pitch, device)
+            dx, dy, r_out, on_axis, r_safe = g["dx"], g["dy"], g["r"], g["on_axis"], g["r_safe"]
             k, _, _ = _piece(ybar, r_out)
             rho = yref[k] + (r_out - ybar[k]) / (ybar[k + 1] - ybar[k]) * (yref[k + 1] - yref[k])
-            on_axis = ~(r_out > 1e-12)
             axis_scale = (yref[1] - yref[0]) / (ybar[1] - ybar[0])
-            scale = np.where(on_axis, axis_scale, rho / np.where(on_axis, 1.0, r_out))
+            scale = np.where(on_axis, axis_scale, rho / r_safe)
             sx, sy = ax + dx * scale, ay + dy * scale
             valid = (sx >= 0.0) & (sx <= width) & (sy >= 0.0) & (sy <= height)
             fx0 = np.floor(sx - 0.5).astype(np.int64)
@@ -473,9 +499,7 @@ class ImageFormation(nn.Module):
             p.pad_rows = dev(np.clip(np.arange(-2, p.rh + 2), 0, p.rh - 1))
             p.pad_cols = dev(np.clip(np.arange(-2, p.rw + 2), 0, p.rw - 1))
             p.warp_piece = dev(k.reshape(-1))
-            p.warp_dx, p.warp_dy = dev(dx.reshape(-1)), dev(dy.reshape(-1))
-            p.warp_r = dev(np.where(on_axis, 1.0, r_out).reshape(-1))
-            p.warp_axis = dev(on_axis.reshape(-1))
+            p.warp_dx, p.warp_dy, p.warp_r, p.warp_axis = g["tensors"]
             p.warp_floor_x = dev(fx0.reshape(-1).astype(np.float64))
             p.warp_floor_y = dev(fy0.reshape(-1).astype(np.float64))
             p.warp_valid = dev(valid.reshape(-1).astype(np.float64))
@@ -483,9 +507,8 @@ class ImageFormation(nn.Module):
         # Relative illumination over the region: the radius of each pixel and its piece.
         p.ri = self.relative_illumination
         if p.ri:
-            jj, ii = np.mgrid[p.ry0:p.ry0 + p.rh, p.rx0:p.rx0 + p.rw]
-            dx, dy = ii + 0.5 - ax, jj + 0.5 - ay
-            r = pitch * np.sqrt(dx * dx + dy * dy)
+            g = self._image_geometry(width, height, ax, ay, pitch)
+            r = g[p.ry0:p.ry0 + p.rh, p.rx0:p.rx0 + p.rw]
             k, low, high = _piece(yref, r)
             p.ri_radius, p.ri_piece = dev(r), dev(k)
             p.ri_low, p.ri_high = dev(low), dev(high)
