@@ -26,9 +26,11 @@ copied to the CPU, so a network on a GPU keeps its images there. The blur works 
 a time and the warp (its own autograd Function) in chunks, so the temporaries stay small.
 
 On the CPU, glibc's malloc by default returns the memory a training step frees to the system, and
-the next step faults it in again (about a third of a step's CPU time for four 256 x 256 crops,
-BENCHMARKS.md); MALLOC_MMAP_THRESHOLD_=67108864 MALLOC_TRIM_THRESHOLD_=268435456 in the
-environment (both: either alone is worse), or jemalloc / tcmalloc, avoids that.
+the next step faults it in again (a quarter to a third of the CPU time of four 256 x 256 crops of
+a 1280 x 720 image, BENCHMARKS.md); MALLOC_MMAP_THRESHOLD_=67108864
+MALLOC_TRIM_THRESHOLD_=268435456 in the environment (both: either alone is worse) avoids that. On
+a machine with more threads than free cores, OMP_WAIT_POLICY=PASSIVE keeps OpenMP's idle threads
+from spinning.
 
 Glasses (glass_mode="quantized", the paper's): the forward pass uses the nearest catalog glass
 and the gradient passes straight through to the continuous g; l_GV pulls g towards its glass.
