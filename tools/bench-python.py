@@ -10,7 +10,10 @@ the CPU, float32 images, forward + backward of a loss wrt x (and optionally the 
 each step so the optics are sampled again:
   - "4 crops": the CLI's work: a 1 x 3 x 720 x 1280 scene, the same four 256 x 256 crops;
   - "batch 4 x 256^2": a batch of four 3 x 256 x 256 full images (smaller PSFs in pixels).
-Median of --repeats after a warm-up. Prints a Markdown table with the load average.
+Median of --repeats after a warm-up. Prints a Markdown table with the load average, the wall
+times and the process's CPU time per step (time.process_time: all threads, user + system; on a
+shared machine the wall time counts the waits for a core, the CPU time does not). The CLI's
+step CPU time is its own (`step_cpu_ms`, the same clock).
 """
 
 import argparse
@@ -60,6 +63,7 @@ def main():
         module.x.grad = None
         with torch.no_grad():  # a new x each step, as in training: the optics are sampled again
             module.x[0] += 1e-9
+        c0 = time.process_time()
         t0 = time.perf_counter()
         if kind == "crops":
             s = scene.clone().requires_grad_(image_grad)
@@ -73,7 +77,7 @@ def main():
             loss = (out * weights).sum()
         loss.backward()
         t2 = time.perf_counter()
-        return t1 - t0, t2 - t1, t2 - t0
+        return t1 - t0, t2 - t1, t2 - t0, time.process_time() - c0
 
     rows = []
     for kind, label in (("crops", "4 crops 256^2 of 1 x 3 x 720 x 1280 (the CLI's work)"),
@@ -81,19 +85,21 @@ def main():
         for image_grad in (False, True):
             step(kind, image_grad)
             runs = [step(kind, image_grad) for _ in range(args.repeats)]
-            med = [statistics.median(r[i] for r in runs) * 1e3 for i in range(3)]
+            med = [statistics.median(r[i] for r in runs) * 1e3 for i in range(4)]
             what = "x and images" if image_grad else "x"
             rows.append((f"lensopt.torch, {label}, grad wrt {what}", *med))
     after = load()
-    cli_step = cli["step_ms"]
-    print("| what | forward (ms) | backward (ms) | step (ms) | / CLI step |")
-    print("|---|---|---|---|---|")
+    cli_step, cli_cpu = cli["step_ms"], cli["step_cpu_ms"]
+    print("| what | forward (ms) | backward (ms) | step (ms) | / CLI step | step CPU (ms) "
+          "| / CLI step CPU |")
+    print("|---|---|---|---|---|---|---|")
     print(f"| CLI joint imaging step (prepare {cli['prepare_ms']:.0f} + render "
           f"{cli['render_4_crops_ms']:.0f}; backward of 4 crops) | "
           f"{cli['prepare_ms'] + cli['render_4_crops_ms']:.0f} | "
-          f"{cli['backward_4_crops_ms']:.0f} | {cli_step:.0f} | 1.00 |")
-    for label, f, b, s in rows:
-        print(f"| {label} | {f:.0f} | {b:.0f} | {s:.0f} | {s / cli_step:.2f} |")
+          f"{cli['backward_4_crops_ms']:.0f} | {cli_step:.0f} | 1.00 | {cli_cpu:.0f} | 1.00 |")
+    for label, f, b, s, c in rows:
+        print(f"| {label} | {f:.0f} | {b:.0f} | {s:.0f} | {s / cli_step:.2f} | {c:.0f} | "
+              f"{c / cli_cpu:.2f} |")
     print(f"\nthreads {args.threads} (torch and C++), median of {args.repeats}; "
           f"{os.cpu_count()} cores; load average before {before}, after {after}")
 

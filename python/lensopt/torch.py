@@ -22,7 +22,15 @@ them wrt the images and the optics:
   - the distortion warp: bicubic (Keys) samples at the inverse map through (ybar_h, y_ref,h).
 Only integer choices (the patch layout, kernel radii, interpolation pieces, warp taps and which
 samples are black) are fixed from the optics' values, as the C++ renderer fixes them; no image is
-copied to the CPU, so a network on a GPU keeps its images there.
+copied to the CPU, so a network on a GPU keeps its images there. The blur works one patch row at
+a time and the warp (its own autograd Function) in chunks, so the temporaries stay small.
+
+On the CPU, glibc's malloc by default returns the memory a training step frees to the system, and
+the next step faults it in again (a quarter to a third of the CPU time of four 256 x 256 crops of
+a 1280 x 720 image, BENCHMARKS.md); MALLOC_MMAP_THRESHOLD_=67108864
+MALLOC_TRIM_THRESHOLD_=268435456 in the environment (both: either alone is worse) avoids that. On
+a machine with more threads than free cores, OMP_WAIT_POLICY=PASSIVE keeps OpenMP's idle threads
+from spinning.
 
 Glasses (glass_mode="quantized", the paper's): the forward pass uses the nearest catalog glass
 and the gradient passes straight through to the continuous g; l_GV pulls g towards its glass.
@@ -99,12 +107,125 @@ def _lerp(xs: torch.Tensor, ys: torch.Tensor, x: torch.Tensor, k: torch.Tensor) 
     return y0 + (x - x0) / (x1 - x0) * (y1 - y0)
 
 
-def _keys(t: torch.Tensor) -> torch.Tensor:
-    """Keys cubic weights (a = -1/2) of the taps at -1, 0, 1, 2 for fractions t: (..., 4)."""
+def _keys(t: torch.Tensor):
+    """Keys cubic (a = -1/2) weights of the taps at -1, 0, 1, 2 for fractions t (n) and their
+    derivatives wrt t: n x 4 each."""
     t2 = t * t
     t3 = t2 * t
-    return torch.stack((-0.5 * t3 + t2 - 0.5 * t, 1.5 * t3 - 2.5 * t2 + 1.0,
-                        -1.5 * t3 + 2.0 * t2 + 0.5 * t, 0.5 * t3 - 0.5 * t2), dim=-1)
+    weights = torch.stack((-0.5 * t3 + t2 - 0.5 * t, 1.5 * t3 - 2.5 * t2 + 1.0,
+                           -1.5 * t3 + 2.0 * t2 + 0.5 * t, 0.5 * t3 - 0.5 * t2), dim=-1)
+    slopes = torch.stack((-1.5 * t2 + 2.0 * t - 0.5, 4.5 * t2 - 5.0 * t,
+                          -4.5 * t2 + 4.0 * t + 0.5, 1.5 * t2 - t), dim=-1)
+    return weights, slopes
+
+
+class _Rfft2Function(torch.autograd.Function):
+    """torch.fft.rfft2(x, s=(ny, nx)) over the last two dimensions (x zero-padded to ny x nx)
+    with a cheaper adjoint than torch's own (which fills a full complex spectrum and runs a
+    complex FFT): for real x and X = rfft2(x), dL/dx = ny nx irfft2(G') (cropped to x) with G'
+    the gradient G wrt X with the columns that stand for two of the full spectrum's
+    (0 < l < nx - l) halved."""
+
+    @staticmethod
+    def forward(ctx, x, ny, nx):
+        ctx.size, ctx.shape = (ny, nx), tuple(x.shape[-2:])
+        return torch.fft.rfft2(x, s=(ny, nx))
+
+    @staticmethod
+    def backward(ctx, grad):
+        ny, nx = ctx.size
+        g = grad.clone()
+        g[..., 1:(nx + 1) // 2] *= 0.5
+        gx = torch.fft.irfft2(g, s=(ny, nx)) * float(ny * nx)
+        return gx[..., :ctx.shape[0], :ctx.shape[1]], None, None
+
+
+# The warp gathers its taps in chunks of about this many values (cache-sized temporaries).
+_WARP_CHUNK_VALUES = 1 << 20
+
+
+def _warp_chunks(pixels: int, channels: int):
+    n = max(64, _WARP_CHUNK_VALUES // (16 * channels))
+    return [(a, min(pixels, a + n)) for a in range(0, pixels, n)]
+
+
+class _WarpFunction(torch.autograd.Function):
+    """The Keys warp's sampling as one operation: out[p, c] = sum_{m,t} wy[p, m] wx[p, t]
+    src[start[p, m] + t, c] with wx = keys(fx[p]), wy = keys(fy[p]) valid[p]; src is the padded
+    region with its pixels as rows and the channels (batch x channels) as columns, start[p, m]
+    the first of the 4 consecutive pixels of tap row m of output pixel p (so each tap row is one
+    contiguous run of 4 x channels values). Gathered and weighted chunk by chunk (no 16-fold
+    temporary of the whole image, no autograd graph of the taps); the backward scatters the
+    weighted gradient to the taps (dL/dsrc) and contracts it with the taps and the weights'
+    slopes (dL/dfx, dL/dfy). The taps' positions (start) and valid are fixed by the plan."""
+
+    @staticmethod
+    def forward(ctx, src, fx, fy, valid, start):
+        pixels, k = fx.shape[0], src.shape[1]
+        runs = src.as_strided((src.shape[0] - 3, 4 * k), (k, 1))
+        out = src.new_empty(pixels, k)
+        wx, wy = _keys(fx)[0], _keys(fy)[0] * valid[:, None]
+        for a, b in _warp_chunks(pixels, k):
+            w = (wy[a:b, :, None] * wx[a:b, None, :]).reshape(b - a, 1, 16)
+            taps = runs[start[4 * a:4 * b]].view(b - a, 16, k)
+            torch.bmm(w, taps, out=out[a:b].view(b - a, 1, k))
+        ctx.save_for_backward(src, fx, fy, valid, start)
+        return out
+
+    @staticmethod
+    def backward(ctx, grad):
+        src, fx, fy, valid, start = ctx.saved_tensors
+        pixels, k = fx.shape[0], src.shape[1]
+        grad = grad.contiguous()
+        need_src, need_fx, need_fy = ctx.needs_input_grad[:3]
+        g_src = g_fx = g_fy = None
+        if need_src:  # per channel plane: contiguous weight x gradient products and scatters
+            g_src = src.new_zeros(k, src.shape[0])
+            grad_t = grad.t().contiguous()
+        if need_fx or need_fy:
+            runs = src.as_strided((src.shape[0] - 3, 4 * k), (k, 1))
+            g_w = src.new_empty(pixels, 16)
+        (wx, slope_x), (wy, slope_y) = _keys(fx), _keys(fy)
+        wy = wy * valid[:, None]
+        tap = torch.arange(4, device=src.device)
+        for a, b in _warp_chunks(pixels, k):
+            n = b - a
+            g = grad[a:b].view(n, k, 1)
+            if need_src:  # g_src[start + t] += w g
+                w = (wy[a:b, :, None] * wx[a:b, None, :]).reshape(n, 16)
+                index = (start[4 * a:4 * b, None] + tap).reshape(-1)
+                for c in range(k):
+                    g_src[c].scatter_add_(0, index, (w * grad_t[c, a:b, None]).reshape(-1))
+            if need_fx or need_fy:  # dL/dw = taps . g
+                taps = runs[start[4 * a:4 * b]].view(n, 16, k)
+                torch.bmm(taps, g, out=g_w[a:b].view(n, 16, 1))
+        if need_fx or need_fy:  # then the weights' slopes
+            g_w = g_w.view(pixels, 4, 4)
+            g_fx = (torch.bmm(wy[:, None, :], g_w).view(pixels, 4) * slope_x).sum(1)
+            g_wy = torch.bmm(g_w, wx[:, :, None]).view(pixels, 4)
+            g_fy = (g_wy * slope_y).sum(1) * valid
+        return None if g_src is None else g_src.t(), g_fx, g_fy, None, None
+
+
+class _GatherFunction(torch.autograd.Function):
+    """images[:, :channels, rows][..., cols] (rows, cols: index vectors) as one operation whose
+    backward adds the gradient straight into one zero gradient of the images' shape (autograd's
+    own chain of slice and two index_select backwards makes three full-size temporaries)."""
+
+    @staticmethod
+    def forward(ctx, images, channels, rows, cols):
+        ctx.shape, ctx.channels = images.shape, channels
+        ctx.save_for_backward(rows, cols)
+        return images[:, :channels].index_select(2, rows).index_select(3, cols)
+
+    @staticmethod
+    def backward(ctx, grad):
+        rows, cols = ctx.saved_tensors
+        B, _, _, W = ctx.shape
+        out = grad.new_zeros(ctx.shape)
+        band = grad.new_zeros(B, ctx.channels, rows.shape[0], W).index_add_(3, cols, grad)
+        out[:, :ctx.channels].index_add_(2, rows, band)
+        return out, None, None, None
 
 
 class _OpticsFunction(torch.autograd.Function):
@@ -143,8 +264,8 @@ class _Plan:
 
 # Patches per row / column of the overlap-add blur (PsfGrid::kPatches).
 _PATCHES = 9
-# The blur processes patch rows in chunks of at most this many block elements.
-_CHUNK_ELEMENTS = 1 << 24
+
+
 class _LensLossFunction(torch.autograd.Function):
     """(l_S, l_RP, l_RA, l_GV) of x; the backward is the gradient of sum_i w_i l_i with the
     incoming gradients as weights (one Jet evaluation per sign)."""
@@ -256,6 +377,7 @@ class ImageFormation(nn.Module):
         self._generation = 0   # counts the samplings of the optics
         self._values = None    # the optics' values (numpy) of the last sampling
         self._cache = {}       # per generation: optics tensors, layouts and plans
+        self._geometry = {}    # pixel geometry of image and crop sizes (not x-dependent)
 
     @property
     def names(self):
@@ -288,6 +410,34 @@ class ImageFormation(nn.Module):
             self._cache[key] = self.imaging.layout(width, height)
         return self._cache[key]
 
+    def _image_geometry(self, width, height, ax, ay, pitch):
+        """The radius (mm) of every pixel centre of a width x height image (kept across the
+        samplings of the optics: it depends on the sensor geometry only)."""
+        key = ("image", width, height, ax, ay, pitch)
+        if key not in self._geometry:
+            dx = np.arange(width) + 0.5 - ax
+            dy = np.arange(height) + 0.5 - ay
+            self._geometry[key] = pitch * np.sqrt(dy[:, None] ** 2 + dx[None, :] ** 2)
+        return self._geometry[key]
+
+    def _crop_geometry(self, width, height, crop, ax, ay, pitch, device):
+        """Per crop pixel its offsets from the axis (pixels), radius (mm), whether it lies on the
+        axis, and those as flat tensors on the device (kept across samplings of the optics)."""
+        key = ("crop", width, height, crop, ax, ay, pitch, str(device))
+        if key not in self._geometry:
+            cx0, cy0, cw, ch = crop
+            jj, ii = np.mgrid[0:ch, 0:cw]
+            dx = (cx0 + ii) + 0.5 - ax
+            dy = (cy0 + jj) + 0.5 - ay
+            r = pitch * np.sqrt(dx * dx + dy * dy)
+            on_axis = ~(r > 1e-12)
+            r_safe = np.where(on_axis, 1.0, r)
+            tensors = tuple(torch.from_numpy(a.reshape(-1)).to(device)
+                            for a in (dx, dy, r_safe, on_axis))
+            self._geometry[key] = dict(dx=dx, dy=dy, r=r, on_axis=on_axis, r_safe=r_safe,
+                                       tensors=tensors)
+        return self._geometry[key]
+
     def _plan(self, width, height, crop, channels, device):
         key = ("plan", width, height, crop, channels, str(device))
         if key in self._cache:
@@ -316,15 +466,12 @@ class ImageFormation(nn.Module):
                         f"cannot apply distortion: the image heights of fields {f[h - 1]:.2f} "
                         f"and {f[h]:.2f} deg do not increase ({ybar[h - 1]:.6f}, "
                         f"{ybar[h]:.6f} mm)")
-            jj, ii = np.mgrid[0:ch, 0:cw]
-            dx = (cx0 + ii) + 0.5 - ax
-            dy = (cy0 + jj) + 0.5 - ay
-            r_out = pitch * np.sqrt(dx * dx + dy * dy)
+            g = self._crop_geometry(width, height, crop, ax, ay, pitch, device)
+            dx, dy, r_out, on_axis, r_safe = g["dx"], g["dy"], g["r"], g["on_axis"], g["r_safe"]
             k, _, _ = _piece(ybar, r_out)
             rho = yref[k] + (r_out - ybar[k]) / (ybar[k + 1] - ybar[k]) * (yref[k + 1] - yref[k])
-            on_axis = ~(r_out > 1e-12)
             axis_scale = (yref[1] - yref[0]) / (ybar[1] - ybar[0])
-            scale = np.where(on_axis, axis_scale, rho / np.where(on_axis, 1.0, r_out))
+            scale = np.where(on_axis, axis_scale, rho / r_safe)
             sx, sy = ax + dx * scale, ay + dy * scale
             valid = (sx >= 0.0) & (sx <= width) & (sy >= 0.0) & (sy <= height)
             fx0 = np.floor(sx - 0.5).astype(np.int64)
@@ -340,16 +487,21 @@ class ImageFormation(nn.Module):
             x_lo, x_hi, y_lo, y_hi = cx0, cx0 + cw, cy0, cy0 + ch
         p.rx0, p.ry0, p.rw, p.rh = x_lo, y_lo, x_hi - x_lo, y_hi - y_lo
         if p.warp:
-            t = np.arange(4)
-            rows = np.clip(fy0[..., None] - 1 + t, 0, height - 1) - p.ry0  # ch x cw x 4
-            cols = np.clip(fx0[..., None] - 1 + t, 0, width - 1) - p.rx0
-            index = rows[..., :, None] * p.rw + cols[..., None, :]  # ch x cw x 4 x 4
-            index = np.where(valid[..., None, None], index, 0)
-            p.warp_index = dev(index.reshape(-1))
+            # The taps of pixel p are rows fy0-1 .. fy0+2 and columns fx0-1 .. fx0+2 of the image,
+            # clamped to its border. The warp samples the region padded by 2 pixels on every side
+            # with its edge pixels repeated (pad_rows, pad_cols): where a tap lies beyond the
+            # image, the region reaches the image's border (it spans every valid sample's
+            # clamped taps), so the repeated edge is the clamp; elsewhere the taps lie inside the
+            # region. Tap row m of p is then the 4 consecutive padded pixels from
+            # warp_start[p, m] (0 for black samples, whose weights are 0).
+            padded_width = p.rw + 4
+            rows = fy0[..., None] - 1 + np.arange(4) - p.ry0 + 2  # ch x cw x 4
+            start = rows * padded_width + (fx0 - 1 - p.rx0 + 2)[..., None]
+            p.warp_start = dev(np.where(valid[..., None], start, 0).reshape(-1))
+            p.pad_rows = dev(np.clip(np.arange(-2, p.rh + 2), 0, p.rh - 1))
+            p.pad_cols = dev(np.clip(np.arange(-2, p.rw + 2), 0, p.rw - 1))
             p.warp_piece = dev(k.reshape(-1))
-            p.warp_dx, p.warp_dy = dev(dx.reshape(-1)), dev(dy.reshape(-1))
-            p.warp_r = dev(np.where(on_axis, 1.0, r_out).reshape(-1))
-            p.warp_axis = dev(on_axis.reshape(-1))
+            p.warp_dx, p.warp_dy, p.warp_r, p.warp_axis = g["tensors"]
             p.warp_floor_x = dev(fx0.reshape(-1).astype(np.float64))
             p.warp_floor_y = dev(fy0.reshape(-1).astype(np.float64))
             p.warp_valid = dev(valid.reshape(-1).astype(np.float64))
@@ -357,9 +509,8 @@ class ImageFormation(nn.Module):
         # Relative illumination over the region: the radius of each pixel and its piece.
         p.ri = self.relative_illumination
         if p.ri:
-            jj, ii = np.mgrid[p.ry0:p.ry0 + p.rh, p.rx0:p.rx0 + p.rw]
-            dx, dy = ii + 0.5 - ax, jj + 0.5 - ay
-            r = pitch * np.sqrt(dx * dx + dy * dy)
+            g = self._image_geometry(width, height, ax, ay, pitch)
+            r = g[p.ry0:p.ry0 + p.rh, p.rx0:p.rx0 + p.rw]
             k, low, high = _piece(yref, r)
             p.ri_radius, p.ri_piece = dev(r), dev(k)
             p.ri_low, p.ri_high = dev(low), dev(high)
@@ -379,7 +530,11 @@ class ImageFormation(nn.Module):
         p.nx, p.ny = _fft_size(ex + 2 * R), _fft_size(ey + 2 * R)
         p.npx, p.npy = len(xs), len(ys)
         p.cols = dev(np.stack([_reflect(x0 - R + np.arange(p.nx), width) for _, x0, _ in xs]))
-        p.rows = dev(np.stack([_reflect(y0 - R + np.arange(p.ny), height) for _, y0, _ in ys]))
+        # The rows of every block row (symmetrically reflected), once: block row a is rows
+        # row_offset[a] .. + ny of them.
+        first = [y0 - R for _, y0, _ in ys]
+        p.ext_rows = dev(_reflect(np.arange(min(first), max(first) + p.ny), height))
+        p.row_offset = [f - min(first) for f in first]
 
         def windows(spans, w, e):
             out = np.zeros((len(spans), e))
@@ -389,11 +544,11 @@ class ImageFormation(nn.Module):
 
         wx = windows(xs, L["window_x"], ex)
         wy = windows(ys, L["window_y"], ey)
-        p.window_np = wy[:, None, :, None] * wx[None, :, None, :]  # npy x npx x ey x ex
+        p.window_np = (wx, wy)  # the windows are separable: npx x ex and npy x ey
         tx = np.array([x0 for _, x0, _ in xs])[:, None] + np.arange(ex) - p.rx0  # npx x ex
         ty = np.array([y0 for _, y0, _ in ys])[:, None] + np.arange(ey) - p.ry0
         tx, ty = np.clip(tx, 0, p.rw - 1), np.clip(ty, 0, p.rh - 1)
-        p.target = dev((ty[:, None, :, None] * p.rw + tx[None, :, None, :]).reshape(-1))
+        p.target_x, p.target_y = dev(tx.reshape(-1)), dev(ty)
         # PSF bins -> pixel kernels of radius R (render/psf_resample.h): the four taps.
         size_q = 2 * radii + 1
         S = 2 * R + 1
@@ -403,12 +558,12 @@ class ImageFormation(nn.Module):
         shift = (R - radii)[:, None]
         base = np.where(ok, (cy + shift) * S + (cx + shift), 0).astype(np.int64)
         fx, fy = L["fx"][patches], L["fy"][patches]
-        p.kernel_index = dev(np.concatenate([base, base + 1, base + S, base + S + 1], axis=1))
-        p.kernel_weight = dev(np.concatenate([(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy,
-                                              fx * fy], axis=1))
+        p.kernel_index = dev(np.stack([base, base + 1, base + S, base + S + 1]))  # 4 x nq x G^2
+        p.kernel_weight_np = np.stack([(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy, fx * fy])
         p.bin_ok = dev(ok)
         p.field_weights = dev(L["field_weights"][patches])
         p.window_t = {}
+        p.kernel_weight = {}
         self._cache[key] = p
         return p
 
@@ -420,45 +575,55 @@ class ImageFormation(nn.Module):
         F, _, G, _ = psf.shape
         nq = p.npx * p.npy
         R, S = p.R, 2 * p.R + 1
-        # Patch kernels K_q[c] = L_q(sum_h a_qh P_h[c]) / T in float64.
+        # Patch kernels K_q[c] = L_q(sum_h a_qh P_h[c]) / T in the images' precision (float64
+        # for float64 images): each bin's weight splat bilinearly onto 4 kernel pixels.
         mixed = torch.einsum("qf,fcb->qcb", p.field_weights, psf.reshape(F, 3, G * G))
-        m = mixed * ((mixed.detach() > 0) & p.bin_ok[:, None, :])
+        m = (mixed * ((mixed.detach() > 0) & p.bin_ok[:, None, :])).to(cdtype)
         total = m.sum(-1, keepdim=True)
-        src = m.repeat(1, 1, 4) * p.kernel_weight[:, None, :]
-        index = p.kernel_index[:, None, :].expand(nq, 3, p.kernel_index.shape[-1])
-        kernel = torch.zeros(nq, 3, S * S, dtype=src.dtype, device=device).scatter_add(
-            2, index, src)
-        unit = torch.zeros(S * S, dtype=src.dtype, device=device)
+        key = (str(device), cdtype)
+        if key not in p.kernel_weight:
+            p.kernel_weight[key] = torch.from_numpy(p.kernel_weight_np).to(device=device,
+                                                                           dtype=cdtype)
+        kernel = torch.zeros(nq, 3, S * S, dtype=cdtype, device=device)
+        for index, weight in zip(p.kernel_index, p.kernel_weight[key]):
+            kernel = kernel.scatter_add(2, index[:, None, :].expand(nq, 3, -1),
+                                        m * weight[:, None, :])
+        unit = torch.zeros(S * S, dtype=cdtype, device=device)
         unit[R * S + R] = 1.0
         has_energy = total > 0
-        kernel = torch.where(has_energy, kernel / torch.where(has_energy, total, torch.ones_like(total)),
-                             unit)
+        kernel = torch.where(
+            has_energy, kernel / torch.where(has_energy, total, torch.ones_like(total)), unit)
         if p.colours == 1:
             kernel = kernel.mean(1, keepdim=True)
         cc = kernel.shape[1]
-        kernel = kernel.reshape(nq, cc, S, S).to(cdtype)
-        placed = nn.functional.pad(kernel, (0, p.nx - S, 0, p.ny - S))
-        placed = torch.roll(placed, shifts=(-R, -R), dims=(-2, -1))
-        spectra = torch.fft.rfft2(placed)  # nq x Cc x ny x nh
-        spectra = spectra.reshape(p.npy, p.npx, cc, p.ny, -1).permute(2, 0, 1, 3, 4)
-        key = (str(device), cdtype)
+        # Per patch row (unbind: their gradients are stacked, not added up at full size).
+        kernel = kernel.reshape(p.npy, p.npx, cc, S, S).unbind(0)
         if key not in p.window_t:
-            p.window_t[key] = torch.from_numpy(p.window_np).to(device=device, dtype=cdtype)
-        window = p.window_t[key]
-        scene = images[:, :p.colours].to(cdtype)
-        region = torch.zeros(B, cc, p.rh * p.rw, dtype=cdtype, device=device)
-        per_row = B * cc * p.npx * p.ny * p.nx
-        step = max(1, _CHUNK_ELEMENTS // per_row)
-        target = p.target.reshape(p.npy, -1)
-        for a in range(0, p.npy, step):
-            b = min(p.npy, a + step)
-            rows = p.rows[a:b]
-            blocks = scene[:, :, rows[:, :, None, None], p.cols[None, None, :, :]]
-            blocks = blocks.permute(0, 1, 2, 4, 3, 5)  # B x Cc x rows x npx x ny x nx
-            conv = torch.fft.irfft2(torch.fft.rfft2(blocks) * spectra[:, a:b], s=(p.ny, p.nx))
-            conv = conv[..., R:R + p.ey, R:R + p.ex] * window[a:b]
-            region = region.index_add(2, target[a:b].reshape(-1), conv.reshape(B, cc, -1))
-        return region.reshape(B, cc, p.rh, p.rw)
+            p.window_t[key] = tuple(torch.from_numpy(w).to(device=device, dtype=cdtype)
+                                    for w in p.window_np)
+        window_x, window_y = p.window_t[key]
+        window_x = window_x[:, None, :]  # npx x 1 x ex
+        # The blocks' rows and columns of the images (B x Cc x rows x npx nx), gathered once.
+        scene = _GatherFunction.apply(images, p.colours, p.ext_rows, p.cols.reshape(-1))
+        scene = scene.to(cdtype)
+        region = torch.zeros(B, cc, p.rh, p.rw, dtype=cdtype, device=device)
+        # One patch row at a time (small temporaries): its blocks B x Cc x npx x ny x nx, their
+        # convolutions' centres windowed and added along x into the row's band, then the band
+        # windowed and added along y into the region.
+        for a in range(p.npy):
+            blocks = scene.narrow(2, p.row_offset[a], p.ny)
+            blocks = blocks.reshape(B, cc, p.ny, p.npx, p.nx).transpose(2, 3)
+            # The row's kernels at the blocks' origin (zero-padded to ny x nx): the centred
+            # output row i is then row i + R of the circular convolution, and the blocks'
+            # centres (rows R .. R + ey) rows 2R .. 2R + ey (< ny: no wrap-around).
+            spectra = _Rfft2Function.apply(kernel[a], p.ny, p.nx).transpose(0, 1)
+            conv = torch.fft.irfft2(torch.fft.rfft2(blocks) * spectra, s=(p.ny, p.nx))
+            conv = conv[..., 2 * R:2 * R + p.ey, 2 * R:2 * R + p.ex] * window_x  # B Cc npx ey ex
+            conv = conv.transpose(2, 3).reshape(B, cc, p.ey, p.npx * p.ex)
+            band = torch.zeros(B, cc, p.ey, p.rw, dtype=cdtype, device=device).index_add(
+                3, p.target_x, conv)
+            region = region.index_add(2, p.target_y[a], band * window_y[a, :, None])
+        return region
 
     def _form(self, x: torch.Tensor, images: torch.Tensor, crop=None) -> torch.Tensor:
         """The image formation of lens variables x (the module's or another tensor, e.g. for
@@ -492,11 +657,13 @@ class ImageFormation(nn.Module):
             scale = torch.where(p.warp_axis, axis_scale, rho / p.warp_r)
             u = p.axis[0] + p.warp_dx * scale - 0.5
             v = p.axis[1] + p.warp_dy * scale - 0.5
-            wx = _keys(u - p.warp_floor_x)
-            wy = _keys(v - p.warp_floor_y)
-            weights = (wy[:, :, None] * wx[:, None, :]) * p.warp_valid[:, None, None]
-            taps = out.reshape(B, C, -1)[:, :, p.warp_index].reshape(B, C, ch * cw, 16)
-            out = (taps * weights.reshape(-1, 16).to(cdtype)).sum(-1).reshape(B, C, ch, cw)
+            # Positions in float64, the Keys weights of their fractions in the images' precision.
+            fx = (u - p.warp_floor_x).to(cdtype)
+            fy = (v - p.warp_floor_y).to(cdtype)
+            src = out.permute(2, 3, 0, 1).index_select(0, p.pad_rows).index_select(1, p.pad_cols)
+            src = src.reshape(-1, B * C).contiguous()
+            out = _WarpFunction.apply(src, fx, fy, p.warp_valid.to(cdtype), p.warp_start)
+            out = out.t().reshape(B, C, ch, cw)
         return out.to(images.dtype)
 
     def forward(self, images: torch.Tensor, crop=None) -> torch.Tensor:

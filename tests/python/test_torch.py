@@ -60,6 +60,16 @@ class ImageFormationGradients(unittest.TestCase):
         self.assertTrue(torch.autograd.gradcheck(self.module, (images,), eps=1e-6, atol=1e-7,
                                                  fast_mode=True))
 
+    def test_rfft2_adjoint(self):
+        # The blur's kernel spectra: rfft2 with zero padding and its own adjoint (irfft2 with the
+        # doubled columns halved), for even and odd FFT widths and heights.
+        for shape, size in (((2, 3, 4, 5), (7, 8)), ((3, 5, 5), (6, 9)), ((4, 4), (4, 5))):
+            x = torch.rand(*shape, dtype=torch.float64, requires_grad=True)
+            self.assertTrue(torch.autograd.gradcheck(
+                lambda v: lt._Rfft2Function.apply(v, *size), (x,), eps=1e-6, atol=1e-8))
+            np.testing.assert_allclose(lt._Rfft2Function.apply(x, *size).detach().numpy(),
+                                       torch.fft.rfft2(x, s=size).detach().numpy(), atol=1e-14)
+
     @unittest.skipUnless(FULL, FULL_REASON)
     def test_lens_losses_gradcheck(self):
         param = self.module.param
