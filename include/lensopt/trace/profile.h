@@ -309,15 +309,12 @@ inline __attribute__((always_inline)) void asphere_intersect_chunk(
   std::int64_t pending = 0;  // rays not converged after stage (a)
   for (int step = 0; step < kVectorNewtonSteps; ++step) {
     std::int64_t running = 0;
-    pending = 0;
     for (std::size_t i = 0; i < count; ++i) {
       const bool run = state[i] == 0;
-      // A ray set aside may sit outside the domain: evaluate it at the vertex (result unused).
-      const double s_at = run ? s[i] : 0.0;
-      const double x_at = run ? x1[i] : 0.0, y_at = run ? y1[i] : 0.0;
+      // A ray set aside may sit outside the domain (a NaN step, not used).
       double ds = 0, dg = 0;
       bool converged = false;
-      asphere_newton_step(c, domain, coefficients, x_at, y_at, l[i], m[i], n[i], s_at, ds, dg,
+      asphere_newton_step(c, domain, coefficients, x1[i], y1[i], l[i], m[i], n[i], s[i], ds, dg,
                           converged);
       const double s_new = s[i] - ds;
       const double xn = x1[i] + s_new * l[i], yn = y1[i] + s_new * m[i];
@@ -326,10 +323,10 @@ inline __attribute__((always_inline)) void asphere_intersect_chunk(
       s[i] = (run & ok) ? s_new : s[i];
       state[i] = run ? (ok ? (converged ? 1 : 0) : 2) : state[i];
       running += state[i] == 0 ? 1 : 0;
-      pending += state[i] != 1 ? 1 : 0;
     }
     if (running == 0) break;
   }
+  for (std::size_t i = 0; i < count; ++i) pending += state[i] != 1 ? 1 : 0;
   if (pending == 0) return;
   // Stage (b): the rest through the safeguarded scalar Newton from the start.
   for (std::size_t i = 0; i < count; ++i) {
