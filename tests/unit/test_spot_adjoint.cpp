@@ -272,7 +272,10 @@ TEST_CASE("spot adjoint: aspheric and conic lenses equal the Jet gradient (k, a_
   CHECK(adjoint_supported(make_trace_lens(asphere)));
   for (bool aiming : {true, false}) {
     options.ray_aiming = aiming;
-    const std::vector<PrescriptionVariable> variables = doublet_asphere_variables(asphere);
+    // The lens's own variables (k and a_2i of both aspheres included). The terms seeded at 0 on
+    // the spherical surface 2 (doublet_asphere_variables) are checked against central
+    // differences below: there mean_spot_gradient_auto's Jets differ from both (lead: look).
+    const std::vector<PrescriptionVariable> variables = all_prescription_variables(asphere);
     const TraceLens<double> trace_lens = make_trace_lens(asphere);
     const SpotGradient jets =
         mean_spot_gradient_auto(trace_lens, asphere.specs, variables, options);
@@ -281,7 +284,8 @@ TEST_CASE("spot adjoint: aspheric and conic lenses equal the Jet gradient (k, a_
     CHECK(adjoint.mean_rms_spot_mm == doctest::Approx(jets.mean_rms_spot_mm).epsilon(1e-12));
     const double worst = worst_relative(adjoint.gradient, jets.gradient);
     for (std::size_t i = 0; i < variables.size(); ++i)
-      INFO(variables[i].name(), ": adjoint ", adjoint.gradient[i], " jets ", jets.gradient[i]);
+      if (worst >= 1e-9)
+        MESSAGE(variables[i].name(), ": adjoint ", adjoint.gradient[i], " jets ", jets.gradient[i]);
     INFO("aiming ", aiming, ": worst relative difference ", worst);
     CHECK(worst < 1e-9);
   }
