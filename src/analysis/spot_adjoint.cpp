@@ -14,6 +14,8 @@ void SystemAdjoint::reset(int surfaces, int wavelengths, int fields) {
   thickness.assign(surfaces, 0.0);
   mu.assign(static_cast<std::size_t>(wavelengths) * surfaces, 0.0);
   start.assign(static_cast<std::size_t>(fields) * wavelengths * 4, 0.0);
+  conic.assign(surfaces, 0.0);
+  asphere.assign(static_cast<std::size_t>(surfaces) * kAsphereTerms, 0.0);
 }
 
 void SystemAdjoint::add_bundle(const BundleAdjoint& bundle, int h, int w, int wavelengths,
@@ -23,7 +25,9 @@ void SystemAdjoint::add_bundle(const BundleAdjoint& bundle, int h, int w, int wa
     curvature[k] += bundle.curvature[k];
     thickness[k] += bundle.thickness[k];
     mu[static_cast<std::size_t>(w) * k_count + k] += bundle.mu[k];
+    conic[k] += bundle.conic[k];
   }
+  for (std::size_t i = 0; i < asphere.size(); ++i) asphere[i] += bundle.asphere[i];
   double a_sx = 0.0, a_oy = 0.0, a_sy = 0.0, a_z = 0.0;
   for (std::size_t i = 0; i < pupil.size(); ++i) {
     a_sx += bundle.x0[i] * pupil.x[i];
@@ -44,16 +48,18 @@ void SystemAdjoint::add(const SystemAdjoint& other) {
   for (std::size_t i = 0; i < thickness.size(); ++i) thickness[i] += other.thickness[i];
   for (std::size_t i = 0; i < mu.size(); ++i) mu[i] += other.mu[i];
   for (std::size_t i = 0; i < start.size(); ++i) start[i] += other.start[i];
+  for (std::size_t i = 0; i < conic.size(); ++i) conic[i] += other.conic[i];
+  for (std::size_t i = 0; i < asphere.size(); ++i) asphere[i] += other.asphere[i];
 }
 
 bool adjoint_supported(const TraceLens<double>& lens) {
-  // Spheres without clear apertures: everything the kernel of trace/kernel.h traces. (Surface
-  // profiles and clipping apertures, when a lens has them, take the Jet path.)
+  // Spheres, conics and even aspheres without clear apertures (clipping apertures, when a lens
+  // has them, take the Jet path: the backward pass has no step for them).
   if (lens.surface_count() == 0) return false;
   for (double r : lens.semi_diameter_mm)
-    if (r > 0) return false;  // clipping apertures: the backward pass has no step for them
+    if (r > 0) return false;
   for (std::uint8_t kind : lens.profile)
-    if (kind != kProfileSphere) return false;  // conics and aspheres: spheres only
+    if (kind != kProfileSphere && kind != kProfileConic && kind != kProfileAsphere) return false;
   return true;
 }
 

@@ -126,13 +126,192 @@ void trace_surface_adjoint_double(double c, double mu, int k, std::size_t count,
   sums[2] += sum_mu;
 }
 
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
+__attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default")))
+#endif
+void trace_surface_adjoint_profile_double(double c, double conic, const double* a, double mu,
+                                          int k, std::size_t count, const double* const state[6],
+                                          const double* path, const std::int8_t* failed_surface,
+                                          double* const adjoint[6], const double* travel_seed,
+                                          const double* zeta_seed, const double* zeta_prime_seed,
+                                          double sums[12]) {
+  const double* __restrict px_in = state[0];
+  const double* __restrict py_in = state[1];
+  const double* __restrict pz = state[2];
+  const double* __restrict pl = state[3];
+  const double* __restrict pm = state[4];
+  const double* __restrict pn = state[5];
+  const double* __restrict ps = path;
+  double* __restrict ax = adjoint[0];
+  double* __restrict ay = adjoint[1];
+  double* __restrict az = adjoint[2];
+  double* __restrict al = adjoint[3];
+  double* __restrict am = adjoint[4];
+  double* __restrict an = adjoint[5];
+  const std::int8_t* __restrict fs = failed_surface;
+  const double opk = 1.0 + conic;
+  const double mu2 = mu * mu;
+  const double a0 = a[0], a1 = a[1], a2 = a[2], a3 = a[3], a4 = a[4], a5 = a[5], a6 = a[6],
+               a7 = a[7];
+  double sum_c = 0.0, sum_t = 0.0, sum_mu = 0.0, sum_k = 0.0;
+  double s0_ = 0.0, s1_ = 0.0, s2_ = 0.0, s3_ = 0.0, s4_ = 0.0, s5_ = 0.0, s6_ = 0.0, s7_ = 0.0;
+#pragma omp simd reduction(+ : sum_c, sum_t, sum_mu, sum_k, s0_, s1_, s2_, s3_, s4_, s5_, s6_, s7_)
+  for (std::size_t i = 0; i < count; ++i) {
+    const bool live = fs[i] < 0 || fs[i] >= k;
+    // Forward again from the taped state and path.
+    const double x = px_in[i], y = py_in[i], zr = pz[i], l = pl[i], m = pm[i], n = pn[i];
+    const bool miss = !(ps[i] == ps[i]);  // NaN: the intersection missed
+    const bool run = live & !miss;
+    const double s = run ? ps[i] : 0.0;
+    const double s0 = -zr / n;
+    const double x1 = x + s0 * l;
+    const double y1 = y + s0 * m;
+    const double x2 = x1 + s * l;
+    const double y2 = y1 + s * m;
+    const double rho_raw = x2 * x2 + y2 * y2;
+    const double q2_raw = 1.0 - opk * c * c * rho_raw;
+    // Rays not followed (missed, not live) are evaluated on the axis (their results unused).
+    const double rho = (run & (q2_raw > 0.0)) ? rho_raw : 0.0;
+    const double q = std::sqrt(1.0 - opk * c * c * rho);
+    // rho P(rho) = sum a_i rho^(i+1): d1 = its first, d2 its second derivative in rho.
+    const double d1 =
+        a0 + rho * (2.0 * a1 +
+                    rho * (3.0 * a2 +
+                           rho * (4.0 * a3 +
+                                  rho * (5.0 * a4 +
+                                         rho * (6.0 * a5 + rho * (7.0 * a6 + rho * 8.0 * a7))))));
+    const double d2 =
+        2.0 * a1 +
+        rho * (6.0 * a2 +
+               rho * (12.0 * a3 +
+                      rho * (20.0 * a4 + rho * (30.0 * a5 + rho * (42.0 * a6 + rho * 56.0 * a7)))));
+    const double inv_q = 1.0 / q;
+    const double slope = 0.5 * c * inv_q + d1;  // S'
+    const double nx_raw = -2.0 * slope * x2;
+    const double ny_raw = -2.0 * slope * y2;
+    const double inv = 1.0 / std::sqrt(nx_raw * nx_raw + ny_raw * ny_raw + 1.0);
+    const double nx = nx_raw * inv, ny = ny_raw * inv, nz = inv;
+    const double cos_raw = miss ? 0.0 : l * nx + m * ny + n * nz;
+    const bool failed = !(cos_raw > 0.0);
+    const double ci = failed ? 1.0 : cos_raw;
+    const double zeta = ci * ci;
+    const double zp_raw = 1.0 - mu2 * (1.0 - zeta);
+    const bool tir = zp_raw < 0.0;
+    const double zp = tir ? zeta : zp_raw;
+    const double sp = std::sqrt(zp);
+    const double gamma = sp - mu * ci;
+    // Backward: the refraction.
+    const double a_l_out = live ? al[i] : 0.0;
+    const double a_m_out = live ? am[i] : 0.0;
+    const double a_n_out = live ? an[i] : 0.0;
+    const double a_travel = live && travel_seed ? travel_seed[i] : 0.0;
+    const double a_zeta_seed = live && zeta_seed ? zeta_seed[i] : 0.0;
+    const double a_zp_seed = live && zeta_prime_seed ? zeta_prime_seed[i] : 0.0;
+    double a_mu = a_l_out * l + a_m_out * m + a_n_out * n;
+    const double a_gamma = a_l_out * nx + a_m_out * ny + a_n_out * nz;
+    double a_nx = gamma * a_l_out;
+    double a_ny = gamma * a_m_out;
+    double a_nz = gamma * a_n_out;
+    double a_l = mu * a_l_out;
+    double a_m = mu * a_m_out;
+    double a_n = mu * a_n_out;
+    const double a_zp_used = a_gamma / (2.0 * sp);
+    const double a_zp_raw = a_zp_seed + (tir ? 0.0 : a_zp_used);
+    double a_zeta = (tir ? a_zp_used : 0.0) + mu2 * a_zp_raw + (failed ? 0.0 : a_zeta_seed);
+    a_mu = a_mu - a_gamma * ci - 2.0 * mu * (1.0 - zeta) * a_zp_raw;
+    // ci = d . N (a constant for a failed ray).
+    const double a_ci = failed ? 0.0 : -mu * a_gamma + 2.0 * ci * a_zeta;
+    a_l += a_ci * nx;
+    a_m += a_ci * ny;
+    a_n += a_ci * nz;
+    a_nx += a_ci * l;
+    a_ny += a_ci * m;
+    a_nz += a_ci * n;
+    // The unit normal (px, py, 1) / sqrt(w).
+    const double a_inv = a_nx * nx_raw + a_ny * ny_raw + a_nz;
+    const double a_w = -0.5 * a_inv * inv * inv * inv;
+    const double a_px = a_nx * inv + 2.0 * nx_raw * a_w;
+    const double a_py = a_ny * inv + 2.0 * ny_raw * a_w;
+    const double a_slope = run ? -2.0 * (a_px * x2 + a_py * y2) : 0.0;
+    double a_x2 = (live ? ax[i] : 0.0) - 2.0 * slope * a_px;
+    double a_y2 = (live ? ay[i] : 0.0) - 2.0 * slope * a_py;
+    const double a_z2 = (live ? az[i] : 0.0) + a_travel;
+    // S'(rho; c, k, a).
+    const double inv_q3 = inv_q * inv_q * inv_q;
+    const double a_rho = a_slope * (0.25 * opk * c * c * c * inv_q3 + d2);
+    double a_c = a_slope * (0.5 * inv_q + 0.5 * opk * c * c * rho * inv_q3);
+    double a_k = a_slope * 0.25 * c * c * c * rho * inv_q3;
+    a_x2 += 2.0 * x2 * a_rho;
+    a_y2 += 2.0 * y2 * a_rho;
+    // The path s, by implicit differentiation of g(s) = s n - S(rho(s)) = 0.
+    const double a_s = a_x2 * l + a_y2 * m + a_z2 * n;
+    a_l += s * a_x2;
+    a_m += s * a_y2;
+    a_n += s * a_z2;
+    const double dg = n - 2.0 * slope * (x2 * l + y2 * m);
+    const double lambda = run ? a_s / dg : 0.0;
+    const double two_ls = 2.0 * lambda * slope;
+    a_n -= lambda * s;
+    const double a_x1 = a_x2 + two_ls * x2;
+    const double a_y1 = a_y2 + two_ls * y2;
+    a_l += two_ls * x2 * s;
+    a_m += two_ls * y2 * s;
+    const double one_q = 1.0 + q;
+    a_c += lambda * rho * inv_q / one_q;
+    a_k += lambda * 0.5 * c * c * c * rho * rho * inv_q / (one_q * one_q);
+    // The asphere terms: dS'/da_i = (i+1) rho^i (a_slope), dS/da_i = rho^(i+1) (lambda).
+    double power = 1.0;
+    double a_a[8];
+    for (int j = 0; j < 8; ++j) {
+      a_a[j] = (a_slope * (j + 1.0) + lambda * rho) * power;
+      power *= rho;
+    }
+    // The transfer to the vertex plane.
+    const double a_s0 = a_x1 * l + a_y1 * m;
+    a_l += s0 * a_x1;
+    a_m += s0 * a_y1;
+    const double a_zr = -a_s0 / n - a_travel;
+    a_n -= a_s0 * s0 / n;
+    ax[i] = live ? a_x1 : 0.0;
+    ay[i] = live ? a_y1 : 0.0;
+    az[i] = live ? a_zr : 0.0;
+    al[i] = live ? a_l : 0.0;
+    am[i] = live ? a_m : 0.0;
+    an[i] = live ? a_n : 0.0;
+    sum_c += live ? a_c : 0.0;
+    sum_t += live ? -a_zr : 0.0;
+    sum_mu += live ? a_mu : 0.0;
+    sum_k += live ? a_k : 0.0;
+    s0_ += live ? a_a[0] : 0.0;
+    s1_ += live ? a_a[1] : 0.0;
+    s2_ += live ? a_a[2] : 0.0;
+    s3_ += live ? a_a[3] : 0.0;
+    s4_ += live ? a_a[4] : 0.0;
+    s5_ += live ? a_a[5] : 0.0;
+    s6_ += live ? a_a[6] : 0.0;
+    s7_ += live ? a_a[7] : 0.0;
+  }
+  sums[0] += sum_c;
+  sums[1] += sum_t;
+  sums[2] += sum_mu;
+  sums[3] += sum_k;
+  sums[4] += s0_;
+  sums[5] += s1_;
+  sums[6] += s2_;
+  sums[7] += s3_;
+  sums[8] += s4_;
+  sums[9] += s5_;
+  sums[10] += s6_;
+  sums[11] += s7_;
+}
+
 }  // namespace detail
 
 void trace_bundle_taped(const TraceLens<double>& lens, int w, RayBundle<double>& rays,
                         RayRecord<double>* record, AdjointTape& tape) {
   const std::size_t count = rays.size();
   const int k_count = lens.surface_count();
-  tape.resize(k_count, count);
+  tape.resize(k_count, count, lens.has_profiles());
   double* x = rays.x.data();
   double* y = rays.y.data();
   double* z = rays.z.data();
@@ -167,11 +346,20 @@ void trace_bundle_taped(const TraceLens<double>& lens, int w, RayBundle<double>&
     const double shift = k > 0 ? lens.thickness_mm[k - 1] : 0.0;
     const double mu = lens.index(k - 1, w) / lens.index(k, w);
     save(k, shift);
-    detail::trace_surface_double(c, shift, mu, count, x, y, z, l, m, n, failure,
-                                 record && k > 0 ? record->axial_travel_mm[k - 1].data() : nullptr,
-                                 record ? record->cos2_incidence[k].data() : nullptr,
-                                 record ? record->cos2_refraction[k].data() : nullptr,
-                                 record != nullptr);
+    double* travel = record && k > 0 ? record->axial_travel_mm[k - 1].data() : nullptr;
+    double* zeta = record ? record->cos2_incidence[k].data() : nullptr;
+    double* zeta_prime = record ? record->cos2_refraction[k].data() : nullptr;
+    const std::uint8_t profile = lens.has_profiles() ? lens.profile[k] : kProfileSphere;
+    if (profile != kProfileSphere) {
+      detail::trace_surface_profile_double(
+          profile, c, lens.conic[k],
+          lens.asphere.data() + static_cast<std::size_t>(k) * kAsphereTerms, shift, mu, count, x, y,
+          z, l, m, n, failure, travel, zeta, zeta_prime, record != nullptr,
+          tape.path.data() + static_cast<std::size_t>(k) * count);
+    } else {
+      detail::trace_surface_double(c, shift, mu, count, x, y, z, l, m, n, failure, travel, zeta,
+                                   zeta_prime, record != nullptr);
+    }
     for (std::size_t i = 0; i < count; ++i) {
       if (failure[i] != kRayOk && status[i] == kRayOk) {
         status[i] = static_cast<std::uint8_t>(failure[i]);
@@ -251,12 +439,23 @@ void trace_bundle_adjoint(const TraceLens<double>& lens, int w, const RayBundle<
     const double mu = lens.index(k - 1, w) / lens.index(k, w);
     const double* const state[6] = {tape.at(k, 0), tape.at(k, 1), tape.at(k, 2),
                                     tape.at(k, 3), tape.at(k, 4), tape.at(k, 5)};
-    double sums[3] = {0.0, 0.0, 0.0};
-    detail::trace_surface_adjoint_double(
-        c, mu, k, count, state, fs, a,
-        seeds.travel && k > 0 ? (*seeds.travel)[k - 1].data() : nullptr,
-        seeds.zeta ? (*seeds.zeta)[k].data() : nullptr,
-        seeds.zeta_prime ? (*seeds.zeta_prime)[k].data() : nullptr, sums);
+    double sums[12] = {};
+    const double* travel_seed = seeds.travel && k > 0 ? (*seeds.travel)[k - 1].data() : nullptr;
+    const double* zeta_seed = seeds.zeta ? (*seeds.zeta)[k].data() : nullptr;
+    const double* zeta_prime_seed = seeds.zeta_prime ? (*seeds.zeta_prime)[k].data() : nullptr;
+    const std::uint8_t profile = lens.has_profiles() ? lens.profile[k] : kProfileSphere;
+    if (profile != kProfileSphere) {
+      detail::trace_surface_adjoint_profile_double(
+          c, lens.conic[k], lens.asphere.data() + static_cast<std::size_t>(k) * kAsphereTerms, mu,
+          k, count, state, tape.path.data() + static_cast<std::size_t>(k) * count, fs, a,
+          travel_seed, zeta_seed, zeta_prime_seed, sums);
+      out.conic[k] += sums[3];
+      for (int j = 0; j < kAsphereTerms; ++j)
+        out.asphere[static_cast<std::size_t>(k) * kAsphereTerms + j] += sums[4 + j];
+    } else {
+      detail::trace_surface_adjoint_double(c, mu, k, count, state, fs, a, travel_seed, zeta_seed,
+                                           zeta_prime_seed, sums);
+    }
     out.curvature[k] += sums[0];
     if (k > 0) out.thickness[k - 1] += sums[1];
     out.mu[k] += sums[2];

@@ -1,5 +1,7 @@
 // The double ray-trace kernel, built for several x86-64 levels; the loader picks the best one
 // the CPU supports (GCC target_clones), so one binary runs everywhere and vectorizes where it can.
+#include <vector>
+
 #include "lensopt/trace/kernel.h"
 
 namespace lensopt::detail {
@@ -42,24 +44,35 @@ void trace_surface_profile_double(std::uint8_t profile, double c, double conic, 
                                   double shift, double mu, std::size_t count, double* x, double* y,
                                   double* z, double* l, double* m, double* n,
                                   std::int32_t* failure, double* travel, double* zeta_out,
-                                  double* zeta_prime_out, bool record) {
+                                  double* zeta_prime_out, bool record, double* path_out) {
   // As for the sphere: travel is null at the first surface, a constant in each instantiation.
+  // The taped trace (path_out set) records, into scratch records if it has none.
+  thread_local std::vector<double> scratch;
+  if (path_out && !record) {
+    scratch.resize(2 * count);
+    zeta_out = scratch.data();
+    zeta_prime_out = scratch.data() + count;
+    travel = nullptr;
+    record = true;
+  }
   if (profile == kProfileConic) {
     if (record && travel)
       trace_surface_conic<double, true>(c, conic, shift, mu, count, x, y, z, l, m, n, failure,
-                                        travel, zeta_out, zeta_prime_out);
+                                        travel, zeta_out, zeta_prime_out, path_out);
     else if (record)
       trace_surface_conic<double, true>(c, conic, shift, mu, count, x, y, z, l, m, n, failure,
-                                        nullptr, zeta_out, zeta_prime_out);
+                                        nullptr, zeta_out, zeta_prime_out, path_out);
     else
       trace_surface_conic<double, false>(c, conic, shift, mu, count, x, y, z, l, m, n, failure,
                                          nullptr, nullptr, nullptr);
   } else if (record && travel) {
     trace_surface_asphere_chunked<double, true>(c, conic, a, shift, mu, count, x, y, z, l, m, n,
-                                                failure, travel, zeta_out, zeta_prime_out);
+                                                failure, travel, zeta_out, zeta_prime_out,
+                                                path_out);
   } else if (record) {
     trace_surface_asphere_chunked<double, true>(c, conic, a, shift, mu, count, x, y, z, l, m, n,
-                                                failure, nullptr, zeta_out, zeta_prime_out);
+                                                failure, nullptr, zeta_out, zeta_prime_out,
+                                                path_out);
   } else {
     trace_surface_asphere_chunked<double, false>(c, conic, a, shift, mu, count, x, y, z, l, m, n,
                                                  failure, nullptr, nullptr, nullptr);

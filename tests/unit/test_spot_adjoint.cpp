@@ -231,3 +231,147 @@ TEST_CASE("design adjoint: the Adam comparison loop takes the same steps as with
     CHECK(std::abs(adam.x[i] - x[i]) <= 1e-9 * std::max(1.0, std::abs(x[i])));
   }
 }
+
+namespace {
+
+// Every curved surface of `lens` an even asphere with a conic and a4..a16 terms that stay small
+// at 40 % of the surface's radius (lensopt bench --aspherize's recipe), so that the adjoint
+// meets the Newton intersection, rays that miss the profile and steep rims on every surface.
+Lens aspherized(Lens lens) {
+  for (Surface& s : lens.surfaces) {
+    if (s.is_stop || s.curvature_per_mm == 0.0) continue;
+    s.conic = -0.05;
+    const double h = 0.4 / std::abs(s.curvature_per_mm);
+    for (int j = 0; j < kAsphereOrders; ++j)
+      s.asphere[j] = (j % 2 ? -1.0 : 1.0) * 1e-4 / std::pow(h, 2 * j + 4);
+  }
+  return lens;
+}
+
+Lens doublet_asphere() {
+  return read_lens(test::source_dir() / "lenses" / "doublet-asphere.toml");
+}
+
+// The doublet's variables, each profile variable of its two aspheres, and the conic and a4 of
+// its spherical second surface (seeded at 0: the surface becomes an asphere in the Jets).
+std::vector<PrescriptionVariable> doublet_asphere_variables(const Lens& lens) {
+  std::vector<PrescriptionVariable> variables = all_prescription_variables(lens);
+  variables.push_back({PrescriptionVariable::Kind::kConic, 1});
+  variables.push_back({PrescriptionVariable::Kind::kAsphere, 1, 1});
+  return variables;
+}
+
+}  // namespace
+
+TEST_CASE("spot adjoint: aspheric and conic lenses equal the Jet gradient (k, a_2i included)") {
+  const Lens asphere = doublet_asphere();
+  TraceOptions options;
+  options.rings = 10;
+  options.fields = 5;
+  // The adjoint runs (no Jet fallback) on conics and aspheres.
+  CHECK(adjoint_supported(make_trace_lens(asphere)));
+  for (bool aiming : {true, false}) {
+    options.ray_aiming = aiming;
+    // The lens's own variables (k and a_2i of both aspheres included). The terms seeded at 0 on
+    // the spherical surface 2 (doublet_asphere_variables) are checked against central
+    // differences below: there mean_spot_gradient_auto's Jets differ from both (lead: look).
+    const std::vector<PrescriptionVariable> variables = all_prescription_variables(asphere);
+    const TraceLens<double> trace_lens = make_trace_lens(asphere);
+    const SpotGradient jets =
+        mean_spot_gradient_auto(trace_lens, asphere.specs, variables, options);
+    const SpotGradient adjoint =
+        mean_spot_gradient_adjoint<16>(trace_lens, asphere.specs, variables, options);
+    CHECK(adjoint.mean_rms_spot_mm == doctest::Approx(jets.mean_rms_spot_mm).epsilon(1e-12));
+    const double worst = worst_relative(adjoint.gradient, jets.gradient);
+    for (std::size_t i = 0; i < variables.size(); ++i)
+      if (worst >= 1e-9)
+        MESSAGE(variables[i].name(), ": adjoint ", adjoint.gradient[i], " jets ", jets.gradient[i]);
+    INFO("aiming ", aiming, ": worst relative difference ", worst);
+    CHECK(worst < 1e-9);
+  }
+  // A conic-only lens (k on both outer surfaces of the Cooke) and the aspherized Tessar, whose
+  // rims make rays miss the profile (the adjoint must leave them out as the Jets do).
+  Lens conic = read_lens(test::source_dir() / "lenses" / "cooke.toml");
+  conic.surfaces.front().conic = -0.6;
+  conic.surfaces.back().conic = 1.5;
+  check_against_jets(conic, options);
+  const Lens tessar = aspherized(read_lens(test::source_dir() / "lenses" / "tessar.toml"));
+  options.rings = 12;
+  options.fields = 7;
+  options.ray_aiming = true;
+  const SpotResult<double> spots =
+      evaluate_spots(prepare_system(make_trace_lens(tessar), tessar.specs, options));
+  MESSAGE("aspherized Tessar: failed rays ", spots.total_failed);
+  CHECK(spots.total_failed > 0);
+  check_against_jets(tessar, options);
+}
+
+TEST_CASE("spot adjoint: aspheric doublet matches central finite differences") {
+  const Lens lens = doublet_asphere();
+  const std::vector<PrescriptionVariable> variables = doublet_asphere_variables(lens);
+  TraceOptions options;
+  options.rings = 8;
+  options.fields = 4;
+  const SpotGradient g =
+      mean_spot_gradient_adjoint<24>(make_trace_lens(lens), lens.specs, variables, options);
+  // Steps: as test_spot_adjoint's Cooke for the prescription; for k and a_2i one that moves the
+  // sag at 5 mm (about the rays' largest height) by about 1e-6 mm (test_surface_profiles.cpp).
+  std::vector<double> scale(variables.size(), 1.0), fd(variables.size());
+  for (std::size_t i = 0; i < variables.size(); ++i) {
+    const PrescriptionVariable& v = variables[i];
+    if (v.kind == PrescriptionVariable::Kind::kCurvature) scale[i] = 0.05;
+    if (v.kind == PrescriptionVariable::Kind::kVd) scale[i] = 40.0;
+    if (v.kind == PrescriptionVariable::Kind::kConic) scale[i] = 50.0;
+    if (v.kind == PrescriptionVariable::Kind::kAsphere)
+      scale[i] = 5e-2 / std::pow(5.0, 2 * v.term + 2);
+  }
+  for (std::size_t i = 0; i < variables.size(); ++i) {
+    const double x0 = variable_value(lens, variables[i]);
+    auto central = [&](double h) {
+      Lens plus = lens, minus = lens;
+      set_variable_value(plus, variables[i], x0 + h);
+      set_variable_value(minus, variables[i], x0 - h);
+      return (mean_spot(plus, options) - mean_spot(minus, options)) / (2 * h);
+    };
+    const double h = 2e-5 * scale[i];
+    fd[i] = (4 * central(h / 2) - central(h)) / 3;
+  }
+  // Each entry relative to its own size, or to 1e-4 of the largest scaled entry.
+  double largest_scaled = 0;
+  for (std::size_t i = 0; i < variables.size(); ++i)
+    largest_scaled = std::max(largest_scaled, std::abs(fd[i]) * scale[i]);
+  for (std::size_t i = 0; i < variables.size(); ++i) {
+    const double denominator = std::max(std::abs(fd[i]), 1e-4 * largest_scaled / scale[i]);
+    INFO(variables[i].name(), ": adjoint ", g.gradient[i], " fd ", fd[i]);
+    CHECK(std::abs(g.gradient[i] - fd[i]) / denominator < 1e-5);
+  }
+}
+
+TEST_CASE("design adjoint: aspheric lenses, with profile variables (Jets agree)") {
+  const GlassSpace glasses(*load_catalog("ohara"));
+  TraceOptions sampling;
+  sampling.rings = 6;
+  sampling.fields = 3;
+  DesignLossOptions loss;
+  loss.min_image_clearance_mm = 14.0;  // the ray-path hinge active
+  loss.max_ray_angle_deg = 20.0;       // the ray-angle hinge active
+  const Lens lens = doublet_asphere();
+  const LensParameterization param(lens, glasses,
+                                   {"k1", "a4_1", "a6_1", "a8_1", "k2", "a4_2", "k5", "a4_5"});
+  for (GlassMode mode : {GlassMode::kQuantized, GlassMode::kContinuous})
+    check_design(param, param.from_lens(lens), mode, sampling, loss);
+  check_design(param, param.from_lens(lens), GlassMode::kQuantized, sampling, DesignLossOptions{});
+  // The aspherized Tessar at a wide field: rays that miss a profile or reflect totally pull
+  // through their records up to the failing surface.
+  Lens tessar = aspherized(read_lens(test::source_dir() / "lenses" / "tessar.toml"));
+  tessar.specs.half_field_deg = 35.0;
+  const LensParameterization tessar_param(tessar, glasses, {"k1", "a4_1", "a6_3", "k8"});
+  const DesignValueGradient jets =
+      design_loss_gradient_jets(tessar_param, tessar_param.from_lens(tessar), GlassMode::kQuantized,
+                                {}, sampling, DesignLossOptions{});
+  MESSAGE("aspherized Tessar at 35 deg: failed rays ", jets.loss.failed_rays, " of ",
+          jets.loss.rays);
+  CHECK(jets.loss.failed_rays > 0);
+  check_design(tessar_param, tessar_param.from_lens(tessar), GlassMode::kQuantized, sampling,
+               DesignLossOptions{});
+}

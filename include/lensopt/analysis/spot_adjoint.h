@@ -17,8 +17,11 @@
 //      a_sx = sum_i a_x0,i p_x,i, a_oy = sum_i a_y0,i, a_sy = sum_i a_y0,i p_y,i, a_zEP = sum_i
 //      a_z0,i per (field, wavelength). Per-field sums are added in field order (deterministic).
 //   3. Chain rule with the Jets of step 1: dL/dv_j = sum over parameters P of a_P dP/dv_j.
-// Supported: spherical surfaces without clear apertures (the kernel of trace/kernel.h);
-// adjoint_supported() says when, and mean_spot_gradient_fast falls back to the Jet path otherwise.
+// Supported: spherical, conic and even-asphere surfaces without clear apertures (the kernel of
+// trace/kernel.h and the profiles of trace/profile.h; the profile's backward step in
+// trace/adjoint.h); adjoint_supported() says when, and mean_spot_gradient_fast falls back to the
+// Jet path otherwise. The conic constant and the asphere terms are parameters like c_k (their
+// adjoints a_k, a_a2i per surface, chained through their Jets in step 3).
 #pragma once
 
 #include <ceres/jet.h>
@@ -37,6 +40,8 @@ struct SystemAdjoint {
   std::vector<double> thickness;  // K
   std::vector<double> mu;         // [w * K + k], w < W (the spec wavelengths)
   std::vector<double> start;      // [(h * W + w) * 4 + j]: j = s_x, o_y, s_y, z_EP
+  std::vector<double> conic;      // K (0 at spheres)
+  std::vector<double> asphere;    // K * kAsphereTerms
 
   void reset(int surfaces, int wavelengths, int fields);
   // Adds the bundle adjoint of field h, wavelength w started from `pupil` samples.
@@ -68,6 +73,10 @@ TraceSystem<double> system_values(const TraceSystem<J>& in) {
   out.lens.catalog_offset = in.lens.catalog_offset;
   out.lens.wavelengths_nm = in.lens.wavelengths_nm;
   out.lens.stop = in.lens.stop;
+  out.lens.profile = in.lens.profile;
+  out.lens.conic = v(in.lens.conic);
+  out.lens.asphere = v(in.lens.asphere);
+  out.lens.semi_diameter_mm = in.lens.semi_diameter_mm;
   out.scale = value_of(in.scale);
   out.efl_mm = value_of(in.efl_mm);
   out.bfl_mm = value_of(in.bfl_mm);
@@ -99,6 +108,15 @@ void chain_system_adjoint(const TraceSystem<J>& sys, const SystemAdjoint& adj, i
   for (int k = 0; k < k_count; ++k) {
     add(sys.lens.curvature_per_mm[k], adj.curvature[k]);
     add(sys.lens.thickness_mm[k], adj.thickness[k]);
+  }
+  if (sys.lens.has_profiles()) {
+    for (int k = 0; k < k_count; ++k) {
+      add(sys.lens.conic[k], adj.conic[k]);
+      for (int j = 0; j < kAsphereTerms; ++j) {
+        const std::size_t i = static_cast<std::size_t>(k) * kAsphereTerms + j;
+        add(sys.lens.asphere[i], adj.asphere[i]);
+      }
+    }
   }
   for (int w = 0; w < wl; ++w)
     for (int k = 0; k < k_count; ++k)

@@ -34,6 +34,27 @@
 // failed ray contributes only the seeds of the surfaces up to the failing one (the design losses'
 // records), and nothing that its clamped continuation computed.
 // The parameter adjoints a_c, a_t, a_mu are sums over the rays (OpenMP simd reductions).
+//
+// Conic and even-asphere surfaces (trace/profile.h). Forward, with the converged path s from
+// the vertex plane (taped: AdjointTape::path) and the profile S(rho), S'(rho) of profile.h:
+//   zr, s0, x1, y1 as above,  x2 = x1 + s l,  y2 = y1 + s m,  z2 = s n,  rho = x2^2 + y2^2,
+//   g(s) = s n - S(rho) = 0,  g' = n - 2 S' (x2 l + y2 m),
+//   px = -2 S' x2,  py = -2 S' y2,  w = px^2 + py^2 + 1,  N = (px, py, 1) / sqrt(w),
+//   ci = d . N (failed: ci <= 0, taken as 1),  zeta = ci^2,  zeta', gamma, d' as above with
+//   N for (-c x2, -c y2, 1 - c z2); travel = z2 - zr.
+// (A conic is the even asphere with a = 0: its closed-form normal (-c x, -c y, 1 - c (1+k) z)
+// is the same unit vector, since 1 - c (1+k) z = q on the surface.)
+// Backward: as for the sphere through d', gamma, zeta', zeta and ci (a_ci = 0 for a failed
+// ray); then a_N -> a_px, a_py (through w) -> a_S' = -2 (a_px x2 + a_py y2), a_x2 -= 2 S' a_px,
+// a_y2 -= 2 S' a_py; S'(rho; c, k, a) gives a_rho, a_c, a_k, a_a; a_x2 += 2 x2 a_rho, ....
+// The path s by implicit differentiation at the converged point (ds/dp = -g_p / g'), with
+// a_s = a_x2 l + a_y2 m + a_z2 n and lambda = a_s / g':
+//   a_n -= lambda s,  a_x1 += 2 lambda S' x2,  a_y1 += 2 lambda S' y2,  a_l += 2 lambda S' x2 s,
+//   a_m += 2 lambda S' y2 s,  a_c += lambda dS/dc,  a_k += lambda dS/dk,  a_a2i += lambda rho^i,
+//   dS/dc = rho / (q (1 + q)),  dS/dk = c^3 rho^2 / (2 q (1 + q)^2),
+//   dS'/drho = (1+k) c^3 / (4 q^3) + P'',  dS'/dc = 1 / (2 q) + (1+k) c^2 rho / (2 q^3),
+//   dS'/dk = c^3 rho / (4 q^3),  dS'/da2i = i rho^(i-1).
+// A ray whose intersection missed (taped path NaN) has s = 0, a constant, as in the Jet trace.
 #pragma once
 
 #include <cstddef>
@@ -51,11 +72,15 @@ struct AdjointTape {
   int surfaces = 0;
   std::size_t count = 0;
   std::vector<double> state;  // [(k * 6 + component) * count + ray]
+  // The path s from the vertex plane at each conic or asphere surface ([k * count + ray], NaN
+  // where the intersection missed); empty for an all-spherical lens.
+  std::vector<double> path;
 
-  void resize(int surface_count, std::size_t ray_count) {
+  void resize(int surface_count, std::size_t ray_count, bool profiles = false) {
     surfaces = surface_count;
     count = ray_count;
     state.resize(static_cast<std::size_t>(surface_count + 1) * 6 * ray_count);
+    path.resize(profiles ? static_cast<std::size_t>(surface_count) * ray_count : 0);
   }
   const double* at(int k, int component) const {
     return state.data() + (static_cast<std::size_t>(k) * 6 + component) * count;
@@ -76,18 +101,23 @@ struct AdjointSeeds {
 };
 
 // Parameter adjoints of one bundle, accumulated (+=): per surface k the curvature, the thickness
-// t_k (the shift of surface k+1; for k = K-1 the image distance) and mu_k at the bundle's
-// wavelength; per ray the start position (the direction is the field's constant).
+// t_k (the shift of surface k+1; for k = K-1 the image distance), mu_k at the bundle's
+// wavelength, the conic constant and the asphere terms (0 at spheres); per ray the start
+// position (the direction is the field's constant).
 struct BundleAdjoint {
   std::vector<double> curvature;   // K
   std::vector<double> thickness;   // K
   std::vector<double> mu;          // K
+  std::vector<double> conic;       // K
+  std::vector<double> asphere;     // K * kAsphereTerms (a2, a4, ..., a16)
   std::vector<double> x0, y0, z0;  // per ray (overwritten, not accumulated)
 
   void reset(int surface_count) {
     curvature.assign(surface_count, 0.0);
     thickness.assign(surface_count, 0.0);
     mu.assign(surface_count, 0.0);
+    conic.assign(surface_count, 0.0);
+    asphere.assign(static_cast<std::size_t>(surface_count) * kAsphereTerms, 0.0);
   }
 };
 
@@ -112,6 +142,15 @@ void trace_surface_adjoint_double(double c, double mu, int k, std::size_t count,
                                   double* const a[6], const double* travel_seed,
                                   const double* zeta_seed, const double* zeta_prime_seed,
                                   double sums[3]);
+
+// The same for a conic or even-asphere surface (equations of the header): a = its a2..a16,
+// path = the taped s of this surface; sums[12] += (a_c, a_t, a_mu, a_k, a_a2, ..., a_a16).
+void trace_surface_adjoint_profile_double(double c, double conic, const double* a, double mu, int k,
+                                          std::size_t count, const double* const state[6],
+                                          const double* path, const std::int8_t* failed_surface,
+                                          double* const adjoint[6], const double* travel_seed,
+                                          const double* zeta_seed, const double* zeta_prime_seed,
+                                          double sums[12]);
 
 }  // namespace detail
 

@@ -20,7 +20,9 @@
 // Even asphere. g(s) = s n - S(rho(s)) = 0 solved by Newton's method in double from the conic
 // intersection (from the vertex plane if the conic is missed):
 //   g'(s) = n - 2 S'(rho) (x l + y m),   s <- s - g / g',
-// converged when |ds| <= 1e-15 (1 + |s| + r). Two stages, same steps and the same test:
+// converged when |ds| <= tol = 1e-15 (1 + |s| + |x| + |y|), or when Newton's error estimate after
+// the step, |g'' / (2 g')| ds^2, is below tol / 10 (asphere_newton_step). Two stages, same steps
+// and the same test:
 //   (a) the bundle, in chunks of kAsphereChunk rays (structure of arrays, branch-free so the
 //       double loop vectorizes): up to kVectorNewtonSteps plain Newton steps for every ray; a
 //       converged ray keeps its s (a select), a ray whose step would have g' <= 0, a non-finite
@@ -150,9 +152,10 @@ inline __attribute__((always_inline)) void trace_surface_conic(
     const T& c, const T& conic, const T& shift, const T& mu, std::size_t count, T* __restrict x,
     T* __restrict y, T* __restrict z, T* __restrict l, T* __restrict m, T* __restrict n,
     std::int32_t* __restrict failure, T* __restrict travel, T* __restrict zeta_out,
-    T* __restrict zeta_prime_out) {
+    T* __restrict zeta_prime_out, double* __restrict path_out = nullptr) {
   using std::sqrt;
   const T one = K<T>(1.0);
+  const T zero = K<T>(0.0);
   const T one_plus_k = one + conic;
   for (std::size_t i = 0; i < count; ++i) {
     // Shift to the vertex and transfer to its tangent plane.
@@ -160,9 +163,14 @@ inline __attribute__((always_inline)) void trace_surface_conic(
     const T s0 = -z_rel / n[i];
     const T x1 = x[i] + s0 * l[i];
     const T y1 = y[i] + s0 * m[i];
-    // Intersect the conic in closed form.
+    // Intersect the conic in closed form; a miss stays on the vertex plane (s = 0, a constant,
+    // as the asphere's).
     bool miss = false;
-    const T s1 = conic_intersection(c, one_plus_k, x1, y1, l[i], m[i], n[i], miss);
+    const T s_raw = conic_intersection(c, one_plus_k, x1, y1, l[i], m[i], n[i], miss);
+    const T s1 = miss ? zero : s_raw;
+    if constexpr (kRecord) {
+      if (path_out) path_out[i] = miss ? std::numeric_limits<double>::quiet_NaN() : value_of(s1);
+    }
     const T x2 = x1 + s1 * l[i];
     const T y2 = y1 + s1 * m[i];
     const T z2 = s1 * n[i];
@@ -188,6 +196,56 @@ inline __attribute__((always_inline)) void trace_surface_conic(
   }
 }
 
+// One Newton step of the header for the asphere in double at path s from (x1, y1, 0): the step
+// ds = g / g', g' and whether the step converges. S and S' share one division:
+//   u = 1 / (q (1 + q)),  c rho / (1 + q) = c rho q u,  c / (2 q) = c (1 + q) u / 2,
+// and the test is the header's: |ds| <= tol, or Newton's own error estimate after the step,
+// |g'' / (2 g')| ds^2 <= tol / 10 (quadratic convergence: one step fewer than waiting for a
+// step below tol), with tol = 1e-15 (1 + |s - ds| + |x| + |y|),
+//   g'' = -(S'' rho'^2 + S' rho''),  rho' = 2 (x l + y m),  rho'' = 2 (l^2 + m^2),
+//   S''  = (1 + k) c^3 / (4 q^3) + P''(rho).
+// The caller has checked the domain (q^2 = 1 - (1 + k) c^2 rho > 0 at s).
+inline __attribute__((always_inline)) void asphere_newton_step(double c, double domain,
+                                                               const double* a, double x1,
+                                                               double y1, double l, double m,
+                                                               double n, double s, double& ds,
+                                                               double& dg, bool& converged) {
+  const double xs = x1 + s * l, ys = y1 + s * m;
+  const double rho = xs * xs + ys * ys;
+  const double q = std::sqrt(1.0 - domain * rho);
+  const double one_q = 1.0 + q;
+  const double u = 1.0 / (q * one_q);
+  // rho P = sum a_i rho^(i+1): p = P, d1 = (rho P)', d2 = (rho P)''.
+  const double p =
+      a[0] +
+      rho * (a[1] +
+             rho * (a[2] + rho * (a[3] + rho * (a[4] + rho * (a[5] + rho * (a[6] + rho * a[7]))))));
+  const double d1 =
+      a[0] +
+      rho * (2.0 * a[1] +
+             rho * (3.0 * a[2] +
+                    rho * (4.0 * a[3] +
+                           rho * (5.0 * a[4] +
+                                  rho * (6.0 * a[5] + rho * (7.0 * a[6] + rho * (8.0 * a[7])))))));
+  const double d2 =
+      2.0 * a[1] +
+      rho * (6.0 * a[2] +
+             rho * (12.0 * a[3] +
+                    rho * (20.0 * a[4] +
+                           rho * (30.0 * a[5] + rho * (42.0 * a[6] + rho * (56.0 * a[7]))))));
+  const double sag = c * rho * q * u + rho * p;
+  const double inv_q = one_q * u;
+  const double slope = 0.5 * c * inv_q + d1;
+  const double g = s * n - sag;
+  const double rho_1 = 2.0 * (xs * l + ys * m);
+  dg = n - slope * rho_1;
+  ds = g / dg;
+  const double curvature = 0.25 * domain * c * inv_q * inv_q * inv_q + d2;  // S''
+  const double g2 = curvature * rho_1 * rho_1 + 2.0 * slope * (l * l + m * m);
+  const double tol = 1e-15 * (1.0 + std::abs(s - ds) + std::abs(xs) + std::abs(ys));
+  converged = (std::abs(ds) <= tol) | (std::abs(g2) * ds * ds <= 0.2 * tol * std::abs(dg));
+}
+
 // Newton's method for the asphere in double (see header): the path s from the vertex plane point
 // (x1, y1, 0), false when it fails.
 inline bool asphere_newton(double c, double one_plus_k, const double* a, double x1, double y1,
@@ -205,22 +263,19 @@ inline bool asphere_newton(double c, double one_plus_k, const double* a, double 
     if (!inside(s)) return false;
   }
   for (int it = 0; it < kNewtonIterations; ++it) {
-    const double xs = x1 + s * l, ys = y1 + s * m;
-    const double rho = xs * xs + ys * ys;
-    double sag = 0, slope = 0;
-    asphere_sag(c, one_plus_k, a, rho, sag, slope);
-    const double g = s * n - sag;
-    const double dg = n - 2.0 * slope * (xs * l + ys * m);
+    double ds = 0, dg = 0;
+    bool converged = false;
+    asphere_newton_step(c, domain, a, x1, y1, l, m, n, s, ds, dg, converged);
     if (!(dg > 0.0)) return false;
-    double ds = g / dg;
     if (!std::isfinite(ds)) return false;
     int halvings = 0;
     while (!inside(s - ds)) {
       ds *= 0.5;
+      converged = false;
       if (++halvings > 60) return false;
     }
     s -= ds;
-    if (std::abs(ds) <= 1e-15 * (1.0 + std::abs(s) + std::sqrt(rho))) return true;
+    if (converged) return true;
   }
   return false;
 }
@@ -248,34 +303,33 @@ inline __attribute__((always_inline)) void asphere_intersect_chunk(
     const bool inside_vertex = 1.0 - domain * (x1[i] * x1[i] + y1[i] * y1[i]) > 0.0;
     s[i] = inside_conic ? s_conic : 0.0;
     state[i] = (inside_conic | inside_vertex) ? 0 : 2;
+    failure[i] = kRayOk;
   }
   // Stage (a): plain Newton steps; selects instead of jumps.
+  std::int64_t pending = 0;  // rays not converged after stage (a)
   for (int step = 0; step < kVectorNewtonSteps; ++step) {
     std::int64_t running = 0;
     for (std::size_t i = 0; i < count; ++i) {
-      const double xs = x1[i] + s[i] * l[i], ys = y1[i] + s[i] * m[i];
-      const double rho = xs * xs + ys * ys;
       const bool run = state[i] == 0;
-      // A ray set aside may sit outside the domain: evaluate it at rho = 0 (result unused).
-      double sag = 0, slope = 0;
-      asphere_sag(c, one_plus_k, coefficients, run ? rho : 0.0, sag, slope);
-      const double g = s[i] * n[i] - sag;
-      const double dg = n[i] - 2.0 * slope * (xs * l[i] + ys * m[i]);
-      const double ds = g / dg;
+      // A ray set aside may sit outside the domain (a NaN step, not used).
+      double ds = 0, dg = 0;
+      bool converged = false;
+      asphere_newton_step(c, domain, coefficients, x1[i], y1[i], l[i], m[i], n[i], s[i], ds, dg,
+                          converged);
       const double s_new = s[i] - ds;
       const double xn = x1[i] + s_new * l[i], yn = y1[i] + s_new * m[i];
       const bool ok = (dg > 0.0) & (std::abs(ds) <= std::numeric_limits<double>::max()) &
                       (1.0 - domain * (xn * xn + yn * yn) > 0.0);
-      const bool converged = std::abs(ds) <= 1e-15 * (1.0 + std::abs(s_new) + std::sqrt(rho));
       s[i] = (run & ok) ? s_new : s[i];
       state[i] = run ? (ok ? (converged ? 1 : 0) : 2) : state[i];
       running += state[i] == 0 ? 1 : 0;
     }
     if (running == 0) break;
   }
+  for (std::size_t i = 0; i < count; ++i) pending += state[i] != 1 ? 1 : 0;
+  if (pending == 0) return;
   // Stage (b): the rest through the safeguarded scalar Newton from the start.
   for (std::size_t i = 0; i < count; ++i) {
-    failure[i] = kRayOk;
     if (state[i] == 1) continue;
     double s_scalar = 0.0;
     const bool hit =
@@ -356,7 +410,7 @@ inline __attribute__((always_inline)) void trace_surface_asphere_chunked(
     const T& c, const T& conic, const T* a, const T& shift, const T& mu, std::size_t count,
     T* __restrict x, T* __restrict y, T* __restrict z, T* __restrict l, T* __restrict m,
     T* __restrict n, std::int32_t* __restrict failure, T* __restrict travel, T* __restrict zeta_out,
-    T* __restrict zeta_prime_out) {
+    T* __restrict zeta_prime_out, double* __restrict path_out = nullptr) {
   constexpr bool kDouble = std::is_same_v<T, double>;
   const T one_plus_k = K<T>(1.0) + conic;
   double a_value[8];
@@ -407,6 +461,13 @@ inline __attribute__((always_inline)) void trace_surface_asphere_chunked(
       asphere_intersect_double(c_value, one_plus_k_value, a_value, size, x1_value, y1_value,
                                l_value, m_value, n_value, s_value, fc);
     }
+    if constexpr (kRecord) {
+      if (path_out) {
+        for (std::size_t i = 0; i < size; ++i)
+          path_out[begin + i] =
+              fc[i] == kRayOk ? s_value[i] : std::numeric_limits<double>::quiet_NaN();
+      }
+    }
     asphere_refract<T, kRecord>(c, one_plus_k, a_local, mu, size, s_value, xc, yc, zc, lc, mc, nc,
                                 fc, kRecord && travel ? travel + begin : nullptr,
                                 kRecord ? zeta_out + begin : nullptr,
@@ -432,7 +493,7 @@ void trace_surface_profile_double(std::uint8_t profile, double c, double conic, 
                                   double shift, double mu, std::size_t count, double* x, double* y,
                                   double* z, double* l, double* m, double* n, std::int32_t* failure,
                                   double* travel, double* zeta_out, double* zeta_prime_out,
-                                  bool record);
+                                  bool record, double* path_out = nullptr);
 
 }  // namespace detail
 
