@@ -8,6 +8,67 @@
 
 namespace lensopt {
 namespace detail {
+namespace {
+
+// Pieces shared by the sphere and profile kernels below; always inlined into their SIMD loops.
+#define LENSOPT_ADJOINT_INLINE inline __attribute__((always_inline))
+
+// Snell's law at the surface, forward again (trace/kernel.h): zeta = cos^2 i (ci = cos i),
+// zeta' = 1 - mu^2 (1 - zeta), taken as zeta on total internal reflection; gamma = sqrt(zeta') -
+// mu cos i, the step along the normal.
+struct Refraction {
+  bool tir;
+  double sp;  // sqrt(zeta')
+  double gamma;
+};
+LENSOPT_ADJOINT_INLINE Refraction refraction(double mu, double mu2, double zeta, double ci) {
+  const double zp_raw = 1.0 - mu2 * (1.0 - zeta);
+  const bool tir = zp_raw < 0.0;
+  const double sp = std::sqrt(tir ? zeta : zp_raw);
+  return {tir, sp, sp - mu * ci};
+}
+
+// The adjoint seeds of ray i after the surface (0 for a ray that failed before it): direction,
+// travel, and the records' zeta and zeta'.
+struct ExitSeeds {
+  double l, m, n, travel, zeta, zeta_prime;
+};
+LENSOPT_ADJOINT_INLINE ExitSeeds exit_seeds(bool live, std::size_t i, const double* al,
+                                            const double* am, const double* an,
+                                            const double* travel_seed, const double* zeta_seed,
+                                            const double* zeta_prime_seed) {
+  return {live ? al[i] : 0.0,
+          live ? am[i] : 0.0,
+          live ? an[i] : 0.0,
+          live && travel_seed ? travel_seed[i] : 0.0,
+          live && zeta_seed ? zeta_seed[i] : 0.0,
+          live && zeta_prime_seed ? zeta_prime_seed[i] : 0.0};
+}
+
+// The transfer from the taped point (x, y, zr) to the vertex plane, x1 = x + s0 l, y1 = y + s0 m,
+// s0 = -zr / n, backward from the adjoints of (x1, y1); adds to those of (l, m, n), stores ray i's
+// adjoint of the taped state (0 if not live) and returns that of zr.
+LENSOPT_ADJOINT_INLINE double vertex_transfer_backward(bool live, std::size_t i, double a_x1,
+                                                       double a_y1, double s0, double l, double m,
+                                                       double n, double a_travel, double& a_l,
+                                                       double& a_m, double& a_n, double* ax,
+                                                       double* ay, double* az, double* al,
+                                                       double* am, double* an) {
+  const double a_s0 = a_x1 * l + a_y1 * m;
+  a_l += s0 * a_x1;
+  a_m += s0 * a_y1;
+  const double a_zr = -a_s0 / n - a_travel;
+  a_n -= a_s0 * s0 / n;
+  ax[i] = live ? a_x1 : 0.0;
+  ay[i] = live ? a_y1 : 0.0;
+  az[i] = live ? a_zr : 0.0;
+  al[i] = live ? a_l : 0.0;
+  am[i] = live ? a_m : 0.0;
+  an[i] = live ? a_n : 0.0;
+  return a_zr;
+}
+
+}  // namespace
 
 #if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
 __attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default")))
@@ -53,18 +114,13 @@ void trace_surface_adjoint_double(double c, double mu, int k, std::size_t count,
     const double x2 = x1 + s1 * l;
     const double y2 = y1 + s1 * m;
     const double z2 = s1 * n;
-    const double zp_raw = 1.0 - mu2 * (1.0 - zeta);
-    const bool tir = zp_raw < 0.0;
-    const double zp = tir ? zeta : zp_raw;
-    const double sp = std::sqrt(zp);
-    const double gamma = sp - mu * ci;
+    const Refraction r = refraction(mu, mu2, zeta, ci);
+    const bool tir = r.tir;
+    const double sp = r.sp, gamma = r.gamma;
     // Backward.
-    const double a_l_out = live ? al[i] : 0.0;
-    const double a_m_out = live ? am[i] : 0.0;
-    const double a_n_out = live ? an[i] : 0.0;
-    const double a_travel = live && travel_seed ? travel_seed[i] : 0.0;
-    const double a_zeta_seed = live && zeta_seed ? zeta_seed[i] : 0.0;
-    const double a_zp_seed = live && zeta_prime_seed ? zeta_prime_seed[i] : 0.0;
+    const ExitSeeds e = exit_seeds(live, i, al, am, an, travel_seed, zeta_seed, zeta_prime_seed);
+    const double a_l_out = e.l, a_m_out = e.m, a_n_out = e.n;
+    const double a_travel = e.travel, a_zeta_seed = e.zeta, a_zp_seed = e.zeta_prime;
     double a_mu = a_l_out * l + a_m_out * m + a_n_out * n;
     const double a_gamma = -c * (a_l_out * x2 + a_m_out * y2) + a_n_out * (1.0 - c * z2);
     double a_c = -gamma * (a_l_out * x2 + a_m_out * y2 + a_n_out * z2);
@@ -105,18 +161,8 @@ void trace_surface_adjoint_double(double c, double mu, int k, std::size_t count,
     const double a_y1 = a_y2 + a_p * m + 2.0 * y1 * a_q;
     a_l += a_p * x1;
     a_m += a_p * y1;
-    // The transfer to the vertex plane.
-    const double a_s0 = a_x1 * l + a_y1 * m;
-    a_l += s0 * a_x1;
-    a_m += s0 * a_y1;
-    const double a_zr = -a_s0 / n - a_travel;
-    a_n -= a_s0 * s0 / n;
-    ax[i] = live ? a_x1 : 0.0;
-    ay[i] = live ? a_y1 : 0.0;
-    az[i] = live ? a_zr : 0.0;
-    al[i] = live ? a_l : 0.0;
-    am[i] = live ? a_m : 0.0;
-    an[i] = live ? a_n : 0.0;
+    const double a_zr = vertex_transfer_backward(live, i, a_x1, a_y1, s0, l, m, n, a_travel, a_l,
+                                                 a_m, a_n, ax, ay, az, al, am, an);
     sum_c += live ? a_c : 0.0;
     sum_t += live ? -a_zr : 0.0;
     sum_mu += live ? a_mu : 0.0;
@@ -195,18 +241,13 @@ void trace_surface_adjoint_profile_double(double c, double conic, const double* 
     const bool failed = !(cos_raw > 0.0);
     const double ci = failed ? 1.0 : cos_raw;
     const double zeta = ci * ci;
-    const double zp_raw = 1.0 - mu2 * (1.0 - zeta);
-    const bool tir = zp_raw < 0.0;
-    const double zp = tir ? zeta : zp_raw;
-    const double sp = std::sqrt(zp);
-    const double gamma = sp - mu * ci;
+    const Refraction r = refraction(mu, mu2, zeta, ci);
+    const bool tir = r.tir;
+    const double sp = r.sp, gamma = r.gamma;
     // Backward: the refraction.
-    const double a_l_out = live ? al[i] : 0.0;
-    const double a_m_out = live ? am[i] : 0.0;
-    const double a_n_out = live ? an[i] : 0.0;
-    const double a_travel = live && travel_seed ? travel_seed[i] : 0.0;
-    const double a_zeta_seed = live && zeta_seed ? zeta_seed[i] : 0.0;
-    const double a_zp_seed = live && zeta_prime_seed ? zeta_prime_seed[i] : 0.0;
+    const ExitSeeds e = exit_seeds(live, i, al, am, an, travel_seed, zeta_seed, zeta_prime_seed);
+    const double a_l_out = e.l, a_m_out = e.m, a_n_out = e.n;
+    const double a_travel = e.travel, a_zeta_seed = e.zeta, a_zp_seed = e.zeta_prime;
     double a_mu = a_l_out * l + a_m_out * m + a_n_out * n;
     const double a_gamma = a_l_out * nx + a_m_out * ny + a_n_out * nz;
     double a_nx = gamma * a_l_out;
@@ -266,18 +307,8 @@ void trace_surface_adjoint_profile_double(double c, double conic, const double* 
       a_a[j] = (a_slope * (j + 1.0) + lambda * rho) * power;
       power *= rho;
     }
-    // The transfer to the vertex plane.
-    const double a_s0 = a_x1 * l + a_y1 * m;
-    a_l += s0 * a_x1;
-    a_m += s0 * a_y1;
-    const double a_zr = -a_s0 / n - a_travel;
-    a_n -= a_s0 * s0 / n;
-    ax[i] = live ? a_x1 : 0.0;
-    ay[i] = live ? a_y1 : 0.0;
-    az[i] = live ? a_zr : 0.0;
-    al[i] = live ? a_l : 0.0;
-    am[i] = live ? a_m : 0.0;
-    an[i] = live ? a_n : 0.0;
+    const double a_zr = vertex_transfer_backward(live, i, a_x1, a_y1, s0, l, m, n, a_travel, a_l,
+                                                 a_m, a_n, ax, ay, az, al, am, an);
     sum_c += live ? a_c : 0.0;
     sum_t += live ? -a_zr : 0.0;
     sum_mu += live ? a_mu : 0.0;
