@@ -734,14 +734,47 @@ class LensOptimization {
     return improved;
   }
 
-  // The result at full sampling, never behind the start, and the counters.
-  void finish() {
-    result_.lens = param_.to_lens(x_.data(), GlassMode::kFixed, fixed_);
-    result_.lens.name = start_.name;
-    result_.lens.source_path = start_.source_path;
+  // The lens of variables x with the phase's glasses, named and cataloged as the start.
+  Lens result_lens(const std::vector<double>& x) const {
+    Lens lens = param_.to_lens(x.data(), GlassMode::kFixed, fixed_);
+    lens.name = start_.name;
+    lens.source_path = start_.source_path;
     // The glasses are the glass space's catalog glasses: name that catalog, so the lens reads
     // back (a start with model glasses has none).
-    if (!glass_indices_.empty()) result_.lens.catalog_name = glass_catalog_for(start_);
+    if (!glass_indices_.empty()) lens.catalog_name = glass_catalog_for(start_);
+    return lens;
+  }
+
+  // Feasibility at the check's fields. The optimization traces its merit rays at
+  // options.sampling.fields fields and only the pupil-edge rays at the constraint fields in
+  // between; full sampling traces the merit rays at every constraint field. Where a bound is
+  // reached by an interior pupil ray at an in-between field (the Cooke's largest ray angle under
+  // the wavefront merit: 60.54 deg against 60), a design feasible at the optimization sampling
+  // fails the full check. Then LM runs again (strict penalties, the weights carried over) with
+  // merit rays at every constraint field, and its design is kept if it passes the full check.
+  void restore_feasibility() {
+    if (soft_ || interrupted()) return;
+    if (check_constraints(result_lens(x_), options_.loss, full_.trace).all_pass()) return;
+    OptimizeOptions dense = options_;
+    dense.sampling.fields = constraint_field_count(options_.sampling.fields, kConstraintFields);
+    if (dense.sampling.fields == options_.sampling.fields) return;  // nothing new to trace
+    std::vector<double> x = x_;
+    DesignLossOptions loss = loss_;
+    const DesignLoss<double> l =
+        run_phase(param_, x, GlassMode::kFixed, fixed_, frozen_all_, dense, loss,
+                  "feasibility at every constraint field", options_.max_rounds,
+                  options_.max_iterations, counters_);
+    const bool ok = check_constraints(result_lens(x), options_.loss, full_.trace).all_pass();
+    result_.log.push_back(fmt::format(
+        "feasibility at all {} constraint fields: {} ({} the full-sampling constraint check)",
+        dense.sampling.fields, merit_text(l), ok ? "passes" : "still fails"));
+    if (ok) x_ = x;
+  }
+
+  // The result at full sampling, never behind the start, and the counters.
+  void finish() {
+    restore_feasibility();
+    result_.lens = result_lens(x_);
     const AnalysisReport final_report = analyze_lens(result_.lens, full_);
     result_.final_spot_um =
         final_report.mean_rms_spot_um.value_or(std::numeric_limits<double>::infinity());
