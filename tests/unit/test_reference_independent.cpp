@@ -437,6 +437,9 @@ TEST_CASE("independent: optiland's sampled MTF of the Cooke triplet on axis") {
     CHECK(d_a <= printed);
     CHECK(d_b <= std::abs(grid_bias) + 1e-3);
   }
+  // The report names the wavelength whose chief ray centres the reference sphere: the primary.
+  CHECK(report.reference_wavelength_nm == 550.0);
+  CHECK(format_wave_text(report).find("about the 550 nm chief ray") != std::string::npos);
   MESSAGE(
       fmt::format("on-axis MTF: emulated within {:.1e}, lensopt's own within {:.4f} of optiland",
                   worst_a, worst_b));
