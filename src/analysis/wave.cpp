@@ -335,6 +335,7 @@ WaveReport analyze_wave(const TraceSystem<double>& sys, const WaveOptions& optio
     lambda_min = std::min(lambda_min, sys.lens.wavelengths_nm[w]);
   }
   report.cutoff_cyc_mm = sys.epd_mm / sys.efl_mm / (lambda_min * 1e-6);
+  report.reference_wavelength_nm = sys.lens.wavelengths_nm.back();
   report.fields.resize(fields.size());
 
   // Every (field, wavelength) pair is one task.
@@ -516,9 +517,10 @@ std::string format_wave_text(const WaveReport& r) {
     return s;
   };
   line("");
-  line(
-      "  wave optics (OPD to the exit-pupil reference sphere about the 587.6 nm chief ray's image "
-      "point; piston and tilt removed)");
+  line(fmt::format(
+      "  wave optics (OPD to the exit-pupil reference sphere about the {:g} nm chief ray's image "
+      "point; piston and tilt removed)",
+      r.reference_wavelength_nm));
   line(
       fmt::format("  sampling: {} x {} pupil grid, FFT {} x {} (padding {}), wavelengths {} nm "
                   "(weights {}), cutoff 1/(lambda_min N) = {:.1f} cycles/mm",

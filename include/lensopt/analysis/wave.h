@@ -98,6 +98,7 @@ struct WaveReport {
   std::vector<double> wavelengths_nm;
   std::vector<double> weights;
   double cutoff_cyc_mm = 0;  // 1 / (lambda_min N), lambda_min the shortest spec wavelength
+  double reference_wavelength_nm = 0;  // the primary: its chief ray centres the reference sphere
   std::vector<WaveField> fields;
   double mean_rms_waves = 0;
   double mean_strehl = 0;
