@@ -13,6 +13,7 @@
 #include "lensopt/lens/lens_io.h"
 #include "lensopt/optimize/design_gradient.h"
 #include "lensopt/optimize/optimizer.h"
+#include "lensopt/optimize/profile_bounds.h"
 #include "test_support.h"
 
 using namespace lensopt;
@@ -412,6 +413,56 @@ TEST_CASE("spot gradients: k and a4 of a spherical surface seeded in a later chu
       CHECK(adjoint.mean_rms_spot_mm == doctest::Approx(jets.mean_rms_spot_mm).epsilon(1e-12));
     }
   }
+}
+
+TEST_CASE("design loss: the profile slope bound, adjoint and Jets against central differences") {
+  // l_lens carries the profile bounds (lambda_PB l_PB, optimize/profile_bounds.h) for Adam as the
+  // LM carries them as residuals. A 12 deg slope bound that the aspheric doublet's surfaces cross;
+  // continuous glasses (the quantized map's glass derivative is a straight-through one, not the
+  // finite difference of its steps).
+  const GlassSpace glasses(*load_catalog("ohara"));
+  const Lens lens = doublet_asphere();
+  const LensParameterization param(lens, glasses, {"k1", "a4_1", "a6_1", "k2", "a4_2", "a4_5"});
+  const std::vector<double> x = param.from_lens(lens);
+  TraceOptions sampling;
+  sampling.rings = 4;
+  sampling.fields = 3;
+  DesignLossOptions with, without;
+  with.max_surface_slope_deg = without.max_surface_slope_deg = 12.0;
+  with.weight_profile = 100.0;
+  without.weight_profile = 0.0;
+  const DesignValueGradient a =
+      design_loss_gradient(param, x, GlassMode::kContinuous, {}, sampling, with);
+  const DesignValueGradient b =
+      design_loss_gradient(param, x, GlassMode::kContinuous, {}, sampling, without);
+  const DesignValueGradient jets =
+      design_loss_gradient_jets(param, x, GlassMode::kContinuous, {}, sampling, with);
+  Specs specs = lens.specs;
+  auto l_pb = [&](const std::vector<double>& at) {
+    return profile_bound_loss(param.to_trace_lens(at.data(), GlassMode::kContinuous, {}), specs,
+                              12.0);
+  };
+  REQUIRE(a.loss.profile > 0.0);
+  CHECK(a.loss.profile == doctest::Approx(l_pb(x)).epsilon(1e-14));
+  CHECK(jets.loss.profile == doctest::Approx(a.loss.profile).epsilon(1e-14));
+  CHECK(a.loss.total == doctest::Approx(b.loss.total + 100.0 * a.loss.profile).epsilon(1e-14));
+  CHECK(worst_relative(a.gradient, jets.gradient) < 1e-9);
+  // The profile term's gradient (adjoint with minus without) against central differences of l_PB.
+  int active = 0;
+  for (int i = 0; i < param.size(); ++i) {
+    auto central = [&](double h) {
+      std::vector<double> plus = x, minus = x;
+      plus[i] += h;
+      minus[i] -= h;
+      return (l_pb(plus) - l_pb(minus)) / (2 * h);
+    };
+    const double fd = (4 * central(5e-7) - central(1e-6)) / 3;
+    const double g = (a.gradient[i] - b.gradient[i]) / 100.0;
+    active += std::abs(fd) > 1e-6;
+    INFO("variable ", i, ": adjoint ", g, " fd ", fd);
+    CHECK(std::abs(g - fd) <= 1e-6 * std::max(std::abs(fd), 1e-3));
+  }
+  CHECK(active >= 4);
 }
 
 TEST_CASE("design adjoint: aspheric lenses, with profile variables (Jets agree)") {
