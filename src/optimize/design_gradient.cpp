@@ -34,6 +34,7 @@ void accumulate(const LensParameterization& param, const std::vector<double>& x,
     out.loss.ray_path_mm = loss.ray_path_mm.a;
     out.loss.ray_angle = loss.ray_angle.a;
     out.loss.glass = loss.glass.a;
+    out.loss.profile = loss.profile.a;
     out.loss.total = loss.total.a;
     out.loss.field_rms_mm.clear();
     for (const J& f : loss.field_rms_mm) out.loss.field_rms_mm.push_back(f.a);
@@ -48,11 +49,10 @@ void accumulate(const LensParameterization& param, const std::vector<double>& x,
 
 // The constraint-field system of evaluate_design on Jets with x[first, first + N) seeded.
 template <int N>
-TraceSystem<ceres::Jet<double, N>> design_system(const LensParameterization& param,
-                                                 const std::vector<double>& x, int first,
-                                                 GlassMode mode,
-                                                 const std::vector<int>& fixed_glasses,
-                                                 const TraceOptions& sampling) {
+TraceSystem<ceres::Jet<double, N>> design_system(
+    const LensParameterization& param, const std::vector<double>& x, int first, GlassMode mode,
+    const std::vector<int>& fixed_glasses, const TraceOptions& sampling,
+    const DesignLossOptions& options, ceres::Jet<double, N>& profile) {
   using J = ceres::Jet<double, N>;
   const int n = param.size();
   std::vector<J> xj(n);
@@ -61,6 +61,10 @@ TraceSystem<ceres::Jet<double, N>> design_system(const LensParameterization& par
     if (i >= first && i < first + N) xj[i].v[i - first] = 1.0;
   }
   const TraceLens<J> lens = param.to_trace_lens(xj.data(), mode, fixed_glasses);
+  // The profile bounds (no rays: forward mode on these Jets, as evaluate_design).
+  Specs specs = param.structure().specs;
+  specs.mode = SpecMode::kPaper;
+  profile = profile_bound_loss(lens, specs, options.max_surface_slope_deg);
   TraceOptions constraint_options = sampling;
   constraint_options.scale_to_spec = false;
   constraint_options.fields = constraint_field_count(sampling.fields, kConstraintFields);
@@ -255,7 +259,12 @@ DesignValueGradient design_adjoint_gradient(const LensParameterization& param,
   out.gradient.assign(n, 0.0);
   SystemAdjoint adj;
   for (int first = 0; first < n || first == 0; first += N) {
-    const auto sys = design_system<N>(param, x, first, mode, fixed_glasses, sampling);
+    ceres::Jet<double, N> profile;
+    const auto sys =
+        design_system<N>(param, x, first, mode, fixed_glasses, sampling, options, profile);
+    for (int j = 0; j < std::min(N, n - first); ++j)
+      out.gradient[first + j] += options.weight_profile * profile.v[j];
+    out.loss.profile = profile.a;
     if (first == 0) {
       const TraceSystem<double> values = system_values(sys);
       if (!adjoint_supported(values.lens))
@@ -279,8 +288,10 @@ DesignValueGradient design_adjoint_gradient(const LensParameterization& param,
   out.loss.glass = glass;
   out.loss.total = options.weight_spot * out.loss.spot_mm +
                    options.weight_ray_path * out.loss.ray_path_mm +
-                   options.weight_ray_angle * out.loss.ray_angle + options.weight_glass * glass;
-  out.finite = std::isfinite(out.loss.spot_mm + out.loss.ray_path_mm + out.loss.ray_angle + glass);
+                   options.weight_ray_angle * out.loss.ray_angle + options.weight_glass * glass +
+                   options.weight_profile * out.loss.profile;
+  out.finite = std::isfinite(out.loss.spot_mm + out.loss.ray_path_mm + out.loss.ray_angle + glass +
+                             out.loss.profile);
   return out;
 }
 

@@ -10,21 +10,7 @@ namespace lensopt {
 
 std::vector<double> paraxial_clear_semi_apertures_mm(const TraceLens<double>& lens,
                                                      const Specs& specs) {
-  const int k_count = lens.surface_count();
-  std::vector<double> out(k_count, 0.0);
-  const ParaxialData<double> par = paraxial_data(lens, lens.reference_nm());
-  const double r_ep = par.efl_mm / specs.f_number / 2.0;
-  const double tan_field = std::tan(specs.half_field_deg * kPi / 180.0);
-  for (int k = 0; k < k_count; ++k) {
-    const ParaxialRay<double> marginal =
-        paraxial_trace(lens, ParaxialRay<double>{r_ep, 0.0}, k + 1, kWavelengthD_nm);
-    const ParaxialRay<double> chief =
-        paraxial_trace(lens, ParaxialRay<double>{-par.entrance_pupil_z_mm * tan_field, tan_field},
-                       k + 1, kWavelengthD_nm);
-    const double h = std::abs(marginal.y) + std::abs(chief.y);
-    out[k] = std::isfinite(h) ? h : 0.0;
-  }
-  return out;
+  return paraxial_clear_semi_apertures(lens, specs);
 }
 
 void profile_extremes(const TraceLens<double>& lens, const std::vector<double>& heights_mm,

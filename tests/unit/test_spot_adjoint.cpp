@@ -13,6 +13,7 @@
 #include "lensopt/lens/lens_io.h"
 #include "lensopt/optimize/design_gradient.h"
 #include "lensopt/optimize/optimizer.h"
+#include "lensopt/optimize/profile_bounds.h"
 #include "test_support.h"
 
 using namespace lensopt;
@@ -272,10 +273,9 @@ TEST_CASE("spot adjoint: aspheric and conic lenses equal the Jet gradient (k, a_
   CHECK(adjoint_supported(make_trace_lens(asphere)));
   for (bool aiming : {true, false}) {
     options.ray_aiming = aiming;
-    // The lens's own variables (k and a_2i of both aspheres included). The terms seeded at 0 on
-    // the spherical surface 2 (doublet_asphere_variables) are checked against central
-    // differences below: there mean_spot_gradient_auto's Jets differ from both (lead: look).
-    const std::vector<PrescriptionVariable> variables = all_prescription_variables(asphere);
+    // The lens's own variables (k and a_2i of both aspheres included) and the terms seeded at
+    // 0 on the spherical surface 2, in the adjoint's second chunk of 16 (the Jets: one of 24).
+    const std::vector<PrescriptionVariable> variables = doublet_asphere_variables(asphere);
     const TraceLens<double> trace_lens = make_trace_lens(asphere);
     const SpotGradient jets =
         mean_spot_gradient_auto(trace_lens, asphere.specs, variables, options);
@@ -345,6 +345,124 @@ TEST_CASE("spot adjoint: aspheric doublet matches central finite differences") {
     INFO(variables[i].name(), ": adjoint ", g.gradient[i], " fd ", fd[i]);
     CHECK(std::abs(g.gradient[i] - fd[i]) / denominator < 1e-5);
   }
+}
+
+TEST_CASE("spot gradients: k and a4 of a spherical surface seeded in a later chunk") {
+  // The Doublet's 13 variables and the conic and a4 of its spherical surface 2, in chunks of 8:
+  // both in the second chunk, or k2 in the first and a4_2 in the second. Every chunk traces
+  // surface 2 as an asphere (with_profile_variables); before, the adjoint traced it as the first
+  // chunk's sphere and lost the direct derivatives of k2 and a4_2 (about 4 % of d/dk2 left).
+  const Lens lens = read_lens(test::source_dir() / "lenses/doublet.toml");
+  const TraceLens<double> trace_lens = make_trace_lens(lens);
+  REQUIRE(!trace_lens.has_profiles());
+  TraceOptions options;
+  options.rings = 6;
+  options.fields = 4;
+  const PrescriptionVariable k2{PrescriptionVariable::Kind::kConic, 1};
+  const PrescriptionVariable a4_2{PrescriptionVariable::Kind::kAsphere, 1, 1};
+  // Central differences (Richardson) of the spherical lens in k2 and a4_2: 1e-6 mm of sag at 5 mm.
+  const double fd_k = [&] {
+    auto central = [&](const PrescriptionVariable& v, double h) {
+      Lens plus = lens, minus = lens;
+      set_variable_value(plus, v, h);
+      set_variable_value(minus, v, -h);
+      return (mean_spot(plus, options) - mean_spot(minus, options)) / (2 * h);
+    };
+    return (4 * central(k2, 5e-4) - central(k2, 1e-3)) / 3;
+  }();
+  const double fd_a = [&] {
+    auto central = [&](double h) {
+      Lens plus = lens, minus = lens;
+      set_variable_value(plus, a4_2, h);
+      set_variable_value(minus, a4_2, -h);
+      return (mean_spot(plus, options) - mean_spot(minus, options)) / (2 * h);
+    };
+    const double h = 1e-6 / std::pow(5.0, 4);
+    return (4 * central(h / 2) - central(h)) / 3;
+  }();
+  REQUIRE(std::abs(fd_k) > 0.0);
+  REQUIRE(std::abs(fd_a) > 0.0);
+  for (bool aiming : {true, false}) {
+    options.ray_aiming = aiming;
+    for (int layout = 0; layout < 2; ++layout) {
+      std::vector<PrescriptionVariable> variables = all_prescription_variables(lens);
+      REQUIRE(variables.size() == 13);
+      if (layout == 0) {
+        variables.push_back(k2);  // 13, 14: the second chunk
+      } else {
+        variables.insert(variables.begin() + 2, k2);  // the first chunk
+      }
+      variables.push_back(a4_2);
+      const std::size_t ik = layout == 0 ? 13 : 2, ia = 14;
+      const SpotGradient jets = mean_spot_gradient<8>(trace_lens, lens.specs, variables, options);
+      const SpotGradient adjoint =
+          mean_spot_gradient_adjoint<8>(trace_lens, lens.specs, variables, options);
+      const SpotGradient one_chunk =
+          mean_spot_gradient<16>(trace_lens, lens.specs, variables, options);
+      INFO("aiming ", aiming, ", layout ", layout, ": d/dk2 jets ", jets.gradient[ik], " adjoint ",
+           adjoint.gradient[ik], " fd ", fd_k, "; d/da4_2 jets ", jets.gradient[ia], " adjoint ",
+           adjoint.gradient[ia], " fd ", fd_a);
+      if (aiming) {
+        CHECK(std::abs(jets.gradient[ik] - fd_k) < 1e-6 * std::abs(fd_k));
+        CHECK(std::abs(jets.gradient[ia] - fd_a) < 1e-6 * std::abs(fd_a));
+        CHECK(std::abs(adjoint.gradient[ik] - fd_k) < 1e-6 * std::abs(fd_k));
+        CHECK(std::abs(adjoint.gradient[ia] - fd_a) < 1e-6 * std::abs(fd_a));
+      }
+      CHECK(worst_relative(adjoint.gradient, jets.gradient) < 1e-9);
+      CHECK(worst_relative(one_chunk.gradient, jets.gradient) < 1e-9);
+      CHECK(adjoint.mean_rms_spot_mm == doctest::Approx(jets.mean_rms_spot_mm).epsilon(1e-12));
+    }
+  }
+}
+
+TEST_CASE("design loss: the profile slope bound, adjoint and Jets against central differences") {
+  // l_lens carries the profile bounds (lambda_PB l_PB, optimize/profile_bounds.h) for Adam as the
+  // LM carries them as residuals. A 12 deg slope bound that the aspheric doublet's surfaces cross;
+  // continuous glasses (the quantized map's glass derivative is a straight-through one, not the
+  // finite difference of its steps).
+  const GlassSpace glasses(*load_catalog("ohara"));
+  const Lens lens = doublet_asphere();
+  const LensParameterization param(lens, glasses, {"k1", "a4_1", "a6_1", "k2", "a4_2", "a4_5"});
+  const std::vector<double> x = param.from_lens(lens);
+  TraceOptions sampling;
+  sampling.rings = 4;
+  sampling.fields = 3;
+  DesignLossOptions with, without;
+  with.max_surface_slope_deg = without.max_surface_slope_deg = 12.0;
+  with.weight_profile = 100.0;
+  without.weight_profile = 0.0;
+  const DesignValueGradient a =
+      design_loss_gradient(param, x, GlassMode::kContinuous, {}, sampling, with);
+  const DesignValueGradient b =
+      design_loss_gradient(param, x, GlassMode::kContinuous, {}, sampling, without);
+  const DesignValueGradient jets =
+      design_loss_gradient_jets(param, x, GlassMode::kContinuous, {}, sampling, with);
+  Specs specs = lens.specs;
+  auto l_pb = [&](const std::vector<double>& at) {
+    return profile_bound_loss(param.to_trace_lens(at.data(), GlassMode::kContinuous, {}), specs,
+                              12.0);
+  };
+  REQUIRE(a.loss.profile > 0.0);
+  CHECK(a.loss.profile == doctest::Approx(l_pb(x)).epsilon(1e-14));
+  CHECK(jets.loss.profile == doctest::Approx(a.loss.profile).epsilon(1e-14));
+  CHECK(a.loss.total == doctest::Approx(b.loss.total + 100.0 * a.loss.profile).epsilon(1e-14));
+  CHECK(worst_relative(a.gradient, jets.gradient) < 1e-9);
+  // The profile term's gradient (adjoint with minus without) against central differences of l_PB.
+  int active = 0;
+  for (int i = 0; i < param.size(); ++i) {
+    auto central = [&](double h) {
+      std::vector<double> plus = x, minus = x;
+      plus[i] += h;
+      minus[i] -= h;
+      return (l_pb(plus) - l_pb(minus)) / (2 * h);
+    };
+    const double fd = (4 * central(5e-7) - central(1e-6)) / 3;
+    const double g = (a.gradient[i] - b.gradient[i]) / 100.0;
+    active += std::abs(fd) > 1e-6;
+    INFO("variable ", i, ": adjoint ", g, " fd ", fd);
+    CHECK(std::abs(g - fd) <= 1e-6 * std::max(std::abs(fd), 1e-3));
+  }
+  CHECK(active >= 4);
 }
 
 TEST_CASE("design adjoint: aspheric lenses, with profile variables (Jets agree)") {

@@ -6,6 +6,7 @@
 
 #include <ceres/jet.h>
 
+#include <cstdint>
 #include <vector>
 
 #include "lensopt/analysis/spot.h"
@@ -18,12 +19,36 @@ struct SpotGradient {
   std::vector<double> gradient;  // d(mean spot, mm) / d(variable), one per variable
 };
 
+// The lens the gradients trace: every spherical surface with a profile variable anywhere in
+// `variables` made a conic (k alone) or an even asphere (any a_2i), its terms still 0, so that
+// every chunk of N variables traces the same profiles. convert_trace_lens gives a profile only
+// to the surfaces whose terms its own chunk seeds; chunk by chunk the Jets then traced a surface
+// as a sphere, a conic or an asphere, and the adjoint, which traces the first chunk's lens in
+// double, ran the sphere's backward step at a surface whose k or a_2i a later chunk seeds (their
+// direct derivatives lost: only the part through the stop radius and ray aiming was left).
+inline TraceLens<double> with_profile_variables(
+    TraceLens<double> lens, const std::vector<PrescriptionVariable>& variables) {
+  for (const PrescriptionVariable& v : variables) {
+    const bool conic = v.kind == PrescriptionVariable::Kind::kConic;
+    if (!conic && v.kind != PrescriptionVariable::Kind::kAsphere) continue;
+    lens.ensure_profiles();
+    std::uint8_t& kind = lens.profile[v.surface];
+    if (!conic) {
+      kind = kProfileAsphere;
+    } else if (kind == kProfileSphere) {
+      kind = kProfileConic;
+    }
+  }
+  return lens;
+}
+
 // Evaluates the gradient in chunks of N variables (ceil(n / N) traces on Jet<double, N>).
 template <int N = 8>
-SpotGradient mean_spot_gradient(const TraceLens<double>& lens, const Specs& specs,
+SpotGradient mean_spot_gradient(const TraceLens<double>& lens_in, const Specs& specs,
                                 const std::vector<PrescriptionVariable>& variables,
                                 const TraceOptions& options) {
   using J = ceres::Jet<double, N>;
+  const TraceLens<double> lens = with_profile_variables(lens_in, variables);
   SpotGradient out;
   out.gradient.assign(variables.size(), 0.0);
   const int count = static_cast<int>(variables.size());

@@ -137,10 +137,12 @@ void chain_system_adjoint(const TraceSystem<J>& sys, const SystemAdjoint& adj, i
 // The mean spot and its gradient with respect to `variables` by the adjoint (steps 1-3), the
 // Jet preparation in chunks of N variables.
 template <int N = 24>
-SpotGradient mean_spot_gradient_adjoint(const TraceLens<double>& lens, const Specs& specs,
+SpotGradient mean_spot_gradient_adjoint(const TraceLens<double>& lens_in, const Specs& specs,
                                         const std::vector<PrescriptionVariable>& variables,
                                         const TraceOptions& options) {
   using J = ceres::Jet<double, N>;
+  // Every chunk with the same profiles (gradient.h): the adjoint traces the first one's lens.
+  const TraceLens<double> lens = with_profile_variables(lens_in, variables);
   SpotGradient out;
   out.gradient.assign(variables.size(), 0.0);
   const int count = static_cast<int>(variables.size());

@@ -6,6 +6,10 @@
 //   l_RP = 1/n_r sum_{k,r} max(dz_min^k - dz_{k,r}, 0) + max(dz_{k,r} - dz_max^k, 0)  (mm)
 //   l_RA = 1/n_r sum_{k,r} max(cos^2 t_max - zeta_{k,r}, 0) + max(cos^2 t_max - zeta'_{k,r}, 0)
 //   l_GV = sum_m ||g_m - g_m*||^2
+// and, for lenses with conics or aspheres, l_PB lambda_PB (lambda_PB = weight_profile): the
+// profile bounds of optimize/profile_bounds.h (slope at the clear semi-aperture, the conic's
+// domain) as squared hinges, profile_bound_loss; in l_lens only (LM adds them as residuals of
+// their own, optimizer.cpp).
 // Least squares (Ceres minimizes 1/2 sum r_i^2), residuals in this order:
 //   spot:  r = sqrt(a_h / N_h) (y - ybar_h) and sqrt(a_h / N_h) x for every traced ray of field h
 //          (N_h = W P rays; a failed ray gives 0). With the per-field weights
@@ -47,6 +51,7 @@
 
 #include "lensopt/analysis/wavefront.h"
 #include "lensopt/core/threads.h"
+#include "lensopt/optimize/profile_bounds.h"
 #include "lensopt/optimize/variables.h"
 #include "lensopt/trace/system.h"
 
@@ -90,11 +95,12 @@ struct DesignLossOptions {
 // The paper's loss terms (double values; also the Jet values when evaluated on Jets).
 template <typename T>
 struct DesignLoss {
-  T spot_mm;      // l_S
-  T ray_path_mm;  // l_RP (linear hinge, as the paper)
-  T ray_angle;    // l_RA
-  T glass;        // l_GV
-  T total;        // l_lens with the options' weights
+  T spot_mm;              // l_S
+  T ray_path_mm;          // l_RP (linear hinge, as the paper)
+  T ray_angle;            // l_RA
+  T glass;                // l_GV
+  T profile = K<T>(0.0);  // l_PB (profile bounds, weight 1)
+  T total;                // l_lens with the options' weights
   std::vector<T> field_rms_mm;
   // The wavefront merit (DesignMerit::kWavefront only, else empty / 0): l_W and W_h (waves).
   T wavefront_waves = K<T>(0.0);
@@ -409,6 +415,7 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
     ++glass_pair;
   }
 
+  const T profile = profile_bound_loss(lens, specs, options.max_surface_slope_deg);
   T spot = K<T>(0.0), path = K<T>(0.0), angle = K<T>(0.0);
   int failed_total = 0;
   T wave = K<T>(0.0);
@@ -443,7 +450,9 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
     loss->ray_angle = angle;
     loss->glass = glass_loss;
     loss->total = K<T>(options.weight_spot) * merit + K<T>(options.weight_ray_path) * path +
-                  K<T>(options.weight_ray_angle) * angle + K<T>(options.weight_glass) * glass_loss;
+                  K<T>(options.weight_ray_angle) * angle + K<T>(options.weight_glass) * glass_loss +
+                  K<T>(options.weight_profile) * profile;
+    loss->profile = profile;
     loss->field_rms_mm = field_rms;
     loss->merit = options.merit;
     loss->wavefront_waves = wave;
@@ -452,7 +461,7 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
     loss->rays = static_cast<int>(n_r);
   }
   const double total_value =
-      value_of(merit) + value_of(path) + value_of(angle) + value_of(glass_loss);
+      value_of(merit) + value_of(path) + value_of(angle) + value_of(glass_loss) + value_of(profile);
   return std::isfinite(total_value);
 }
 

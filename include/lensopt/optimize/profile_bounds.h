@@ -17,11 +17,13 @@
 #pragma once
 
 #include <cmath>
+#include <type_traits>
 #include <vector>
 
 #include "lensopt/core/scalar.h"
 #include "lensopt/lens/lens.h"
 #include "lensopt/lens/trace_lens.h"
+#include "lensopt/paraxial/paraxial.h"
 #include "lensopt/trace/system.h"
 
 namespace lensopt {
@@ -31,6 +33,25 @@ inline constexpr double kProfileMinDomain = 1e-3;
 
 // Paraxial clear semi-aperture (mm) of every surface of `lens` for its specs (paper sampling:
 // entrance-pupil radius f / (2 N), the largest field); 0 where it cannot be computed.
+template <typename T>
+std::vector<T> paraxial_clear_semi_apertures(const TraceLens<T>& lens, const Specs& specs) {
+  using std::abs;
+  const int k_count = lens.surface_count();
+  std::vector<T> out(k_count, K<T>(0.0));
+  const ParaxialData<T> par = paraxial_data(lens, lens.reference_nm());
+  const T r_ep = par.efl_mm / K<T>(specs.f_number) / K<T>(2.0);
+  const double tan_field = std::tan(specs.half_field_deg * kPi / 180.0);
+  for (int k = 0; k < k_count; ++k) {
+    const ParaxialRay<T> marginal =
+        paraxial_trace(lens, ParaxialRay<T>{r_ep, K<T>(0.0)}, k + 1, kWavelengthD_nm);
+    const ParaxialRay<T> chief = paraxial_trace(
+        lens, ParaxialRay<T>{-par.entrance_pupil_z_mm * K<T>(tan_field), K<T>(tan_field)}, k + 1,
+        kWavelengthD_nm);
+    const T h = abs(marginal.y) + abs(chief.y);
+    out[k] = std::isfinite(value_of(h)) ? h : K<T>(0.0);
+  }
+  return out;
+}
 std::vector<double> paraxial_clear_semi_apertures_mm(const TraceLens<double>& lens,
                                                      const Specs& specs);
 
@@ -42,9 +63,10 @@ int profile_bound_count(const TraceLens<T>& lens) {
   return 2 * kProfileBoundRadii * count;
 }
 
-// The residuals of the header into `residuals` (profile_bound_count of them), weight w.
-template <typename T>
-void profile_bound_residuals(const TraceLens<T>& lens, const std::vector<double>& heights_mm,
+// The residuals of the header into `residuals` (profile_bound_count of them), weight w; the
+// heights (H = double: constants, as LM holds them per round; H = T: differentiated).
+template <typename T, typename H>
+void profile_bound_residuals(const TraceLens<T>& lens, const std::vector<H>& heights_mm,
                              double max_slope_deg, double weight, T* residuals) {
   using std::abs;
   using std::sqrt;
@@ -52,6 +74,13 @@ void profile_bound_residuals(const TraceLens<T>& lens, const std::vector<double>
   const T tan_max = K<T>(std::tan(max_slope_deg * kPi / 180.0));
   const T zero = K<T>(0.0);
   const T floor = K<T>(kProfileMinDomain);
+  auto to_t = [](const H& v) -> T {
+    if constexpr (std::is_same_v<H, T>) {
+      return v;
+    } else {
+      return K<T>(v);
+    }
+  };
   int out = 0;
   for (int k = 0; k < lens.surface_count(); ++k) {
     if (!lens.has_profiles() || lens.profile[k] == kProfileSphere) continue;
@@ -59,20 +88,36 @@ void profile_bound_residuals(const TraceLens<T>& lens, const std::vector<double>
     const T one_plus_k = K<T>(1.0) + lens.conic[k];
     const T* a = lens.asphere.data() + static_cast<std::size_t>(k) * kAsphereTerms;
     for (int j = 1; j <= kProfileBoundRadii; ++j) {
-      const double r = heights_mm[k] * j / kProfileBoundRadii;
-      const T rho = K<T>(r * r);
+      const H r = heights_mm[k] * K<H>(static_cast<double>(j)) / K<H>(kProfileBoundRadii);
+      const T rho = to_t(r * r);
       const T q2 = K<T>(1.0) - one_plus_k * c * c * rho;
       // S' with q^2 held at the floor where the domain bound is violated (see header).
       const T q = sqrt(q2 > floor ? q2 : floor);
       T dp = a[7] * K<T>(8.0);
-      for (int i = 6; i >= 0; --i) dp = a[i] * K<T>(i + 1.0) + K<T>(r * r) * dp;
-      const T slope = abs(K<T>(2.0 * r) * (c / (K<T>(2.0) * q) + dp));
+      for (int i = 6; i >= 0; --i) dp = a[i] * K<T>(i + 1.0) + rho * dp;
+      const T slope = abs(to_t(K<H>(2.0) * r) * (c / (K<T>(2.0) * q) + dp));
       const T over = slope - tan_max;
       residuals[out++] = root_w * (over > zero ? over : zero);
       const T short_of = floor - q2;
       residuals[out++] = root_w * (short_of > zero ? short_of : zero);
     }
   }
+}
+
+// The profile bounds as a term of the design loss (design_loss.h, the gradient optimizers'):
+//   l_PB = sum of the squared residuals of the header at weight 1,
+// with the clear semi-apertures computed on T from the lens itself, so that l_PB is one smooth
+// function of the variables and its gradient exact (LM holds the heights per round instead).
+template <typename T>
+T profile_bound_loss(const TraceLens<T>& lens, const Specs& specs, double max_slope_deg) {
+  const int count = profile_bound_count(lens);
+  T sum = K<T>(0.0);
+  if (count == 0) return sum;
+  const std::vector<T> heights = paraxial_clear_semi_apertures(lens, specs);
+  std::vector<T> r(count);
+  profile_bound_residuals(lens, heights, max_slope_deg, 1.0, r.data());
+  for (const T& v : r) sum = sum + v * v;
+  return sum;
 }
 
 // The steepest profile slope (deg, atan |dz/dr|) over the non-spherical surfaces at the radii of
