@@ -13,6 +13,7 @@
 #include "lensopt/core/threads.h"
 #include "lensopt/render/metrics.h"
 #include "lensopt/render/render.h"
+#include "render/metrics_views.h"
 #include "render/overlap_add.h"
 
 namespace lensopt {
@@ -71,12 +72,11 @@ std::shared_ptr<const PsfGrid> Renderer::psf_grid(int width, int height) const {
   return entry(width, height)->grid;
 }
 
-FloatImage Renderer::blur(const FloatImage& input, int threads) const {
+std::vector<float> Renderer::blur_planes(const FloatImage& input, int nthreads) const {
   const std::shared_ptr<GridEntry> e = entry(input.width, input.height);
   const PsfGrid& grid = *e->grid;
   const int width = input.width, height = input.height;
   const int colours = colour_channel_count(input.channels);
-  const int nthreads = thread_count(threads > 0 ? threads : options_.threads);
   const std::size_t plane = static_cast<std::size_t>(width) * height;
   constexpr int n = PsfGrid::kPatches;
   // Deterministic overlap-add: the patches are added in four phases by the parity of (px, py).
@@ -103,9 +103,27 @@ FloatImage Renderer::blur(const FloatImage& input, int threads) const {
     for (int q = 0; q < n * n; ++q) phases[q] = {q};
   }
 
+  // The colour planes extended by symmetric reflection by the pad on each side (the pad is at
+  // most the image's size: check_image_holds_psf), so that each block is a contiguous copy.
+  const int pad = e->pad;
+  const int padded_w = width + 2 * pad, padded_h = height + 2 * pad;
+  const std::size_t padded_plane = static_cast<std::size_t>(padded_w) * padded_h;
+  std::vector<float> padded(padded_plane * colours);
+  std::vector<int> source_x(padded_w);
+  for (int i = 0; i < padded_w; ++i) source_x[i] = reflect_index(i - pad, width) * input.channels;
   std::vector<float> acc(plane * colours, 0.0f);
 #pragma omp parallel num_threads(nthreads)
   {
+#pragma omp for schedule(static)
+    for (int j = 0; j < padded_h; ++j) {
+      const float* src =
+          input.pixels.data() +
+          static_cast<std::size_t>(reflect_index(j - pad, height)) * width * input.channels;
+      for (int c = 0; c < colours; ++c) {
+        float* dst = padded.data() + padded_plane * c + static_cast<std::size_t>(j) * padded_w;
+        for (int i = 0; i < padded_w; ++i) dst[i] = src[source_x[i] + c];
+      }
+    }  // the barrier: the planes are complete
     OverlapAddBuffers buffers(e->ny, e->nx);
     std::vector<std::complex<double>> grey_spectrum;
     for (const std::vector<int>& phase : phases) {
@@ -126,32 +144,78 @@ FloatImage Renderer::blur(const FloatImage& input, int threads) const {
                           grey_spectrum);
           k = grey_spectrum.data();
         }
-        // The patch's input: its window's extent plus the largest PSF reach on each side.
-        const int pad = e->pad;
-        load_reflected_block(input, c, lo_x - pad, lo_y - pad, hi_x - lo_x + 2 * pad,
-                             hi_y - lo_y + 2 * pad, buffers);
+        // The patch's input: its window's extent plus the largest PSF reach on each side (image
+        // column lo_x - pad is the padded plane's column lo_x).
+        load_padded_block(padded.data() + padded_plane * c, padded_w, lo_x, lo_y,
+                          hi_x - lo_x + 2 * pad, hi_y - lo_y + 2 * pad, buffers);
         convolve_loaded_block(k, buffers);
         add_windowed_block(buffers, pad, lo_x, hi_x, lo_y, hi_y, e->window_x[px], e->window_y[py],
                            acc.data() + plane * c, width, 0, 0);
       }  // the omp for's barrier ends the phase
     }
   }
-  FloatImage out = input;
+  return acc;
+}
+
+namespace {
+
+// The image `input` with its colour channels replaced by the planes `acc`, each value times
+// factor[p] if `factor` is not null (the relative illumination); other channels (alpha) kept.
+FloatImage interleave(const FloatImage& input, const std::vector<float>& acc, const float* factor,
+                      int nthreads) {
+  const int colours = colour_channel_count(input.channels), channels = input.channels;
+  const std::size_t plane = static_cast<std::size_t>(input.width) * input.height;
+  FloatImage out;
+  out.width = input.width;
+  out.height = input.height;
+  out.channels = channels;
+  out.pixels.resize(plane * channels);
+  float* o = out.pixels.data();
+  const float* a = acc.data();
+  const float* in = input.pixels.data();
 #pragma omp parallel for num_threads(nthreads) schedule(static)
-  for (std::size_t p = 0; p < plane; ++p)
-    for (int c = 0; c < colours; ++c) out.pixels[p * out.channels + c] = acc[plane * c + p];
+  for (int j = 0; j < input.height; ++j) {
+    const std::size_t p0 = static_cast<std::size_t>(j) * input.width, p1 = p0 + input.width;
+    if (colours == 3 && channels == 3) {
+      for (std::size_t p = p0; p < p1; ++p) {
+        const float f = factor ? factor[p] : 1.0f;
+        for (int c = 0; c < 3; ++c) o[p * 3 + c] = factor ? a[plane * c + p] * f : a[plane * c + p];
+      }
+      continue;
+    }
+    for (std::size_t p = p0; p < p1; ++p) {
+      for (int c = 0; c < channels; ++c) {
+        float v = in[p * channels + c];
+        if (c < colours) v = factor ? a[plane * c + p] * factor[p] : a[plane * c + p];
+        o[p * channels + c] = v;
+      }
+    }
+  }
   return out;
+}
+
+}  // namespace
+
+FloatImage Renderer::blur(const FloatImage& input, int threads) const {
+  const int nthreads = thread_count(threads > 0 ? threads : options_.threads);
+  return interleave(input, blur_planes(input, nthreads), nullptr, nthreads);
 }
 
 RenderResult Renderer::render(const FloatImage& input, int threads) const {
   if (input.empty()) throw Error("cannot render an empty image");
-  const int nthreads = threads > 0 ? threads : options_.threads;
+  const int nthreads = thread_count(threads > 0 ? threads : options_.threads);
   RenderResult result;
   result.colour_channels = colour_channel_count(input.channels);
-  result.image = blur(input, nthreads);
-  result.psnr_db = psnr_db(input, result.image, result.colour_channels, nthreads);
-  result.ssim = ssim(input, result.image, result.colour_channels, nthreads);
-  if (options_.relative_illumination) apply_relative_illumination(result.image, nthreads);
+  const int width = input.width, height = input.height, colours = result.colour_channels;
+  // The blur's planes feed the metrics directly, and the relative illumination is applied while
+  // they are interleaved: the same values as blur(), then apply_relative_illumination().
+  const std::vector<float> acc = blur_planes(input, nthreads);
+  const ChannelView blurred = ChannelView::planar(acc.data(), width, height);
+  result.psnr_db = psnr_db(ChannelView::of(input), blurred, width, height, colours, nthreads);
+  result.ssim = ssim(ChannelView::of(input), blurred, width, height, colours, nthreads);
+  std::shared_ptr<const std::vector<float>> factor;
+  if (options_.relative_illumination) factor = illumination_map(width, height);
+  result.image = interleave(input, acc, factor ? factor->data() : nullptr, nthreads);
   if (options_.distortion) result.image = apply_distortion(result.image, nthreads);
   return result;
 }

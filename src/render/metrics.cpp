@@ -5,11 +5,13 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <vector>
 
 #include "lensopt/core/error.h"
 #include "lensopt/core/threads.h"
+#include "render/metrics_views.h"
 
 namespace lensopt {
 namespace {
@@ -34,43 +36,87 @@ std::vector<double> gaussian_window(int size, double sigma) {
   return w;
 }
 
-// The hot loop, compiled for AVX2/FMA as well as the baseline (picked at run time), written with
-// contiguous inner loops so it vectorizes. One output row of SSIM: `xs`, `ys` point to the wy
-// rows under the window (each `width` doubles, one channel); vertical Gaussian sums of x, y, x^2,
-// y^2, xy into v (5 x width scratch), horizontal sums into m (5 x out_w scratch), and the sum of
-// SSIM over the row. In double: the variances are differences of nearly equal second moments.
-// v0..v4 += g (a, b, a^2, b^2, a b), elementwise.
-inline __attribute__((always_inline)) void add_moments(const double* __restrict a,
-                                                       const double* __restrict b, double g, int n,
-                                                       double* __restrict v0, double* __restrict v1,
-                                                       double* __restrict v2, double* __restrict v3,
-                                                       double* __restrict v4) {
-  for (int i = 0; i < n; ++i) {
-    const double ga = g * a[i], gb = g * b[i];
-    v0[i] += ga;
-    v1[i] += gb;
-    v2[i] += ga * a[i];
-    v3[i] += gb * b[i];
-    v4[i] += ga * b[i];
-  }
-}
+// The hot loop, compiled for AVX-512 and AVX2/FMA as well as the baseline (picked at run time).
+// One output row of SSIM: `xs`, `ys` point to the wy rows under the window (each `width`
+// doubles, one channel); vertical Gaussian sums of x, y, x^2, y^2, xy into v (5 x width
+// scratch), horizontal sums into m (5 x out_w scratch), and the sum of SSIM over the row. In
+// double: the variances are differences of nearly equal second moments. Both passes run over
+// blocks of kBlock columns whose five sums stay in registers across the taps (one load of x and
+// y per tap instead of five loads and stores of the sums), adding the taps in order: the same
+// sums as one pass per tap over whole rows.
+constexpr int kBlock = 8;
+typedef double Block __attribute__((vector_size(kBlock * sizeof(double))));
 
-__attribute__((target_clones("arch=x86-64-v3", "default"))) double ssim_row(
+// Unaligned loads and stores of a block (macros rather than functions: a function returning a
+// vector type wider than the baseline's registers draws GCC's ABI warning).
+#define LENSOPT_LOAD_BLOCK(dst, p) std::memcpy(&(dst), (p), sizeof(Block))
+#define LENSOPT_STORE_BLOCK(p, src) std::memcpy((p), &(src), sizeof(Block))
+
+__attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default"))) double ssim_row(
     const double* const* xs, const double* const* ys, int width, const double* gy, int wy,
     const double* gx, int wx, double* v, double* m, int out_w) {
   constexpr double kC1 = 0.01 * 0.01;
   constexpr double kC2 = 0.03 * 0.03;
-  for (int i = 0; i < 5 * width; ++i) v[i] = 0.0;
-  for (int k = 0; k < wy; ++k)
-    add_moments(xs[k], ys[k], gy[k], width, v, v + width, v + 2 * width, v + 3 * width,
-                v + 4 * width);
-  for (int i = 0; i < 5 * out_w; ++i) m[i] = 0.0;
+  double* v0 = v;
+  double* v1 = v + width;
+  double* v2 = v + 2 * width;
+  double* v3 = v + 3 * width;
+  double* v4 = v + 4 * width;
+  int i0 = 0;
+  for (; i0 + kBlock <= width; i0 += kBlock) {
+    Block s0 = {}, s1 = {}, s2 = {}, s3 = {}, s4 = {};
+    for (int k = 0; k < wy; ++k) {
+      const double g = gy[k];
+      Block a, b;
+      LENSOPT_LOAD_BLOCK(a, xs[k] + i0);
+      LENSOPT_LOAD_BLOCK(b, ys[k] + i0);
+      const Block ga = g * a, gb = g * b;
+      s0 += ga;
+      s1 += gb;
+      s2 += ga * a;
+      s3 += gb * b;
+      s4 += ga * b;
+    }
+    LENSOPT_STORE_BLOCK(v0 + i0, s0);
+    LENSOPT_STORE_BLOCK(v1 + i0, s1);
+    LENSOPT_STORE_BLOCK(v2 + i0, s2);
+    LENSOPT_STORE_BLOCK(v3 + i0, s3);
+    LENSOPT_STORE_BLOCK(v4 + i0, s4);
+  }
+  for (int i = i0; i < width; ++i) {  // the last columns
+    double s0 = 0, s1 = 0, s2 = 0, s3 = 0, s4 = 0;
+    for (int k = 0; k < wy; ++k) {
+      const double a = xs[k][i], b = ys[k][i];
+      const double ga = gy[k] * a, gb = gy[k] * b;
+      s0 += ga;
+      s1 += gb;
+      s2 += ga * a;
+      s3 += gb * b;
+      s4 += ga * b;
+    }
+    v0[i] = s0;
+    v1[i] = s1;
+    v2[i] = s2;
+    v3[i] = s3;
+    v4[i] = s4;
+  }
   for (int q = 0; q < 5; ++q) {
     double* __restrict dst = m + static_cast<std::size_t>(q) * out_w;
     const double* __restrict src = v + static_cast<std::size_t>(q) * width;
-    for (int k = 0; k < wx; ++k) {
-      const double g = gx[k];
-      for (int col = 0; col < out_w; ++col) dst[col] += g * src[col + k];
+    int c0 = 0;
+    for (; c0 + kBlock <= out_w; c0 += kBlock) {
+      Block sum = {};
+      for (int k = 0; k < wx; ++k) {
+        Block x;
+        LENSOPT_LOAD_BLOCK(x, src + c0 + k);
+        sum += gx[k] * x;
+      }
+      LENSOPT_STORE_BLOCK(dst + c0, sum);
+    }
+    for (int col = c0; col < out_w; ++col) {
+      double s = 0;
+      for (int k = 0; k < wx; ++k) s += gx[k] * src[col + k];
+      dst[col] = s;
     }
   }
   const double* mx = m;
@@ -78,13 +124,16 @@ __attribute__((target_clones("arch=x86-64-v3", "default"))) double ssim_row(
   const double* mxx = my + out_w;
   const double* myy = mxx + out_w;
   const double* mxy = myy + out_w;
-  double sum = 0;
+  // The terms (vectorized, into v's space, no longer needed), then their sum in column order.
+  double* __restrict terms = v;
   for (int col = 0; col < out_w; ++col) {
     const double vx = mxx[col] - mx[col] * mx[col], vy = myy[col] - my[col] * my[col];
     const double cxy = mxy[col] - mx[col] * my[col];
-    sum += ((2 * mx[col] * my[col] + kC1) * (2 * cxy + kC2)) /
-           ((mx[col] * mx[col] + my[col] * my[col] + kC1) * (vx + vy + kC2));
+    terms[col] = ((2 * mx[col] * my[col] + kC1) * (2 * cxy + kC2)) /
+                 ((mx[col] * mx[col] + my[col] * my[col] + kC1) * (vx + vy + kC2));
   }
+  double sum = 0;
+  for (int col = 0; col < out_w; ++col) sum += terms[col];
   return sum;
 }
 
@@ -95,19 +144,20 @@ int window_size(int extent) {
 
 }  // namespace
 
-double psnr_db(const FloatImage& x, const FloatImage& y, int channels, int threads) {
-  check_same_size(x, y, channels);
-  const std::size_t pixels = static_cast<std::size_t>(x.width) * x.height;
+double psnr_db(const ChannelView& x, const ChannelView& y, int width, int height, int channels,
+               int threads) {
+  const std::size_t pixels = static_cast<std::size_t>(width) * height;
   // Per-row sums, then the rows in order: the same value for any thread count.
-  std::vector<double> row_sums(x.height, 0.0);
+  std::vector<double> row_sums(height, 0.0);
 #pragma omp parallel for num_threads(thread_count(threads)) schedule(static)
-  for (int row = 0; row < x.height; ++row) {
+  for (int row = 0; row < height; ++row) {
     double row_sum = 0;
-    for (std::size_t p = static_cast<std::size_t>(row) * x.width;
-         p < static_cast<std::size_t>(row + 1) * x.width; ++p) {
+    const float* xr = x.data + static_cast<std::size_t>(row) * x.row_stride;
+    const float* yr = y.data + static_cast<std::size_t>(row) * y.row_stride;
+    for (int col = 0; col < width; ++col) {
       for (int c = 0; c < channels; ++c) {
-        const double d = static_cast<double>(x.pixels[p * x.channels + c]) -
-                         static_cast<double>(y.pixels[p * y.channels + c]);
+        const double d = static_cast<double>(xr[col * x.col_stride + c * x.channel_stride]) -
+                         static_cast<double>(yr[col * y.col_stride + c * y.channel_stride]);
         row_sum += d * d;
       }
     }
@@ -120,11 +170,19 @@ double psnr_db(const FloatImage& x, const FloatImage& y, int channels, int threa
   return 10.0 * std::log10(1.0 / mse);
 }
 
+double psnr_db(const FloatImage& x, const FloatImage& y, int channels, int threads) {
+  check_same_size(x, y, channels);
+  return psnr_db(ChannelView::of(x), ChannelView::of(y), x.width, x.height, channels, threads);
+}
+
 double ssim(const FloatImage& x, const FloatImage& y, int channels, int threads) {
   check_same_size(x, y, channels);
+  return ssim(ChannelView::of(x), ChannelView::of(y), x.width, x.height, channels, threads);
+}
+
+double ssim(const ChannelView& x, const ChannelView& y, int width, int height, int channels,
+            int threads) {
   constexpr double kSigma = 1.5;
-  const int width = x.width;
-  const int height = x.height;
   const int wx = window_size(width);
   const int wy = window_size(height);
   const std::vector<double> gx = gaussian_window(wx, kSigma);
@@ -150,11 +208,13 @@ double ssim(const FloatImage& x, const FloatImage& y, int channels, int threads)
       auto load = [&](int row) {  // image row `row` into ring slot row % wy
         double* a = ring.data() + static_cast<std::size_t>(row % wy) * 2 * width;
         double* b = a + width;
-        const float* xr = x.pixels.data() + static_cast<std::size_t>(row) * width * x.channels + c;
-        const float* yr = y.pixels.data() + static_cast<std::size_t>(row) * width * y.channels + c;
+        const float* xr =
+            x.data + static_cast<std::size_t>(row) * x.row_stride + c * x.channel_stride;
+        const float* yr =
+            y.data + static_cast<std::size_t>(row) * y.row_stride + c * y.channel_stride;
         for (int col = 0; col < width; ++col) {
-          a[col] = xr[static_cast<std::size_t>(col) * x.channels];
-          b[col] = yr[static_cast<std::size_t>(col) * y.channels];
+          a[col] = xr[col * x.col_stride];
+          b[col] = yr[col * y.col_stride];
         }
       };
       if (r0 < r1)

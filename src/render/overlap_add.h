@@ -56,6 +56,11 @@ void kernel_spectrum(const V* kernel, int radius, OverlapAddBuffers& b,
 void load_reflected_block(const FloatImage& image, int c, int x_first, int y_first, int cols,
                           int rows, OverlapAddBuffers& b);
 
+// The same from a colour plane already extended by reflection (`stride` floats per row): the
+// block's rows y .. y + rows - 1, columns x .. x + cols - 1 of the plane (plane coordinates).
+void load_padded_block(const float* plane, std::size_t stride, int x, int y, int cols, int rows,
+                       OverlapAddBuffers& b);
+
 // b.spectrum *= K^ element-wise, and the blurred block back into b.real (c2r).
 void convolve_loaded_block(const std::complex<double>* kernel_spectrum, OverlapAddBuffers& b);
 

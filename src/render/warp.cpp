@@ -113,11 +113,14 @@ void Renderer::apply_relative_illumination(FloatImage& image, int threads) const
   const std::shared_ptr<const std::vector<float>> map = illumination_map(image.width, image.height);
   const int colours = colour_channel_count(image.channels);
   const std::size_t pixels = static_cast<std::size_t>(image.width) * image.height;
+  const float* __restrict factor = map->data();
+  float* __restrict pixels_out = image.pixels.data();
+  const int channels = image.channels;
 #pragma omp parallel for num_threads(thread_count(threads > 0 ? threads : options_.threads)) \
     schedule(static)
   for (std::size_t p = 0; p < pixels; ++p) {
-    const float ri = (*map)[p];
-    for (int c = 0; c < colours; ++c) image.pixels[p * image.channels + c] *= ri;
+    const float ri = factor[p];
+    for (int c = 0; c < colours; ++c) pixels_out[p * channels + c] *= ri;
   }
 }
 

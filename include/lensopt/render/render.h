@@ -211,6 +211,8 @@ class Renderer {
  private:
   struct GridEntry;
   std::shared_ptr<GridEntry> entry(int width, int height) const;
+  // The blurred colour channels of `input`, one width x height plane each (R, G, B or grey).
+  std::vector<float> blur_planes(const FloatImage& input, int nthreads) const;
   // Per pixel of a W x H image: the relative-illumination factor; the warp's source offset
   // (x, y interleaved, pixels; NaN where the source is outside the image).
   std::shared_ptr<const std::vector<float>> illumination_map(int width, int height) const;
