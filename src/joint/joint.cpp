@@ -400,7 +400,9 @@ Progress JointRun::read_checkpoint(const std::filesystem::path& dir) {
   nlohmann::json j;
   try {
     j = nlohmann::json::parse(read_file(file));
-    if (j.at("version").get<int>() != kCheckpointVersion)
+    // Version 1 differs only in the perfect-optics phase (detection).
+    const int version = j.at("version").get<int>();
+    if (version != kCheckpointVersion && !(version == 1 && !detection_))
       throw Error(SourceLocation{file.string()}, "unsupported checkpoint version");
     if (j.at("variables").get<int>() != n_ || j.at("task").get<std::string>() != options_.task ||
         j.at("phases").get<std::vector<std::string>>() != phases_)
