@@ -9,7 +9,7 @@
 # STEPS steps (default 6) with the setting: a batch of 4 crops of 256 x 256 with their
 # boxes, PSFs at 21 fields and 8 rings, the 2x resolution factor, relative illumination and
 # distortion on (boxes distorted as the images), the built-in detector, l_lens at 8 rings x 11
-# fields. The perfect-optics detector is trained first (STEPS network-only steps, not timed).
+# fields. The perfect-optics detector is trained first (2 x STEPS network-only steps, not timed).
 # Prints the mean wall time of a joint step and its split: tracing (Jets: system, ray aiming,
 # reference heights, RI), PSFs (KDE with Jets), rendering (forward, incl. the patch kernels of
 # the first render after prepare, and the boxes), adjoint (imaging backward), network (the

@@ -377,11 +377,13 @@ std::function<void(const OptimizeShared&)> setup_optimize_joint(CLI::App& sub) {
                  "and joint")
       ->group(g);
   sub.add_option("--perfect-steps", cmd->perfect_steps,
-                 "with --data: training steps of the perfect-optics detector (default: --steps)")
+                 "with --data: training steps of the base perfect-optics detector, the start of "
+                 "fixed/trained and joint (default: --steps); the perfect-optics row trains "
+                 "--steps more on sharp crops")
       ->group(g);
   sub.add_option("--detector", cmd->detector,
-                 "with --data: the perfect-optics detector of an earlier run (OUT.detector.pt), "
-                 "used instead of training one")
+                 "with --data: the base perfect-optics detector of an earlier run "
+                 "(OUT.detector.pt), used instead of training one")
       ->group(g);
   sub.add_option("--steps", cmd->steps, "optimization steps per trained setting (default 300)")
       ->group(g);

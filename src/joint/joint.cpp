@@ -35,7 +35,7 @@ constexpr const char* kPerfect = "perfect";
 constexpr const char* kFixedFixed = "fixed/fixed";
 constexpr const char* kFixedTrained = "fixed/trained";
 constexpr const char* kJoint = "joint";
-constexpr int kCheckpointVersion = 1;
+constexpr int kCheckpointVersion = 2;  // 2: perfect optics trains base + continuation
 
 // The per-step CSV, kept in memory and rewritten atomically (it is small).
 class CsvLog {
@@ -245,8 +245,10 @@ class JointRun {
       quality.relative_illumination = false;
       quality_imaging_ = std::make_unique<DifferentiableImaging>(param_, options.glass_mode,
                                                                  std::vector<int>{}, quality);
-      perfect_path_ = options.checkpoint_every > 0 ? options.checkpoint_dir / "perfect.pt"
-                                                   : temporary_dir() / "perfect.pt";
+      const std::filesystem::path dir =
+          options.checkpoint_every > 0 ? options.checkpoint_dir : temporary_dir();
+      perfect_path_ = dir / "perfect.pt";
+      base_path_ = dir / "perfect-base.pt";
     }
     if (options.run_baselines) {
       phases_.push_back(kFixedFixed);
@@ -331,7 +333,8 @@ class JointRun {
   double sensor_diagonal_mm_ = 0;
   std::unique_ptr<DifferentiableImaging> quality_imaging_;    // detection: PSNR and SSIM
   std::map<std::pair<int, int>, BoxDistortion> distortions_;  // by scene size
-  std::filesystem::path perfect_path_;                        // the perfect-optics detector
+  std::filesystem::path perfect_path_;  // the perfect-optics detector (perfect, fixed/fixed)
+  std::filesystem::path base_path_;     // it after --perfect-steps: the fine-tunes' start
   std::filesystem::path temp_dir_;
 };
 
@@ -397,7 +400,9 @@ Progress JointRun::read_checkpoint(const std::filesystem::path& dir) {
   nlohmann::json j;
   try {
     j = nlohmann::json::parse(read_file(file));
-    if (j.at("version").get<int>() != kCheckpointVersion)
+    // Version 1 differs only in the perfect-optics phase (detection).
+    const int version = j.at("version").get<int>();
+    if (version != kCheckpointVersion && !(version == 1 && !detection_))
       throw Error(SourceLocation{file.string()}, "unsupported checkpoint version");
     if (j.at("variables").get<int>() != n_ || j.at("task").get<std::string>() != options_.task ||
         j.at("phases").get<std::vector<std::string>>() != phases_)
@@ -442,13 +447,14 @@ Progress JointRun::read_checkpoint(const std::filesystem::path& dir) {
   }
   log_ = CsvLog(options_.log_csv, read_file(dir / "log.csv"));
   resume_task_ = dir / "task.pt";
-  // The perfect-optics detector, where this run keeps it (it may checkpoint elsewhere).
-  const std::filesystem::path perfect = dir / "perfect.pt";
-  if (detection_ && std::filesystem::exists(perfect) &&
-      !(std::filesystem::exists(perfect_path_) &&
-        std::filesystem::equivalent(perfect, perfect_path_))) {
-    std::filesystem::create_directories(perfect_path_.parent_path());
-    write_file_atomic(perfect_path_, read_file(perfect));
+  // The perfect-optics detectors, where this run keeps them (it may checkpoint elsewhere).
+  for (const std::filesystem::path& to : {perfect_path_, base_path_}) {
+    const std::filesystem::path from = dir / to.filename();
+    if (detection_ && std::filesystem::exists(from) &&
+        !(std::filesystem::exists(to) && std::filesystem::equivalent(from, to))) {
+      std::filesystem::create_directories(to.parent_path());
+      write_file_atomic(to, read_file(from));
+    }
   }
   say(fmt::format("lensopt optimize --joint: resuming {} at step {} from {}", progress.phase,
                   progress.step, dir.string()));
@@ -553,14 +559,20 @@ void JointRun::add_timings(const StepRecord& r, Clock::time_point step_start,
 bool JointRun::run_phase(std::size_t pi, Progress progress, bool resumed) {
   const std::string phase = phases_[pi];
   const bool train_lens = phase == kJoint;
-  // The perfect-optics phase may have its own length (the same share of decay steps).
+  // The perfect-optics phase trains in two stages: the base detector (perfect_steps, its own
+  // schedule with the same share of decay steps), the start of fixed/trained and joint; then,
+  // from the same crop stream's start and with the same schedule as they, total_steps() more on
+  // the sharp crops, so that every trained setting gets the same training budget. The base stage
+  // is skipped when the base detector is given (pretrained_task).
   int constant = options_.constant_steps, decay = options_.decay_steps;
-  if (phase == kPerfect && options_.perfect_steps > 0) {
-    decay = static_cast<int>(std::lround(static_cast<double>(options_.perfect_steps) *
-                                         options_.decay_steps / options_.total_steps()));
-    constant = options_.perfect_steps - decay;
+  int base_total = 0, base_constant = 0, base_decay = 0;
+  if (phase == kPerfect) {
+    base_total = options_.perfect_steps > 0 ? options_.perfect_steps : options_.total_steps();
+    base_decay = static_cast<int>(std::lround(static_cast<double>(base_total) *
+                                              options_.decay_steps / options_.total_steps()));
+    base_constant = base_total - base_decay;
   }
-  const int total = constant + decay;
+  const int total = base_total + constant + decay;
   int t = progress.step;
   std::vector<double>& x = progress.x;
   AdamMoments& moments = progress.moments;
@@ -583,19 +595,29 @@ bool JointRun::run_phase(std::size_t pi, Progress progress, bool resumed) {
   } else if (pretrained) {
     task_->load(options_.pretrained_task);
   } else if (detection_ && !perfect) {
-    task_->load(perfect_path_);
+    task_->load(phase == kFixedFixed ? perfect_path_ : base_path_);
   }
+  if (pretrained && t < base_total) t = base_total;
   if (resumed && !progress.rng.empty()) data_.set_rng_state(progress.rng);
   // A fixed lens is sampled once; a trained one per step; perfect optics renders nothing.
   if (!train_lens && !perfect) prepare(x);
   design_ = design_loss_gradient(param_, x, options_.glass_mode, {}, options_.design_sampling,
                                  options_.loss);
   std::vector<int> glasses = param_.nearest_glasses(x.data());
-  const bool trains = phase != kFixedFixed && !pretrained;
+  const bool trains = phase != kFixedFixed;
   say(fmt::format("lensopt optimize --joint: {} (task {}, {} steps)", phase, task_->name(),
-                  trains ? total : 0));
+                  trains ? total - (pretrained ? base_total : 0) : 0));
   if (trains) {
     while (t < total) {
+      if (perfect && t == base_total) {
+        // The base detector is done (or given): kept for the fine-tunes, and the continuation
+        // sees the crops they see.
+        if (base_path_.has_parent_path())
+          std::filesystem::create_directories(base_path_.parent_path());
+        task_->save(base_path_);
+        if (!options_.perfect_task_out.empty()) task_->save(options_.perfect_task_out);
+        data_.restart();
+      }
       if (stop_requested()) {
         result_.interrupted = true;
         result_.x = x;
@@ -605,7 +627,8 @@ bool JointRun::run_phase(std::size_t pi, Progress progress, bool resumed) {
       }
       const auto step_start = Clock::now();
       const std::clock_t step_cpu_start = std::clock();
-      const double factor = learning_rate_factor(t, constant, decay);
+      const double factor = t < base_total ? learning_rate_factor(t, base_constant, base_decay)
+                                           : learning_rate_factor(t - base_total, constant, decay);
       const double lr_lens =
           train_lens ? options_.lens_learning_rate * factor * safeguard.step_scale : 0.0;
       const double lr_task = options_.task_options.learning_rate * factor;
@@ -669,7 +692,6 @@ bool JointRun::run_phase(std::size_t pi, Progress progress, bool resumed) {
     if (perfect_path_.has_parent_path())
       std::filesystem::create_directories(perfect_path_.parent_path());
     task_->save(perfect_path_);
-    if (!options_.perfect_task_out.empty()) task_->save(options_.perfect_task_out);
   }
   score_setting(pi, x);
   result_.x = x;

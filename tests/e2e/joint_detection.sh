@@ -4,7 +4,7 @@
 # and prints them as a table (text, and JSON with --json: perfect optics without mean spot, PSNR
 # and SSIM; AP, AP50, AP75 for every setting); it writes the lens, the log and the perfect-optics
 # detector, and a second run of another lens reuses that detector (--detector) instead of training
-# it. Tiny sampling and a few steps keep it to seconds. Without libtorch it is skipped (exit 77).
+# it again (only the perfect-optics row's continuation, --steps on sharp crops, is trained). Tiny sampling and a few steps keep it to seconds. Without libtorch it is skipped (exit 77).
 set -euo pipefail
 lensopt="$1"
 tmp=$(mktemp -d)
@@ -32,10 +32,11 @@ done
 grep -q "mean spot (um) *PSNR (dB) *SSIM *AP *AP50 *AP75" "$tmp/text" || fail "no table header"
 # Perfect optics has no lens: its spot, PSNR and SSIM are '-'.
 grep -E -q "^  perfect +- +- +- +[0-9.-]+" "$tmp/text" || fail "perfect row: $(grep perfect "$tmp/text")"
-[ "$(grep -c '^perfect,' "$tmp/out.csv")" -eq 2 ] || fail "the log has no 2 perfect-optics steps"
+# Perfect optics: the base detector (--perfect-steps, default --steps: 2), then --steps (2) more.
+[ "$(grep -c '^perfect,' "$tmp/out.csv")" -eq 4 ] || fail "the log has no 2 + 2 perfect-optics steps"
 
-# Another lens, the same detector: nothing of perfect optics is trained again, and its AP is the
-# first run's (the same detector on the same held-out crops).
+# Another lens, the same base detector: only the perfect row's continuation (2 steps) is trained,
+# and its AP is the first run's (the same continuation on the same crops, the same held-out crops).
 "$lensopt" optimize lenses/tessar.toml --joint "${tiny[@]}" --detector "$tmp/out.detector.pt" \
   -o "$tmp/tessar.toml" --json > "$tmp/tessar.json" 2> "$tmp/err2" || fail "$(cat "$tmp/err2")"
 python3 - "$tmp/text" "$tmp/tessar.json" "$tmp/tessar.csv" <<'PY'
@@ -55,8 +56,8 @@ first = [l for l in text.splitlines() if l.startswith("  perfect ")][0].split()
 ap_text = float(first[4])
 assert perfect["ap"] is not None and abs(perfect["ap"] - ap_text) < 6e-5, (perfect["ap"], ap_text)
 assert j["res_factor"] == 2 and j["distortion"] is True, j
-rows = [l for l in open(sys.argv[3]) if l.startswith("perfect,")]
-assert not rows, "the reused detector was trained again"
+rows = [l.split(",")[1] for l in open(sys.argv[3]) if l.startswith("perfect,")]
+assert rows == ["2", "3"], ("the reused detector was trained again", rows)
 print("joint detection: table and JSON agree; perfect AP", ap_text, "reused")
 PY
 echo "e2e joint_detection: ok"

@@ -97,29 +97,40 @@ TEST_CASE("joint detection: the four settings, and the perfect-optics detector r
       CHECK(s.ssim <= 1);
     }
   }
-  // Perfect optics (4 steps), fixed/trained (4) and joint (4) train; fixed/fixed does not.
-  CHECK(r.steps_done == 12);
+  // Perfect optics (4 base steps + 4 more, the budget of the others), fixed/trained (4) and
+  // joint (4) train; fixed/fixed does not.
+  CHECK(r.steps_done == 16);
   const auto rows = test::csv_rows(dir / "log.csv");
-  REQUIRE(rows.size() == 13);
+  REQUIRE(rows.size() == 17);
   CHECK(rows[1][0] == "perfect");
-  CHECK(rows[5][0] == "fixed/trained");
-  CHECK(rows[9][0] == "joint");
-  for (int i = 9; i < 13; ++i)
+  CHECK(rows[8][0] == "perfect");
+  CHECK(rows[9][0] == "fixed/trained");
+  CHECK(rows[13][0] == "joint");
+  for (int i = 13; i < 17; ++i)
     CHECK(std::stod(rows[i][13]) > 0);  // the detector's loss reaches the lens
-  CHECK(std::stod(rows[5][13]) == 0);
+  CHECK(std::stod(rows[9][13]) == 0);
+  // The perfect row's last 4 steps have the fine-tunes' schedule (the task learning rate, column
+  // 3) and the base's 4 steps the same (the base has as many steps here).
+  for (int i = 0; i < 4; ++i) {
+    CHECK(rows[5 + i][3] == rows[9 + i][3]);
+    CHECK(rows[5 + i][3] == rows[13 + i][3]);
+    CHECK(rows[1 + i][3] == rows[9 + i][3]);
+  }
+  // Both fine-tunes start from the same (base) detector on the same crops and lens.
+  CHECK(rows[9][5] == rows[13][5]);
   const LensParameterization param(doublet(), GlassSpace(*load_catalog("ohara")));
   CHECK(r.x != param.from_lens(doublet()));
   REQUIRE(std::filesystem::exists(dir / "perfect.pt"));
 
-  // The same run from the saved perfect-optics detector: nothing of it is trained again, and
-  // every setting scores exactly as before (fixed/trained and joint start from it as before).
+  // The same run from the saved base detector: its 4 base steps are not trained again (only the
+  // perfect row's continuation), and every setting scores exactly as before.
   JointOptions again = o;
   again.perfect_task_out.clear();
   again.pretrained_task = dir / "perfect.pt";
   again.log_csv = dir / "again.csv";
   const JointResult r2 = optimize_joint(doublet(), again);
   REQUIRE(r2.settings.size() == 4);
-  CHECK(r2.steps_done == 8);
+  CHECK(r2.steps_done == 12);
   for (int i = 0; i < 4; ++i) {
     INFO(r.settings[i].name);
     CHECK(r2.settings[i].metric == r.settings[i].metric);
@@ -128,8 +139,8 @@ TEST_CASE("joint detection: the four settings, and the perfect-optics detector r
   CHECK(r2.x == r.x);
   // Step for step the same losses: the loaded detector is the trained one, bit for bit.
   const auto rows2 = test::csv_rows(dir / "again.csv");
-  REQUIRE(rows2.size() == 9);
-  for (int i = 1; i < 9; ++i) CHECK(rows2[i] == rows[i + 4]);
+  REQUIRE(rows2.size() == 13);
+  for (int i = 1; i < 13; ++i) CHECK(rows2[i] == rows[i + 4]);
   std::filesystem::remove_all(dir);
 }
 

@@ -35,11 +35,14 @@
 // factor enters through the distortion's geometry). The boxes are targets: no gradient flows
 // through them to the lens (the images carry the lens's gradient). Four settings, the paper's
 // Table 2:
-//   perfect:       the detector trained on the sharp crops (no lens) for all steps, scored on the
-//                  sharp held-out crops (or loaded from `pretrained_task` instead of trained);
-//   fixed/fixed:   that detector, unchanged, on the start lens's images;
-//   fixed/trained: that detector fine-tuned for all steps on the start lens's images;
-//   joint:         that detector and the lens trained together for all steps.
+//   perfect:       the detector trained on the sharp crops (no lens): first `perfect_steps`
+//                  steps (the base detector; or it is loaded from `pretrained_task`), then
+//                  total_steps() more with the fine-tunes' schedule and crops, so that it has
+//                  the same training budget as fixed/trained and joint; scored on the sharp
+//                  held-out crops;
+//   fixed/fixed:   that (final) detector, unchanged, on the start lens's images;
+//   fixed/trained: the base detector fine-tuned for total_steps() on the start lens's images;
+//   joint:         the base detector and the lens trained together for total_steps().
 // Scores on the held-out crops: COCO AP, AP50, AP75 (detection/coco_eval.h) of all crops'
 // detections at once, the predicted boxes corrected by the inverse distortion and compared with the
 // crop's evaluation ground truth (detection/crop_boxes.h); and the lens's image quality, the mean
@@ -96,12 +99,13 @@ struct JointOptions {
   std::vector<std::string> freeze;               // lens variables held (names or groups)
   bool run_baselines = true;  // also run fixed/fixed and fixed/trained (else only joint; with
                               // detection the perfect-optics detector is always trained)
-  std::filesystem::path pretrained_task;   // detection: the perfect-optics detector (a
+  std::filesystem::path pretrained_task;   // detection: the base perfect-optics detector (a
                                            // perfect_task_out of an earlier run), not trained
-  std::filesystem::path perfect_task_out;  // detection: writes the perfect-optics detector
+  std::filesystem::path perfect_task_out;  // detection: writes the base perfect-optics detector
                                            // (Task::save: weights and optimizer state)
-  int perfect_steps = 0;     // detection: steps of the perfect-optics detector (0: total_steps();
-                             // the same share of them decays)
+  int perfect_steps = 0;     // detection: steps of the base perfect-optics detector (0:
+                             // total_steps(); the same share of them decays); the perfect row
+                             // then trains total_steps() more
   int checkpoint_every = 0;  // steps; 0: none
   std::filesystem::path checkpoint_dir;  // required when checkpoint_every > 0
   std::filesystem::path resume_dir;      // a checkpoint directory to resume from
