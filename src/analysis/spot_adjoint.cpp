@@ -106,7 +106,8 @@ SystemAdjoint mean_spot_adjoint(const TraceSystem<double>& sys, int threads) {
       const double ybar = acc.centroid();
       // d S_h / d Y_i = omega_w (Y_i - ybar_h) / (M_h S_h), times phi_h / Phi (spot.h); with
       // equal weights 1 / (F N_h S_h).
-      const bool equal = weights.field[h] == 1.0 && weights.field_sum == field_count;
+      const bool equal = weights.field[h] == 1.0 && weights.field_sum == field_count &&
+                         acc.weight_sum == acc.count;
       const double field_scale =
           equal ? 1.0 / (static_cast<double>(field_count) * acc.count * rms)
                 : weights.field[h] / (weights.field_sum * acc.weight_sum * rms);

@@ -171,7 +171,7 @@ SystemAdjoint design_adjoint(const TraceSystem<double>& sys, const DesignSamplin
         // (omega_w applied per wavelength in `backward`).
         if (field_rms[h] > 0.0)
           spot_scale =
-              phi_sum == field_count
+              phi_sum == field_count && weight_sum == count
                   ? options.weight_spot / (static_cast<double>(field_count) * count * field_rms[h])
                   : options.weight_spot * phi[h] / (phi_sum * weight_sum * field_rms[h]);
       }
