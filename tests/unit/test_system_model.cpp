@@ -14,8 +14,10 @@
 #include "lensopt/formats/lens_file.h"
 #include "lensopt/formats/zmx.h"
 #include "lensopt/lens/lens_io.h"
+#include "lensopt/optimize/design_sampling.h"
 #include "lensopt/optimize/optimizer.h"
 #include "lensopt/render/psf.h"
+#include "lensopt/tolerance/tolerance.h"
 #include "test_support.h"
 
 using namespace lensopt;
@@ -440,4 +442,48 @@ TEST_CASE("system: VDX and VAN are kept in TOML and .zmx; fields on -y and on x 
       CHECK(a.van_deg == b.van_deg);
     }
   }
+}
+
+TEST_CASE("system: optimize and tolerance sample an as-written lens at its fields and weights") {
+  // A .zmx lens (as written): the design loss's spot fields are the file's 0, 14 and 20 deg with
+  // their weights, its wavelength weights kept; the constraint fields spread 0..20 (21, which
+  // hold 0, 14 and 20). The paper's Cooke keeps the paper's sampling: 11 of 21 angles 0..hfov.
+  Lens lens = read_zmx(test::source_dir() / "lenses" / "zmx" / "cooke_triplet_50.zmx").lens;
+  REQUIRE(lens.specs.fields.size() == 3);
+  lens.specs.fields[1].weight = 2.0;
+  lens.specs.wavelength_weights = {1.0, 3.0, 0.5};
+  TraceOptions sampling;
+  sampling.rings = 3;
+  sampling.fields = 11;
+  const DesignSampling d = design_sampling(lens, sampling);
+  CHECK(d.spot_fields == 3);
+  CHECK(d.setup.field_values.size() == 21);
+  std::vector<double> values, weights;
+  for (std::size_t hf = 0; hf < d.spot_field.size(); ++hf) {
+    if (d.spot_field[hf] < 0) continue;
+    CHECK(d.spot_field[hf] == static_cast<int>(values.size()));
+    values.push_back(d.setup.field_values[hf]);
+    weights.push_back(d.setup.field_weights[hf]);
+  }
+  CHECK(values == std::vector<double>{0.0, 14.0, 20.0});
+  CHECK(weights == std::vector<double>{1.0, 2.0, 1.0});
+  CHECK(d.setup.wavelength_weights == std::vector<double>{1.0, 3.0, 0.5});
+  CHECK(d.setup.aperture_type == ApertureType::kEntrancePupilDiameter);
+  CHECK(describe_design_sampling(lens, sampling).find("(as written)") != std::string::npos);
+  const Lens cooke = shipped("cooke");
+  const DesignSampling p = design_sampling(cooke, sampling);
+  CHECK(p.spot_fields == 11);
+  CHECK(p.setup.field_values.size() == 21);
+  std::vector<double> paper_values;
+  for (std::size_t hf = 0; hf < p.spot_field.size(); ++hf)
+    if (p.spot_field[hf] >= 0) paper_values.push_back(p.setup.field_values[hf]);
+  CHECK(paper_values == field_angles_deg(cooke.specs.half_field_deg, 11));
+  // tolerance: the file's fields, not 5 angles 0..hfov.
+  ToleranceOptions t;
+  t.rings = 3;
+  t.fields = 5;
+  const ToleranceModel model(lens, t);
+  CHECK(model.fields_deg() == std::vector<double>{0.0, 14.0, 20.0});
+  const ToleranceModel paper_model(cooke, t);
+  CHECK(paper_model.fields_deg() == field_angles_deg(cooke.specs.half_field_deg, 5));
 }
