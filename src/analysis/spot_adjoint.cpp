@@ -19,7 +19,7 @@ void SystemAdjoint::reset(int surfaces, int wavelengths, int fields) {
 }
 
 void SystemAdjoint::add_bundle(const BundleAdjoint& bundle, int h, int w, int wavelengths,
-                               const PupilSamples& pupil) {
+                               const PupilSamples& pupil, const VignettingFactors& v) {
   const int k_count = static_cast<int>(curvature.size());
   for (int k = 0; k < k_count; ++k) {
     curvature[k] += bundle.curvature[k];
@@ -29,11 +29,21 @@ void SystemAdjoint::add_bundle(const BundleAdjoint& bundle, int h, int w, int wa
   }
   for (std::size_t i = 0; i < asphere.size(); ++i) asphere[i] += bundle.asphere[i];
   double a_sx = 0.0, a_oy = 0.0, a_sy = 0.0, a_z = 0.0;
-  for (std::size_t i = 0; i < pupil.size(); ++i) {
-    a_sx += bundle.x0[i] * pupil.x[i];
-    a_oy += bundle.y0[i];
-    a_sy += bundle.y0[i] * pupil.y[i];
-    a_z += bundle.z0[i];
+  if (!v.any()) {
+    for (std::size_t i = 0; i < pupil.size(); ++i) {
+      a_sx += bundle.x0[i] * pupil.x[i];
+      a_oy += bundle.y0[i];
+      a_sy += bundle.y0[i] * pupil.y[i];
+      a_z += bundle.z0[i];
+    }
+  } else {
+    // The vignetted pupil point (start_rays): px' = (1 - VCX) px, py' = VDY + (1 - VCY) py.
+    for (std::size_t i = 0; i < pupil.size(); ++i) {
+      a_sx += bundle.x0[i] * ((1.0 - v.vcx) * pupil.x[i]);
+      a_oy += bundle.y0[i];
+      a_sy += bundle.y0[i] * (v.vdy + (1.0 - v.vcy) * pupil.y[i]);
+      a_z += bundle.z0[i];
+    }
   }
   double* a = &start[(static_cast<std::size_t>(h) * wavelengths + w) * 4];
   a[0] += a_sx;
@@ -70,6 +80,7 @@ SystemAdjoint mean_spot_adjoint(const TraceSystem<double>& sys, int threads) {
   // Per-field results, added in field order afterwards so the sum does not depend on threads.
   std::vector<SystemAdjoint> per_field(field_count);
   std::vector<double> field_rms(field_count, 0.0);
+  const SpotWeights weights = spot_weights(sys);
   const int nthreads = thread_count(threads);
 #pragma omp parallel num_threads(nthreads)
   {
@@ -87,15 +98,23 @@ SystemAdjoint mean_spot_adjoint(const TraceSystem<double>& sys, int threads) {
       for (int w = 0; w < wl; ++w) {
         start_rays(sys, h, w, rays);
         trace_bundle(sys.lens, w, k_count, true, rays, static_cast<RayRecord<double>*>(nullptr));
-        acc.add(rays);
+        acc.add(rays, weights.wavelength[w]);
       }
       const double rms = acc.rms();
       field_rms[h] = rms;
       if (!(rms > 0.0)) continue;
       const double ybar = acc.centroid();
-      const double scale = 1.0 / (static_cast<double>(field_count) * acc.count * rms);
+      // d S_h / d Y_i = omega_w (Y_i - ybar_h) / (M_h S_h), times phi_h / Phi (spot.h); with
+      // equal weights 1 / (F N_h S_h).
+      const bool equal = weights.field[h] == 1.0 && weights.field_sum == field_count &&
+                         acc.weight_sum == acc.count;
+      const double field_scale =
+          equal ? 1.0 / (static_cast<double>(field_count) * acc.count * rms)
+                : weights.field[h] / (weights.field_sum * acc.weight_sum * rms);
       // Backward per wavelength from a taped forward trace.
       for (int w = 0; w < wl; ++w) {
+        const double scale =
+            weights.wavelength[w] == 1.0 ? field_scale : field_scale * weights.wavelength[w];
         start_rays(sys, h, w, rays);
         trace_bundle_taped(sys.lens, w, rays, nullptr, tape);
         seed_x.resize(rays.size());
@@ -109,7 +128,9 @@ SystemAdjoint mean_spot_adjoint(const TraceSystem<double>& sys, int threads) {
         seeds.y_image = seed_y.data();
         bundle.reset(k_count);
         trace_bundle_adjoint(sys.lens, w, rays, tape, seeds, bundle);
-        adj.add_bundle(bundle, h, w, wl, sys.pupil);
+        adj.add_bundle(
+            bundle, h, w, wl, sys.pupil,
+            h < static_cast<int>(sys.vignetting.size()) ? sys.vignetting[h] : VignettingFactors{});
       }
     }
   }
@@ -117,11 +138,11 @@ SystemAdjoint mean_spot_adjoint(const TraceSystem<double>& sys, int threads) {
   out.reset(k_count, wl, field_count);
   double sum = 0.0;
   for (int h = 0; h < field_count; ++h) {
-    sum += field_rms[h];
+    sum += weights.field[h] == 1.0 ? field_rms[h] : weights.field[h] * field_rms[h];
     if (per_field[h].curvature.empty()) continue;
     out.add(per_field[h]);
   }
-  out.value = sum / field_count;
+  out.value = weights.field_sum > 0.0 ? sum / weights.field_sum : 0.0;
   return out;
 }
 

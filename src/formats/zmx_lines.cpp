@@ -17,11 +17,11 @@ namespace lensopt::zmx_detail {
 // tolerances, coatings, drawing). They are reported together, by keyword and line.
 bool is_setting_keyword(const std::string& key) {
   static const std::set<std::string> kSettings = {
-      "PFIL", "LANG", "GFAC", "RAIM", "PUSH", "SDMA", "ROPD", "PICB", "POLS", "GLRS",
-      "GSTD", "NSCD", "COFN", "SUMM", "DMFS", "BLNK", "RWRE", "TOL",  "MNUM", "MOFF",
-      "OPDX", "SCOL", "SQFN", "VANN", "HIDE", "MIRR", "SLAB", "POPS", "FLAP", "MEMA",
-      "COAT", "TCE",  "ENVD", "EFFL", "ZVDX", "ZVDY", "ZVCX", "ZVCY", "ZVAN", "WAVN",
-      "XFLD", "YFLD", "FIMP", "BLAN", "CONF", "DESC"};
+      "PFIL", "LANG", "GFAC", "RAIM", "PUSH", "SDMA", "ROPD", "PICB", "POLS",
+      "GLRS", "GSTD", "NSCD", "COFN", "SUMM", "DMFS", "BLNK", "RWRE", "TOL",
+      "MNUM", "MOFF", "OPDX", "SCOL", "SQFN", "HIDE", "MIRR", "SLAB", "POPS",
+      "FLAP", "MEMA", "COAT", "TCE",  "ENVD", "EFFL", "ZVDX", "ZVDY", "ZVCX",
+      "ZVCY", "ZVAN", "WAVN", "XFLD", "YFLD", "FIMP", "BLAN", "CONF", "DESC"};
   return kSettings.count(key) > 0;
 }
 
@@ -277,12 +277,13 @@ void ZmxParser::system_line(const Line& line, const std::string& key) {
     field_type_ = type;
     if (line.fields.size() > 3) field_count_ = integer(line, 3, "the number of fields");
     if (line.fields.size() > 4) wavelength_count_ = integer(line, 4, "the number of wavelengths");
-  } else if (key == "VDXN" || key == "VDYN" || key == "VCXN" || key == "VCYN") {
+  } else if (key == "VDXN" || key == "VDYN" || key == "VCXN" || key == "VCYN" || key == "VANN") {
     std::vector<double>& values = vignetting_[key];
     values.clear();
     for (std::size_t i = 1; i < line.fields.size(); ++i)
       values.push_back(number(line, i, "a vignetting factor"));
     if (key == "VDXN") vdxn_line_ = line.number;
+    if (key == "VANN") vann_line_ = line.number;
   } else if (key == "FWGN") {
     field_weights_.clear();
     for (std::size_t i = 1; i < line.fields.size(); ++i)

@@ -149,6 +149,7 @@ class ZmxParser {
   std::vector<double> field_weights_;
   std::map<std::string, std::vector<double>> vignetting_;
   int vdxn_line_ = 0;
+  int vann_line_ = 0;
   std::map<int, Wavelength> wavm_;
   std::vector<Wavelength> wavl_;
   int wavelength_line_ = 0;

@@ -117,15 +117,17 @@ std::string format_zmx(const Lens& lens) {
   }
   const int field_type =
       as_written && !specs.fields.empty() ? static_cast<int>(specs.field_type) : 0;
-  std::vector<std::string> x_texts, y_texts, weight_texts, vdy, vcx, vcy;
+  std::vector<std::string> x_texts, y_texts, weight_texts, vdx, vdy, vcx, vcy, van;
   bool vignetting = false;
   for (const FieldPoint& f : fields) {
     x_texts.push_back("0");
     y_texts.push_back(number_text(f.value));
     weight_texts.push_back(number_text(f.weight));
+    vdx.push_back(number_text(f.vignetting.vdx));
     vdy.push_back(number_text(f.vignetting.vdy));
     vcx.push_back(number_text(f.vignetting.vcx));
     vcy.push_back(number_text(f.vignetting.vcy));
+    van.push_back(number_text(f.vignetting.van_deg));
     vignetting = vignetting || f.vignetting.any();
   }
   line(
@@ -134,9 +136,11 @@ std::string format_zmx(const Lens& lens) {
   line(fmt::format("YFLN {}", fmt::join(y_texts, " ")));
   line(fmt::format("FWGN {}", fmt::join(weight_texts, " ")));
   if (vignetting) {
+    line(fmt::format("VDXN {}", fmt::join(vdx, " ")));
     line(fmt::format("VDYN {}", fmt::join(vdy, " ")));
     line(fmt::format("VCXN {}", fmt::join(vcx, " ")));
     line(fmt::format("VCYN {}", fmt::join(vcy, " ")));
+    line(fmt::format("VANN {}", fmt::join(van, " ")));
   }
   std::size_t primary = 0;
   for (std::size_t i = 0; i < specs.wavelengths_nm.size(); ++i) {

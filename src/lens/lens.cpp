@@ -220,7 +220,7 @@ void validate_lens(const Lens& lens, const LensSourceLines& lines) {
       fail(fmt::format("field weight {} must be >= 0", f.weight));
     const VignettingFactors& v = f.vignetting;
     if (!std::isfinite(v.vdx) || !std::isfinite(v.vdy) || !(v.vcx < 1.0) || !(v.vcy < 1.0) ||
-        !std::isfinite(v.vcx) || !std::isfinite(v.vcy))
+        !std::isfinite(v.vcx) || !std::isfinite(v.vcy) || !std::isfinite(v.van_deg))
       fail("vignetting factors must be finite with VCX, VCY < 1");
   }
   if (!specs.object_at_infinity() && !(specs.object_distance_mm > 0.0))

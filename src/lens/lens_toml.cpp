@@ -65,7 +65,7 @@ using detail::kChannelLetters;
 using detail::kFieldTypeNames;
 
 constexpr std::array<std::string_view, 4> kTopLevelKeys = {"lens", "specs", "system", "surfaces"};
-constexpr std::array<std::string_view, 12> kSystemKeys = {"mode",
+constexpr std::array<std::string_view, 14> kSystemKeys = {"mode",
                                                           "primary_wavelength_nm",
                                                           "wavelength_weights",
                                                           "aperture",
@@ -73,9 +73,11 @@ constexpr std::array<std::string_view, 12> kSystemKeys = {"mode",
                                                           "field_type",
                                                           "fields",
                                                           "field_weights",
+                                                          "vdx",
                                                           "vdy",
                                                           "vcx",
                                                           "vcy",
+                                                          "van_deg",
                                                           "object_distance_mm"};
 constexpr std::array<std::string_view, 2> kLensKeys = {"name", "catalog"};
 constexpr std::array<std::string_view, 6> kSpecsKeys = {
@@ -369,6 +371,7 @@ void read_system(const TomlReader& reader, const toml::table& table, Specs& spec
     if (!(v >= 0.0)) reader.fail(n, "field weights must be >= 0");
     f.weight = v;
   });
+  per_field("vdx", [](FieldPoint& f, double v, const toml::node&) { f.vignetting.vdx = v; });
   per_field("vdy", [](FieldPoint& f, double v, const toml::node&) { f.vignetting.vdy = v; });
   per_field("vcx", [&](FieldPoint& f, double v, const toml::node& n) {
     if (!(v < 1.0)) reader.fail(n, "vcx must be < 1");
@@ -378,6 +381,8 @@ void read_system(const TomlReader& reader, const toml::table& table, Specs& spec
     if (!(v < 1.0)) reader.fail(n, "vcy must be < 1");
     f.vignetting.vcy = v;
   });
+  per_field("van_deg",
+            [](FieldPoint& f, double v, const toml::node&) { f.vignetting.van_deg = v; });
 }
 
 Material read_material(const TomlReader& reader, const toml::node& node, int surface_number,

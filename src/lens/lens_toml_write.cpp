@@ -267,23 +267,28 @@ std::string format_lens_toml(const Lens& lens) {
     if (!specs.fields.empty()) {
       line("field_type",
            fmt::format("\"{}\"", kFieldTypeNames[static_cast<int>(specs.field_type)]));
-      std::vector<double> values, weights, vdy, vcx, vcy;
-      bool weighted = false, vignetted = false;
+      std::vector<double> values, weights, vdx, vdy, vcx, vcy, van;
+      bool weighted = false, vignetted = false, asymmetric = false;
       for (const FieldPoint& f : specs.fields) {
         values.push_back(f.value);
         weights.push_back(f.weight);
+        vdx.push_back(f.vignetting.vdx);
         vdy.push_back(f.vignetting.vdy);
         vcx.push_back(f.vignetting.vcx);
         vcy.push_back(f.vignetting.vcy);
+        van.push_back(f.vignetting.van_deg);
         weighted = weighted || f.weight != 1.0;
         vignetted = vignetted || f.vignetting.any();
+        asymmetric = asymmetric || f.vignetting.asymmetric();
       }
       line("fields", list(values));
       if (weighted) line("field_weights", list(weights));
       if (vignetted) {
+        if (asymmetric) line("vdx", list(vdx));
         line("vdy", list(vdy));
         line("vcx", list(vcx));
         line("vcy", list(vcy));
+        if (asymmetric) line("van_deg", list(van));
       }
     }
   }

@@ -62,22 +62,19 @@ TraceSystem<ceres::Jet<double, N>> design_system(
   }
   const TraceLens<J> lens = param.to_trace_lens(xj.data(), mode, fixed_glasses);
   // The profile bounds (no rays: forward mode on these Jets, as evaluate_design).
-  Specs specs = param.structure().specs;
-  specs.mode = SpecMode::kPaper;
-  profile = profile_bound_loss(lens, specs, options.max_surface_slope_deg);
-  TraceOptions constraint_options = sampling;
-  constraint_options.scale_to_spec = false;
-  constraint_options.fields = constraint_field_count(sampling.fields, kConstraintFields);
-  return prepare_system(lens, param.structure().specs, constraint_options);
+  profile = profile_bound_loss(lens, param.structure().specs, options.max_surface_slope_deg);
+  TraceOptions topt = sampling;
+  topt.scale_to_spec = false;
+  return prepare_system(lens, design_sampling(param.structure(), topt).setup, topt);
 }
 
 // Step 2 of the header for the design loss: the loss terms of evaluate_design in double and the
 // adjoints of l_lens (without the glass term) with respect to the system's parameters.
-SystemAdjoint design_adjoint(const TraceSystem<double>& sys, const TraceOptions& sampling,
-                             const DesignLossOptions& options, DesignLoss<double>& loss) {
+SystemAdjoint design_adjoint(const TraceSystem<double>& sys, const DesignSampling& sampled,
+                             const TraceOptions& sampling, const DesignLossOptions& options,
+                             DesignLoss<double>& loss) {
   const int all_fields = static_cast<int>(sys.fields_deg.size());
-  const int field_stride = sampling.fields > 1 ? (all_fields - 1) / (sampling.fields - 1) : 1;
-  const int field_count = sampling.fields > 1 ? sampling.fields : 1;
+  const int field_count = sampled.spot_fields;
   const int wl = sys.wavelength_count;
   const int rays = static_cast<int>(sys.pupil.size());
   const int k_count = sys.lens.surface_count();
@@ -104,6 +101,18 @@ SystemAdjoint design_adjoint(const TraceSystem<double>& sys, const TraceOptions&
       angle_linear(all_fields, 0.0);
   std::vector<int> failed(all_fields, 0);
   std::vector<SystemAdjoint> per_field(all_fields);
+  // The spot's weights (analysis/spot.h, as evaluate_design): omega_w, and phi_h of the spot
+  // fields; all exactly 1 when equal.
+  const SpotWeights spot_w = spot_weights(sys);
+  std::vector<double> phi(field_count, 1.0);
+  for (int hf = 0; hf < all_fields; ++hf)
+    if (sampled.spot_field[hf] >= 0) phi[sampled.spot_field[hf]] = spot_w.field[hf];
+  double phi_sum = 0.0;
+  for (int h = 0; h < field_count; ++h) phi_sum += phi[h];
+  if (!(phi_sum > 0.0)) {
+    phi.assign(field_count, 1.0);
+    phi_sum = field_count;
+  }
   const int nthreads = thread_count(sampling.threads);
 #pragma omp parallel num_threads(nthreads)
   {
@@ -119,8 +128,8 @@ SystemAdjoint design_adjoint(const TraceSystem<double>& sys, const TraceOptions&
       SystemAdjoint& adj = per_field[hf];
       adj.reset(k_count, wl, 0);
       adj.start.assign(static_cast<std::size_t>(all_fields) * wl * 4, 0.0);
-      const bool spot_field = hf % field_stride == 0;
-      const int h = hf / field_stride;
+      const int h = sampled.spot_field[hf];
+      const bool spot_field = h >= 0;
       // The spot of field h (evaluate_design's formula) and its seed scale.
       double y_mean = 0.0, spot_scale = 0.0;
       if (spot_field) {
@@ -141,25 +150,32 @@ SystemAdjoint design_adjoint(const TraceSystem<double>& sys, const TraceOptions&
           }
         }
         int count = 0;
-        double y_sum = 0.0;
+        double y_sum = 0.0, weight_sum = 0.0;
         for (std::size_t i = 0; i < ys.size(); ++i)
           if (ok[i]) {
-            y_sum += ys[i];
+            const double o = spot_w.wavelength[i / rays];
+            y_sum += o == 1.0 ? ys[i] : o * ys[i];
             ++count;
+            weight_sum += o;
           }
-        y_mean = count > 0 ? y_sum / count : 0.0;
+        const bool any = count > 0 && weight_sum > 0.0;
+        y_mean = any ? y_sum / weight_sum : 0.0;
         double s2 = 0.0;
         for (std::size_t i = 0; i < ys.size(); ++i)
           if (ok[i]) {
+            const double o = spot_w.wavelength[i / rays];
             const double dy = ys[i] - y_mean;
-            s2 += dy * dy + xs[i] * xs[i];
+            s2 += o == 1.0 ? dy * dy + xs[i] * xs[i] : o * (dy * dy + xs[i] * xs[i]);
           }
-        const double var = count > 0 ? s2 / count : 0.0;
+        const double var = any ? s2 / weight_sum : 0.0;
         field_rms[h] = var > 0.0 ? std::sqrt(var) : 0.0;
-        // d sqrt(s2 / N) / dY_i = (Y_i - ybar) / (N S); l_S = mean over the F spot fields.
+        // d sqrt(s2 / M) / dY_i = omega_w (Y_i - ybar) / (M S); l_S = sum_h phi_h S_h / Phi
+        // (omega_w applied per wavelength in `backward`).
         if (field_rms[h] > 0.0)
           spot_scale =
-              options.weight_spot / (static_cast<double>(field_count) * count * field_rms[h]);
+              phi_sum == field_count && weight_sum == count
+                  ? options.weight_spot / (static_cast<double>(field_count) * count * field_rms[h])
+                  : options.weight_spot * phi[h] / (phi_sum * weight_sum * field_rms[h]);
       }
       double path_sum = 0.0, angle_sum = 0.0;
       // The penalties of a traced bundle and their seeds (evaluate_design's add_constraints).
@@ -195,18 +211,22 @@ SystemAdjoint design_adjoint(const TraceSystem<double>& sys, const TraceOptions&
         seeds.zeta = &zeta_seed;
         seeds.zeta_prime = &zeta_prime_seed;
         if (spot && spot_scale > 0.0) {
+          const double o = spot_w.wavelength[w];
+          const double scale = o == 1.0 ? spot_scale : spot_scale * o;
           seed_x.resize(bundle.size());
           seed_y.resize(bundle.size());
           for (std::size_t i = 0; i < bundle.size(); ++i) {
-            seed_x[i] = bundle.x[i] * spot_scale;
-            seed_y[i] = (bundle.y[i] - y_mean) * spot_scale;
+            seed_x[i] = bundle.x[i] * scale;
+            seed_y[i] = (bundle.y[i] - y_mean) * scale;
           }
           seeds.x_image = seed_x.data();
           seeds.y_image = seed_y.data();
         }
         adjoint.reset(k_count);
         trace_bundle_adjoint(sys.lens, w, bundle, tape, seeds, adjoint);
-        adj.add_bundle(adjoint, hf, w, wl, pupil);
+        adj.add_bundle(adjoint, hf, w, wl, pupil,
+                       hf < static_cast<int>(sys.vignetting.size()) ? sys.vignetting[hf]
+                                                                    : VignettingFactors{});
       };
       for (int w = 0; w < wl; ++w) {
         if (spot_field) {
@@ -233,16 +253,18 @@ SystemAdjoint design_adjoint(const TraceSystem<double>& sys, const TraceOptions&
   for (int hf = 0; hf < all_fields; ++hf) out.add(per_field[hf]);
   double spot = 0.0, path = 0.0, angle = 0.0;
   int failed_total = 0;
-  for (int h = 0; h < field_count; ++h) spot += field_rms[h];
+  for (int h = 0; h < field_count; ++h)
+    spot += phi[h] == 1.0 ? field_rms[h] : phi[h] * field_rms[h];
   for (int hf = 0; hf < all_fields; ++hf) {
     path += path_linear[hf];
     angle += angle_linear[hf];
     failed_total += failed[hf];
   }
-  loss.spot_mm = spot / field_count;
+  loss.spot_mm = spot / phi_sum;
   loss.ray_path_mm = path / n_r;
   loss.ray_angle = angle / n_r;
   loss.field_rms_mm = field_rms;
+  loss.field_weights = phi;
   loss.failed_rays = failed_total;
   loss.rays = static_cast<int>(n_r);
   return out;
@@ -269,7 +291,10 @@ DesignValueGradient design_adjoint_gradient(const LensParameterization& param,
       const TraceSystem<double> values = system_values(sys);
       if (!adjoint_supported(values.lens))
         return design_loss_gradient_jets(param, x, mode, fixed_glasses, sampling, options);
-      adj = design_adjoint(values, sampling, options, out.loss);
+      TraceOptions unscaled = sampling;
+      unscaled.scale_to_spec = false;
+      adj = design_adjoint(values, design_sampling(param.structure(), unscaled), sampling, options,
+                           out.loss);
     }
     chain_system_adjoint(sys, adj, std::min(N, n - first), out.gradient.data() + first);
     if (n == 0) break;

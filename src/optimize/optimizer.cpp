@@ -149,12 +149,13 @@ struct Counters {
 int residual_count(const LensParameterization& param, const TraceOptions& sampling,
                    const DesignLossOptions& loss) {
   const Specs& specs = param.structure().specs;
-  const int fields =
-      static_cast<int>(field_angles_deg(specs.half_field_deg, sampling.fields).size());
+  // The design loss's sampling (design_sampling.h): spot fields among all traced fields.
+  const DesignSampling sampled = design_sampling(param.structure(), sampling);
+  const int fields = sampled.spot_fields;
   const int rays = static_cast<int>(paper_pupil_samples(sampling.rings).size());
   int glasses = 0;
   for (const LensVariable& v : param.variables()) glasses += v.kind == LensVariable::Kind::kGlass0;
-  return design_residual_count(loss, fields, constraint_field_count(fields, kConstraintFields),
+  return design_residual_count(loss, fields, static_cast<int>(sampled.setup.field_values.size()),
                                static_cast<int>(specs.wavelengths_nm.size()), rays,
                                static_cast<int>(param.structure().surfaces.size()), glasses);
 }
@@ -194,9 +195,17 @@ DesignLoss<double> run_phase(const LensParameterization& param, std::vector<doub
     if (static_cast<int>(frozen.size()) >= n) break;
     const std::vector<double>& field_merit = current.field_merit();
     const int field_count = static_cast<int>(field_merit.size());
+    // a_h = phi_h / (Phi S_h0): the field weights of the spot average (analysis/spot.h).
     std::vector<double> weights(field_count);
+    double phi_sum = 0.0;
     for (int h = 0; h < field_count; ++h)
-      weights[h] = 1.0 / (field_count * std::max(field_merit[h], 1e-5));
+      phi_sum += static_cast<int>(current.field_weights.size()) == field_count
+                     ? current.field_weights[h]
+                     : 1.0;
+    for (int h = 0; h < field_count; ++h)
+      weights[h] = phi_sum == field_count
+                       ? 1.0 / (field_count * std::max(field_merit[h], 1e-5))
+                       : current.field_weights[h] / (phi_sum * std::max(field_merit[h], 1e-5));
     auto* functor = new DesignFunctor{&param,
                                       mode,
                                       fixed,
@@ -598,6 +607,9 @@ class LensOptimization {
 
   // The start at full sampling.
   void measure_start() {
+    if (options_.verbose)
+      fmt::print(stderr, "lensopt optimize: {}\n",
+                 describe_design_sampling(param_.structure(), options_.sampling));
     const AnalysisReport start_report = analyze_lens(start_, full_);
     result_.start_spot_um =
         start_report.mean_rms_spot_um.value_or(std::numeric_limits<double>::infinity());

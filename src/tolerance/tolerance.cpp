@@ -249,6 +249,10 @@ struct ToleranceModel::Impl {
   double defocus_mm = 0;      // t0_{K-1} - BFL0
   double image_distance0_mm = 0;
   std::vector<double> fields_deg;
+  // A lens with its own system data (SpecMode::kAsWritten and written fields) is traced at its
+  // fields (type, weights, vignetting factors) and object distance, not at 0..hfov.
+  bool as_written = false;
+  SystemSetup written;
   int rays = 0;
   // Edge-gap check: per space k (between surfaces k and k+1, the image space excluded) the
   // height it is checked at (mm) and whether the nominal's gap there is >= 0 (a space that is
@@ -338,6 +342,18 @@ ToleranceModel::ToleranceModel(const Lens& lens, const ToleranceOptions& options
     throw Error(SourceLocation{lens.source_path},
                 "the lens has no finite paraxial stop height or back focal length");
   m.fields_deg = field_angles_deg(lens.specs.half_field_deg, options.fields);
+  if (lens.specs.mode == SpecMode::kAsWritten && !lens.specs.fields.empty()) {
+    TraceOptions to;
+    to.rings = options.rings;
+    to.fields = options.fields;
+    to.ray_aiming = options.ray_aiming;
+    to.scale_to_spec = false;
+    to.threads = 1;
+    m.as_written = true;
+    m.written = lens_setup(m.scaled_lens, to);
+    // The nominal's chief-ray angles (deg) label the fields.
+    m.fields_deg = prepare_lens_system(m.scaled_lens, to).fields_deg;
+  }
   m.rays = static_cast<int>(paper_pupil_samples(options.rings).size());
 
   // Clear semi-apertures (clear_semi_apertures_mm). An element's rim is at the larger of its
@@ -437,9 +453,23 @@ TrialResult ToleranceModel::evaluate(const std::vector<double>& perturbations) c
   to.ray_aiming = m.options.ray_aiming;
   to.scale_to_spec = false;
   to.threads = 1;
-  TraceSystem<double> sys =
-      prepare_system(tl, m.specs.focal_length_mm(), f_number, m.specs.half_field_deg, to);
+  SystemSetup setup =
+      paper_setup(m.specs.focal_length_mm(), f_number, m.specs.half_field_deg, to.fields);
+  setup.scale = false;
+  if (m.as_written) {
+    // The lens's own fields and object (the aperture stays the fixed stop above).
+    setup.field_type = m.written.field_type;
+    setup.field_values = m.written.field_values;
+    setup.field_weights = m.written.field_weights;
+    setup.vignetting = m.written.vignetting;
+    setup.object_distance_mm = m.written.object_distance_mm;
+  }
+  TraceSystem<double> sys = prepare_system(tl, setup, to);
 
+  // The lens's wavelength weights and the fields' weights (the mean spot of analysis/spot.h).
+  if (m.specs.wavelength_weights.size() == m.specs.wavelengths_nm.size())
+    sys.wavelength_weights = m.specs.wavelength_weights;
+  const SpotWeights spot_w = spot_weights(sys);
   std::vector<ThroughFocusSpot> moments(field_count);
   RayBundle<double> rays;
   std::vector<double> slopes;
@@ -451,7 +481,7 @@ TrialResult ToleranceModel::evaluate(const std::vector<double>& perturbations) c
       int failures = 0;  // a local count (the status bytes may alias the result's fields)
       for (std::size_t i = 0; i < rays.size(); ++i) failures += rays.status[i] != kRayOk;
       r.ray_failures += failures;
-      moments[h].add(rays, slopes);
+      moments[h].add(rays, slopes, spot_w.wavelength[w]);
     }
     if (moments[h].count() == 0) r.valid = false;
   }
@@ -460,8 +490,9 @@ TrialResult ToleranceModel::evaluate(const std::vector<double>& perturbations) c
   if (m.options.compensator == FocusCompensator::kBestRms && r.valid) {
     auto mean_spot = [&](double t) {
       double sum = 0.0;
-      for (const ThroughFocusSpot& fm : moments) sum += fm.rms(t);
-      return sum / field_count;
+      for (int h = 0; h < field_count; ++h)
+        sum += spot_w.field[h] == 1.0 ? moments[h].rms(t) : spot_w.field[h] * moments[h].rms(t);
+      return sum / spot_w.field_sum;
     };
     // Start with a bracket of +-2 % of the image distance (or 0.1 mm): focus shifts from
     // manufacturing errors are far smaller; the bracket grows if needed.
@@ -475,12 +506,12 @@ TrialResult ToleranceModel::evaluate(const std::vector<double>& perturbations) c
   std::vector<double> y_ref(field_count);
   for (int h = 0; h < field_count; ++h) {
     r.rms_spot_um[h] = moments[h].rms(tau) * 1000.0;
-    sum += r.rms_spot_um[h];
+    sum += spot_w.field[h] == 1.0 ? r.rms_spot_um[h] : spot_w.field[h] * r.rms_spot_um[h];
     y_ref[h] =
         paraxial_image_height(sys.lens, sys.entrance_pupil_z_mm,
                               std::tan(sys.fields_deg[h] * kPi / 180.0), sys.lens.reference_nm());
   }
-  r.mean_spot_um = sum / field_count;
+  r.mean_spot_um = sum / spot_w.field_sum;
   const double y_ref_last = y_ref.back();
   for (int h = 0; h < field_count; ++h) {
     if (moments[h].count() == 0 || y_ref_last == 0.0) continue;

@@ -60,13 +60,19 @@ SystemSetup paper_setup(double focal_length_mm, double f_number, double half_fie
 }
 
 SystemSetup specs_setup(const Specs& specs, const TraceOptions& options) {
+  // The wavelength weights hold in both modes (the wavelengths are the lens's in both).
+  const std::vector<double> wavelength_weights =
+      specs.wavelength_weights.size() == specs.wavelengths_nm.size() ? specs.wavelength_weights
+                                                                     : std::vector<double>{};
   if (specs.mode == SpecMode::kPaper) {
     SystemSetup setup =
         paper_setup(specs.focal_length_mm(), specs.f_number, specs.half_field_deg, options.fields);
     setup.scale = options.scale_to_spec;
+    setup.wavelength_weights = wavelength_weights;
     return setup;
   }
   SystemSetup setup;
+  setup.wavelength_weights = wavelength_weights;
   setup.scale = false;
   setup.aperture_type = specs.aperture_type;
   setup.f_number = specs.f_number;

@@ -43,8 +43,10 @@ int residuals_of(const LensParameterization& param, const TraceOptions& sampling
   const Lens& lens = param.structure();
   int glasses = 0;
   for (const LensVariable& v : param.variables()) glasses += v.kind == LensVariable::Kind::kGlass0;
-  return design_residual_count(loss, sampling.fields,
-                               constraint_field_count(sampling.fields, kConstraintFields),
+  // The design loss's sampling: the paper's fields, or a lens's own (design_sampling.h).
+  const DesignSampling sampled = design_sampling(lens, sampling);
+  return design_residual_count(loss, sampled.spot_fields,
+                               static_cast<int>(sampled.setup.field_values.size()),
                                static_cast<int>(lens.specs.wavelengths_nm.size()),
                                static_cast<int>(paper_pupil_samples(sampling.rings).size()),
                                static_cast<int>(lens.surfaces.size()), glasses);

@@ -493,3 +493,180 @@ TEST_CASE("design adjoint: aspheric lenses, with profile variables (Jets agree)"
   check_design(tessar_param, tessar_param.from_lens(tessar), GlassMode::kQuantized, sampling,
                DesignLossOptions{});
 }
+
+namespace {
+
+// The Cooke triplet of lenses/zmx (its own wavelengths F, d, C and fields 0, 14, 20 deg) with
+// unequal wavelength and field weights.
+Lens weighted_cooke() {
+  Lens lens = read_zmx(test::source_dir() / "lenses" / "zmx" / "cooke_triplet_50.zmx").lens;
+  lens.specs.wavelength_weights = {1.0, 3.0, 0.5};
+  REQUIRE(lens.specs.fields.size() == 3);
+  lens.specs.fields[0].weight = 0.5;
+  lens.specs.fields[1].weight = 2.0;
+  lens.specs.fields[2].weight = 1.0;
+  return lens;
+}
+
+// The weighted mean RMS spot by hand, from the raw weights (no normalization) in two passes:
+//   ybar_h = sum omega_w y / sum omega_w,  S_h^2 = sum omega_w ((y - ybar_h)^2 + x^2) / sum
+//   omega_w, mean = sum_h phi_h S_h / sum_h phi_h.
+double hand_weighted_spot(const Lens& lens, const TraceOptions& options) {
+  const TraceSystem<double> sys = prepare_system(make_trace_lens(lens), lens.specs, options);
+  const std::vector<double>& omega = lens.specs.wavelength_weights;
+  double mean = 0.0, phi_sum = 0.0;
+  RayBundle<double> rays;
+  for (std::size_t h = 0; h < sys.fields_deg.size(); ++h) {
+    std::vector<double> xs, ys, ws;
+    for (int w = 0; w < sys.wavelength_count; ++w) {
+      start_rays(sys, static_cast<int>(h), w, rays);
+      trace_bundle(sys.lens, w, sys.lens.surface_count(), true, rays,
+                   static_cast<RayRecord<double>*>(nullptr));
+      for (std::size_t i = 0; i < rays.size(); ++i)
+        if (rays.status[i] == kRayOk) {
+          xs.push_back(rays.x[i]);
+          ys.push_back(rays.y[i]);
+          ws.push_back(omega.empty() ? 1.0 : omega[w]);
+        }
+    }
+    double sw = 0.0, swy = 0.0;
+    for (std::size_t i = 0; i < ys.size(); ++i) {
+      sw += ws[i];
+      swy += ws[i] * ys[i];
+    }
+    const double ybar = swy / sw;
+    double s2 = 0.0;
+    for (std::size_t i = 0; i < ys.size(); ++i)
+      s2 += ws[i] * ((ys[i] - ybar) * (ys[i] - ybar) + xs[i] * xs[i]);
+    const double phi = sys.field_weights[h];
+    mean += phi * std::sqrt(s2 / sw);
+    phi_sum += phi;
+  }
+  return mean / phi_sum;
+}
+
+}  // namespace
+
+TEST_CASE("spot weights: the mean spot is the weighted mean over fields and wavelengths") {
+  const Lens lens = weighted_cooke();
+  TraceOptions options;
+  options.rings = 12;
+  const double weighted = mean_spot(lens, options);
+  const double hand = hand_weighted_spot(lens, options);
+  CHECK(weighted == doctest::Approx(hand).epsilon(1e-12));
+  // The weights matter here.
+  Lens equal = lens;
+  equal.specs.wavelength_weights.clear();
+  for (FieldPoint& f : equal.specs.fields) f.weight = 1.0;
+  const double unweighted = mean_spot(equal, options);
+  MESSAGE("Cooke 50: weighted mean spot ", weighted * 1000, " um, unweighted ", unweighted * 1000,
+          " um");
+  CHECK(std::abs(weighted - unweighted) > 1e-3 * unweighted);
+  // Weights are relative: all scaled by 7 give the same mean.
+  Lens scaled_weights = lens;
+  for (double& w : scaled_weights.specs.wavelength_weights) w *= 7.0;
+  for (FieldPoint& f : scaled_weights.specs.fields) f.weight *= 7.0;
+  CHECK(mean_spot(scaled_weights, options) == doctest::Approx(weighted).epsilon(1e-14));
+  // Equal weights written out give the unweighted spot bit for bit (every field too).
+  Lens written = equal;
+  written.specs.wavelength_weights = {2.0, 2.0, 2.0};
+  for (FieldPoint& f : written.specs.fields) f.weight = 3.0;
+  const SpotResult<double> a =
+      evaluate_spots(prepare_system(make_trace_lens(equal), equal.specs, options));
+  const SpotResult<double> b =
+      evaluate_spots(prepare_system(make_trace_lens(written), written.specs, options));
+  CHECK(a.mean_rms_spot_mm == b.mean_rms_spot_mm);
+  for (std::size_t h = 0; h < a.rms_spot_mm.size(); ++h) {
+    CHECK(a.rms_spot_mm[h] == b.rms_spot_mm[h]);
+    CHECK(a.centroid_y_mm[h] == b.centroid_y_mm[h]);
+  }
+  // A field of weight 0 leaves the mean: the mean of the other two.
+  Lens dropped = lens;
+  dropped.specs.fields[1].weight = 0.0;
+  CHECK(mean_spot(dropped, options) ==
+        doctest::Approx(hand_weighted_spot(dropped, options)).epsilon(1e-12));
+}
+
+TEST_CASE("spot weights: adjoint, Jets and central differences agree with unequal weights") {
+  const Lens lens = weighted_cooke();
+  TraceOptions options;
+  options.rings = 10;
+  for (bool aiming : {true, false}) {
+    options.ray_aiming = aiming;
+    check_against_jets(lens, options);
+  }
+  // Unequal wavelength weights with equal field weights.
+  Lens wavelengths_only = lens;
+  for (FieldPoint& f : wavelengths_only.specs.fields) f.weight = 1.0;
+  check_against_jets(wavelengths_only, options);
+  // With vignetting factors as well (the adjoint's pupil start terms carry them).
+  Lens vignetted = lens;
+  vignetted.specs.fields[1].vignetting = {0.0, 0.04, 0.05, 0.1, 0.0};
+  vignetted.specs.fields[2].vignetting = {0.0, 0.06, 0.02, 0.25, 0.0};
+  options.ray_aiming = true;
+  check_against_jets(vignetted, options);
+  // Central differences (Richardson-extrapolated, as above) for every curvature and thickness
+  // (not the zero spaces; the lens's catalog glasses tie nd and vd to the catalog, so those are
+  // left to the Jets).
+  options.rings = 8;
+  std::vector<PrescriptionVariable> variables;
+  for (const PrescriptionVariable& v : all_prescription_variables(vignetted))
+    if (v.kind == PrescriptionVariable::Kind::kCurvature ||
+        (v.kind == PrescriptionVariable::Kind::kThickness && variable_value(vignetted, v) > 0.1))
+      variables.push_back(v);
+  REQUIRE(!variables.empty());
+  const SpotGradient g = mean_spot_gradient_adjoint<24>(make_trace_lens(vignetted), vignetted.specs,
+                                                        variables, options);
+  std::vector<double> fd(variables.size());
+  for (std::size_t i = 0; i < variables.size(); ++i) {
+    const double x0 = variable_value(vignetted, variables[i]);
+    double scale = 1.0;
+    if (variables[i].kind == PrescriptionVariable::Kind::kCurvature) scale = 0.05;
+    if (variables[i].kind == PrescriptionVariable::Kind::kVd) scale = 40.0;
+    auto central = [&](double h) {
+      Lens plus = vignetted, minus = vignetted;
+      set_variable_value(plus, variables[i], x0 + h);
+      set_variable_value(minus, variables[i], x0 - h);
+      return (mean_spot(plus, options) - mean_spot(minus, options)) / (2 * h);
+    };
+    const double h = 2e-5 * scale;
+    fd[i] = (4 * central(h / 2) - central(h)) / 3;
+  }
+  const double worst = worst_relative(g.gradient, fd);
+  INFO("worst relative error against finite differences ", worst);
+  CHECK(worst < 1e-5);
+}
+
+TEST_CASE("spot weights: the design loss weighs wavelengths as the analysis (adjoint = Jets)") {
+  Lens lens = read_lens(test::source_dir() / "lenses" / "starts" / "cooke-seed1.toml");
+  const std::size_t count = lens.specs.wavelengths_nm.size();
+  lens.specs.wavelength_weights.clear();
+  for (std::size_t i = 0; i < count; ++i) lens.specs.wavelength_weights.push_back(1.0 + i % 4);
+  const LensParameterization param(lens, GlassSpace(*load_catalog("ohara")));
+  const std::vector<double> x = param.from_lens(lens);
+  TraceOptions sampling;
+  sampling.rings = 6;
+  sampling.fields = 3;
+  check_design(param, x, GlassMode::kQuantized, sampling, DesignLossOptions{});
+  // l_S is the analysis's weighted mean spot of the same system (3 fields 0..hfov, no scaling).
+  DesignLoss<double> loss;
+  evaluate_design<double>(param, x.data(), GlassMode::kQuantized, {}, sampling, DesignLossOptions{},
+                          nullptr, nullptr, &loss);
+  TraceOptions topt = sampling;
+  topt.scale_to_spec = false;
+  Specs specs = lens.specs;
+  specs.mode = SpecMode::kPaper;
+  const double analysis =
+      evaluate_spots(
+          prepare_system(param.to_trace_lens(x.data(), GlassMode::kQuantized, {}), specs, topt))
+          .mean_rms_spot_mm;
+  CHECK(loss.spot_mm == doctest::Approx(analysis).epsilon(1e-9));
+  // And differs from the unweighted loss.
+  Lens plain = lens;
+  plain.specs.wavelength_weights.clear();
+  const LensParameterization plain_param(plain, GlassSpace(*load_catalog("ohara")));
+  DesignLoss<double> plain_loss;
+  evaluate_design<double>(plain_param, x.data(), GlassMode::kQuantized, {}, sampling,
+                          DesignLossOptions{}, nullptr, nullptr, &plain_loss);
+  CHECK(std::abs(plain_loss.spot_mm - loss.spot_mm) > 1e-4 * loss.spot_mm);
+}

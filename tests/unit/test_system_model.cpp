@@ -14,8 +14,10 @@
 #include "lensopt/formats/lens_file.h"
 #include "lensopt/formats/zmx.h"
 #include "lensopt/lens/lens_io.h"
+#include "lensopt/optimize/design_sampling.h"
 #include "lensopt/optimize/optimizer.h"
 #include "lensopt/render/psf.h"
+#include "lensopt/tolerance/tolerance.h"
 #include "test_support.h"
 
 using namespace lensopt;
@@ -317,4 +319,171 @@ TEST_CASE("system: a stop-sized front aperture vignettes as the clipped pupil ar
   CHECK(report.fields.back().vignetted_rays > 0);
   CHECK(report.vignetted_by_surface[0] == report.vignetted_rays);
   CHECK(report.fields[2].field_value == 8.0);
+}
+
+TEST_CASE("system: a real file's vignetting factors move the chief and marginal rays") {
+  // rayoptics_US00583336-2-scaled.zmx (tests/data/zmx-real): fields 0, 17 and 24 deg with
+  // VDYN, VCXN, VCYN from OpticStudio's Set Vignetting. OpticStudio's definition on the
+  // normalized pupil: px' = VDX + (1 - VCX) px, py' = VDY + (1 - VCY) py. By hand, the chief
+  // ray (0, 0) starts at (0, VDY), the upper and lower marginal rays (0, +-1) at
+  // (0, VDY +- (1 - VCY)), the sagittal ray (1, 0) at (1 - VCX, VDY); lensopt then maps the
+  // normalized point through the field's aimed pupil (x = R scale_x px', y = R (offset_y +
+  // scale_y py'), R = EPD / 2).
+  const ZmxImport imp = read_zmx(test::source_dir() / "tests" / "data" / "zmx-real" /
+                                 "rayoptics_US00583336-2-scaled.zmx");
+  const Specs& s = imp.lens.specs;
+  REQUIRE(s.fields.size() == 3);
+  // The file's values (line 22-24), read exactly.
+  const double vdy[3] = {0, 6.208442661354E-2, 5.473246586901E-2};
+  const double vcx[3] = {0, 2.455956935883E-3, 2.0477435112E-3};
+  const double vcy[3] = {0, 1.556542586327E-1, 3.64762539196E-1};
+  for (int h = 0; h < 3; ++h) {
+    CHECK(s.fields[h].vignetting.vdx == 0.0);
+    CHECK(s.fields[h].vignetting.vdy == vdy[h]);
+    CHECK(s.fields[h].vignetting.vcx == vcx[h]);
+    CHECK(s.fields[h].vignetting.vcy == vcy[h]);
+    CHECK(s.fields[h].vignetting.van_deg == 0.0);
+  }
+  const TraceSystem<double> sys = prepare_lens_system(imp.lens, quick());
+  Lens plain_lens = imp.lens;
+  for (FieldPoint& f : plain_lens.specs.fields) f.vignetting = {};
+  const TraceSystem<double> plain = prepare_lens_system(plain_lens, quick());
+  REQUIRE(sys.fields_deg.size() == 3);
+  const double efl = sys.efl_mm;
+  const double r_ep = sys.epd_mm / 2;
+  PupilSamples rays4;  // chief, upper marginal, lower marginal, sagittal
+  rays4.x = {0.0, 0.0, 0.0, 1.0};
+  rays4.y = {0.0, 1.0, -1.0, 0.0};
+  const int w = static_cast<int>(s.wavelengths_nm.size()) - 1;
+  double largest_shift = 0.0;
+  for (int h = 0; h < 3; ++h) {
+    CAPTURE(h);
+    const PupilMap<double>& map = sys.pupil_map(h, w);
+    // The same aimed map with and without the factors (aiming does not see them).
+    CHECK(map.scale_y == plain.pupil_map(h, w).scale_y);
+    PupilSamples hand;  // px', py' by hand
+    for (std::size_t i = 0; i < 4; ++i) {
+      hand.x.push_back((1.0 - vcx[h]) * rays4.x[i]);  // VDX = 0
+      hand.y.push_back(vdy[h] + (1.0 - vcy[h]) * rays4.y[i]);
+    }
+    RayBundle<double> vignetted, by_hand, unvignetted;
+    start_rays(sys, h, w, vignetted, &rays4);
+    start_rays(plain, h, w, by_hand, &hand);
+    start_rays(plain, h, w, unvignetted, &rays4);
+    for (std::size_t i = 0; i < 4; ++i) {
+      CAPTURE(i);
+      CHECK(std::abs(vignetted.x[i] - r_ep * map.scale_x * hand.x[i]) <= 1e-13 * efl);
+      CHECK(std::abs(vignetted.y[i] - r_ep * (map.offset_y + map.scale_y * hand.y[i])) <=
+            1e-13 * efl);
+    }
+    for (RayBundle<double>* b : {&vignetted, &by_hand, &unvignetted})
+      trace_bundle(sys.lens, w, sys.lens.surface_count(), true, *b,
+                   static_cast<RayRecord<double>*>(nullptr));
+    for (std::size_t i = 0; i < 4; ++i) {
+      CAPTURE(i);
+      REQUIRE(vignetted.status[i] == kRayOk);
+      REQUIRE(by_hand.status[i] == kRayOk);
+      // At the image: the vignetted rays are the rays started from the hand-computed points.
+      CHECK(std::abs(vignetted.x[i] - by_hand.x[i]) <= 1e-12 * efl);
+      CHECK(std::abs(vignetted.y[i] - by_hand.y[i]) <= 1e-12 * efl);
+      if (unvignetted.status[i] == kRayOk)
+        largest_shift = std::max(largest_shift, std::abs(vignetted.y[i] - unvignetted.y[i]));
+    }
+  }
+  // The factors matter: a marginal ray lands elsewhere by a sizeable part of the focal length.
+  MESSAGE("largest image shift from the factors: ", largest_shift / efl, " of the EFL");
+  CHECK(largest_shift > 1e-3 * efl);
+}
+
+TEST_CASE("system: VDX and VAN are kept in TOML and .zmx; fields on -y and on x turn the factors") {
+  // A field on -y mirrors y (VDY -> -VDY); a field on +x turns the pupil a quarter turn
+  // (VDY' = VDX, VDX' = -VDY, VCX and VCY swap), on -x the other way.
+  const ZmxImport imp = parse_zmx(
+      doublet_zmx(std::string("ENPD 10\nFTYP 0 0 4 3 0 0 0\nXFLN 0 0 3 -3\nYFLN 0 -3 0 0\n"
+                              "VDXN 0.01 0.02 0.03 0.04\nVDYN 0.05 0.06 0.07 0.08\n"
+                              "VCXN 0.1 0.2 0.3 0.4\nVCYN 0.5 0.6 0.7 0.8\nVANN 1 0 0 0\n") +
+                  kFdc),
+      "turn.zmx");
+  const std::vector<FieldPoint>& f = imp.lens.specs.fields;
+  REQUIRE(f.size() == 4);
+  CHECK(f[0].vignetting.vdx == 0.01);
+  CHECK(f[0].vignetting.vdy == 0.05);
+  CHECK(f[0].vignetting.van_deg == 1.0);
+  CHECK(f[1].vignetting.vdy == -0.06);  // -y
+  CHECK(f[1].vignetting.vdx == 0.02);
+  CHECK(f[1].vignetting.vcy == 0.6);
+  CHECK(f[2].vignetting.vdy == 0.03);  // +x
+  CHECK(f[2].vignetting.vdx == -0.07);
+  CHECK(f[2].vignetting.vcy == 0.3);
+  CHECK(f[2].vignetting.vcx == 0.7);
+  CHECK(f[3].vignetting.vdy == -0.04);  // -x
+  CHECK(f[3].vignetting.vdx == 0.08);
+  CHECK(f[3].vignetting.vcy == 0.4);
+  CHECK(f[3].vignetting.vcx == 0.8);
+  // The reader says VDX and VAN are not traced.
+  bool warned_vdx = false, warned_van = false;
+  for (const std::string& w : imp.warnings) {
+    warned_vdx = warned_vdx || w.find("VDXN") != std::string::npos;
+    warned_van = warned_van || w.find("VANN") != std::string::npos;
+  }
+  CHECK(warned_vdx);
+  CHECK(warned_van);
+  for (const Lens& back : {parse_zmx(format_zmx(imp.lens), "back.zmx").lens,
+                           parse_lens_toml(format_lens_toml(imp.lens), "back.toml")}) {
+    REQUIRE(back.specs.fields.size() == 4);
+    for (std::size_t i = 0; i < 4; ++i) {
+      CAPTURE(i);
+      const VignettingFactors& a = back.specs.fields[i].vignetting;
+      const VignettingFactors& b = f[i].vignetting;
+      CHECK(a.vdx == b.vdx);
+      CHECK(a.vdy == b.vdy);
+      CHECK(a.vcx == b.vcx);
+      CHECK(a.vcy == b.vcy);
+      CHECK(a.van_deg == b.van_deg);
+    }
+  }
+}
+
+TEST_CASE("system: optimize and tolerance sample an as-written lens at its fields and weights") {
+  // A .zmx lens (as written): the design loss's spot fields are the file's 0, 14 and 20 deg with
+  // their weights, its wavelength weights kept; the constraint fields spread 0..20 (21, which
+  // hold 0, 14 and 20). The paper's Cooke keeps the paper's sampling: 11 of 21 angles 0..hfov.
+  Lens lens = read_zmx(test::source_dir() / "lenses" / "zmx" / "cooke_triplet_50.zmx").lens;
+  REQUIRE(lens.specs.fields.size() == 3);
+  lens.specs.fields[1].weight = 2.0;
+  lens.specs.wavelength_weights = {1.0, 3.0, 0.5};
+  TraceOptions sampling;
+  sampling.rings = 3;
+  sampling.fields = 11;
+  const DesignSampling d = design_sampling(lens, sampling);
+  CHECK(d.spot_fields == 3);
+  CHECK(d.setup.field_values.size() == 21);
+  std::vector<double> values, weights;
+  for (std::size_t hf = 0; hf < d.spot_field.size(); ++hf) {
+    if (d.spot_field[hf] < 0) continue;
+    CHECK(d.spot_field[hf] == static_cast<int>(values.size()));
+    values.push_back(d.setup.field_values[hf]);
+    weights.push_back(d.setup.field_weights[hf]);
+  }
+  CHECK(values == std::vector<double>{0.0, 14.0, 20.0});
+  CHECK(weights == std::vector<double>{1.0, 2.0, 1.0});
+  CHECK(d.setup.wavelength_weights == std::vector<double>{1.0, 3.0, 0.5});
+  CHECK(d.setup.aperture_type == ApertureType::kEntrancePupilDiameter);
+  CHECK(describe_design_sampling(lens, sampling).find("(as written)") != std::string::npos);
+  const Lens cooke = shipped("cooke");
+  const DesignSampling p = design_sampling(cooke, sampling);
+  CHECK(p.spot_fields == 11);
+  CHECK(p.setup.field_values.size() == 21);
+  std::vector<double> paper_values;
+  for (std::size_t hf = 0; hf < p.spot_field.size(); ++hf)
+    if (p.spot_field[hf] >= 0) paper_values.push_back(p.setup.field_values[hf]);
+  CHECK(paper_values == field_angles_deg(cooke.specs.half_field_deg, 11));
+  // tolerance: the file's fields, not 5 angles 0..hfov.
+  ToleranceOptions t;
+  t.rings = 3;
+  t.fields = 5;
+  const ToleranceModel model(lens, t);
+  CHECK(model.fields_deg() == std::vector<double>{0.0, 14.0, 20.0});
+  const ToleranceModel paper_model(cooke, t);
+  CHECK(paper_model.fields_deg() == field_angles_deg(cooke.specs.half_field_deg, 5));
 }

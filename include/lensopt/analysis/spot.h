@@ -1,7 +1,17 @@
-// RMS spot sizes (paper Eq. spot_loss), templated on the scalar.
+// RMS spot sizes (paper Eq. spot_loss), templated on the scalar, with the lens's wavelength and
+// field weights as OpticStudio's RMS spot merit applies them.
 //
-// For field h, over all wavelengths w and traced pupil rays p (rays that failed are left out):
-//   ybar_h = mean(y),  S_h = sqrt( mean( (y - ybar_h)^2 + x^2 ) ),  mean spot = mean_h S_h.
+// Definition: the mean RMS spot is the weighted mean over fields of each field's RMS spot radius,
+// which is itself the wavelength-weighted RMS about the wavelength-weighted centroid. With
+// wavelength weights omega_w and field weights phi_h (normalized to their largest, spot_weights),
+// over the traced pupil rays p of field h and wavelength w (failed rays are left out):
+//   M_h    = sum_w omega_w N_hw                                  (N_hw traced rays)
+//   ybar_h = sum_{w,p} omega_w y / M_h,
+//   S_h    = sqrt( sum_{w,p} omega_w ((y - ybar_h)^2 + x^2) / M_h ),
+//   mean spot = sum_h phi_h S_h / sum_h phi_h.
+// Equal weights give the paper's unweighted means (every normalized weight is exactly 1, so the
+// sums are the unweighted ones bit for bit). A lens without weights (the paper's, its YAML) has
+// equal weights; the paper's spec mode samples its own fields, each of weight 1.
 // The x centroid is 0 by symmetry (half pupil, mirrored). To keep precision when the spot is
 // small compared with its height, sums are taken about a reference height y0 (the first traced
 // ray): mean((y - ybar)^2) = mean((y - y0)^2) - (mean(y - y0))^2, exact for any y0.
@@ -39,13 +49,16 @@ struct SpotAccumulator {
   T sum_dy2 = K<T>(0.0);
   T sum_x2 = K<T>(0.0);
   int count = 0;
+  double weight_sum = 0.0;  // M_h: sum of the rays' weights (= count with unit weights)
 
-  void add(const RayBundle<T>& rays) {
+  // The arrived rays of a bundle, each of weight `weight` (the wavelength's omega_w).
+  void add(const RayBundle<T>& rays, double weight = 1.0) {
     for (std::size_t i = 0; i < rays.size(); ++i)
-      if (rays.status[i] == kRayOk) add_ray(rays.x[i], rays.y[i]);
+      if (rays.status[i] == kRayOk) add_ray(rays.x[i], rays.y[i], weight);
   }
-  // One arrived ray at (x, y) mm; the first one becomes the reference y0.
-  void add_ray(const T& x, const T& y) {
+  // One arrived ray at (x, y) mm of weight `weight`; the first one becomes the reference y0.
+  // A weight of exactly 1 takes the unweighted sums (the same bits as without weights).
+  void add_ray(const T& x, const T& y, double weight = 1.0) {
     if (!has_reference) {
       has_reference = true;
       y0 = y;
@@ -54,23 +67,61 @@ struct SpotAccumulator {
       sum_x2 = K<T>(0.0);
     }
     const T dy = y - y0;
-    sum_dy = sum_dy + dy;
-    sum_dy2 = sum_dy2 + dy * dy;
-    sum_x2 = sum_x2 + x * x;
+    if (weight == 1.0) {
+      sum_dy = sum_dy + dy;
+      sum_dy2 = sum_dy2 + dy * dy;
+      sum_x2 = sum_x2 + x * x;
+    } else {
+      const T w = K<T>(weight);
+      sum_dy = sum_dy + w * dy;
+      sum_dy2 = sum_dy2 + w * (dy * dy);
+      sum_x2 = sum_x2 + w * (x * x);
+    }
     ++count;
+    weight_sum += weight;
   }
-  // RMS radius (mm); 0 when no ray arrived.
+  // RMS radius (mm); 0 when no ray arrived (or every arrived ray has weight 0).
   T rms() const {
     using std::sqrt;
-    if (count == 0) return K<T>(0.0);
-    const T inv = K<T>(1.0 / count);
+    if (count == 0 || !(weight_sum > 0.0)) return K<T>(0.0);
+    const T inv = K<T>(1.0 / weight_sum);
     const T mean_dy = sum_dy * inv;
     T var = sum_dy2 * inv - mean_dy * mean_dy + sum_x2 * inv;
     if (!(var > K<T>(0.0))) return K<T>(0.0);
     return sqrt(var);
   }
-  T centroid() const { return count == 0 ? K<T>(0.0) : y0 + sum_dy * K<T>(1.0 / count); }
+  T centroid() const {
+    return count == 0 || !(weight_sum > 0.0) ? K<T>(0.0) : y0 + sum_dy * K<T>(1.0 / weight_sum);
+  }
 };
+
+// The spot average's weights normalized to their largest: `weights` (one per item, >= 0) divided
+// by their maximum, so equal weights are exactly 1. Wrong count, or no positive weight: all 1.
+inline std::vector<double> normalized_spot_weights(const std::vector<double>& weights, int count) {
+  std::vector<double> out(count, 1.0);
+  if (static_cast<int>(weights.size()) != count) return out;
+  double largest = 0.0;
+  for (double v : weights)
+    if (v > largest) largest = v;
+  if (!(largest > 0.0) || !std::isfinite(largest)) return out;
+  for (int i = 0; i < count; ++i) out[i] = weights[i] / largest;
+  return out;
+}
+
+// omega_w (the system's wavelength weights) and phi_h (its field weights), normalized.
+struct SpotWeights {
+  std::vector<double> wavelength;  // W
+  std::vector<double> field;       // F
+  double field_sum = 0.0;          // sum_h phi_h (F with equal weights)
+};
+template <typename T>
+SpotWeights spot_weights(const TraceSystem<T>& sys) {
+  SpotWeights out;
+  out.wavelength = normalized_spot_weights(sys.wavelength_weights, sys.wavelength_count);
+  out.field = normalized_spot_weights(sys.field_weights, static_cast<int>(sys.fields_deg.size()));
+  for (double v : out.field) out.field_sum += v;
+  return out;
+}
 
 namespace detail {
 
@@ -94,12 +145,13 @@ struct ThroughFocusSpot {
   double sum_ds = 0, sum_dyds = 0, sum_ds2 = 0, sum_xsx = 0, sum_sx2 = 0;
 
   int count() const { return spot.count; }
-  void add(const RayBundle<double>& rays) {
+  void add(const RayBundle<double>& rays, double weight = 1.0) {
     std::vector<double> slopes;
-    add(rays, slopes);
+    add(rays, slopes, weight);
   }
-  // The same with a scratch buffer for the slopes (reused across calls, no allocation).
-  void add(const RayBundle<double>& rays, std::vector<double>& slopes) {
+  // The same with a scratch buffer for the slopes (reused across calls, no allocation). Each ray
+  // has weight `weight` (the wavelength's omega_w, as SpotAccumulator; 1: the unweighted sums).
+  void add(const RayBundle<double>& rays, std::vector<double>& slopes, double weight = 1.0) {
     const std::size_t count = rays.size();
     slopes.resize(2 * count);
     double* slope_x = slopes.data();
@@ -110,19 +162,27 @@ struct ThroughFocusSpot {
       const double sy = slope_y[i];
       const double sx = slope_x[i];
       if (!spot.has_reference) sy0 = sy;
-      spot.add_ray(rays.x[i], rays.y[i]);
+      spot.add_ray(rays.x[i], rays.y[i], weight);
       const double dy = rays.y[i] - spot.y0;
       const double ds = sy - sy0;
-      sum_ds += ds;
-      sum_dyds += dy * ds;
-      sum_ds2 += ds * ds;
-      sum_xsx += rays.x[i] * sx;
-      sum_sx2 += sx * sx;
+      if (weight == 1.0) {
+        sum_ds += ds;
+        sum_dyds += dy * ds;
+        sum_ds2 += ds * ds;
+        sum_xsx += rays.x[i] * sx;
+        sum_sx2 += sx * sx;
+      } else {
+        sum_ds += weight * ds;
+        sum_dyds += weight * (dy * ds);
+        sum_ds2 += weight * (ds * ds);
+        sum_xsx += weight * (rays.x[i] * sx);
+        sum_sx2 += weight * (sx * sx);
+      }
     }
   }
   // S^2(tau) (mm^2).
   double variance(double tau) const {
-    const double inv = 1.0 / spot.count;
+    const double inv = 1.0 / spot.weight_sum;
     const double mean_dy = spot.sum_dy * inv;
     const double mean_ds = sum_ds * inv;
     const double a = spot.sum_dy2 * inv - mean_dy * mean_dy + spot.sum_x2 * inv;
@@ -132,16 +192,16 @@ struct ThroughFocusSpot {
   }
   // RMS radius (mm) at shift tau; 0 when no ray arrived.
   double rms(double tau) const {
-    if (spot.count == 0) return 0.0;
+    if (spot.count == 0 || !(spot.weight_sum > 0.0)) return 0.0;
     if (tau == 0.0) return spot.rms();
     const double v = variance(tau);
     return v > 0.0 ? std::sqrt(v) : 0.0;
   }
   // Centroid height (mm) at shift tau: y0 + tau sy0 + mean(dy + tau ds).
   double centroid(double tau) const {
-    if (spot.count == 0) return 0.0;
+    if (spot.count == 0 || !(spot.weight_sum > 0.0)) return 0.0;
     if (tau == 0.0) return spot.centroid();
-    const double inv = 1.0 / spot.count;
+    const double inv = 1.0 / spot.weight_sum;
     return spot.y0 + tau * sy0 + (spot.sum_dy + tau * sum_ds) * inv;
   }
 };
@@ -161,6 +221,7 @@ SpotResult<T> evaluate_spots(const TraceSystem<T>& sys, int threads = 0) {
                                           std::vector<int>(sys.lens.surface_count(), 0));
   out.vignetted_rays.assign(field_count, 0);
   out.vignetted_by_field_surface.assign(field_count, std::vector<int>(sys.lens.surface_count(), 0));
+  const SpotWeights weights = spot_weights(sys);
   const int nthreads = thread_count(threads);
 #pragma omp parallel num_threads(nthreads)
   {
@@ -183,7 +244,7 @@ SpotResult<T> evaluate_spots(const TraceSystem<T>& sys, int threads = 0) {
           ++failed;
           if (rays.failed_surface[i] >= 0) ++failed_at[h][rays.failed_surface[i]];
         }
-        acc.add(rays);
+        acc.add(rays, weights.wavelength[w]);
       }
       out.rms_spot_mm[h] = acc.rms();
       out.centroid_y_mm[h] = acc.centroid();
@@ -193,11 +254,15 @@ SpotResult<T> evaluate_spots(const TraceSystem<T>& sys, int threads = 0) {
   }
   T sum = K<T>(0.0);
   for (int h = 0; h < field_count; ++h) {
-    sum = sum + out.rms_spot_mm[h];
+    if (weights.field[h] == 1.0)
+      sum = sum + out.rms_spot_mm[h];
+    else
+      sum = sum + K<T>(weights.field[h]) * out.rms_spot_mm[h];
     out.total_failed += out.failed_rays[h];
     for (int k = 0; k < sys.lens.surface_count(); ++k) out.failed_by_surface[k] += failed_at[h][k];
   }
-  out.mean_rms_spot_mm = sum / K<T>(field_count);
+  // sum_h phi_h S_h / sum_h phi_h (the sum of the weights is F, exactly, when they are equal).
+  out.mean_rms_spot_mm = weights.field_sum > 0.0 ? sum / K<T>(weights.field_sum) : K<T>(0.0);
   return out;
 }
 

@@ -9,13 +9,17 @@
 //      per field h and wavelength w the ray start x = s_x p_x, y = o_y + s_y p_y, z = z_EP with
 //      s_x = R_EP sx_hw, o_y = R_EP oy_hw, s_y = R_EP sy_hw (system.h's pupil map).
 //   2. Every ray in double: field by field, a forward trace of all wavelengths gives the field's
-//      spot S_h, centroid ybar_h and traced count N_h; then per wavelength a taped forward trace
-//      and the backward pass (trace/adjoint.h) with the seeds of L = (1/F) sum_h S_h:
-//        dL/dY_i = (Y_i - ybar_h) / (F N_h S_h),   dL/dX_i = X_i / (F N_h S_h)
-//      (the centroid's own derivative drops out: sum_i (Y_i - ybar_h) = 0), 0 for failed rays and
-//      for fields with S_h = 0. The backward pass sums the adjoints a_c, a_t, a_mu per surface and
-//      a_sx = sum_i a_x0,i p_x,i, a_oy = sum_i a_y0,i, a_sy = sum_i a_y0,i p_y,i, a_zEP = sum_i
-//      a_z0,i per (field, wavelength). Per-field sums are added in field order (deterministic).
+//      spot S_h, centroid ybar_h and weight sum M_h (analysis/spot.h's weighted definition); then
+//      per wavelength a taped forward trace and the backward pass (trace/adjoint.h) with the
+//      seeds of L = sum_h phi_h S_h / sum_h phi_h (omega_w, phi_h the normalized weights):
+//        dL/dY_i = phi_h omega_w (Y_i - ybar_h) / (Phi M_h S_h),   dL/dX_i = phi_h omega_w X_i /
+//        (...)
+//      (Phi = sum_h phi_h; the centroid's own derivative drops out: sum_i omega_w (Y_i - ybar_h)
+//      = 0), 0 for failed rays and for fields with S_h = 0. The backward pass sums the adjoints
+//      a_c, a_t, a_mu per surface and, with the field's vignetting factors (x0 = s_x (1 - VCX)
+//      p_x, y0 = o_y + s_y (VDY + (1 - VCY) p_y)), a_sx = sum_i a_x0,i (1 - VCX) p_x,i, a_oy =
+//      sum_i a_y0,i, a_sy = sum_i a_y0,i (VDY + (1 - VCY) p_y,i), a_zEP = sum_i a_z0,i per (field,
+//      wavelength). Per-field sums are added in field order (deterministic).
 //   3. Chain rule with the Jets of step 1: dL/dv_j = sum over parameters P of a_P dP/dv_j.
 // Supported: spherical, conic and even-asphere surfaces without clear apertures (the kernel of
 // trace/kernel.h and the profiles of trace/profile.h; the profile's backward step in
@@ -44,9 +48,10 @@ struct SystemAdjoint {
   std::vector<double> asphere;    // K * kAsphereTerms
 
   void reset(int surfaces, int wavelengths, int fields);
-  // Adds the bundle adjoint of field h, wavelength w started from `pupil` samples.
+  // Adds the bundle adjoint of field h, wavelength w started from `pupil` samples under the
+  // field's vignetting factors `v` (start_rays).
   void add_bundle(const BundleAdjoint& bundle, int h, int w, int wavelengths,
-                  const PupilSamples& pupil);
+                  const PupilSamples& pupil, const VignettingFactors& v = VignettingFactors{});
   void add(const SystemAdjoint& other);
 };
 
@@ -84,6 +89,13 @@ TraceSystem<double> system_values(const TraceSystem<J>& in) {
   out.entrance_pupil_z_mm = value_of(in.entrance_pupil_z_mm);
   out.stop_radius_mm = value_of(in.stop_radius_mm);
   out.fields_deg = in.fields_deg;
+  out.field_values = in.field_values;
+  out.field_type = in.field_type;
+  out.field_weights = in.field_weights;
+  out.vignetting = in.vignetting;
+  out.object_distance_mm = in.object_distance_mm;
+  out.field_object_y_mm = in.field_object_y_mm;
+  out.wavelength_weights = in.wavelength_weights;
   out.pupil_maps.resize(in.pupil_maps.size());
   for (std::size_t i = 0; i < in.pupil_maps.size(); ++i) {
     out.pupil_maps[i] = {value_of(in.pupil_maps[i].scale_x), value_of(in.pupil_maps[i].offset_y),

@@ -87,10 +87,18 @@ enum class FieldType { kAngle, kObjectHeight, kParaxialImageHeight, kRealImageHe
 
 // OpticStudio's vignetting factors of one field: the normalized pupil point (px, py) is moved to
 //   px' = VDX + (1 - VCX) px,   py' = VDY + (1 - VCY) py
-// (decentre and compression; the pupil of that field is smaller, so fewer rays are clipped).
+// (decentre and compression; the pupil of that field is smaller, so fewer rays are clipped), and
+// VAN (deg) turns that ellipse about the pupil centre. The factors are in the frame in which the
+// field lies on +y (the .zmx reader turns a field on -y or +-x into it). The tracer applies VDY,
+// VCX and VCY; VDX and VAN, which make the pupil asymmetric in x (lensopt traces half pupils
+// mirrored in x), are kept (TOML, .zmx) but not traced, and the readers warn when they are not 0.
 struct VignettingFactors {
-  double vdx = 0.0, vdy = 0.0, vcx = 0.0, vcy = 0.0;
-  bool any() const { return vdx != 0.0 || vdy != 0.0 || vcx != 0.0 || vcy != 0.0; }
+  double vdx = 0.0, vdy = 0.0, vcx = 0.0, vcy = 0.0, van_deg = 0.0;
+  bool any() const {
+    return vdx != 0.0 || vdy != 0.0 || vcx != 0.0 || vcy != 0.0 || van_deg != 0.0;
+  }
+  // Factors the half-pupil tracer cannot apply (VDX, VAN) are set.
+  bool asymmetric() const { return vdx != 0.0 || van_deg != 0.0; }
 };
 
 // One field point as written: its value (deg for kAngle, mm for the heights), its weight and its

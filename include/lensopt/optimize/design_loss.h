@@ -3,6 +3,8 @@
 //
 // Paper:  l_lens = l_S + l_RP lambda_RP + l_RA lambda_RA + l_GV lambda_GV, with
 //   l_S  = mean_h sqrt(mean_{w,p} (y - ybar_h)^2 + x^2)                         (spot, mm)
+//          (with the lens's wavelength and field weights, analysis/spot.h's weighted mean:
+//          sum_h phi_h S_h / sum_h phi_h, S_h and ybar_h means weighted by omega_w)
 //   l_RP = 1/n_r sum_{k,r} max(dz_min^k - dz_{k,r}, 0) + max(dz_{k,r} - dz_max^k, 0)  (mm)
 //   l_RA = 1/n_r sum_{k,r} max(cos^2 t_max - zeta_{k,r}, 0) + max(cos^2 t_max - zeta'_{k,r}, 0)
 //   l_GV = sum_m ||g_m - g_m*||^2
@@ -49,8 +51,10 @@
 #include <limits>
 #include <vector>
 
+#include "lensopt/analysis/spot.h"
 #include "lensopt/analysis/wavefront.h"
 #include "lensopt/core/threads.h"
+#include "lensopt/optimize/design_sampling.h"
 #include "lensopt/optimize/profile_bounds.h"
 #include "lensopt/optimize/variables.h"
 #include "lensopt/trace/system.h"
@@ -102,6 +106,7 @@ struct DesignLoss {
   T profile = K<T>(0.0);  // l_PB (profile bounds, weight 1)
   T total;                // l_lens with the options' weights
   std::vector<T> field_rms_mm;
+  std::vector<double> field_weights;  // phi_h of the spot fields, normalized (spot.h)
   // The wavefront merit (DesignMerit::kWavefront only, else empty / 0): l_W and W_h (waves).
   T wavefront_waves = K<T>(0.0);
   std::vector<T> field_wavefront_waves;
@@ -195,18 +200,14 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
   const TraceLens<T> lens = param.to_trace_lens(x, mode, fixed_glasses);
   TraceOptions topt = trace_options;
   topt.scale_to_spec = false;  // the forward map gives the spec focal length exactly
-  // The optimizer samples as the paper does (fields 0..hfov, EPD = f / N) in every spec mode.
-  Specs specs = param.structure().specs;
-  specs.mode = SpecMode::kPaper;
-  // Constraint rays run at every one of the paper's fields (at least 21); spot rays at the
-  // sampling's fields, which must be a subset (F - 1 dividing the constraint field count - 1)
-  // or get their own system.
-  TraceOptions constraint_options = topt;
-  constraint_options.fields = constraint_field_count(topt.fields, kConstraintFields);
-  const TraceSystem<T> sys = prepare_system(lens, specs, constraint_options);
+  // The lens's sampling (design_sampling.h): the paper's (fields 0..hfov, EPD = f / N) in its
+  // spec mode, else the lens's own fields, weights, aperture and object. Constraint rays run at
+  // every field of the system (at least 21); spot rays at its spot fields.
+  const Specs& specs = param.structure().specs;
+  const DesignSampling sampled = design_sampling(param.structure(), topt);
+  const TraceSystem<T> sys = prepare_system(lens, sampled.setup, topt);
   const int all_fields = static_cast<int>(sys.fields_deg.size());
-  const int field_stride = topt.fields > 1 ? (all_fields - 1) / (topt.fields - 1) : 1;
-  const int field_count = topt.fields > 1 ? topt.fields : 1;
+  const int field_count = sampled.spot_fields;
   const int wl = sys.wavelength_count;
   const bool wavefront = options.merit == DesignMerit::kWavefront;
   // The half grid: the lens is symmetric about the meridional plane (as the half-pupil spot).
@@ -221,6 +222,21 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
   if (static_cast<int>(specs.wavelength_weights.size()) == wl) omega = specs.wavelength_weights;
   double omega_sum = 0;
   for (double v : omega) omega_sum += v;
+  // The spot's weights (analysis/spot.h): omega_w and phi_h normalized to their largest (all
+  // exactly 1 when equal); phi of the spot fields.
+  const SpotWeights spot_w = spot_weights(sys);
+  double spot_omega_sum = 0.0;
+  for (double v : spot_w.wavelength) spot_omega_sum += v;
+  std::vector<double> phi(field_count, 1.0);
+  for (int hf = 0; hf < all_fields; ++hf)
+    if (sampled.spot_field[hf] >= 0) phi[sampled.spot_field[hf]] = spot_w.field[hf];
+  double phi_sum = 0.0;
+  for (int h = 0; h < field_count; ++h) phi_sum += phi[h];
+  if (!(phi_sum > 0.0)) {  // no spot field with weight: the plain mean
+    phi.assign(field_count, 1.0);
+    phi_sum = field_count;
+  }
+  const bool equal_fields = phi_sum == field_count;
   const PupilSamples edge = pupil_edge_samples(kEdgeRays);
   const double cos2_max = std::pow(std::cos(options.max_ray_angle_deg * kPi / 180.0), 2);
   // Bounds per space: air >= min_air; glass in [min, max]; the last (image) >= clearance.
@@ -263,9 +279,9 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
     std::vector<T> path_soft(k_count), angle_soft(k_count * 2);
 #pragma omp for schedule(dynamic, 1)
     for (int hf = 0; hf < all_fields; ++hf) {
-      // hf: constraint field; every field_stride-th one is also spot field h.
-      const bool spot_field = hf % field_stride == 0;
-      const int h = hf / field_stride;
+      // hf: constraint field; spot field h when sampled.spot_field[hf] = h >= 0.
+      const int h = sampled.spot_field[hf];
+      const bool spot_field = h >= 0;
       ys.assign(static_cast<std::size_t>(wl) * rays, K<T>(0.0));
       xs.assign(static_cast<std::size_t>(wl) * rays, K<T>(0.0));
       ok.assign(static_cast<std::size_t>(wl) * rays, 0);
@@ -321,7 +337,8 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
       };
       if (spot_field && wavefront) {
         // The wavefront merit: the grid rays of every wavelength, against the field's sphere.
-        const double a_h = field_weights ? (*field_weights)[h] : 1.0 / field_count;
+        const double a_h = field_weights ? (*field_weights)[h]
+                                         : (equal_fields ? 1.0 / field_count : phi[h] / phi_sum);
         T* r = residuals ? residuals + static_cast<std::size_t>(h) * spot_block : nullptr;
         field_wave[h] = field_rms_wavefront(
             sys, hf, grid, omega, bundle, record, [&](int w, const Wavefront<T>& wf) {
@@ -368,30 +385,44 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
         }
       }
       if (!spot_field) continue;
-      // Spot of field h about its polychromatic centroid.
+      // Spot of field h about its polychromatic centroid, weighted by omega_w (spot.h; a weight
+      // of exactly 1 takes the unweighted sums).
       int count = 0;
+      double weight_sum = 0.0;
       T y_sum = K<T>(0.0);
       for (std::size_t i = 0; i < ys.size(); ++i)
         if (ok[i]) {
-          y_sum = y_sum + ys[i];
+          const double o = spot_w.wavelength[i / rays];
+          y_sum = o == 1.0 ? y_sum + ys[i] : y_sum + K<T>(o) * ys[i];
           ++count;
+          weight_sum += o;
         }
-      const T y_mean = count > 0 ? y_sum / K<T>(count) : K<T>(0.0);
+      const bool any = count > 0 && weight_sum > 0.0;
+      const T y_mean = any ? y_sum / K<T>(weight_sum) : K<T>(0.0);
       T s2 = K<T>(0.0);
       for (std::size_t i = 0; i < ys.size(); ++i)
         if (ok[i]) {
+          const double o = spot_w.wavelength[i / rays];
           const T dy = ys[i] - y_mean;
-          s2 = s2 + dy * dy + xs[i] * xs[i];
+          s2 = o == 1.0 ? s2 + dy * dy + xs[i] * xs[i] : s2 + K<T>(o) * (dy * dy + xs[i] * xs[i]);
         }
-      field_rms[h] = count > 0 ? detail::safe_norm(s2 / K<T>(count)) : K<T>(0.0);
+      field_rms[h] = any ? detail::safe_norm(s2 / K<T>(weight_sum)) : K<T>(0.0);
       if (residuals && !wavefront) {
-        const double a_h = field_weights ? (*field_weights)[h] : 1.0 / field_count;
-        const T scale =
-            K<T>(std::sqrt(options.weight_spot * a_h / (static_cast<double>(wl) * rays)));
+        const double a_h = field_weights ? (*field_weights)[h]
+                                         : (equal_fields ? 1.0 / field_count : phi[h] / phi_sum);
+        // r = sqrt(w_S a_h omega_w / (sum_w omega_w P)) (y - ybar_h): sum of squares
+        // a_h S_h^2 when no ray fails.
+        const double denominator = spot_omega_sum * rays;
         T* r = residuals + static_cast<std::size_t>(h) * spot_block;
-        for (std::size_t i = 0; i < ys.size(); ++i) {
-          r[2 * i] = ok[i] ? scale * (ys[i] - y_mean) : K<T>(0.0);
-          r[2 * i + 1] = ok[i] ? scale * xs[i] : K<T>(0.0);
+        for (int w = 0; w < wl; ++w) {
+          const double o = spot_w.wavelength[w];
+          const T scale = K<T>(std::sqrt(o == 1.0 ? options.weight_spot * a_h / denominator
+                                                  : options.weight_spot * a_h * o / denominator));
+          for (int p = 0; p < rays; ++p) {
+            const std::size_t i = static_cast<std::size_t>(w) * rays + p;
+            r[2 * i] = ok[i] ? scale * (ys[i] - y_mean) : K<T>(0.0);
+            r[2 * i + 1] = ok[i] ? scale * xs[i] : K<T>(0.0);
+          }
         }
       }
     }
@@ -419,16 +450,19 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
   T spot = K<T>(0.0), path = K<T>(0.0), angle = K<T>(0.0);
   int failed_total = 0;
   T wave = K<T>(0.0);
-  for (int h = 0; h < field_count; ++h) spot = spot + field_rms[h];
-  for (const T& v : field_wave) wave = wave + v;
-  wave = wave / K<T>(field_count);
-  const T merit = wavefront ? wave : spot / K<T>(field_count);
+  // sum_h phi_h S_h / sum_h phi_h (spot.h; the plain mean with equal weights).
+  for (int h = 0; h < field_count; ++h)
+    spot = phi[h] == 1.0 ? spot + field_rms[h] : spot + K<T>(phi[h]) * field_rms[h];
+  for (int h = 0; h < static_cast<int>(field_wave.size()); ++h)
+    wave = phi[h] == 1.0 ? wave + field_wave[h] : wave + K<T>(phi[h]) * field_wave[h];
+  wave = wave / K<T>(phi_sum);
+  const T merit = wavefront ? wave : spot / K<T>(phi_sum);
   for (int hf = 0; hf < all_fields; ++hf) {
     path = path + path_linear[hf];
     angle = angle + angle_linear[hf];
     failed_total += failed[hf];
   }
-  spot = spot / K<T>(field_count);
+  spot = spot / K<T>(phi_sum);
   path = path / K<T>(n_r);
   angle = angle / K<T>(n_r);
   if (extremes) {
@@ -454,6 +488,7 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
                   K<T>(options.weight_profile) * profile;
     loss->profile = profile;
     loss->field_rms_mm = field_rms;
+    loss->field_weights = phi;
     loss->merit = options.merit;
     loss->wavefront_waves = wave;
     loss->field_wavefront_waves = field_wave;

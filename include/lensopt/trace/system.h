@@ -92,6 +92,8 @@ struct TraceSystem {
   // Aimed pupils, [field * (W + 1) + w]; w = W is the reference wavelength (587.6 nm).
   std::vector<PupilMap<T>> pupil_maps;
   int wavelength_count = 0;  // W: the spec wavelengths (the reference one is extra)
+  // The spec wavelengths' weights as written (W values), or empty: equal weights.
+  std::vector<double> wavelength_weights;
 
   const PupilMap<T>& pupil_map(int h, int w) const {
     return pupil_maps[static_cast<std::size_t>(h) * (wavelength_count + 1) + w];
@@ -205,6 +207,7 @@ struct SystemSetup {
   std::vector<double> field_values;  // deg or mm, as the type says
   std::vector<double> field_weights;
   std::vector<VignettingFactors> vignetting;  // per field, or empty
+  std::vector<double> wavelength_weights;     // per spec wavelength, or empty: equal
 };
 
 // The paper's setup: scale to f, EPD = f / N, `field_count` angles from 0 to hfov.
@@ -261,6 +264,8 @@ TraceSystem<T> prepare_system(const TraceLens<T>& lens_in, const SystemSetup& se
   if (value_of(sys.epd_mm) < 0.0) sys.epd_mm = -sys.epd_mm;
   const T r_ep = sys.epd_mm / K<T>(2.0);
   sys.wavelength_count = reference_w;
+  if (static_cast<int>(setup.wavelength_weights.size()) == reference_w)
+    sys.wavelength_weights = setup.wavelength_weights;
   sys.pupil = paper_pupil_samples(options.rings);
 
   // Fields: every written value as the chief-ray angle in object space (and, for a finite
