@@ -79,7 +79,7 @@ bool read_image_size(const std::filesystem::path& path, int& width, int& height)
 // Writes `image` to `path` (format from the extension) atomically, with the pixel type and
 // metadata of `like` (the input's spec); a default spec writes 8-bit for PNG/JPEG, 16-bit for
 // TIFF and half for EXR. A PNG is 8-bit for an 8-bit type and 16-bit for any other, and is
-// compressed for speed (zlib level 2; LENSOPT_PNG_LEVEL=9 for the smallest files,
+// compressed for speed (zlib level 3; LENSOPT_PNG_LEVEL=9 for the smallest files,
 // src/core/png_io.h). Throws Error naming the path.
 void write_image(const std::filesystem::path& path, const FloatImage& image,
                  const ImageFileSpec& like = ImageFileSpec());
