@@ -142,8 +142,10 @@ bool render_text(float* pixels, int width, int height, int channels, int x, int 
                  const std::string& text, int size_px, const std::string& font, const float* colour,
                  bool align_right) {
   OIIO::ImageBuf buf(OIIO::ImageSpec(width, height, channels, OIIO::TypeDesc::FLOAT), pixels);
-  const bool ok = iba::render_text(buf, x, y, text, size_px, font, {colour, static_cast<OIIO::span<const float>::size_type>(channels)},
-                                   align_right ? iba::TextAlignX::Right : iba::TextAlignX::Left);
+  const bool ok =
+      iba::render_text(buf, x, y, text, size_px, font,
+                       {colour, static_cast<OIIO::span<const float>::size_type>(channels)},
+                       align_right ? iba::TextAlignX::Right : iba::TextAlignX::Left);
   if (!ok) buf.geterror();  // clear
   return ok;
 }
