@@ -1,7 +1,6 @@
 // The output layer (include/lensopt/core/atomic_file.h).
 #include "lensopt/core/atomic_file.h"
 
-#include <OpenImageIO/imageio.h>
 #include <fcntl.h>
 #include <fmt/format.h>
 #include <signal.h>
@@ -18,6 +17,8 @@
 #include <sstream>
 #include <vector>
 
+#include "core/image_plugin.h"
+#include "core/png_io.h"
 #include "lensopt/core/error.h"
 #include "lensopt/core/output_checks.h"
 #include "lensopt/core/text.h"
@@ -68,27 +69,21 @@ bool is_image_path(const fs::path& path) {
          ext == ".exr";
 }
 
+// A PNG through libpng; the other formats through the OpenImageIO module (which wrote them).
 void verify_image(const fs::path& temp, const fs::path& target) {
-  auto first_line = [](std::string m) {
-    const std::size_t end = m.find('\n');
-    if (end != std::string::npos) m.resize(end);
-    return m.empty() ? std::string("unknown error") : m;
-  };
-  auto in = OIIO::ImageInput::open(temp.string());
-  if (!in)
-    fail(target, fmt::format("the written image does not decode ({}); is the disk full?",
-                             first_line(OIIO::geterror())));
-  const OIIO::ImageSpec spec = in->spec();
-  std::vector<unsigned char> row(static_cast<std::size_t>(std::max(spec.width, 1)) *
-                                 std::max(spec.nchannels, 1) * 4);
-  bool ok = spec.width > 0 && spec.height > 0;
-  // Scanline by scanline: a whole large image need not be held twice.
-  for (int y = spec.y; ok && y < spec.y + spec.height; ++y)
-    ok = in->read_scanline(y, 0, OIIO::TypeDesc::UINT8, row.data());
-  const std::string error = ok ? std::string() : first_line(in->geterror());
-  in->close();
+  std::string error;
+  bool ok = false;
+  if (is_png_path(temp)) {
+    ok = verify_png(temp, error);
+  } else {
+    const ImagePlugin& plugin = image_plugin(fmt::format("{}: cannot check the written {} file",
+                                                         target.string(), lower_extension(temp)));
+    ok = plugin.verify(temp.string(), error);
+  }
   if (!ok)
-    fail(target, fmt::format("the written image is incomplete ({}); is the disk full?", error));
+    fail(target, fmt::format("the written image is incomplete or does not decode ({}); is the "
+                             "disk full?",
+                             error));
 }
 
 fs::path folder_of(const fs::path& path) {

@@ -1,14 +1,13 @@
 // The SVG canvas backend and helpers shared by both backends.
 #include "lensopt/plot/canvas.h"
 
-#include <OpenImageIO/filesystem.h>
-#include <OpenImageIO/imageio.h>
 #include <fmt/format.h>
 
 #include <algorithm>
 #include <cctype>
 #include <cmath>
 
+#include "core/png_io.h"
 #include "lensopt/core/atomic_file.h"
 #include "lensopt/core/error.h"
 
@@ -70,21 +69,9 @@ std::unique_ptr<Canvas> make_canvas(const std::filesystem::path& path, double wi
 
 std::string encode_png(const RgbImage& image) {
   std::vector<unsigned char> bytes;
-  OIIO::Filesystem::IOVecOutput proxy(bytes);
-  auto out = OIIO::ImageOutput::create("png");
-  if (!out) throw Error("OpenImageIO has no PNG writer");
-  OIIO::ImageSpec spec(image.width, image.height, 3, OIIO::TypeDesc::UINT8);
-  if (!out->set_ioproxy(&proxy) || !out->open("memory.png", spec))
-    throw Error(fmt::format("cannot encode a PNG in memory: {}", out->geterror()));
-  std::vector<unsigned char> row8(static_cast<std::size_t>(image.width) * 3);
-  for (int y = 0; y < image.height; ++y) {
-    const float* row = image.at(0, y);
-    for (std::size_t i = 0; i < row8.size(); ++i)
-      row8[i] = static_cast<unsigned char>(std::lround(255.f * std::clamp(row[i], 0.f, 1.f)));
-    if (!out->write_scanline(y, 0, OIIO::TypeDesc::UINT8, row8.data()))
-      throw Error(fmt::format("cannot encode a PNG in memory: {}", out->geterror()));
-  }
-  out->close();
+  std::string error;
+  if (!encode_png_bytes(image.width, image.height, 3, 8, image.pixels.data(), bytes, error))
+    throw Error(fmt::format("cannot encode a PNG in memory: {}", error));
   return std::string(bytes.begin(), bytes.end());
 }
 

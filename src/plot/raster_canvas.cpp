@@ -1,18 +1,19 @@
-// The raster canvas backend: OpenImageIO's ImageBufAlgo draws at `supersample` times the page
-// size into an RGBA buffer (colours premultiplied, composited "over"); save() box-filters it
-// down to the page size, which anti-aliases every edge, and writes an RGB PNG.
+// The raster canvas backend: OpenImageIO's ImageBufAlgo (in the module liblensopt_oiio.so, behind
+// core/image_plugin.h's RasterSurface) draws at `supersample` times the page size into an RGBA
+// buffer (colours premultiplied, composited "over"); save() box-filters it down to the page size,
+// which anti-aliases every edge, and writes an RGB PNG through libpng.
 //   lines      render_line for hairlines; wider strokes as filled quads
 //   polygons   even-odd scanline spans, each span one render_box
 //   text       render_text (DejaVu Sans); vertical text is rendered apart, turned with
 //              rotate270 and composited with over()
-#include <OpenImageIO/imagebuf.h>
-#include <OpenImageIO/imagebufalgo.h>
 #include <fmt/format.h>
 
 #include <algorithm>
 #include <cmath>
 #include <sstream>
 
+#include "core/image_plugin.h"
+#include "core/png_io.h"
 #include "lensopt/core/atomic_file.h"
 #include "lensopt/core/constants.h"
 #include "lensopt/core/error.h"
@@ -21,7 +22,10 @@
 namespace lensopt::plot {
 namespace {
 
-namespace iba = OIIO::ImageBufAlgo;
+// The OpenImageIO module, loaded when the first raster canvas is made.
+const ImagePlugin& oiio() {
+  return image_plugin("drawing a PNG plot (lines and text through OpenImageIO)");
+}
 
 constexpr const char* kFontRegular = "DejaVuSans";
 constexpr const char* kFontBold = "DejaVuSans-Bold";
@@ -97,15 +101,15 @@ std::vector<std::vector<Point>> dashed_pieces(const std::vector<Point>& points,
 
 // Fills a polygon (pixel coordinates of dst): pixels whose centres are inside (even-odd), one
 // render_box per span.
-void fill_polygon(OIIO::ImageBuf& dst, const std::vector<Point>& pts, const float rgba[4]) {
+void fill_polygon(RasterSurface& dst, const std::vector<Point>& pts, const float rgba[4]) {
   if (pts.size() < 3) return;
   double y_lo = pts[0].y, y_hi = pts[0].y;
   for (const Point& p : pts) {
     y_lo = std::min(y_lo, p.y);
     y_hi = std::max(y_hi, p.y);
   }
-  const int H = dst.spec().height;
-  const int W = dst.spec().width;
+  const int H = dst.height();
+  const int W = dst.width();
   const int row_begin = std::max(0, static_cast<int>(std::floor(y_lo - 0.5)));
   const int row_end = std::min(H - 1, static_cast<int>(std::ceil(y_hi + 0.5)));
   std::vector<double> xs;
@@ -122,17 +126,16 @@ void fill_polygon(OIIO::ImageBuf& dst, const std::vector<Point>& pts, const floa
     for (std::size_t k = 0; k + 1 < xs.size(); k += 2) {
       const int x0 = std::max(0, static_cast<int>(std::ceil(xs[k] - 0.5)));
       const int x1 = std::min(W - 1, static_cast<int>(std::floor(xs[k + 1] - 0.5)));
-      if (x1 >= x0) iba::render_box(dst, x0, j, x1, j, {rgba, 4}, true, OIIO::ROI(), 1);
+      if (x1 >= x0) dst.box(x0, j, x1, j, rgba);
     }
   }
 }
 
 // One straight stroke of width w (pixels of dst): a hairline below 1.75 px, else a quad.
-void stroke_segment(OIIO::ImageBuf& dst, Point a, Point b, double w, const float rgba[4]) {
+void stroke_segment(RasterSurface& dst, Point a, Point b, double w, const float rgba[4]) {
   if (w < 1.75) {
-    iba::render_line(dst, static_cast<int>(std::floor(a.x)), static_cast<int>(std::floor(a.y)),
-                     static_cast<int>(std::floor(b.x)), static_cast<int>(std::floor(b.y)),
-                     {rgba, 4}, false, OIIO::ROI(), 1);
+    dst.line(static_cast<int>(std::floor(a.x)), static_cast<int>(std::floor(a.y)),
+             static_cast<int>(std::floor(b.x)), static_cast<int>(std::floor(b.y)), rgba);
     return;
   }
   const double len = std::hypot(b.x - a.x, b.y - a.y);
@@ -175,10 +178,10 @@ std::vector<TextPiece> split_text(const std::string& utf8) {
 // Advance (px) of an ASCII run: measured with a sentinel so trailing spaces count.
 double ascii_advance(const std::string& text, int size, const char* font) {
   if (text.empty()) return 0;
-  const OIIO::ROI with = iba::text_size(text + "|", size, font);
-  const OIIO::ROI bar = iba::text_size("|", size, font);
-  if (!with.defined() || !bar.defined()) return 0;
-  return with.xend - bar.xend;
+  int with[4], bar[4];
+  if (!oiio().text_size(text + "|", size, font, with) || !oiio().text_size("|", size, font, bar))
+    return 0;
+  return with[1] - bar[1];
 }
 
 double symbol_advance(char32_t symbol, int size, const char* font) {
@@ -204,15 +207,14 @@ double text_advance(const std::vector<TextPiece>& pieces, int size, const char* 
 }
 
 // Draws pieces left-aligned with the baseline at (x, y) into dst.
-void draw_pieces(OIIO::ImageBuf& dst, double x, double y, const std::vector<TextPiece>& pieces,
+void draw_pieces(RasterSurface& dst, double x, double y, const std::vector<TextPiece>& pieces,
                  int size, const char* font, const float rgba[4]) {
   const double em = size;
   const double stroke = std::max(1.0, 0.085 * em);
   for (const TextPiece& p : pieces) {
     if (!p.symbol) {
-      iba::render_text(dst, static_cast<int>(std::lround(x)), static_cast<int>(std::lround(y)),
-                       p.ascii, size, font, {rgba, 4}, iba::TextAlignX::Left,
-                       iba::TextAlignY::Baseline, 0, OIIO::ROI(), 1);
+      dst.text(static_cast<int>(std::lround(x)), static_cast<int>(std::lround(y)), p.ascii, size,
+               font, rgba);
       x += ascii_advance(p.ascii, size, font);
       continue;
     }
@@ -228,11 +230,10 @@ void draw_pieces(OIIO::ImageBuf& dst, double x, double y, const std::vector<Text
         break;
       }
       case U'\u00b5': {  // "u" with a descender on its left stem
-        iba::render_text(dst, static_cast<int>(std::lround(x)), static_cast<int>(std::lround(y)),
-                         "u", size, font, {rgba, 4}, iba::TextAlignX::Left,
-                         iba::TextAlignY::Baseline, 0, OIIO::ROI(), 1);
-        const OIIO::ROI u = iba::text_size("u", size, font);
-        const double left = x + (u.defined() ? u.xbegin : 0.09 * em);
+        dst.text(static_cast<int>(std::lround(x)), static_cast<int>(std::lround(y)), "u", size,
+                 font, rgba);
+        int u[4];
+        const double left = x + (oiio().text_size("u", size, font, u) ? u[0] : 0.09 * em);
         fill_polygon(dst,
                      {{left, y - 0.2 * em},
                       {left + stroke * 1.05, y - 0.2 * em},
@@ -253,9 +254,8 @@ void draw_pieces(OIIO::ImageBuf& dst, double x, double y, const std::vector<Text
                        rgba);
         break;
       default:
-        iba::render_text(dst, static_cast<int>(std::lround(x)), static_cast<int>(std::lround(y)),
-                         "?", size, font, {rgba, 4}, iba::TextAlignX::Left,
-                         iba::TextAlignY::Baseline, 0, OIIO::ROI(), 1);
+        dst.text(static_cast<int>(std::lround(x)), static_cast<int>(std::lround(y)), "?", size,
+                 font, rgba);
     }
     x += symbol_advance(p.symbol, size, font);
   }
@@ -267,7 +267,8 @@ struct RasterCanvas::Impl {
   int ss = 2;
   int width_px = 0;
   int height_px = 0;
-  OIIO::ImageBuf buf;
+  std::unique_ptr<RasterSurface> surface;
+  RasterSurface& buf() { return *surface; }
   bool font_ok = true;
   bool bold_ok = true;
   std::vector<std::string> warnings;
@@ -285,13 +286,13 @@ struct RasterCanvas::Impl {
     const double w = std::max(1.0, s(style.stroke_width));
     for (const auto& piece : dashed_pieces(pts, parse_dash(style.dash, ss))) {
       for (std::size_t i = 0; i + 1 < piece.size(); ++i) {
-        stroke_segment(buf, piece[i], piece[i + 1], w, rgba);
+        stroke_segment(buf(), piece[i], piece[i + 1], w, rgba);
         // Square joins keep wide polylines free of notches.
         if (w >= 3 && i > 0 && style.opacity >= 1.0) {
           const int r = static_cast<int>(w / 2 - 0.5);
           const int x = static_cast<int>(std::floor(piece[i].x));
           const int y = static_cast<int>(std::floor(piece[i].y));
-          iba::render_box(buf, x - r, y - r, x + r, y + r, {rgba, 4}, true, OIIO::ROI(), 1);
+          buf().box(x - r, y - r, x + r, y + r, rgba);
         }
       }
     }
@@ -311,7 +312,7 @@ struct RasterCanvas::Impl {
                          : style.anchor == Anchor::kMiddle ? advance / 2
                                                            : advance;
     if (!style.vertical) {
-      draw_pieces(buf, p.x - shift, p.y, pieces, size, font, rgba);
+      draw_pieces(buf(), p.x - shift, p.y, pieces, size, font, rgba);
       return;
     }
     // Vertical: draw horizontally into a transparent buffer, turn it 90 degrees
@@ -321,27 +322,16 @@ struct RasterCanvas::Impl {
     const int descent = static_cast<int>(std::ceil(0.3 * size));
     const int tw = static_cast<int>(std::ceil(advance)) + 2 * pad;
     const int th = ascent + descent + 2 * pad;
-    OIIO::ImageBuf flat(OIIO::ImageSpec(tw, th, 4, OIIO::TypeDesc::UINT8));
-    iba::zero(flat);
+    std::unique_ptr<RasterSurface> flat = oiio().make_surface(tw, th);
+    const float clear[4] = {0.f, 0.f, 0.f, 0.f};
+    flat->fill(clear);
     const int base_u = pad, base_v = pad + ascent;
-    draw_pieces(flat, base_u, base_v, pieces, size, font, rgba);
-    OIIO::ImageBuf turned = iba::rotate270(flat);
+    draw_pieces(*flat, base_u, base_v, pieces, size, font, rgba);
     // (u, v) of the flat buffer lands on (v, tw - 1 - u) of the turned one.
     const double u_anchor = base_u + shift;
     const int x0 = static_cast<int>(std::lround(p.x - base_v));
     const int y0 = static_cast<int>(std::lround(p.y - (tw - 1 - u_anchor)));
-    turned.specmod().x = x0;
-    turned.specmod().y = y0;
-    turned.specmod().full_x = x0;
-    turned.specmod().full_y = y0;
-    OIIO::ROI region = OIIO::roi_intersection(turned.roi(), buf.roi());
-    if (!region.defined() || region.npixels() == 0) return;
-    OIIO::ImageBuf composite;
-    if (!iba::over(composite, turned, buf, region, 1)) return;
-    // paste() offsets by the source's own origin: move the composite to (0, 0) first.
-    composite.specmod().x = composite.specmod().y = 0;
-    composite.specmod().full_x = composite.specmod().full_y = 0;
-    iba::paste(buf, region.xbegin, region.ybegin, 0, 0, composite, OIIO::ROI(), 1);
+    buf().over_rotated270(*flat, x0, y0);
   }
 };
 
@@ -350,16 +340,16 @@ RasterCanvas::RasterCanvas(double width, double height, int supersample)
   impl_->ss = std::max(1, supersample);
   impl_->width_px = std::max(1, static_cast<int>(std::lround(width)));
   impl_->height_px = std::max(1, static_cast<int>(std::lround(height)));
-  impl_->buf.reset(OIIO::ImageSpec(impl_->width_px * impl_->ss, impl_->height_px * impl_->ss, 4,
-                                   OIIO::TypeDesc::UINT8));
+  impl_->surface = oiio().make_surface(impl_->width_px * impl_->ss, impl_->height_px * impl_->ss);
   const float white[4] = {1.f, 1.f, 1.f, 1.f};
-  iba::fill(impl_->buf, {white, 4});
-  if (!iba::text_size("M", 12, kFontRegular).defined()) {
+  impl_->buf().fill(white);
+  int box[4];
+  if (!oiio().text_size("M", 12, kFontRegular, box)) {
     impl_->font_ok = false;
     impl_->warnings.push_back(
         "OpenImageIO found no DejaVu Sans font (install fonts-dejavu-core): PNG text left out");
   }
-  if (impl_->font_ok && !iba::text_size("M", 12, kFontBold).defined()) impl_->bold_ok = false;
+  if (impl_->font_ok && !oiio().text_size("M", 12, kFontBold, box)) impl_->bold_ok = false;
 }
 
 RasterCanvas::~RasterCanvas() = default;
@@ -374,7 +364,7 @@ void RasterCanvas::draw_polygon(const std::vector<Point>& points, const Style& s
     std::vector<Point> pts;
     pts.reserve(points.size());
     for (const Point& p : points) pts.push_back(impl_->s(p));
-    fill_polygon(impl_->buf, pts, rgba);
+    fill_polygon(impl_->buf(), pts, rgba);
   }
   impl_->stroke(points, style, true);
 }
@@ -406,7 +396,7 @@ void RasterCanvas::draw_dots(const std::vector<Point>& centres, double radius,
     const Point p = impl_->s(c);
     const int x = static_cast<int>(std::lround(p.x - 0.5 * d));
     const int y = static_cast<int>(std::lround(p.y - 0.5 * d));
-    iba::render_box(impl_->buf, x, y, x + d - 1, y + d - 1, {rgba, 4}, true, OIIO::ROI(), 1);
+    impl_->buf().box(x, y, x + d - 1, y + d - 1, rgba);
   }
 }
 
@@ -417,46 +407,27 @@ void RasterCanvas::draw_text(Point at, const std::string& content, const TextSty
 void RasterCanvas::draw_image(Point corner, double width, double height, const RgbImage& image,
                               bool pixelated) {
   if (image.width <= 0 || image.height <= 0) return;
-  OIIO::ImageBuf src(OIIO::ImageSpec(image.width, image.height, 3, OIIO::TypeDesc::FLOAT),
-                     const_cast<float*>(image.pixels.data()));
   const int x0 = static_cast<int>(std::lround(impl_->s(corner.x)));
   const int y0 = static_cast<int>(std::lround(impl_->s(corner.y)));
   const int w = std::max(1, static_cast<int>(std::lround(impl_->s(width))));
   const int h = std::max(1, static_cast<int>(std::lround(impl_->s(height))));
-  OIIO::ImageBuf scaled;
-  const OIIO::ROI target(0, w, 0, h, 0, 1, 0, 3);
-  const bool ok = pixelated ? iba::resample(scaled, src, false, target, 1)
-                            : iba::resize(scaled, src, "", 0, target, 1);
-  if (!ok) return;
-  // Opaque alpha, then paste.
-  const int order[4] = {0, 1, 2, -1};
-  const float fill[4] = {0.f, 0.f, 0.f, 1.f};
-  OIIO::ImageBuf rgba = iba::channels(scaled, 4, {order, 4}, {fill, 4});
-  iba::paste(impl_->buf, x0, y0, 0, 0, rgba, OIIO::ROI(), 1);
+  impl_->buf().paste_rgb(image.pixels.data(), image.width, image.height, x0, y0, w, h, pixelated);
 }
 
 RgbImage RasterCanvas::final_image() const {
   const int w = impl_->width_px, h = impl_->height_px;
-  OIIO::ImageBuf small;
-  const OIIO::ROI target(0, w, 0, h, 0, 1, 0, 4);
-  if (impl_->ss == 1)
-    small.copy(impl_->buf);
-  else
-    iba::resize(small, impl_->buf, "box", 1.0f, target);
   RgbImage out(w, h);
-  small.get_pixels(OIIO::ROI(0, w, 0, h, 0, 1, 0, 3), OIIO::TypeDesc::FLOAT, out.pixels.data());
+  out.pixels = impl_->surface->downsample_rgb(w, h);
   return out;
 }
 
 void RasterCanvas::save(const std::filesystem::path& path) const {
   const RgbImage page = final_image();
-  OIIO::ImageBuf out(OIIO::ImageSpec(page.width, page.height, 3, OIIO::TypeDesc::UINT8));
-  out.set_pixels(OIIO::ROI(0, page.width, 0, page.height, 0, 1, 0, 3), OIIO::TypeDesc::FLOAT,
-                 page.pixels.data());
   write_file_atomic_with(path, [&](const std::filesystem::path& temp) {
-    if (!out.write(temp.string(), OIIO::TypeDesc::UINT8, "png"))
+    std::string error;
+    if (!write_png(temp, page.width, page.height, 3, 8, page.pixels.data(), error))
       throw Error(SourceLocation{path.string(), 0, 0},
-                  fmt::format("cannot write the PNG: {}", out.geterror()));
+                  fmt::format("cannot write the PNG: {}", error));
   });
 }
 

@@ -1,13 +1,12 @@
 #include "lensopt/render/chart.h"
 
-#include <OpenImageIO/imagebuf.h>
-#include <OpenImageIO/imagebufalgo.h>
 #include <fmt/format.h>
 
 #include <array>
 #include <cmath>
 #include <vector>
 
+#include "core/image_plugin.h"
 #include "lensopt/core/constants.h"
 #include "lensopt/core/error.h"
 
@@ -119,22 +118,25 @@ Chart make_test_chart(const ChartOptions& options) {
     chart.note = "text disabled";
     return chart;
   }
-  // Labels through OpenImageIO's text rendering (FreeType with a system font).
-  OIIO::ImageBuf buf(OIIO::ImageSpec(options.width, options.height, 3, OIIO::TypeDesc::FLOAT),
-                     chart.image.pixels.data());
+  // Labels through OpenImageIO's text rendering (FreeType with a system font), in the module
+  // liblensopt_oiio.so (core/image_plugin.h).
+  const ImagePlugin& oiio = image_plugin(
+      "the chart's labels (text through OpenImageIO; --no-text "
+      "draws the chart without them)");
   const int size = std::max(10, std::min(options.width, options.height) / 30);
   const float ink[3] = {0.05f, 0.05f, 0.05f};
   const std::string title = fmt::format("lensopt test chart {}x{}", options.width, options.height);
+  float* pixels = chart.image.pixels.data();
   bool ok = false;
   for (const char* font : {"DejaVuSans", "DejaVu Sans", ""}) {
-    ok = OIIO::ImageBufAlgo::render_text(buf, size / 2, size + size / 2, title, size, font, ink);
+    ok = oiio.render_text(pixels, options.width, options.height, 3, size / 2, size + size / 2,
+                          title, size, font, ink, false);
     if (ok) break;
-    buf.geterror();  // clear
   }
   if (ok) {
-    OIIO::ImageBufAlgo::render_text(buf, options.width - size / 2, options.height - size / 2,
-                                    "0123456789 ABCDEFGH abcdefgh", size, "DejaVuSans", ink,
-                                    OIIO::ImageBufAlgo::TextAlignX::Right);
+    oiio.render_text(pixels, options.width, options.height, 3, options.width - size / 2,
+                     options.height - size / 2, "0123456789 ABCDEFGH abcdefgh", size, "DejaVuSans",
+                     ink, true);
     chart.text_drawn = true;
   } else {
     chart.note = "no font found for OpenImageIO's text rendering: the chart has no text";

@@ -1,6 +1,5 @@
 #include "lensopt/render/dataset.h"
 
-#include <OpenImageIO/imageio.h>
 #include <fcntl.h>
 #include <fmt/format.h>
 #include <fmt/ranges.h>
@@ -256,15 +255,8 @@ PreviousMetrics load_previous(const fs::path& dir) {
 bool output_is_complete(const fs::path& output, const PreviousRecord& record) {
   std::error_code ec;
   if (!fs::is_regular_file(output, ec) || fs::file_size(output, ec) == 0 || ec) return false;
-  auto in = OIIO::ImageInput::open(output.string());
-  if (!in) {
-    (void)OIIO::geterror();
-    return false;
-  }
-  const OIIO::ImageSpec& spec = in->spec();
-  const bool ok = spec.width == record.width && spec.height == record.height;
-  in->close();
-  return ok;
+  int width = 0, height = 0;
+  return read_image_size(output, width, height) && width == record.width && height == record.height;
 }
 
 // The PSFs the model holds (ImagingModel::psf_kind): {"kind": "geometric"}; with diffraction

@@ -1,13 +1,12 @@
 #include "lensopt/render/export.h"
 
-#include <OpenImageIO/imagebuf.h>
-#include <OpenImageIO/imagebufalgo.h>
 #include <fmt/format.h>
 
 #include <algorithm>
 #include <cmath>
 #include <nlohmann/json.hpp>
 
+#include "core/image_plugin.h"
 #include "lensopt/core/atomic_file.h"
 #include "lensopt/core/error.h"
 
@@ -23,12 +22,11 @@ float view_value(float v, float peak) {
 
 // Draws a label; false if no font could be found.
 bool label(FloatImage& img, int x, int y, const std::string& text, int size) {
-  OIIO::ImageBuf buf(OIIO::ImageSpec(img.width, img.height, img.channels, OIIO::TypeDesc::FLOAT),
-                     img.pixels.data());
-  const float white[3] = {0.9f, 0.9f, 0.9f};
-  const bool ok = OIIO::ImageBufAlgo::render_text(buf, x, y, text, size, "DejaVuSans", white);
-  if (!ok) buf.geterror();
-  return ok;
+  const float white[4] = {0.9f, 0.9f, 0.9f, 0.9f};
+  if (img.channels < 1 || img.channels > 4) return false;
+  return image_plugin("the PSF sheet's labels (text through OpenImageIO)")
+      .render_text(img.pixels.data(), img.width, img.height, img.channels, x, y, text, size,
+                   "DejaVuSans", white, false);
 }
 
 // psf/field_NN.exr (the field PSFs, G x G, RGB) and psf_sheet.png (peak-normalized, gamma 1/2.2,

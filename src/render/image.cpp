@@ -1,54 +1,62 @@
 #include "lensopt/render/image.h"
 
-#include <OpenImageIO/imageio.h>
 #include <fmt/format.h>
 
 #include <algorithm>
 #include <cctype>
+#include <cmath>
 #include <system_error>
 
+#include "core/image_plugin.h"
+#include "core/png_io.h"
 #include "lensopt/core/atomic_file.h"
 #include "lensopt/core/error.h"
 #include "lensopt/core/text.h"
 
 namespace lensopt {
+
+// The pixel type to write and, for a file OpenImageIO read, its spec (metadata).
+struct ImageFileSpec::Impl {
+  StoredPixelType type = StoredPixelType::kUint8;
+  OpaqueImageSpec oiio;  // null for a PNG or a bare pixel type
+};
+
 namespace {
 
-// The first line of an OpenImageIO message (some readers add a second, redundant line).
-std::string first_line(std::string message) {
-  const std::size_t end = message.find('\n');
-  if (end != std::string::npos) message.resize(end);
-  while (!message.empty() && (message.back() == ' ' || message.back() == '.')) message.pop_back();
-  return message.empty() ? std::string("unknown error") : message;
+StoredPixelType default_pixel_type(const std::string& format) {
+  if (format == "EXR") return StoredPixelType::kHalf;
+  if (format == "TIFF") return StoredPixelType::kUint16;
+  return StoredPixelType::kUint8;
 }
 
-OIIO::TypeDesc default_pixel_type(const std::string& format) {
-  if (format == "EXR") return OIIO::TypeDesc::HALF;
-  if (format == "TIFF") return OIIO::TypeDesc::UINT16;
-  return OIIO::TypeDesc::UINT8;
+// libpng stores 8 or 16 bits: 8-bit stays 8-bit, anything deeper is written as 16-bit.
+int png_bits(StoredPixelType type) {
+  return type == StoredPixelType::kUint8 ? 8 : 16;
 }
 
-void write_with_oiio(const std::filesystem::path& target, const std::filesystem::path& temp,
-                     const FloatImage& image, OIIO::ImageSpec spec) {
-  auto out = OIIO::ImageOutput::create(temp.string());
-  if (!out) {
+void write_through_plugin(const std::filesystem::path& target, const std::filesystem::path& temp,
+                          const FloatImage& image, const EncodeRequest& request,
+                          const std::string& format) {
+  const ImagePlugin& plugin =
+      image_plugin(fmt::format("{}: cannot write a {} file", target.string(), format));
+  EncodeRequest r = request;
+  r.width = image.width;
+  r.height = image.height;
+  r.channels = image.channels;
+  r.pixels = image.pixels.data();
+  std::string error;
+  if (!plugin.write(temp.string(), r, error))
+    throw Error(SourceLocation{target.string()}, fmt::format("cannot write: {}", error));
+}
+
+void write_png_file(const std::filesystem::path& target, const std::filesystem::path& temp,
+                    const FloatImage& image, int bits) {
+  if (image.channels < 1 || image.channels > 4)
     throw Error(SourceLocation{target.string()},
-                fmt::format("cannot write: no image writer for this format ({})",
-                            first_line(OIIO::geterror())));
-  }
-  if (!out->open(temp.string(), spec)) {
-    throw Error(SourceLocation{target.string()},
-                fmt::format("cannot write: {}", first_line(out->geterror())));
-  }
-  if (!out->write_image(OIIO::TypeDesc::FLOAT, image.pixels.data())) {
-    const std::string message = first_line(out->geterror());
-    out->close();
-    throw Error(SourceLocation{target.string()}, fmt::format("cannot write: {}", message));
-  }
-  if (!out->close()) {
-    throw Error(SourceLocation{target.string()},
-                fmt::format("cannot write: {}", first_line(out->geterror())));
-  }
+                fmt::format("cannot write: a PNG holds 1 to 4 channels, not {}", image.channels));
+  std::string error;
+  if (!write_png(temp, image.width, image.height, image.channels, bits, image.pixels.data(), error))
+    throw Error(SourceLocation{target.string()}, fmt::format("cannot write: {}", error));
 }
 
 }  // namespace
@@ -72,32 +80,12 @@ std::string image_format_name(const std::filesystem::path& path) {
   return "";
 }
 
-struct ImageFileSpec::Impl {
-  OIIO::ImageSpec spec;
-};
-
 ImageFileSpec::ImageFileSpec() = default;
 ImageFileSpec::ImageFileSpec(std::shared_ptr<const Impl> impl) : impl_(std::move(impl)) {}
 
 ImageFileSpec image_file_spec(ImagePixelType type) {
-  OIIO::TypeDesc desc = OIIO::TypeDesc::UINT8;
-  switch (type) {
-    case ImagePixelType::kUint8:
-      desc = OIIO::TypeDesc::UINT8;
-      break;
-    case ImagePixelType::kUint16:
-      desc = OIIO::TypeDesc::UINT16;
-      break;
-    case ImagePixelType::kHalf:
-      desc = OIIO::TypeDesc::HALF;
-      break;
-    case ImagePixelType::kFloat:
-      desc = OIIO::TypeDesc::FLOAT;
-      break;
-  }
-  // The size is a placeholder: write_image takes width, height and channels from the image.
   return ImageFileSpec(std::make_shared<const ImageFileSpec::Impl>(
-      ImageFileSpec::Impl{OIIO::ImageSpec(1, 1, 3, desc)}));
+      ImageFileSpec::Impl{static_cast<StoredPixelType>(static_cast<int>(type)), nullptr}));
 }
 
 LoadedImage read_image(const std::filesystem::path& path) {
@@ -115,34 +103,63 @@ LoadedImage read_image(const std::filesystem::path& path) {
   if (ec) throw Error(where, fmt::format("cannot read image: {}", ec.message()));
   if (size == 0) throw Error(where, "cannot read image: the file is empty");
 
-  auto in = OIIO::ImageInput::open(path.string());
-  if (!in) {
-    throw Error(where, fmt::format("cannot read image (corrupt or not a {} file): {}",
-                                   image_format_name(path), first_line(OIIO::geterror())));
-  }
+  const std::string format = image_format_name(path);
   LoadedImage loaded;
-  auto file_spec = std::make_shared<ImageFileSpec::Impl>(ImageFileSpec::Impl{in->spec()});
-  const OIIO::ImageSpec& spec = file_spec->spec;
-  if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0 || spec.depth > 1) {
-    in->close();
-    throw Error(where, fmt::format("cannot render a {} x {} x {} image with {} channels",
-                                   spec.width, spec.height, spec.depth, spec.nchannels));
-  }
   FloatImage& image = loaded.image;
-  image = FloatImage(spec.width, spec.height, spec.nchannels);
-  if (!in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT, image.pixels.data())) {
-    const std::string message = first_line(in->geterror());
-    in->close();
-    throw Error(where, fmt::format("cannot read image (corrupt or truncated): {}", message));
+  auto file_spec = std::make_shared<ImageFileSpec::Impl>();
+  if (format == "PNG") {
+    PngPixels png;
+    std::string error;
+    if (!read_png(path, png, error))
+      throw Error(where, fmt::format("cannot read image (corrupt or not a PNG file): {}", error));
+    if (png.width <= 0 || png.height <= 0 || png.channels <= 0)
+      throw Error(where, fmt::format("cannot render a {} x {} x 1 image with {} channels",
+                                     png.width, png.height, png.channels));
+    image.width = png.width;
+    image.height = png.height;
+    image.channels = png.channels;
+    image.pixels = std::move(png.pixels);
+    file_spec->type = png.bit_depth == 16 ? StoredPixelType::kUint16 : StoredPixelType::kUint8;
+  } else {
+    const ImagePlugin& plugin =
+        image_plugin(fmt::format("{}: cannot read a {} file", path.string(), format));
+    DecodedImage decoded;
+    std::string error;
+    if (!plugin.read(path.string(), decoded, error)) {
+      const bool opened = decoded.width > 0 || decoded.channels > 0;
+      throw Error(where, opened ? fmt::format("cannot read image (corrupt or truncated): {}", error)
+                                : fmt::format("cannot read image (corrupt or not a {} file): {}",
+                                              format, error));
+    }
+    if (decoded.width <= 0 || decoded.height <= 0 || decoded.channels <= 0 || decoded.depth > 1)
+      throw Error(where,
+                  fmt::format("cannot render a {} x {} x {} image with {} channels", decoded.width,
+                              decoded.height, decoded.depth, decoded.channels));
+    image.width = decoded.width;
+    image.height = decoded.height;
+    image.channels = decoded.channels;
+    image.pixels = std::move(decoded.pixels);
+    file_spec->type = decoded.stored;
+    file_spec->oiio = std::move(decoded.spec);
   }
-  in->close();
   // A reader may leave a truncated file's tail undefined: no NaN goes further.
   for (float& v : image.pixels)
     if (!std::isfinite(v)) v = 0.0f;
-  // The spec describes the file as it will be written back: drop the reader's bookkeeping.
-  file_spec->spec.erase_attribute("oiio:SubImages");
   loaded.spec = ImageFileSpec(std::move(file_spec));
   return loaded;
+}
+
+bool read_image_size(const std::filesystem::path& path, int& width, int& height) {
+  if (image_format_name(path) == "PNG") {
+    PngPixels header;
+    std::string error;
+    if (!read_png_header(path, header, error)) return false;
+    width = header.width;
+    height = header.height;
+    return true;
+  }
+  if (!image_plugin_available()) return false;
+  return image_plugin("").read_size(path.string(), width, height);
 }
 
 void write_image(const std::filesystem::path& path, const FloatImage& image,
@@ -153,19 +170,19 @@ void write_image(const std::filesystem::path& path, const FloatImage& image,
                 fmt::format("cannot write: unsupported image format '{}' (PNG, JPEG, TIFF, EXR)",
                             path.extension().string()));
   }
-  OIIO::ImageSpec spec = like.empty() ? OIIO::ImageSpec(image.width, image.height, image.channels,
-                                                        default_pixel_type(format))
-                                      : like.impl()->spec;
-  spec.width = spec.full_width = image.width;
-  spec.height = spec.full_height = image.height;
-  spec.x = spec.y = spec.full_x = spec.full_y = 0;
-  if (spec.nchannels != image.channels) {
-    spec.nchannels = image.channels;
-    spec.default_channel_names();
-    spec.channelformats.clear();
+  const StoredPixelType type = like.empty() ? default_pixel_type(format) : like.impl()->type;
+  if (format == "PNG") {
+    write_file_atomic_with(path, [&](const std::filesystem::path& temp) {
+      write_png_file(path, temp, image, png_bits(type));
+    });
+    return;
   }
-  write_file_atomic_with(
-      path, [&](const std::filesystem::path& temp) { write_with_oiio(path, temp, image, spec); });
+  EncodeRequest request;
+  request.stored = type;
+  request.spec = like.empty() ? nullptr : like.impl()->oiio.get();
+  write_file_atomic_with(path, [&](const std::filesystem::path& temp) {
+    write_through_plugin(path, temp, image, request, format);
+  });
 }
 
 void write_float_image(const std::filesystem::path& path, const FloatImage& image,
@@ -174,11 +191,14 @@ void write_float_image(const std::filesystem::path& path, const FloatImage& imag
   if (format != "EXR" && format != "TIFF") {
     throw Error(SourceLocation{path.string()}, "float images are written as EXR or TIFF");
   }
-  OIIO::ImageSpec spec(image.width, image.height, image.channels, OIIO::TypeDesc::FLOAT);
-  if (image.channels == 1) spec.channelnames = {"Y"};
-  if (static_cast<int>(channel_names.size()) == image.channels) spec.channelnames = channel_names;
-  write_file_atomic_with(
-      path, [&](const std::filesystem::path& temp) { write_with_oiio(path, temp, image, spec); });
+  EncodeRequest request;
+  request.stored = StoredPixelType::kFloat;
+  if (image.channels == 1) request.channel_names = {"Y"};
+  if (static_cast<int>(channel_names.size()) == image.channels)
+    request.channel_names = channel_names;
+  write_file_atomic_with(path, [&](const std::filesystem::path& temp) {
+    write_through_plugin(path, temp, image, request, format);
+  });
 }
 
 }  // namespace lensopt

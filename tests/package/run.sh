@@ -57,4 +57,17 @@ if [ -f "$build/liblensopt_torch.so" ]; then
   grep -q "file=$module .*dynamically loaded" "$tmp/joint.txt" ||
     fail "the installed lensopt loaded another module: $(grep 'liblensopt_torch' "$tmp/joint.txt" | head -n 3)"
 fi
+# The OpenImageIO module (when built): installed in <libdir>/lensopt; the installed lensopt loads
+# that copy for an EXR, and links neither OpenImageIO nor the module.
+if [ -f "$build/liblensopt_oiio.so" ]; then
+  module=$(find "$tmp/prefix" -name liblensopt_oiio.so | head -n 1)
+  [ -n "$module" ] || fail "liblensopt_oiio.so was not installed"
+  if ldd "$tmp/prefix/bin/lensopt" | grep -qi "OpenImageIO"; then
+    fail "the installed lensopt links OpenImageIO"
+  fi
+  LD_DEBUG=files "$tmp/prefix/bin/lensopt" chart -o "$tmp/chart.exr" --size 64x48 --no-text \
+    > /dev/null 2> "$tmp/oiio.txt" || fail "the installed lensopt could not write an EXR: $(grep -v '^ *[0-9]*:' "$tmp/oiio.txt" | tail -n 3)"
+  grep -q "file=$module .*dynamically loaded" "$tmp/oiio.txt" ||
+    fail "the installed lensopt loaded another OpenImageIO module: $(grep 'liblensopt_oiio' "$tmp/oiio.txt" | head -n 3)"
+fi
 echo "package: find_package(lensopt) from $tmp/prefix: built and ran (EFL $efl_mm mm)"

@@ -3,7 +3,8 @@
 // Coordinates are pixels of the output page, x to the right and y down (the SVG convention);
 // a plot maps its data into a panel with plot::Axes (axes.h). Two backends:
 //   SvgCanvas     the project's SvgDocument (vector output, .svg);
-//   RasterCanvas  an OpenImageIO ImageBuf (.png): lines, boxes and text through ImageBufAlgo,
+//   RasterCanvas  an OpenImageIO ImageBuf (.png; in the module liblensopt_oiio.so, loaded when
+//                 the first one is made): lines, boxes and text through ImageBufAlgo,
 //                 drawn at `supersample` times the page size and box-filtered down, which
 //                 anti-aliases edges. Filled polygons are filled span by span with render_box.
 // Colours are CSS hex strings "#rrggbb" (or "none"); text uses DejaVu Sans (fonts-dejavu-core).
@@ -164,7 +165,7 @@ OutputFormat output_format_for(const std::filesystem::path& path);
 // A canvas of the format `path` asks for.
 std::unique_ptr<Canvas> make_canvas(const std::filesystem::path& path, double width, double height);
 
-// PNG bytes of an RGB image (8 bit), through OpenImageIO.
+// PNG bytes of an RGB image (8 bit), through libpng.
 std::string encode_png(const RgbImage& image);
 
 // "#rrggbb" -> r, g, b in [0, 1]; false for "none" or anything unparsable.

@@ -1,4 +1,7 @@
-// Float images in memory and their files (through OpenImageIO).
+// Float images in memory and their files: PNG through libpng in the process; JPEG, TIFF and EXR
+// through OpenImageIO, in the module liblensopt_oiio.so loaded on first use
+// (src/core/image_plugin.h: a process that touches only PNG files never maps OpenImageIO and starts
+// in a few milliseconds).
 //
 // Pixel values are the file's values converted to float (integer formats scaled to [0, 1]); they
 // are used as they are, proportional to scene luminance as the paper assumes (no sRGB decoding).
@@ -32,9 +35,10 @@ struct FloatImage {
   bool empty() const { return pixels.empty(); }
 };
 
-// How an image file stores its pixels: the pixel type and the file's metadata (OpenImageIO's
-// ImageSpec, kept opaque so that OpenImageIO stays out of lensopt's public headers). An empty
-// spec stands for the format's default (see write_image).
+// How an image file stores its pixels: the pixel type and, for a file OpenImageIO read, the file's
+// metadata (OpenImageIO's ImageSpec, kept opaque so that OpenImageIO stays out of lensopt's public
+// headers and process). A PNG keeps its bit depth only. An empty spec stands for the format's
+// default (see write_image).
 class ImageFileSpec {
  public:
   struct Impl;  // defined in render/image.cpp
@@ -68,9 +72,15 @@ std::string image_format_name(const std::filesystem::path& path);
 // missing, unreadable, empty or corrupt file, an unsupported format or a zero-sized image.
 LoadedImage read_image(const std::filesystem::path& path);
 
+// Width and height from the file's header; false if it does not open as an image (or its format
+// needs OpenImageIO and the module cannot be loaded).
+bool read_image_size(const std::filesystem::path& path, int& width, int& height);
+
 // Writes `image` to `path` (format from the extension) atomically, with the pixel type and
 // metadata of `like` (the input's spec); a default spec writes 8-bit for PNG/JPEG, 16-bit for
-// TIFF and half for EXR. Throws Error naming the path.
+// TIFF and half for EXR. A PNG is 8-bit for an 8-bit type and 16-bit for any other, and is
+// compressed for speed (zlib level 3; LENSOPT_PNG_LEVEL=9 for the smallest files,
+// src/core/png_io.h). Throws Error naming the path.
 void write_image(const std::filesystem::path& path, const FloatImage& image,
                  const ImageFileSpec& like = ImageFileSpec());
 
