@@ -772,10 +772,9 @@ class LensOptimization {
     if (dense.sampling.fields == options_.sampling.fields) return;  // nothing new to trace
     std::vector<double> x = x_;
     DesignLossOptions loss = loss_;
-    const DesignLoss<double> l =
-        run_phase(param_, x, GlassMode::kFixed, fixed_, frozen_all_, dense, loss,
-                  "feasibility at every constraint field", options_.max_rounds,
-                  options_.max_iterations, counters_);
+    const DesignLoss<double> l = run_phase(param_, x, GlassMode::kFixed, fixed_, frozen_all_, dense,
+                                           loss, "feasibility at every constraint field",
+                                           options_.max_rounds, options_.max_iterations, counters_);
     const bool ok = check_constraints(result_lens(x), options_.loss, full_.trace).all_pass();
     result_.log.push_back(fmt::format(
         "feasibility at all {} constraint fields: {} ({} the full-sampling constraint check)",
