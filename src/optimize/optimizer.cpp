@@ -764,34 +764,43 @@ class LensOptimization {
   // the wavefront merit: 60.54 deg against 60), a design feasible at the optimization sampling
   // fails the full check. Then LM runs again (strict penalties, the weights carried over) with
   // merit rays at every constraint field, and its design is kept if it passes the full check.
-  void restore_feasibility() {
-    if (soft_ || interrupted()) return;
-    if (check_constraints(result_lens(x_), options_.loss, full_.trace).all_pass()) return;
+  // Returns the full-sampling constraint check of the lens kept in x_.
+  ConstraintReport restore_feasibility() {
+    ConstraintReport report = check_constraints(result_lens(x_), options_.loss, full_.trace);
+    if (soft_ || interrupted() || report.all_pass()) return report;
     OptimizeOptions dense = options_;
     dense.sampling.fields = constraint_field_count(options_.sampling.fields, kConstraintFields);
-    if (dense.sampling.fields == options_.sampling.fields) return;  // nothing new to trace
+    // Nothing new to trace when the spot fields are already every constraint field (or are the
+    // lens's own written fields, which the sampling's field count does not change).
+    const Lens& structure = param_.structure();
+    if (design_sampling(structure, dense.sampling).spot_fields ==
+        design_sampling(structure, options_.sampling).spot_fields)
+      return report;
     std::vector<double> x = x_;
     DesignLossOptions loss = loss_;
     const DesignLoss<double> l = run_phase(param_, x, GlassMode::kFixed, fixed_, frozen_all_, dense,
                                            loss, "feasibility at every constraint field",
                                            options_.max_rounds, options_.max_iterations, counters_);
-    const bool ok = check_constraints(result_lens(x), options_.loss, full_.trace).all_pass();
+    ConstraintReport dense_report = check_constraints(result_lens(x), options_.loss, full_.trace);
+    const bool ok = dense_report.all_pass();
     result_.log.push_back(fmt::format(
         "feasibility at all {} constraint fields: {} ({} the full-sampling constraint check)",
         dense.sampling.fields, merit_text(l), ok ? "passes" : "still fails"));
-    if (ok) x_ = x;
+    if (!ok) return report;
+    x_ = x;
+    return dense_report;
   }
 
   // The result at full sampling, never behind the start, and the counters.
   void finish() {
-    restore_feasibility();
+    ConstraintReport final_constraints = restore_feasibility();
     result_.lens = result_lens(x_);
     const AnalysisReport final_report = analyze_lens(result_.lens, full_);
     result_.final_spot_um =
         final_report.mean_rms_spot_um.value_or(std::numeric_limits<double>::infinity());
     for (const FieldReport& f : final_report.fields)
       result_.final_field_spot_um.push_back(f.rms_spot_um.value_or(0.0));
-    result_.final_constraints = check_constraints(result_.lens, options_.loss, full_.trace);
+    result_.final_constraints = std::move(final_constraints);
     if (wavefront_) result_.final_wavefront_waves = full_wavefront_waves(result_.lens, full_.trace);
     // Never return a worse lens than the start: designs are ordered by (every constraint met at
     // full sampling, then the merit at full sampling: mean spot, or mean RMS wavefront); a start
