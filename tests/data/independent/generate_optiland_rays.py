@@ -22,15 +22,17 @@ What it does, per lens:
   fields by angle;
 - records, at each wavelength, optiland's paraxial EFL (f2), back focal point from the image
   surface (F2), EPL, EPD, XPL, computed with that wavelength as optiland's primary; and the
-  image-plane (x, y) of the chief ray and of the marginal rays (Px, Py) = (0, 1), (0, -1),
-  (1, 0) at every written field, traced with optiland's trace_generic at that wavelength while
+  image-plane (x, y) of the chief ray, the marginal rays (Px, Py) = (0, 1), (0, -1), (1, 0)
+  and the zonal rays (0, 0.5), (0, -0.5), (0.5, 0) at every written field (a ray that misses a
+  surface in optiland, a NaN, is recorded as not traced), traced with optiland's trace_generic at that wavelength while
   the optic's primary is the file's primary (so every ray goes through the paraxial entrance
   pupil of the primary wavelength: optiland does not aim rays).
   Vignetting factors of the file are not applied (pupil coordinates are those of the paraxial
-  entrance pupil); a FLOA aperture's EPD is found with optiland's paraxial marginal ray (EPD =
-  stop semi-diameter / marginal height at the stop for EPD = 1); even-asphere intersections use
-  optiland's iteration with tol 1e-14 mm and up to 1000 steps (its surface factory's default
-  tol is 1e-6 mm).
+  entrance pupil), nor its clear apertures (DIAM); a FLOA aperture's EPD is found with
+  optiland's paraxial marginal ray (EPD = stop semi-diameter / marginal height at the stop for
+  EPD = 1); even-asphere intersections use optiland's iteration with tol 1e-14 mm and up to
+  1000 steps (its surface factory's default tol is 1e-6 mm). A file without GCAT uses SCHOTT
+  (OpticStudio's default catalog).
 
 Usage:
   generate_optiland_rays.py --optiland /tmp/optiland-src --repo . \
@@ -59,7 +61,10 @@ LENSES = [
     ("double_gauss_100", "lenses/zmx/double_gauss_100.zmx", []),
 ]
 
-PUPIL_POINTS = [[0.0, 0.0], [0.0, 1.0], [0.0, -1.0], [1.0, 0.0]]  # (Px, Py): chief, marginals
+# (Px, Py): the chief ray, the marginal rays, and zonal rays at half the pupil radius (the
+# marginal rays of a very fast lens may miss a surface: recorded as not traced).
+PUPIL_POINTS = [[0.0, 0.0], [0.0, 1.0], [0.0, -1.0], [1.0, 0.0], [0.0, 0.5], [0.0, -0.5],
+                [0.5, 0.0]]
 
 ASPHERE_TOL_MM = 1e-14
 ASPHERE_MAX_ITER = 1000
@@ -299,14 +304,17 @@ def run_lens(optiland, repo, name, rel_path, extra_um):
             for px, py in PUPIL_POINTS:
                 rays = optic.trace_generic(Hx=0.0, Hy=hy, Px=np.array([px]), Py=np.array([py]),
                                            wavelength=w)
+                x, y, z = float(rays.x[0]), float(rays.y[0]), float(rays.z[0])
+                traced = all(math.isfinite(v) for v in (x, y, z))
                 out["rays"].append({
                     "wavelength_um": w,
                     "field_deg": field,
                     "px": px,
                     "py": py,
-                    "x": float(rays.x[0]),
-                    "y": float(rays.y[0]),
-                    "z": float(rays.z[0]),
+                    "traced": traced,
+                    "x": x if traced else None,
+                    "y": y if traced else None,
+                    "z": z if traced else None,
                 })
     return out
 
@@ -367,8 +375,8 @@ def main():
                         "with that wavelength as optiland's primary; BFL = F2 + last thickness",
             "rays": "optiland's trace_generic, no ray aiming: collimated at the field angle, "
                     "through (Px EPD/2, Py EPD/2) on the paraxial entrance pupil plane z = EPL "
-                    "of the primary wavelength; the file's vignetting factors are not applied; "
-                    "(x, y) on the image surface",
+                    "of the primary wavelength; the file's vignetting factors and clear "
+                    "apertures (DIAM) are not applied; (x, y) on the image surface",
             "even_asphere": f"optiland's intersection iteration with tol {ASPHERE_TOL_MM} mm, "
                             f"max_iter {ASPHERE_MAX_ITER}",
             "floa": "EPD = stop semi-diameter / optiland's paraxial marginal-ray height at the "
