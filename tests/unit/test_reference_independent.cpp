@@ -574,7 +574,7 @@ TEST_CASE("independent: optiland run on real .zmx files, first order and real ra
   const nlohmann::json doc = read_json(independent_dir() / "optiland_run_rays.json");
   const double bound = doc.at("relative_bound").get<double>();
   int lenses = 0, paraxial_values = 0, intercepts = 0, missed = 0;
-  double worst_paraxial = 0.0, worst_ray = 0.0;
+  double worst_paraxial = 0.0, worst_ray = 0.0, worst_direction = 0.0;
   for (const nlohmann::json& ref : doc.at("lenses")) {
     const std::string name = ref.at("name").get<std::string>();
     CAPTURE(name);
@@ -651,7 +651,7 @@ TEST_CASE("independent: optiland run on real .zmx files, first order and real ra
     // Image intercepts of the chief ray, the marginal rays (Px, Py) = (0, +-1), (1, 0) and the
     // zonal rays (0, +-0.5), (0.5, 0) at each field and wavelength, relative to the EFL at the
     // primary wavelength.
-    double lens_ray = 0.0;
+    double lens_ray = 0.0, lens_direction = 0.0;
     for (const nlohmann::json& r : ref.at("rays")) {
       const double nm = r.at("wavelength_um").get<double>() * 1000.0;
       const double field = r.at("field_deg").get<double>();
@@ -685,20 +685,28 @@ TEST_CASE("independent: optiland run on real .zmx files, first order and real ra
       CAPTURE(r.at("y").get<double>());
       CHECK(d <= bound);
       lens_ray = std::max(lens_ray, d);
+      // Direction cosines in image space (dimensionless).
+      const double dd = std::max({std::abs(rays.l[0] - r.at("L").get<double>()),
+                                  std::abs(rays.m[0] - r.at("M").get<double>()),
+                                  std::abs(rays.n[0] - r.at("N").get<double>())});
+      CHECK(dd <= bound);
+      lens_direction = std::max(lens_direction, dd);
       ++intercepts;
     }
     MESSAGE(
         fmt::format("{}: paraxial (EFL, BFL, EPL, XPL, EPD) within {:.2e} relative, image "
-                    "intercepts within {:.2e} x EFL ({} wavelengths, {} fields)",
-                    name, lens_paraxial, lens_ray, ref.at("wavelengths_um").size(),
+                    "intercepts within {:.2e} x EFL, directions within {:.2e} ({} "
+                    "wavelengths, {} fields)",
+                    name, lens_paraxial, lens_ray, lens_direction, ref.at("wavelengths_um").size(),
                     ref.at("fields_deg").size()));
     worst_paraxial = std::max(worst_paraxial, lens_paraxial);
     worst_ray = std::max(worst_ray, lens_ray);
+    worst_direction = std::max(worst_direction, lens_direction);
     ++lenses;
   }
-  MESSAGE(
-      fmt::format("{} lenses: {} paraxial values within {:.2e}, {} intercepts within {:.2e} "
-                  "x EFL; {} rays that miss a surface in both",
-                  lenses, paraxial_values, worst_paraxial, intercepts, worst_ray, missed));
+  MESSAGE(fmt::format(
+      "{} lenses: {} paraxial values within {:.2e}, {} rays: intercepts within "
+      "{:.2e} x EFL, directions within {:.2e}; {} rays that miss a surface in both",
+      lenses, paraxial_values, worst_paraxial, intercepts, worst_ray, worst_direction, missed));
   CHECK(lenses == static_cast<int>(doc.at("lenses").size()));
 }

@@ -23,8 +23,9 @@ What it does, per lens:
 - records, at each wavelength, optiland's paraxial EFL (f2), back focal point from the image
   surface (F2), EPL, EPD, XPL, computed with that wavelength as optiland's primary; and the
   image-plane (x, y) of the chief ray, the marginal rays (Px, Py) = (0, 1), (0, -1), (1, 0)
-  and the zonal rays (0, 0.5), (0, -0.5), (0.5, 0) at every written field (a ray that misses a
-  surface in optiland, a NaN, is recorded as not traced), traced with optiland's trace_generic at that wavelength while
+  and the zonal rays (0, 0.5), (0, -0.5), (0.5, 0) at every written field, with their
+  direction cosines (L, M, N) in image space (a ray that misses a surface in optiland, a NaN,
+  is recorded as not traced), traced with optiland's trace_generic at that wavelength while
   the optic's primary is the file's primary (so every ray goes through the paraxial entrance
   pupil of the primary wavelength: optiland does not aim rays).
   Vignetting factors of the file are not applied (pupil coordinates are those of the paraxial
@@ -315,6 +316,9 @@ def run_lens(optiland, repo, name, rel_path, extra_um):
                     "x": x if traced else None,
                     "y": y if traced else None,
                     "z": z if traced else None,
+                    "L": float(rays.L[0]) if traced else None,
+                    "M": float(rays.M[0]) if traced else None,
+                    "N": float(rays.N[0]) if traced else None,
                 })
     return out
 
@@ -376,7 +380,8 @@ def main():
             "rays": "optiland's trace_generic, no ray aiming: collimated at the field angle, "
                     "through (Px EPD/2, Py EPD/2) on the paraxial entrance pupil plane z = EPL "
                     "of the primary wavelength; the file's vignetting factors and clear "
-                    "apertures (DIAM) are not applied; (x, y) on the image surface",
+                    "apertures (DIAM) are not applied; (x, y) on the image surface, (L, M, N) "
+                    "the direction cosines after it",
             "even_asphere": f"optiland's intersection iteration with tol {ASPHERE_TOL_MM} mm, "
                             f"max_iter {ASPHERE_MAX_ITER}",
             "floa": "EPD = stop semi-diameter / optiland's paraxial marginal-ray height at the "
