@@ -573,8 +573,8 @@ TEST_CASE("independent: optiland run on real .zmx files, first order and real ra
   // given them.
   const nlohmann::json doc = read_json(independent_dir() / "optiland_run_rays.json");
   const double bound = doc.at("relative_bound").get<double>();
-  int lenses = 0, paraxial_values = 0, intercepts = 0, missed = 0;
-  double worst_paraxial = 0.0, worst_ray = 0.0, worst_direction = 0.0;
+  int lenses = 0, paraxial_values = 0, intercepts = 0, missed = 0, surface_points = 0;
+  double worst_paraxial = 0.0, worst_ray = 0.0, worst_direction = 0.0, worst_surfaces = 0.0;
   for (const nlohmann::json& ref : doc.at("lenses")) {
     const std::string name = ref.at("name").get<std::string>();
     CAPTURE(name);
@@ -651,7 +651,7 @@ TEST_CASE("independent: optiland run on real .zmx files, first order and real ra
     // Image intercepts of the chief ray, the marginal rays (Px, Py) = (0, +-1), (1, 0) and the
     // zonal rays (0, +-0.5), (0.5, 0) at each field and wavelength, relative to the EFL at the
     // primary wavelength.
-    double lens_ray = 0.0, lens_direction = 0.0;
+    double lens_ray = 0.0, lens_direction = 0.0, lens_surfaces = 0.0;
     for (const nlohmann::json& r : ref.at("rays")) {
       const double nm = r.at("wavelength_um").get<double>() * 1000.0;
       const double field = r.at("field_deg").get<double>();
@@ -691,22 +691,46 @@ TEST_CASE("independent: optiland run on real .zmx files, first order and real ra
                                   std::abs(rays.n[0] - r.at("N").get<double>())});
       CHECK(dd <= bound);
       lens_direction = std::max(lens_direction, dd);
+      if (r.contains("surfaces_xy")) {
+        // (x, y) on every surface of the file: lensopt's surface k + inserted, where a stop on a
+        // curved surface became a flat stop surface before it (inserted from there on).
+        const nlohmann::json& xy = r.at("surfaces_xy");
+        const bool stop_inserted = tl.surface_count() == static_cast<int>(xy.size()) + 1;
+        REQUIRE((stop_inserted || tl.surface_count() == static_cast<int>(xy.size())));
+        for (int j = 0; j < static_cast<int>(xy.size()); ++j) {
+          const int k = j + (stop_inserted && j >= tl.stop ? 1 : 0);
+          RayBundle<double> at;
+          start_rays(sys, h, w, at, &pupil);
+          trace_bundle(tl, w, k + 1, false, at, static_cast<RayRecord<double>*>(nullptr));
+          CAPTURE(k);
+          REQUIRE(at.status[0] == kRayOk);
+          const double ds = std::max(std::abs(at.x[0] - xy.at(j).at(0).get<double>()),
+                                     std::abs(at.y[0] - xy.at(j).at(1).get<double>())) /
+                            efl_primary;
+          CHECK(ds <= bound);
+          lens_surfaces = std::max(lens_surfaces, ds);
+          ++surface_points;
+        }
+      }
       ++intercepts;
     }
     MESSAGE(
-        fmt::format("{}: paraxial (EFL, BFL, EPL, XPL, EPD) within {:.2e} relative, image "
-                    "intercepts within {:.2e} x EFL, directions within {:.2e} ({} "
-                    "wavelengths, {} fields)",
-                    name, lens_paraxial, lens_ray, lens_direction, ref.at("wavelengths_um").size(),
-                    ref.at("fields_deg").size()));
+        fmt::format("{}: paraxial (EFL, BFL, EPL, XPL, EPD) within {:.2e} relative; image "
+                    "intercepts within {:.2e} x EFL, directions within {:.2e}; on the "
+                    "surfaces within {:.2e} x EFL ({} wavelengths, {} fields)",
+                    name, lens_paraxial, lens_ray, lens_direction, lens_surfaces,
+                    ref.at("wavelengths_um").size(), ref.at("fields_deg").size()));
     worst_paraxial = std::max(worst_paraxial, lens_paraxial);
     worst_ray = std::max(worst_ray, lens_ray);
     worst_direction = std::max(worst_direction, lens_direction);
+    worst_surfaces = std::max(worst_surfaces, lens_surfaces);
     ++lenses;
   }
-  MESSAGE(fmt::format(
-      "{} lenses: {} paraxial values within {:.2e}, {} rays: intercepts within "
-      "{:.2e} x EFL, directions within {:.2e}; {} rays that miss a surface in both",
-      lenses, paraxial_values, worst_paraxial, intercepts, worst_ray, worst_direction, missed));
+  MESSAGE(
+      fmt::format("{} lenses: {} paraxial values within {:.2e}; {} rays: image intercepts "
+                  "within {:.2e} x EFL, directions within {:.2e}; {} points on the surfaces "
+                  "within {:.2e} x EFL; {} rays that miss a surface in both",
+                  lenses, paraxial_values, worst_paraxial, intercepts, worst_ray, worst_direction,
+                  surface_points, worst_surfaces, missed));
   CHECK(lenses == static_cast<int>(doc.at("lenses").size()));
 }

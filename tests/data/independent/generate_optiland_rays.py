@@ -24,8 +24,9 @@ What it does, per lens:
   surface (F2), EPL, EPD, XPL, computed with that wavelength as optiland's primary; and the
   image-plane (x, y) of the chief ray, the marginal rays (Px, Py) = (0, 1), (0, -1), (1, 0)
   and the zonal rays (0, 0.5), (0, -0.5), (0.5, 0) at every written field, with their
-  direction cosines (L, M, N) in image space (a ray that misses a surface in optiland, a NaN,
-  is recorded as not traced), traced with optiland's trace_generic at that wavelength while
+  direction cosines (L, M, N) in image space and, for the chief and marginal rays at the
+  primary wavelength, their (x, y) on every lens surface (a ray that misses a surface in
+  optiland, a NaN, is recorded as not traced), traced with optiland's trace_generic at that wavelength while
   the optic's primary is the file's primary (so every ray goes through the paraxial entrance
   pupil of the primary wavelength: optiland does not aim rays).
   Vignetting factors of the file are not applied (pupil coordinates are those of the paraxial
@@ -307,6 +308,13 @@ def run_lens(optiland, repo, name, rel_path, extra_um):
                                            wavelength=w)
                 x, y, z = float(rays.x[0]), float(rays.y[0]), float(rays.z[0])
                 traced = all(math.isfinite(v) for v in (x, y, z))
+                # At the primary wavelength, the chief and marginal rays' (x, y) on every lens
+                # surface (SURF 1 .. N-1 of the file) as well.
+                on_surfaces = None
+                if traced and w == primary_um and abs(px) in (0.0, 1.0) and abs(py) in (0.0, 1.0):
+                    group = optic.surface_group
+                    on_surfaces = [[float(group.x[k][0]), float(group.y[k][0])]
+                                   for k in range(1, group.num_surfaces - 1)]
                 out["rays"].append({
                     "wavelength_um": w,
                     "field_deg": field,
@@ -320,6 +328,8 @@ def run_lens(optiland, repo, name, rel_path, extra_um):
                     "M": float(rays.M[0]) if traced else None,
                     "N": float(rays.N[0]) if traced else None,
                 })
+                if on_surfaces is not None:
+                    out["rays"][-1]["surfaces_xy"] = on_surfaces
     return out
 
 
@@ -381,7 +391,8 @@ def main():
                     "through (Px EPD/2, Py EPD/2) on the paraxial entrance pupil plane z = EPL "
                     "of the primary wavelength; the file's vignetting factors and clear "
                     "apertures (DIAM) are not applied; (x, y) on the image surface, (L, M, N) "
-                    "the direction cosines after it",
+                    "the direction cosines after it; surfaces_xy: (x, y) on the file's "
+                    "SURF 1 .. N-1 (primary wavelength, chief and marginal rays)",
             "even_asphere": f"optiland's intersection iteration with tol {ASPHERE_TOL_MM} mm, "
                             f"max_iter {ASPHERE_MAX_ITER}",
             "floa": "EPD = stop semi-diameter / optiland's paraxial marginal-ray height at the "
