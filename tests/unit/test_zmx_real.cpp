@@ -114,11 +114,14 @@ TEST_CASE("zmx-real: spherical refractive files import with the shipped catalogs
       REQUIRE(s.material.glass != nullptr);
       CHECK(s.material.glass->catalog == "SCHOTT");
     }
-    const auto paraxial = paraxial_data(make_trace_lens(lens), kWavelengthD_nm);
+    // At the file's primary wavelength, one the traced lens holds (TraceLens::index_at_nm falls
+    // back to the nd / vd model at any other wavelength).
+    const auto paraxial = paraxial_data(make_trace_lens(lens), lens.specs.primary_wavelength_nm);
     CHECK(std::isfinite(paraxial.efl_mm));
     CHECK(std::isfinite(paraxial.bfl_mm));
-    MESSAGE(fmt::format("{}: EFL {:.6f} mm, BFL {:.6f} mm, entrance pupil at {:.6f} mm", f.file,
-                        paraxial.efl_mm, paraxial.bfl_mm, paraxial.entrance_pupil_z_mm));
+    MESSAGE(fmt::format("{}: EFL {:.6f} mm, BFL {:.6f} mm, entrance pupil at {:.6f} mm ({} nm)",
+                        f.file, paraxial.efl_mm, paraxial.bfl_mm, paraxial.entrance_pupil_z_mm,
+                        lens.specs.primary_wavelength_nm));
     if (const auto it = references.find(f.file); it != references.end()) {
       const nlohmann::json& ref = it->second;
       const double tolerance = ref.at("tolerance_mm").get<double>();
