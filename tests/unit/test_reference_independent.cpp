@@ -569,8 +569,8 @@ void add_wavelength(Lens& lens, double wavelength_nm) {
 TEST_CASE("independent: optiland run on real .zmx files, first order and real rays at 1e-9") {
   // tests/data/independent/optiland_run_rays.json (README there): optiland given the indices of
   // lensopt's glass data. Rays without aiming, through the paraxial entrance pupil of the primary
-  // wavelength, the files' vignetting factors and clear apertures not applied, as optiland was
-  // given them.
+  // wavelength; the files' vignetting factors and clear apertures are not applied (optiland was
+  // given neither).
   const nlohmann::json doc = read_json(independent_dir() / "optiland_run_rays.json");
   const double bound = doc.at("relative_bound").get<double>();
   int lenses = 0, paraxial_values = 0, intercepts = 0, missed = 0, surface_points = 0;
