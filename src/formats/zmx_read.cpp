@@ -171,6 +171,10 @@ LensSourceLines ZmxParser::build_surfaces(Lens& lens) {
             fmt::format("surface {} (the last before the image) must be followed by air, not {}",
                         raw.number, raw.glass));
   }
+  if (gcat_.empty() && !note_catalog_ && !used_catalogs.empty())
+    warn(0, fmt::format("the file has no GCAT line: its glasses come from {}, OpticStudio's "
+                        "default catalog",
+                        used_catalogs.front()));
   if (!used_catalogs.empty()) {
     lens.catalog_name = note_catalog_ && std::find(used_catalogs.begin(), used_catalogs.end(),
                                                    *note_catalog_) != used_catalogs.end()
