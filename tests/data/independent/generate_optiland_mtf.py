@@ -33,6 +33,12 @@ What it computes, per lens and field (0 and full), monochromatic at the primary 
   num_points=P, scale=False) (not multiplied by the diffraction limit, as lensopt's): the spot
   of the N x N uniform grid binned into P + 1 bins, its Fourier transform at P frequencies from 0
   to 1 / (lambda F); the values at 10, 30, 50 by the same cubic spline in frequency.
+- the same FFTMTF with a clear aperture on the stop (StopClip below, radius: lensopt's real stop
+  radius, the on-axis marginal ray's height there, x (1 + 1e-9)): rays outside the real stop
+  are vignetted (intensity 0), as in a real lens traced without ray aiming. Without it, at the
+  Tessar's full field part of the paraxial pupil passes outside the stop through overlapping
+  lens edges, travelling backwards between surfaces (counted here as backward_rays), where the
+  two tools' optical paths differ by definition (optiland |t| n, lensopt t n).
 The reported reference is the finest sampling (FFT N = 512, geometric N = 512 with P = 4096);
 the coarser runs are kept in the file to show the convergence.
 
@@ -241,6 +247,12 @@ def main():
             "geometric MTF: unscaled (scale=False), spot binned into num_points + 1 bins; "
             "values read by cubic spline in frequency",
             "monochromatic only: this optiland's FFTMTF and GeometricMTF take one wavelength",
+            "fft_stop_clipped_*: the same FFT MTF with a clear aperture on the stop of radius "
+            "stop_clip_radius_mm (lensopt's real stop radius x (1 + 1e-9)): rays outside the real "
+            "stop get intensity 0 (lensopt: vignetted)",
+            "backward_rays: rays of the finest FFT grid that arrive and travel backwards (z "
+            "decreasing) between two consecutive surfaces (they cross overlapping surfaces "
+            "outside the real stop); optiland adds |t| n to their optical path, lensopt t n",
         ],
         "lenses": lenses,
     }
