@@ -100,10 +100,10 @@ std::vector<double> clear_semi_apertures_mm(const Lens& lens, const TraceLens<do
       continue;
     }
     const ParaxialRay<double> marginal =
-        paraxial_trace(tl, ParaxialRay<double>{r_ep, 0.0}, k + 1, kWavelengthD_nm);
+        paraxial_trace(tl, ParaxialRay<double>{r_ep, 0.0}, k + 1, tl.reference_nm());
     const ParaxialRay<double> chief =
         paraxial_trace(tl, ParaxialRay<double>{-par.entrance_pupil_z_mm * tan_field, tan_field},
-                       k + 1, kWavelengthD_nm);
+                       k + 1, tl.reference_nm());
     aperture[k] = std::abs(marginal.y) + std::abs(chief.y);
   }
   return aperture;

@@ -107,6 +107,23 @@ TEST_CASE("system: paraxial data use the real rays' index at the same wavelength
   CHECK(real_efl == doctest::Approx(efl).epsilon(1e-8));
 }
 
+TEST_CASE("system: a catalog-dispersion lens has no index at a wavelength it does not hold") {
+  // The catalog corrections exist at the lens's own wavelengths only; the abbe model elsewhere
+  // would be another dispersion model (5e-4 in EFL on a real file), so asking is an error.
+  Lens lens = shipped("tessar");
+  lens.specs.dispersion = DispersionModel::kCatalog;
+  const TraceLens<double> catalog = make_trace_lens(lens);
+  const double ref = catalog.reference_nm();
+  CHECK_NOTHROW(paraxial_data(catalog, ref));
+  CHECK_THROWS_AS(paraxial_data(catalog, std::nextafter(ref, 1e9)), std::logic_error);
+  CHECK_THROWS_AS(catalog.index_at_nm(0, 550.0), std::logic_error);
+  // The abbe model is a formula: any wavelength.
+  lens.specs.dispersion = DispersionModel::kAbbe;
+  const TraceLens<double> abbe = make_trace_lens(lens);
+  REQUIRE(abbe.is_glass[0]);
+  CHECK(abbe.index_at_nm(0, 550.0) == abbe_index(abbe.nd[0], abbe.vd[0], 550.0));
+}
+
 TEST_CASE("system: any wavelength count; channels by band, a single wavelength feeds R, G, B") {
   CHECK(default_wavelength_channels({486.1327, 587.5618, 656.2725}) == std::vector<int>{2, 1, 0});
   const auto one = channel_wavelengths({1}, {550.0});
