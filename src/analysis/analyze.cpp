@@ -43,6 +43,7 @@ AnalysisReport analyze_lens(const Lens& lens_in, const AnalyzeOptions& options) 
   for (double t : sys.lens.thickness_mm) r.total_track_mm += t;
   r.rings = options.trace.rings;
   r.rays_per_field_wavelength = static_cast<int>(sys.pupil.size());
+  r.full_pupil = sys.full_pupil;
   r.wavelength_count = sys.wavelength_count;
   r.ray_aiming = options.trace.ray_aiming;
   r.dispersion = dispersion_name(lens.specs.dispersion);
@@ -171,11 +172,11 @@ std::string format_report_text(const AnalysisReport& r) {
                    r.epd_mm, r.entrance_pupil_z_mm));
   line(fmt::format("  stop radius (real ray)   {:10.4f} mm", r.stop_radius_mm));
   line(fmt::format("  total track              {:10.4f} mm", r.total_track_mm));
-  line(
-      fmt::format("  sampling: {} fields x {} wavelengths x {} half-pupil rays ({} rings), "
-                  "ray aiming {}, dispersion {}",
-                  r.fields.size(), r.wavelength_count, r.rays_per_field_wavelength, r.rings,
-                  r.ray_aiming ? "on" : "off", r.dispersion));
+  line(fmt::format(
+      "  sampling: {} fields x {} wavelengths x {} {}-pupil rays ({} rings), "
+      "ray aiming {}, dispersion {}",
+      r.fields.size(), r.wavelength_count, r.rays_per_field_wavelength,
+      r.full_pupil ? "full" : "half", r.rings, r.ray_aiming ? "on" : "off", r.dispersion));
   line(
       fmt::format("  system: spec mode {}, aperture {}, object {}, primary wavelength {} nm, "
                   "fields by {}",
@@ -244,6 +245,7 @@ std::string format_report_json(const AnalysisReport& r) {
   j["total_track_mm"] = finite_or_null(r.total_track_mm);
   j["rings"] = r.rings;
   j["rays_per_field_wavelength"] = r.rays_per_field_wavelength;
+  j["full_pupil"] = r.full_pupil;
   j["wavelength_count"] = r.wavelength_count;
   j["ray_aiming"] = r.ray_aiming;
   j["dispersion"] = r.dispersion;

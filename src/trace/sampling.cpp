@@ -37,6 +37,26 @@ PupilSamples paper_pupil_samples(int rings) {
   return out;
 }
 
+PupilSamples mirrored_pupil(const PupilSamples& half) {
+  PupilSamples out;
+  const std::size_t n = half.size();
+  out.x.resize(2 * n);
+  out.y.resize(2 * n);
+  for (std::size_t i = 0; i < n; ++i) {
+    out.x[i] = half.x[i];
+    out.y[i] = half.y[i];
+    out.x[n + i] = -half.x[i];
+    out.y[n + i] = half.y[i];
+  }
+  return out;
+}
+
+bool needs_full_pupil(const std::vector<VignettingFactors>& vignetting) {
+  for (const VignettingFactors& v : vignetting)
+    if (v.asymmetric()) return true;
+  return false;
+}
+
 PupilSamples pupil_edge_samples(int count) {
   PupilSamples out;
   for (int j = 0; j < count; ++j) {

@@ -58,7 +58,8 @@ struct AnalysisReport {
   double stop_radius_mm = 0;
   double total_track_mm = 0;
   int rings = 0;
-  int rays_per_field_wavelength = 0;
+  int rays_per_field_wavelength = 0;  // sys.pupil: the half pupil, or the full one (full_pupil)
+  bool full_pupil = false;            // a field's VDX or VAN is set (trace/system.h)
   int wavelength_count = 0;
   bool ray_aiming = true;
   std::string dispersion;
