@@ -91,6 +91,7 @@ AnalysisReport analyze_lens(const Lens& lens_in, const AnalyzeOptions& options) 
       all_fields_traced = false;
     }
     f.centroid_y_mm = spots.centroid_y_mm[h];
+    f.centroid_x_mm = spots.centroid_x_mm[h];
     f.reference_y_mm = y_ref[h];
     f.distortion_percent =
         f.traced_rays > 0 ? 100.0 * field_distortion(f.centroid_y_mm, y_ref[h], y_ref_last) : 0.0;
@@ -287,6 +288,11 @@ std::string format_report_json(const AnalysisReport& r) {
   j["distortion_percent"] = distortion;
   j["relative_illumination"] = ri;
   j["centroid_y_mm"] = centroid;
+  if (r.full_pupil) {  // the x centroids (0 by symmetry on a half pupil, and then not written)
+    json centroid_x = json::array();
+    for (const FieldReport& f : r.fields) centroid_x.push_back(finite_or_null(f.centroid_x_mm));
+    j["centroid_x_mm"] = centroid_x;
+  }
   j["aiming_error"] = aiming;
   j["max_aiming_error"] = finite_or_null(r.max_aiming_error);
   j["ray_failures"] = r.ray_failures;

@@ -38,6 +38,7 @@ struct FieldReport {
   int vignetted_rays = 0;             // clipped by a clear aperture (not failures)
   std::optional<double> rms_spot_um;  // none if no ray reached the image
   double centroid_y_mm = 0;
+  double centroid_x_mm = 0;   // 0 unless the system traces full pupils (VDX or VAN)
   double reference_y_mm = 0;  // paraxial chief-ray height
   double distortion_percent = 0;
   double relative_illumination = 0;
