@@ -13,7 +13,9 @@
 // domain) as squared hinges, profile_bound_loss; in l_lens only (LM adds them as residuals of
 // their own, optimizer.cpp).
 // Least squares (Ceres minimizes 1/2 sum r_i^2), residuals in this order:
-//   spot:  r = sqrt(a_h / N_h) (y - ybar_h) and sqrt(a_h / N_h) x for every traced ray of field h
+//   spot:  r = sqrt(a_h / N_h) (y - ybar_h) and sqrt(a_h / N_h) (x - xbar_h) for every traced ray
+//          of field h (xbar_h = 0 on the mirrored half pupil; a system with VDX or VAN traces the
+//          full pupil, TraceSystem::full_pupil, and then the x centroid is its own)
 //          (N_h = W P rays; a failed ray gives 0). With the per-field weights
 //          a_h = 1 / (F S_h0), S_h0 the field's RMS at the current point (iteratively reweighted),
 //          sum of squares = sum_h S_h^2 / (F S_h0) = l_S at S = S_0, and its gradient is
@@ -35,9 +37,9 @@
 //   l_W  = mean_h W_h,  W_h = sqrt(sum_w omega_w RMS_{h,w}^2 / sum_w omega_w)     (waves)
 // the RMS wavefront with piston and tilt removed (analysis/wavefront.h, the same code as
 // `analyze --wave`) on the half x_p >= 0 of an n x n pupil grid (wavefront_pupil_samples; the
-// mirrored half grid of wavefront.h, exact for the meridionally symmetric systems the tracer
-// assumes), omega the lens's wavelength weights. Its residuals, one per (field, wavelength, grid
-// cell):
+// mirrored half grid of wavefront.h, exact for meridionally symmetric pupils; the full grid when
+// the system traces full pupils), omega the lens's wavelength weights. Its residuals, one per
+// (field, wavelength, grid cell):
 //   r = sqrt(a_h omega_w / sum omega) sqrt(g_i / sum g) (W_i - piston - tilt)
 // (rms_wavefront_residuals), so sum of squares = sum_h a_h W_h^2 = l_W at W = W_0 with the
 // reweighting above. The grid rays (and each wavelength's chief ray) also carry the path and
@@ -137,20 +139,27 @@ inline int design_residual_count(int fields, int constraint_fields, int waveleng
   return fields * wavelengths * rays * 2 + constraint_fields * surfaces * 3 + glasses * 2;
 }
 
-// The merit's residuals per spot field: 2 per ring ray and wavelength (spot), or one per grid
-// cell and wavelength (wavefront).
-inline int merit_residuals_per_field(const DesignLossOptions& options, int wavelengths, int rays) {
+// The wavefront merit's pupil grid: the mirrored half grid, or the full one when the system traces
+// full pupils (TraceSystem::full_pupil).
+inline PupilGrid merit_wavefront_grid(const DesignLossOptions& options, bool full_pupil) {
+  return full_pupil ? make_pupil_grid(options.wavefront_pupil_samples)
+                    : make_half_pupil_grid(options.wavefront_pupil_samples);
+}
+
+// The merit's residuals per spot field: 2 per ring ray and wavelength (spot; `rays` the traced
+// pupil samples, sys.pupil), or one per grid cell and wavelength (wavefront).
+inline int merit_residuals_per_field(const DesignLossOptions& options, int wavelengths, int rays,
+                                     bool full_pupil = false) {
   if (options.merit == DesignMerit::kWavefront)
-    return wavelengths *
-           static_cast<int>(make_half_pupil_grid(options.wavefront_pupil_samples).size());
+    return wavelengths * static_cast<int>(merit_wavefront_grid(options, full_pupil).size());
   return wavelengths * rays * 2;
 }
 
 // design_residual_count for the merit of `options`.
 inline int design_residual_count(const DesignLossOptions& options, int fields,
                                  int constraint_fields, int wavelengths, int rays, int surfaces,
-                                 int glasses) {
-  return fields * merit_residuals_per_field(options, wavelengths, rays) +
+                                 int glasses, bool full_pupil = false) {
+  return fields * merit_residuals_per_field(options, wavelengths, rays, full_pupil) +
          constraint_fields * surfaces * 3 + glasses * 2;
 }
 
@@ -210,9 +219,9 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
   const int field_count = sampled.spot_fields;
   const int wl = sys.wavelength_count;
   const bool wavefront = options.merit == DesignMerit::kWavefront;
-  // The half grid: the lens is symmetric about the meridional plane (as the half-pupil spot).
-  const PupilGrid grid =
-      wavefront ? make_half_pupil_grid(options.wavefront_pupil_samples) : PupilGrid{};
+  // The half grid: the lens is symmetric about the meridional plane (as the half-pupil spot);
+  // the full grid when a field's vignetting is not (sys.full_pupil).
+  const PupilGrid grid = wavefront ? merit_wavefront_grid(options, sys.full_pupil) : PupilGrid{};
   // Rays per field and wavelength that carry the merit (and the spot).
   const int rays = wavefront ? static_cast<int>(grid.size()) : static_cast<int>(sys.pupil.size());
   const int k_count = lens.surface_count();
@@ -237,7 +246,7 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
     phi_sum = field_count;
   }
   const bool equal_fields = phi_sum == field_count;
-  const PupilSamples edge = pupil_edge_samples(kEdgeRays);
+  const PupilSamples edge = sys.samples_for(pupil_edge_samples(kEdgeRays));
   const double cos2_max = std::pow(std::cos(options.max_ray_angle_deg * kPi / 180.0), 2);
   // Bounds per space: air >= min_air; glass in [min, max]; the last (image) >= clearance.
   std::vector<double> lower(k_count), upper(k_count);
@@ -263,7 +272,7 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
     e.min_travel_mm.assign(k_count, std::numeric_limits<double>::infinity());
     e.max_travel_mm.assign(k_count, -std::numeric_limits<double>::infinity());
   }
-  const int spot_block = merit_residuals_per_field(options, wl, rays);
+  const int spot_block = merit_residuals_per_field(options, wl, rays, sys.full_pupil);
   const int path_offset = field_count * spot_block;
   const int angle_offset = path_offset + all_fields * k_count;
   const int glass_offset = angle_offset + all_fields * k_count * 2;
@@ -399,6 +408,18 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
         }
       const bool any = count > 0 && weight_sum > 0.0;
       const T y_mean = any ? y_sum / K<T>(weight_sum) : K<T>(0.0);
+      // The x centroid of a full pupil (0 by symmetry on the mirrored half pupil): x about it.
+      if (sys.full_pupil && any) {
+        T x_sum = K<T>(0.0);
+        for (std::size_t i = 0; i < xs.size(); ++i)
+          if (ok[i]) {
+            const double o = spot_w.wavelength[i / rays];
+            x_sum = o == 1.0 ? x_sum + xs[i] : x_sum + K<T>(o) * xs[i];
+          }
+        const T x_mean = x_sum / K<T>(weight_sum);
+        for (std::size_t i = 0; i < xs.size(); ++i)
+          if (ok[i]) xs[i] = xs[i] - x_mean;
+      }
       T s2 = K<T>(0.0);
       for (std::size_t i = 0; i < ys.size(); ++i)
         if (ok[i]) {
