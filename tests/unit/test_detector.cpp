@@ -71,6 +71,7 @@ TEST_CASE("detector: the built-in detector learns the generated scenes") {
                                                            << ap0 << " -> " << ap1);
   CHECK(loss1 < 0.5 * loss0);
   CHECK(ap1 > ap0 + 0.1);
+  CHECK(ap1 > 0.5);  // most of the 4 crops' objects found (0.90 with the version-2 detector)
   // The image gradient has the batch's layout and is not zero.
   const TaskOutput out = task->step(batch, false, true);
   REQUIRE(out.grad_rendered.size() == 4);
