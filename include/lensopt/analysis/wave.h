@@ -38,7 +38,7 @@
 namespace lensopt {
 
 struct WaveOptions {
-  int pupil_samples = 64;                  // n: grid cells across the pupil diameter
+  int pupil_samples = 128;                 // n: grid cells across the pupil diameter
   int padding = 2;                         // Q: FFT size >= Q n (2 = Nyquist)
   std::vector<double> wavelength_weights;  // per spec wavelength; empty: equal weights
   double focus_shift_mm = 0;               // image plane moved away from the lens
