@@ -19,6 +19,7 @@
 #include "lensopt/render/psf.h"
 #include "lensopt/tolerance/tolerance.h"
 #include "test_support.h"
+#include "trace_checks.h"
 
 using namespace lensopt;
 
@@ -48,13 +49,7 @@ std::string doublet_zmx(const std::string& system_lines,
 
 const char* kFdc = "WAVM 1 0.4861327 1\nWAVM 2 0.5875618 1\nWAVM 3 0.6562725 1\nPWAV 2\n";
 
-TraceOptions quick(int rings = 8) {
-  TraceOptions t;
-  t.rings = rings;
-  t.fields = 5;
-  t.threads = 1;
-  return t;
-}
+using test::quick;
 
 }  // namespace
 

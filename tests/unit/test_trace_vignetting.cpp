@@ -22,6 +22,7 @@
 #include "lensopt/optimize/optimizer.h"
 #include "lensopt/render/psf.h"
 #include "test_support.h"
+#include "trace_checks.h"
 
 using namespace lensopt;
 
@@ -44,13 +45,7 @@ std::string doublet_zmx(const std::string& field_lines) {
          "SURF 5\n  TYPE STANDARD\n  CURV 0\n  DISZ 0\n";
 }
 
-TraceOptions quick(int rings = 8) {
-  TraceOptions t;
-  t.rings = rings;
-  t.fields = 5;
-  t.threads = 1;
-  return t;
-}
+using test::quick;
 
 // OpticStudio's definition written out: compress, turn by VAN (counterclockwise), decentre.
 void by_hand(double vdx, double vdy, double vcx, double vcy, double van_deg, double px, double py,
@@ -61,22 +56,9 @@ void by_hand(double vdx, double vdy, double vcx, double vcy, double van_deg, dou
   qy = vdy + std::sin(a) * u + std::cos(a) * t;
 }
 
-// The Jet gradient and the adjoint agree within 1e-9 relative (test_spot_adjoint.cpp's check).
-double worst_relative(const std::vector<double>& a, const std::vector<double>& b) {
-  double largest = 0;
-  for (double d : b) largest = std::max(largest, std::abs(d));
-  double worst = 0;
-  for (std::size_t i = 0; i < a.size(); ++i) {
-    const double denominator = std::max(std::abs(b[i]), 1e-6 * largest);
-    worst = std::max(worst, std::abs(a[i] - b[i]) / denominator);
-  }
-  return worst;
-}
+using test::worst_relative;  // the 1e-9 check of test_spot_adjoint.cpp
 
-double mean_spot(const Lens& lens, const TraceOptions& options) {
-  const TraceSystem<double> sys = prepare_system(make_trace_lens(lens), lens.specs, options);
-  return evaluate_spots(sys, options.threads).mean_rms_spot_mm;
-}
+using test::mean_spot;
 
 // The AC254-100 achromat (.zmx) with three fields, the outer two vignetted with VDX and VAN.
 Lens vignetted_achromat() {
@@ -396,21 +378,8 @@ TEST_CASE("vignetting: gradients with VDX and VAN stay exact (adjoint, Jets, fin
     CHECK(adjoint.mean_rms_spot_mm == doctest::Approx(mean_spot(lens, options)).epsilon(1e-12));
     CHECK(worst_relative(adjoint.gradient, jets.gradient) < 1e-9);
     // Central differences (Richardson-extrapolated) of every variable.
-    std::vector<double> fd(variables.size());
-    for (std::size_t i = 0; i < variables.size(); ++i) {
-      const double x0 = variable_value(lens, variables[i]);
-      double scale = 1.0;
-      if (variables[i].kind == PrescriptionVariable::Kind::kCurvature) scale = 0.01;
-      if (variables[i].kind == PrescriptionVariable::Kind::kVd) scale = 40.0;
-      auto central = [&](double step) {
-        Lens plus = lens, minus = lens;
-        set_variable_value(plus, variables[i], x0 + step);
-        set_variable_value(minus, variables[i], x0 - step);
-        return (mean_spot(plus, options) - mean_spot(minus, options)) / (2 * step);
-      };
-      const double step = 2e-5 * scale;
-      fd[i] = (4 * central(step / 2) - central(step)) / 3;
-    }
+    const std::vector<double> fd =
+        test::mean_spot_central_differences(lens, variables, options, 0.01);
     const double worst = worst_relative(adjoint.gradient, fd);
     INFO("worst relative error against finite differences ", worst);
     CHECK(worst < 1e-5);
