@@ -20,8 +20,13 @@
 
 #include "lensopt/core/error.h"
 #include "lensopt/detection/scenes.h"
+#include "lensopt/formats/lens_file.h"
 #include "lensopt/joint/detector.h"
+#include "lensopt/joint/joint.h"
 #include "lensopt/joint/task.h"
+#include "lensopt/lens/lens_io.h"
+#include "test_joint_support.h"
+#include "test_support.h"
 
 using namespace lensopt;
 
@@ -175,6 +180,75 @@ def forward(self, images, boxes, labels):
   CHECK(dets[0][0].score == doctest::Approx(0.9));
   CHECK(dets[0][0].box.x0 == doctest::Approx(4).epsilon(1e-2));
   CHECK(task->metric(batch) == doctest::Approx(1.0));  // the learned box is the ground truth
+  std::filesystem::remove_all(dir);
+}
+
+TEST_CASE("detector: a scripted detector by the contract trains jointly through torchscript:") {
+  // The TorchScript path without torchvision (issue 19): a detector of the (images, boxes,
+  // labels) contract whose training loss depends on the images (the learned box's distance to
+  // the ground truth plus the images' mean squared contrast), so its gradient reaches the lens,
+  // runs the four settings of `optimize --joint --task torchscript:MODEL.pt` on generated scenes.
+  const auto dir = test::joint_temp_dir("lensopt_test_detector_joint");
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  torch::jit::Module m("BoxAndContrast");
+  m.register_parameter("box", torch::tensor({0.0f, 0.0f, 10.0f, 10.0f}), false);
+  m.register_attribute("training", c10::BoolType::get(), true);
+  m.define(R"JIT(
+def forward(self, images, boxes, labels):
+    if self.training:
+        valid = (labels >= 0).to(images.dtype).unsqueeze(2)
+        d = (boxes.to(images.dtype) - self.box.to(images.dtype)) ** 2 * valid
+        contrast = torch.mean((images - torch.mean(images)) ** 2)
+        return torch.sum(d) / torch.clamp(torch.sum(valid), min=1.0) * 1e-4 - contrast
+    b = images.size(0)
+    row = torch.cat([self.box.to(images.dtype), torch.tensor([0.9, 1.0], dtype=images.dtype)])
+    return row.unsqueeze(0).unsqueeze(0).repeat(b, 1, 1)
+)JIT");
+  m.save((dir / "model.pt").string());
+  REQUIRE(is_torchscript_detector(dir / "model.pt"));
+  SceneSetOptions scenes;
+  scenes.count = 6;
+  scenes.width = 192;
+  scenes.height = 112;
+  scenes.seed = 5;
+  write_detection_scenes(dir / "data", scenes);
+  JointOptions o;
+  o.task = "torchscript:" + (dir / "model.pt").string();
+  o.data.annotations = dir / "data" / "annotations.json";
+  o.data.crop_px = 64;
+  o.data.batch_size = 2;
+  o.data.eval_crops = 3;
+  o.data.holdout_fraction = 0.34;
+  o.imaging.sampling.rings = 4;
+  o.imaging.sampling.fields = 5;
+  o.imaging.res_factor = 2;
+  o.design_sampling.rings = 4;
+  o.design_sampling.fields = 3;
+  o.task_options.learning_rate = 1e-2;
+  o.constant_steps = 2;
+  o.decay_steps = 2;
+  o.verbose = false;
+  o.log_csv = dir / "log.csv";
+  const Lens lens = read_lens(test::source_dir() / "lenses" / "doublet.toml");
+  const JointResult r = optimize_joint(lens, o);
+  CHECK(r.metric_name == "AP");
+  REQUIRE(r.settings.size() == 4);
+  for (const JointSettingResult& s : r.settings) {
+    INFO(s.name);
+    CHECK(s.done);
+    CHECK(s.metric >= 0.0);
+    CHECK(s.metric <= 1.0);
+  }
+  // The detector's loss reaches the lens in the joint rows, and the lens moves.
+  const auto rows = test::csv_rows(dir / "log.csv");
+  REQUIRE(rows.size() == 17);
+  for (int i = 13; i < 17; ++i) {
+    CHECK(rows[i][0] == "joint");
+    CHECK(std::stod(rows[i][13]) > 0);
+  }
+  const LensParameterization param(lens, GlassSpace(*load_catalog("ohara")));
+  CHECK(r.x != param.from_lens(lens));
   std::filesystem::remove_all(dir);
 }
 
