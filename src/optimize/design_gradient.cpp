@@ -149,27 +149,20 @@ SystemAdjoint design_adjoint(const TraceSystem<double>& sys, const DesignSamplin
             }
           }
         }
+        // The centroids (evaluate_design); x's is 0 on the mirrored half pupil.
         int count = 0;
-        double y_sum = 0.0, weight_sum = 0.0;
+        double y_sum = 0.0, x_sum = 0.0, weight_sum = 0.0;
         for (std::size_t i = 0; i < ys.size(); ++i)
           if (ok[i]) {
             const double o = spot_w.wavelength[i / rays];
             y_sum += o == 1.0 ? ys[i] : o * ys[i];
+            x_sum += o == 1.0 ? xs[i] : o * xs[i];
             ++count;
             weight_sum += o;
           }
         const bool any = count > 0 && weight_sum > 0.0;
         y_mean = any ? y_sum / weight_sum : 0.0;
-        // The x centroid of a full pupil (evaluate_design; 0 on the mirrored half pupil).
-        if (sys.full_pupil && any) {
-          double x_sum = 0.0;
-          for (std::size_t i = 0; i < xs.size(); ++i)
-            if (ok[i]) {
-              const double o = spot_w.wavelength[i / rays];
-              x_sum += o == 1.0 ? xs[i] : o * xs[i];
-            }
-          x_mean = x_sum / weight_sum;
-        }
+        x_mean = sys.full_pupil && any ? x_sum / weight_sum : 0.0;
         double s2 = 0.0;
         for (std::size_t i = 0; i < ys.size(); ++i)
           if (ok[i]) {
