@@ -26,7 +26,14 @@ Errors are lensopt.LensoptError (a ValueError) with the CLI's "file:line:column:
 Long calls release the GIL; optimize() stops on Ctrl-C (KeyboardInterrupt).
 """
 
-from ._lensopt import (  # noqa: F401
+import os as _os
+
+# OpenMP threads that wait passively (sleep) between parallel regions instead of spinning:
+# libgomp reads this once, when it is loaded, so it only takes effect if nothing loaded it
+# before (torch does); the user's own setting wins (include/lensopt/core/passive_threads.h).
+_os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
+from ._lensopt import (  # noqa: F401,E402
     AnalysisReport,
     FieldReport,
     Imaging,

@@ -5,6 +5,7 @@
 
 #include "commands.h"
 #include "lensopt/core/error.h"
+#include "lensopt/core/passive_threads.h"
 
 int main(int argc, char** argv) {
   CLI::App app{"lensopt: compound lens design with exact, differentiable ray tracing"};
