@@ -20,7 +20,9 @@ inline void set_passive_omp_wait_policy(int, char**, char**) {
 }
 
 // NOLINTNEXTLINE: the ELF pre-initialization hook (static: one per executable that includes this).
-[[maybe_unused]] __attribute__((section(".preinit_array"), used)) static void (
-    *const kPassiveOmpWaitPolicy)(int, char**, char**) = &set_passive_omp_wait_policy;
+[[maybe_unused]] __attribute__((section(".preinit_array"),
+                                used)) static void (*const kPassiveOmpWaitPolicy)(int, char**,
+                                                                                  char**) =
+    &set_passive_omp_wait_policy;
 
 }  // namespace lensopt::detail
