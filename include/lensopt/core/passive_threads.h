@@ -19,10 +19,10 @@ inline void set_passive_omp_wait_policy(int, char**, char**) {
   setenv("OMP_WAIT_POLICY", "PASSIVE", /*overwrite=*/0);
 }
 
-// NOLINTNEXTLINE: the ELF pre-initialization hook (static: one per executable that includes this).
+// The ELF pre-initialization hook (static: one per executable that includes this).
+using PreinitFunction = void (*)(int, char**, char**);
 [[maybe_unused]] __attribute__((section(".preinit_array"),
-                                used)) static void (*const kPassiveOmpWaitPolicy)(int, char**,
-                                                                                  char**) =
+                                used)) static const PreinitFunction kPassiveOmpWaitPolicy =
     &set_passive_omp_wait_policy;
 
 }  // namespace lensopt::detail
