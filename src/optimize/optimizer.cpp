@@ -619,6 +619,23 @@ class LensOptimization {
     if (wavefront_) result_.start_wavefront_waves = full_wavefront_waves(start_, full_.trace);
   }
 
+  // The loss of the first phases, which pick the basin (focus, soft start): the paper's soft
+  // penalties, and the spot merit whatever the merit. The wavefront merit starts from the spot
+  // merit's basin: with the soft penalties, whose weights are set against a merit in mm (the
+  // spot, ~0.02 mm on the Cooke; the wavefront is ~2 waves), it crosses the bounds a hundred
+  // times further than the spot merit does (Cooke: l_RP 5.5e-4 against 1.5e-7 mm) and the
+  // strict phases then lose more walking it back than it gained (2.05 -> 2.51 waves at the
+  // optimization sampling); with the penalties rescaled to the wavefront's unit it lands in a
+  // worse basin (3.26 waves). The RMS spot is the RMS slope of the wavefront (transverse ray
+  // aberration = -(R / r_p) dW/drho), the smoother merit for finding the basin; the wavefront
+  // merit then takes over at the strict phases (BENCHMARKS.md, wave-merit).
+  DesignLossOptions basin_loss() const {
+    DesignLossOptions loss = options_.loss;
+    loss.paper_penalties = true;
+    loss.merit = DesignMerit::kSpot;
+    return loss;
+  }
+
   // Focus first: a start far from focus (a perturbed last spacing is a defocus of a tenth of the
   // back focal length) has a spot dominated by defocus, and LM's first steps on all variables
   // then bend the curvatures to compensate and land in a poor basin. The defocus alone is
@@ -635,8 +652,7 @@ class LensOptimization {
         all_but_defocus.push_back(i);
     }
     if (!defocus_free) return;
-    DesignLossOptions focus_loss = options_.loss;
-    focus_loss.paper_penalties = true;
+    DesignLossOptions focus_loss = basin_loss();
     const DesignLoss<double> f = phase(x_, GlassMode::kFixed, fixed_, all_but_defocus, focus_loss,
                                        "focus", 1, options_.max_iterations);
     result_.log.push_back(fmt::format("focus: {} (optimization sampling)", merit_text(f)));
@@ -648,8 +664,7 @@ class LensOptimization {
   // design crosses its bounds only slightly, and the continuation then walks it inside.
   void soft_start() {
     if (soft_ || !options_.soft_start || interrupted()) return;
-    DesignLossOptions soft_loss = options_.loss;
-    soft_loss.paper_penalties = true;
+    DesignLossOptions soft_loss = basin_loss();
     const DesignLoss<double> s =
         phase(x_, GlassMode::kFixed, fixed_, frozen_all_, soft_loss, "soft penalties",
               options_.max_rounds, options_.max_iterations);

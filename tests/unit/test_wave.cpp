@@ -5,7 +5,10 @@
 #include <ceres/jet.h>
 #include <doctest/doctest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <utility>
+#include <vector>
 
 #include "lensopt/analysis/wave.h"
 #include "lensopt/analysis/wavefront.h"
@@ -64,6 +67,50 @@ TEST_CASE("wave: pupil grid weights add up to the unit disk's area") {
     CAPTURE(n);
     CHECK(area == doctest::Approx(kPi).epsilon(2e-4));
   }
+}
+
+TEST_CASE("wave: the polar pupil quadrature integrates polynomials up to its degree exactly") {
+  // int_disk x^a y^b dA for even a, b: 2 Gamma((a+1)/2) Gamma((b+1)/2) / ((a+b+2) Gamma((a+b)/2+1))
+  // (0 when a or b is odd).
+  auto exact = [](int a, int b) {
+    if (a % 2 || b % 2) return 0.0;
+    return 2.0 * std::tgamma((a + 1) / 2.0) * std::tgamma((b + 1) / 2.0) /
+           ((a + b + 2) * std::tgamma((a + b) / 2.0 + 1.0));
+  };
+  for (const auto& [rings, half] : std::vector<std::pair<int, int>>{{1, 1}, {3, 6}, {6, 12}}) {
+    const int degree = std::min(4 * rings - 1, 2 * half - 1);
+    for (bool mirrored : {false, true}) {
+      const PupilGrid q = make_pupil_quadrature(rings, half, mirrored);
+      REQUIRE(q.size() == static_cast<std::size_t>(rings * half * (mirrored ? 1 : 2)));
+      CHECK(q.mirrored == mirrored);
+      for (std::size_t i = 0; i < q.size(); ++i) {
+        const double r2 = q.samples.x[i] * q.samples.x[i] + q.samples.y[i] * q.samples.y[i];
+        CHECK(r2 < 1.0);
+        if (mirrored) CHECK(q.samples.x[i] > 0.0);
+      }
+      // Every monomial up to the rule's degree; a mirrored rule only the even ones in x_p
+      // (those its mirror images double).
+      for (int a = 0; a <= degree; ++a)
+        for (int b = 0; a + b <= degree; ++b) {
+          if (mirrored && a % 2) continue;
+          double sum = 0;
+          for (std::size_t i = 0; i < q.size(); ++i)
+            sum += q.weight[i] * std::pow(q.samples.x[i], a) * std::pow(q.samples.y[i], b);
+          CAPTURE(rings);
+          CAPTURE(half);
+          CAPTURE(a);
+          CAPTURE(b);
+          CHECK(sum == doctest::Approx(exact(a, b)).epsilon(1e-12).scale(1.0));
+        }
+    }
+  }
+  // One degree beyond: r^{4 R} is not integrated exactly (the rule's degree is sharp).
+  const PupilGrid q = make_pupil_quadrature(3, 12, false);
+  double sum = 0;
+  for (std::size_t i = 0; i < q.size(); ++i)
+    sum += q.weight[i] * std::pow(q.samples.x[i] * q.samples.x[i] + q.samples.y[i] * q.samples.y[i], 6);
+  CHECK(std::abs(sum - kPi / 7.0) > 1e-6);
+  CHECK_THROWS_AS(make_pupil_quadrature(0, 4, true), Error);
 }
 
 TEST_CASE("wave: the aberration-free singlet gives the diffraction-limited MTF, Airy ring, S = 1") {

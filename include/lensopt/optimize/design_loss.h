@@ -34,10 +34,14 @@
 // Wavefront merit (DesignMerit::kWavefront, `optimize --merit wavefront`): l_S is replaced by
 //   l_W  = mean_h W_h,  W_h = sqrt(sum_w omega_w RMS_{h,w}^2 / sum_w omega_w)     (waves)
 // the RMS wavefront with piston and tilt removed (analysis/wavefront.h, the same code as
-// `analyze --wave`) on the half x_p >= 0 of an n x n pupil grid (wavefront_pupil_samples; the
-// mirrored half grid of wavefront.h, exact for the meridionally symmetric systems the tracer
-// assumes), omega the lens's wavelength weights. Its residuals, one per (field, wavelength, grid
-// cell):
+// `analyze --wave`) on the half x_p > 0 of a polar Gauss quadrature of the pupil
+// (wavefront_merit_pupil: n / 2 rings and n azimuths per half for n = wavefront_pupil_samples,
+// exact for wavefronts of degree n - 1; mirrored, exact for the meridionally symmetric systems
+// the tracer assumes), omega the lens's wavelength weights. The analysis judges on a square grid
+// of cells, which converges to the same integral at first order in the cell size (its rim cells);
+// the quadrature samples the 2-3 waves of high-order aberration of a fast lens at full field
+// closer to that limit than a grid of as many rays (BENCHMARKS.md, wave-merit). Its residuals,
+// one per (field, wavelength, quadrature node):
 //   r = sqrt(a_h omega_w / sum omega) sqrt(g_i / sum g) (W_i - piston - tilt)
 // (rms_wavefront_residuals), so sum of squares = sum_h a_h W_h^2 = l_W at W = W_0 with the
 // reweighting above. The grid rays (and each wavelength's chief ray) also carry the path and
@@ -88,8 +92,9 @@ struct DesignLossOptions {
   // kPaperHingeSmoothing of the bound so LM has a derivative), fixed weights; a design may then
   // cross a bound where the trade-off pays, as the paper's own baselines do.
   bool paper_penalties = false;
-  // The merit: the paper's RMS spot, or the RMS wavefront (weight_spot weighs it) on a grid of
-  // wavefront_pupil_samples cells across the pupil.
+  // The merit: the paper's RMS spot, or the RMS wavefront (weight_spot weighs it) on a polar
+  // quadrature of the pupil with wavefront_pupil_samples samples across its diameter
+  // (wavefront_merit_pupil).
   DesignMerit merit = DesignMerit::kSpot;
   int wavefront_pupil_samples = 12;
 
@@ -137,12 +142,21 @@ inline int design_residual_count(int fields, int constraint_fields, int waveleng
   return fields * wavelengths * rays * 2 + constraint_fields * surfaces * 3 + glasses * 2;
 }
 
-// The merit's residuals per spot field: 2 per ring ray and wavelength (spot), or one per grid
-// cell and wavelength (wavefront).
+// The wavefront merit's pupil samples for n = wavefront_pupil_samples (header): the mirrored
+// polar quadrature of ceil(n / 2) rings and n azimuths per half (so n^2 / 2 rays per field and
+// wavelength for an even n).
+inline int wavefront_merit_rings(int n) { return (n + 1) / 2; }
+inline int wavefront_merit_half_azimuths(int n) { return n; }
+inline PupilGrid wavefront_merit_pupil(int n) {
+  return make_pupil_quadrature(wavefront_merit_rings(n), wavefront_merit_half_azimuths(n), true);
+}
+
+// The merit's residuals per spot field: 2 per ring ray and wavelength (spot), or one per
+// quadrature node and wavelength (wavefront).
 inline int merit_residuals_per_field(const DesignLossOptions& options, int wavelengths, int rays) {
   if (options.merit == DesignMerit::kWavefront)
-    return wavelengths *
-           static_cast<int>(make_half_pupil_grid(options.wavefront_pupil_samples).size());
+    return wavelengths * wavefront_merit_rings(options.wavefront_pupil_samples) *
+           wavefront_merit_half_azimuths(options.wavefront_pupil_samples);
   return wavelengths * rays * 2;
 }
 
@@ -210,9 +224,9 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
   const int field_count = sampled.spot_fields;
   const int wl = sys.wavelength_count;
   const bool wavefront = options.merit == DesignMerit::kWavefront;
-  // The half grid: the lens is symmetric about the meridional plane (as the half-pupil spot).
+  // The half pupil: the lens is symmetric about the meridional plane (as the half-pupil spot).
   const PupilGrid grid =
-      wavefront ? make_half_pupil_grid(options.wavefront_pupil_samples) : PupilGrid{};
+      wavefront ? wavefront_merit_pupil(options.wavefront_pupil_samples) : PupilGrid{};
   // Rays per field and wavelength that carry the merit (and the spot).
   const int rays = wavefront ? static_cast<int>(grid.size()) : static_cast<int>(sys.pupil.size());
   const int k_count = lens.surface_count();
