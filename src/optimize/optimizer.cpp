@@ -356,6 +356,7 @@ void DesignLossOptions::validate() const {
   if (!(max_ray_angle_deg > 0.0 && max_ray_angle_deg < 90.0))
     throw Error(fmt::format("max_ray_angle_deg = {} must be in (0, 90)", max_ray_angle_deg));
   positive(weight_profile, "weight_profile");
+  positive(wavefront_unit_mm, "wavefront_unit_mm");
   if (wavefront_pupil_samples < 4 || wavefront_pupil_samples > 256)
     throw Error(
         fmt::format("wavefront_pupil_samples = {} must be in [4, 256]", wavefront_pupil_samples));
@@ -673,13 +674,17 @@ class LensOptimization {
 
   // The bounds continued from the start's extremes to the targets (25, 50, 75 %), then LM with
   // the fixed glasses at the target bounds: the design every later phase must beat.
+  // The wavefront merit skips the continuation: its strict phases start from the spot merit's
+  // soft design (basin_loss), which crosses its bounds only slightly (Cooke: l_RP 1.5e-7 mm,
+  // l_RA 1.6e-6), and each stage, changing the merit as well, ran to its 20-iteration limit
+  // (63 of the 266 iterations of the Cooke run) for a design the target round then moves anyway.
   void fixed_glasses() {
     DesignExtremes start_extremes;
     evaluate_double(param_, x_, GlassMode::kFixed, fixed_, options_.sampling, loss_,
                     &start_extremes);
     const DesignLossOptions target_loss = loss_;
     for (double t : {0.25, 0.5, 0.75}) {
-      if (interrupted() || soft_) break;
+      if (interrupted() || soft_ || (wavefront_ && options_.soft_start)) break;
       DesignLossOptions stage = continued_bounds(target_loss, start_extremes, start_, t);
       phase(x_, GlassMode::kFixed, fixed_, frozen_all_, stage,
             fmt::format("constraints {:.0f}%", 100 * t), 1, std::min(options_.max_iterations, 20));
@@ -866,7 +871,13 @@ class LensOptimization {
 
 OptimizeResult optimize_lens(const Lens& start, const OptimizeOptions& options) {
   options.validate();
-  return LensOptimization(start, options).run();
+  if (options.loss.merit != DesignMerit::kWavefront || options.loss.wavefront_unit_mm > 0.0)
+    return LensOptimization(start, options).run();
+  // The wavefront merit in mm (design_loss.h): the start's defocus unit, fixed for the run.
+  OptimizeOptions with_unit = options;
+  const double unit = wavefront_mm_per_wave(prepare_lens_system(start, options.sampling));
+  if (std::isfinite(unit) && unit > 0.0) with_unit.loss.wavefront_unit_mm = unit;
+  return LensOptimization(start, with_unit).run();
 }
 
 AdamResult adam_on_design_loss(const LensParameterization& param, std::vector<double> x,

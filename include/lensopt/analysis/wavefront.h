@@ -93,6 +93,16 @@ T exit_pupil_from_image_mm(const TraceLens<T>& lens, double wavelength_nm) {
   return -y / u - lens.thickness_mm[k_count - 1];
 }
 
+// The RMS spot radius (mm) per wave of RMS wavefront of a pure defocus W = W020 rho^2 in a
+// system of f-number N = EFL / EPD at wavelength lambda (the reference one): the transverse ray
+// aberration is -2 N lambda dW/drho = -4 N lambda W020 rho, of RMS 2 sqrt(2) N lambda W020 over
+// the pupil, and the RMS of W020 rho^2 without piston is W020 / (2 sqrt(3)), so
+//   mm per wave = 4 sqrt(6) N lambda   (Cooke, f/2 at 587.6 nm: 0.0115 mm per wave).
+inline double wavefront_mm_per_wave(const TraceSystem<double>& sys) {
+  const double lambda_mm = sys.lens.wavelengths_nm[sys.wavelength_count] * 1e-6;
+  return 4.0 * std::sqrt(6.0) * (sys.efl_mm / sys.epd_mm) * lambda_mm;
+}
+
 // The reference sphere of one field: centre on the (focus-shifted) image plane, signed radius.
 template <typename T>
 struct ReferenceSphere {

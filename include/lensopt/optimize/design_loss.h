@@ -43,8 +43,12 @@
 // closer to that limit than a grid of as many rays (BENCHMARKS.md, wave-merit). Its residuals,
 // one per (field, wavelength, quadrature node):
 //   r = sqrt(a_h omega_w / sum omega) sqrt(g_i / sum g) (W_i - piston - tilt)
-// (rms_wavefront_residuals), so sum of squares = sum_h a_h W_h^2 = l_W at W = W_0 with the
-// reweighting above. The grid rays (and each wavelength's chief ray) also carry the path and
+// (rms_wavefront_residuals), times sqrt(u) for the unit u = wavefront_unit_mm (mm per wave; 1
+// when 0), so sum of squares = u sum_h a_h W_h^2 = u l_W at W = W_0 with the reweighting above;
+// l_lens has u l_W in place of l_S. The unit matters for the strict phases: with the merit in
+// waves (~2 on the Cooke against its spot's ~0.02 mm) the penalties weigh a hundredth of what
+// they weigh against the spot, the designs of each round cross their bounds a hundred times
+// further and LM spends its iteration limit on every round (BENCHMARKS.md, wave-merit). The grid rays (and each wavelength's chief ray) also carry the path and
 // angle penalties in place of the ring rays; l_S is still reported, from the grid rays.
 #pragma once
 
@@ -97,6 +101,11 @@ struct DesignLossOptions {
   // (wavefront_merit_pupil).
   DesignMerit merit = DesignMerit::kSpot;
   int wavefront_pupil_samples = 12;
+  // The wavefront merit's unit in the least squares and in l_lens: mm per wave (0: 1, the merit
+  // in waves). The optimizer sets wavefront_mm_per_wave of the start (analysis/wavefront.h), the
+  // RMS spot of a pure defocus per wave of RMS wavefront, so the penalties, whose weights are
+  // set against the spot in mm, weigh the same against either merit (header).
+  double wavefront_unit_mm = 0.0;
 
   void validate() const;  // throws Error naming the bad value
 };
@@ -224,6 +233,7 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
   const int field_count = sampled.spot_fields;
   const int wl = sys.wavelength_count;
   const bool wavefront = options.merit == DesignMerit::kWavefront;
+  const double wave_unit = options.wavefront_unit_mm > 0.0 ? options.wavefront_unit_mm : 1.0;
   // The half pupil: the lens is symmetric about the meridional plane (as the half-pupil spot).
   const PupilGrid grid =
       wavefront ? wavefront_merit_pupil(options.wavefront_pupil_samples) : PupilGrid{};
@@ -362,7 +372,8 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
               if (r) {
                 T* rw = r + static_cast<std::size_t>(w) * rays;
                 rms_wavefront_residuals(wf, grid, rw);
-                const T scale = K<T>(std::sqrt(options.weight_spot * a_h * omega[w] / omega_sum));
+                const T scale =
+                    K<T>(std::sqrt(options.weight_spot * wave_unit * a_h * omega[w] / omega_sum));
                 for (int p = 0; p < rays; ++p) rw[p] = scale * rw[p];
               }
             });
@@ -470,7 +481,7 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
   for (int h = 0; h < static_cast<int>(field_wave.size()); ++h)
     wave = phi[h] == 1.0 ? wave + field_wave[h] : wave + K<T>(phi[h]) * field_wave[h];
   wave = wave / K<T>(phi_sum);
-  const T merit = wavefront ? wave : spot / K<T>(phi_sum);
+  const T merit = wavefront ? K<T>(wave_unit) * wave : spot / K<T>(phi_sum);
   for (int hf = 0; hf < all_fields; ++hf) {
     path = path + path_linear[hf];
     angle = angle + angle_linear[hf];
