@@ -348,6 +348,35 @@ TEST_CASE("wave: a wavefront made of known Zernike terms is recovered to 1e-10")
   }
 }
 
+TEST_CASE("wave: wavefront_mm_per_wave is the RMS spot per wave of RMS wavefront of a defocus") {
+  // The aberration-free slow singlet moved out of focus by several waves of W020: the RMS
+  // radius of its rays about the chief ray's point (the wavefront's own image positions, on the
+  // quadrature) over its RMS wavefront is 4 sqrt(6) N lambda.
+  const Lens lens = slow_singlet();
+  const TraceSystem<double> sys = prepare(lens);
+  const double focus = sys.bfl_mm - sys.lens.thickness_mm.back();
+  const PupilGrid q = make_pupil_quadrature(8, 16, false);
+  RayBundle<double> rays;
+  RayRecord<double> record;
+  const double unit = wavefront_mm_per_wave(sys);
+  CHECK(unit == doctest::Approx(4 * std::sqrt(6.0) * 40.0 * 587.56e-6).epsilon(2e-3));
+  for (double dz : {0.5, 2.0}) {
+    const ReferenceSphere<double> sphere = reference_sphere(sys, 0, focus + dz);
+    const Wavefront<double> wf = compute_wavefront(sys, 0, 0, q, sphere, focus + dz, rays, record);
+    double sum = 0, weight = 0;
+    for (std::size_t i = 0; i < q.size(); ++i) {
+      REQUIRE(wf.ok[i]);
+      sum += q.weight[i] * (wf.image_x_mm[i] * wf.image_x_mm[i] + wf.image_y_mm[i] * wf.image_y_mm[i]);
+      weight += q.weight[i];
+    }
+    const double spot_mm = std::sqrt(sum / weight);
+    CAPTURE(dz);
+    CAPTURE(wf.rms_waves);
+    CHECK(wf.rms_waves > 1.0);
+    CHECK(spot_mm / wf.rms_waves == doctest::Approx(unit).epsilon(0.01));
+  }
+}
+
 TEST_CASE("wave: a known defocus gives the Zernike defocus term of the OPD's quadratic term") {
   const Lens lens = slow_singlet();
   const TraceSystem<double> sys = prepare(lens);

@@ -100,7 +100,7 @@ struct DesignLossOptions {
   // quadrature of the pupil with wavefront_pupil_samples samples across its diameter
   // (wavefront_merit_pupil).
   DesignMerit merit = DesignMerit::kSpot;
-  int wavefront_pupil_samples = 12;
+  int wavefront_pupil_samples = 8;
   // The wavefront merit's unit in the least squares and in l_lens: mm per wave (0: 1, the merit
   // in waves). The optimizer sets wavefront_mm_per_wave of the start (analysis/wavefront.h), the
   // RMS spot of a pure defocus per wave of RMS wavefront, so the penalties, whose weights are
