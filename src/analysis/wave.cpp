@@ -260,9 +260,10 @@ PupilGrid make_half_pupil_grid(int n) {
 
 PupilGrid make_pupil_quadrature(int rings, int half_azimuths, bool mirrored) {
   if (rings < 1 || rings > 512 || half_azimuths < 1 || half_azimuths > 2048)
-    throw Error(fmt::format("pupil quadrature of {} rings x {} azimuths per half: rings must be "
-                            "in [1, 512], azimuths in [1, 2048]",
-                            rings, half_azimuths));
+    throw Error(
+        fmt::format("pupil quadrature of {} rings x {} azimuths per half: rings must be "
+                    "in [1, 512], azimuths in [1, 2048]",
+                    rings, half_azimuths));
   // Gauss-Legendre nodes t_i of [-1, 1] by Newton's method on P_R (three-term recurrence
   // (k + 1) P_{k+1} = (2k + 1) t P_k - k P_{k-1}; P_R'(t) = R (t P_R - P_{R-1}) / (t^2 - 1)),
   // weights 2 / ((1 - t^2) P_R'(t)^2); mapped to u = (1 + t) / 2 in [0, 1] with weight w / 2.

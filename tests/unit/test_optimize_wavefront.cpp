@@ -152,7 +152,8 @@ TEST_CASE("optimize wavefront: the merit is the analysis's RMS wavefront; residu
   // The merit's half quadrature against the full one (both halves traced): the mirror is exact.
   const int n = loss.wavefront_pupil_samples;
   const double analysed = mean_rms_wavefront(
-      sys, make_pupil_quadrature(wavefront_merit_rings(n), wavefront_merit_half_azimuths(n), false));
+      sys,
+      make_pupil_quadrature(wavefront_merit_rings(n), wavefront_merit_half_azimuths(n), false));
   CHECK(l.wavefront_waves == doctest::Approx(analysed).epsilon(1e-12));
   // ... and near the analysis's square grid at fine sampling (the same wavefront, the same
   // integral; measured 3e-5 relative, the 256 x 256 grid's own rim error being of that order).

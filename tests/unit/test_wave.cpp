@@ -108,7 +108,8 @@ TEST_CASE("wave: the polar pupil quadrature integrates polynomials up to its deg
   const PupilGrid q = make_pupil_quadrature(3, 12, false);
   double sum = 0;
   for (std::size_t i = 0; i < q.size(); ++i)
-    sum += q.weight[i] * std::pow(q.samples.x[i] * q.samples.x[i] + q.samples.y[i] * q.samples.y[i], 6);
+    sum += q.weight[i] *
+           std::pow(q.samples.x[i] * q.samples.x[i] + q.samples.y[i] * q.samples.y[i], 6);
   CHECK(std::abs(sum - kPi / 7.0) > 1e-6);
   CHECK_THROWS_AS(make_pupil_quadrature(0, 4, true), Error);
 }
@@ -366,7 +367,8 @@ TEST_CASE("wave: wavefront_mm_per_wave is the RMS spot per wave of RMS wavefront
     double sum = 0, weight = 0;
     for (std::size_t i = 0; i < q.size(); ++i) {
       REQUIRE(wf.ok[i]);
-      sum += q.weight[i] * (wf.image_x_mm[i] * wf.image_x_mm[i] + wf.image_y_mm[i] * wf.image_y_mm[i]);
+      sum +=
+          q.weight[i] * (wf.image_x_mm[i] * wf.image_x_mm[i] + wf.image_y_mm[i] * wf.image_y_mm[i]);
       weight += q.weight[i];
     }
     const double spot_mm = std::sqrt(sum / weight);

@@ -48,8 +48,9 @@
 // l_lens has u l_W in place of l_S. The unit matters for the strict phases: with the merit in
 // waves (~2 on the Cooke against its spot's ~0.02 mm) the penalties weigh a hundredth of what
 // they weigh against the spot, the designs of each round cross their bounds a hundred times
-// further and LM spends its iteration limit on every round (BENCHMARKS.md, wave-merit). The grid rays (and each wavelength's chief ray) also carry the path and
-// angle penalties in place of the ring rays; l_S is still reported, from the grid rays.
+// further and LM spends its iteration limit on every round (BENCHMARKS.md, wave-merit).
+// The quadrature rays (and each wavelength's chief ray) also carry the path and angle penalties
+// in place of the ring rays; l_S is still reported, from the quadrature rays.
 #pragma once
 
 #include <omp.h>
@@ -154,8 +155,12 @@ inline int design_residual_count(int fields, int constraint_fields, int waveleng
 // The wavefront merit's pupil samples for n = wavefront_pupil_samples (header): the mirrored
 // polar quadrature of ceil(n / 2) rings and n azimuths per half (so n^2 / 2 rays per field and
 // wavelength for an even n).
-inline int wavefront_merit_rings(int n) { return (n + 1) / 2; }
-inline int wavefront_merit_half_azimuths(int n) { return n; }
+inline int wavefront_merit_rings(int n) {
+  return (n + 1) / 2;
+}
+inline int wavefront_merit_half_azimuths(int n) {
+  return n;
+}
 inline PupilGrid wavefront_merit_pupil(int n) {
   return make_pupil_quadrature(wavefront_merit_rings(n), wavefront_merit_half_azimuths(n), true);
 }
