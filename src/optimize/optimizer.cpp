@@ -235,10 +235,9 @@ DesignLoss<double> run_phase(const LensParameterization& param, std::vector<doub
     solver.linear_solver_type = ceres::DENSE_QR;
     solver.max_num_iterations = max_iterations;
     solver.initial_trust_region_radius = radius;
-    // The wavefront merit stops at a relative cost decrease of 1e-5 per iteration: below that
-    // its strict rounds crept (Cooke: 36 iterations for 0.1 % of the cost, 40 for 0.0006 waves),
-    // far under what its quadrature resolves (4 x 8 against 12 x 24 nodes: 5e-4 waves of 2.16).
-    solver.function_tolerance = loss.merit == DesignMerit::kWavefront ? 1e-5 : 1e-6;
+    // (1e-5 for the wavefront merit saved the Cooke's creeping strict rounds but stopped the
+    // AC254-100 achromat at 0.186 waves against 0.092: BENCHMARKS.md, wave-merit.)
+    solver.function_tolerance = 1e-6;
     solver.gradient_tolerance = 1e-12;
     solver.parameter_tolerance = 1e-8;
     solver.num_threads = 1;  // the loss parallelizes over fields itself
