@@ -676,17 +676,26 @@ class LensOptimization {
 
   // The bounds continued from the start's extremes to the targets (25, 50, 75 %), then LM with
   // the fixed glasses at the target bounds: the design every later phase must beat.
-  // The wavefront merit skips the continuation: its strict phases start from the spot merit's
-  // soft design (basin_loss), which crosses its bounds only slightly (Cooke: l_RP 1.5e-7 mm,
-  // l_RA 1.6e-6), and each stage, changing the merit as well, ran to its 20-iteration limit
-  // (63 of the 266 iterations of the Cooke run) for a design the target round then moves anyway.
+  // The wavefront merit skips the continuation when its strict phases start from a spot-merit
+  // soft design (basin_loss) that crosses its bounds only slightly (within 0.01 mm and 0.5 deg:
+  // the Cooke's, l_RP 1.5e-7 mm, l_RA 1.6e-6): each stage, changing the merit as well, ran to its
+  // 20-iteration limit (63 of the 266 iterations of the Cooke run) for a design the target round
+  // then moves anyway. A start still far outside (short rounds) is walked in as before.
   void fixed_glasses() {
     DesignExtremes start_extremes;
     evaluate_double(param_, x_, GlassMode::kFixed, fixed_, options_.sampling, loss_,
                     &start_extremes);
     const DesignLossOptions target_loss = loss_;
+    const DesignLossOptions from = continued_bounds(target_loss, start_extremes, start_, 0.0);
+    const double length_gap_mm =
+        std::max({std::abs(from.min_air_mm - target_loss.min_air_mm),
+                  std::abs(from.min_glass_mm - target_loss.min_glass_mm),
+                  std::abs(from.max_glass_mm - target_loss.max_glass_mm),
+                  std::abs(from.min_image_clearance_mm - target_loss.min_image_clearance_mm)});
+    const double angle_gap_deg = std::abs(from.max_ray_angle_deg - target_loss.max_ray_angle_deg);
+    const bool nearly_inside = length_gap_mm <= 0.01 && angle_gap_deg <= 0.5;
     for (double t : {0.25, 0.5, 0.75}) {
-      if (interrupted() || soft_ || (wavefront_ && options_.soft_start)) break;
+      if (interrupted() || soft_ || (wavefront_ && options_.soft_start && nearly_inside)) break;
       DesignLossOptions stage = continued_bounds(target_loss, start_extremes, start_, t);
       phase(x_, GlassMode::kFixed, fixed_, frozen_all_, stage,
             fmt::format("constraints {:.0f}%", 100 * t), 1, std::min(options_.max_iterations, 20));
