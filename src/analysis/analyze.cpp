@@ -43,6 +43,7 @@ AnalysisReport analyze_lens(const Lens& lens_in, const AnalyzeOptions& options) 
   for (double t : sys.lens.thickness_mm) r.total_track_mm += t;
   r.rings = options.trace.rings;
   r.rays_per_field_wavelength = static_cast<int>(sys.pupil.size());
+  r.full_pupil = sys.full_pupil;
   r.wavelength_count = sys.wavelength_count;
   r.ray_aiming = options.trace.ray_aiming;
   r.dispersion = dispersion_name(lens.specs.dispersion);
@@ -90,6 +91,7 @@ AnalysisReport analyze_lens(const Lens& lens_in, const AnalyzeOptions& options) 
       all_fields_traced = false;
     }
     f.centroid_y_mm = spots.centroid_y_mm[h];
+    f.centroid_x_mm = spots.centroid_x_mm[h];
     f.reference_y_mm = y_ref[h];
     f.distortion_percent =
         f.traced_rays > 0 ? 100.0 * field_distortion(f.centroid_y_mm, y_ref[h], y_ref_last) : 0.0;
@@ -171,11 +173,11 @@ std::string format_report_text(const AnalysisReport& r) {
                    r.epd_mm, r.entrance_pupil_z_mm));
   line(fmt::format("  stop radius (real ray)   {:10.4f} mm", r.stop_radius_mm));
   line(fmt::format("  total track              {:10.4f} mm", r.total_track_mm));
-  line(
-      fmt::format("  sampling: {} fields x {} wavelengths x {} half-pupil rays ({} rings), "
-                  "ray aiming {}, dispersion {}",
-                  r.fields.size(), r.wavelength_count, r.rays_per_field_wavelength, r.rings,
-                  r.ray_aiming ? "on" : "off", r.dispersion));
+  line(fmt::format(
+      "  sampling: {} fields x {} wavelengths x {} {}-pupil rays ({} rings), "
+      "ray aiming {}, dispersion {}",
+      r.fields.size(), r.wavelength_count, r.rays_per_field_wavelength,
+      r.full_pupil ? "full" : "half", r.rings, r.ray_aiming ? "on" : "off", r.dispersion));
   line(
       fmt::format("  system: spec mode {}, aperture {}, object {}, primary wavelength {} nm, "
                   "fields by {}",
@@ -244,6 +246,7 @@ std::string format_report_json(const AnalysisReport& r) {
   j["total_track_mm"] = finite_or_null(r.total_track_mm);
   j["rings"] = r.rings;
   j["rays_per_field_wavelength"] = r.rays_per_field_wavelength;
+  j["full_pupil"] = r.full_pupil;
   j["wavelength_count"] = r.wavelength_count;
   j["ray_aiming"] = r.ray_aiming;
   j["dispersion"] = r.dispersion;
@@ -285,6 +288,11 @@ std::string format_report_json(const AnalysisReport& r) {
   j["distortion_percent"] = distortion;
   j["relative_illumination"] = ri;
   j["centroid_y_mm"] = centroid;
+  if (r.full_pupil) {  // the x centroids (0 by symmetry on a half pupil, and then not written)
+    json centroid_x = json::array();
+    for (const FieldReport& f : r.fields) centroid_x.push_back(finite_or_null(f.centroid_x_mm));
+    j["centroid_x_mm"] = centroid_x;
+  }
   j["aiming_error"] = aiming;
   j["max_aiming_error"] = finite_or_null(r.max_aiming_error);
   j["ray_failures"] = r.ray_failures;

@@ -8,7 +8,7 @@ namespace lensopt {
 std::vector<double> automatic_semi_diameters(const TraceSystem<double>& sys, int edge_rays) {
   const int k_count = sys.lens.surface_count();
   std::vector<double> out(k_count, 0.0);
-  PupilSamples pupil = pupil_edge_samples(edge_rays);
+  PupilSamples pupil = sys.samples_for(pupil_edge_samples(edge_rays));
   pupil.x.push_back(0.0);  // the chief ray
   pupil.y.push_back(0.0);
   RayBundle<double> rays;

@@ -36,6 +36,17 @@ void SystemAdjoint::add_bundle(const BundleAdjoint& bundle, int h, int w, int wa
       a_sy += bundle.y0[i] * pupil.y[i];
       a_z += bundle.z0[i];
     }
+  } else if (v.asymmetric()) {
+    // The vignetted pupil point (start_rays): x0 = s_x px', y0 = o_y + s_y py', (px', py') =
+    // VignettingFactors::pupil_point(px, py).
+    double qx = 0.0, qy = 0.0;
+    for (std::size_t i = 0; i < pupil.size(); ++i) {
+      v.pupil_point(pupil.x[i], pupil.y[i], qx, qy);
+      a_sx += bundle.x0[i] * qx;
+      a_oy += bundle.y0[i];
+      a_sy += bundle.y0[i] * qy;
+      a_z += bundle.z0[i];
+    }
   } else {
     // The vignetted pupil point (start_rays): px' = (1 - VCX) px, py' = VDY + (1 - VCY) py.
     for (std::size_t i = 0; i < pupil.size(); ++i) {
@@ -95,6 +106,7 @@ SystemAdjoint mean_spot_adjoint(const TraceSystem<double>& sys, int threads) {
       adj.start.assign(static_cast<std::size_t>(field_count) * wl * 4, 0.0);
       // Forward: the field's spot, centroid and count.
       SpotAccumulator<double> acc;
+      acc.full_pupil = sys.full_pupil;
       for (int w = 0; w < wl; ++w) {
         start_rays(sys, h, w, rays);
         trace_bundle(sys.lens, w, k_count, true, rays, static_cast<RayRecord<double>*>(nullptr));
@@ -104,6 +116,7 @@ SystemAdjoint mean_spot_adjoint(const TraceSystem<double>& sys, int threads) {
       field_rms[h] = rms;
       if (!(rms > 0.0)) continue;
       const double ybar = acc.centroid();
+      const double xbar = acc.centroid_x();  // 0 on a mirrored half pupil
       // d S_h / d Y_i = omega_w (Y_i - ybar_h) / (M_h S_h), times phi_h / Phi (spot.h); with
       // equal weights 1 / (F N_h S_h).
       const bool equal = weights.field[h] == 1.0 && weights.field_sum == field_count &&
@@ -120,7 +133,7 @@ SystemAdjoint mean_spot_adjoint(const TraceSystem<double>& sys, int threads) {
         seed_x.resize(rays.size());
         seed_y.resize(rays.size());
         for (std::size_t i = 0; i < rays.size(); ++i) {
-          seed_x[i] = rays.x[i] * scale;
+          seed_x[i] = (sys.full_pupil ? rays.x[i] - xbar : rays.x[i]) * scale;
           seed_y[i] = (rays.y[i] - ybar) * scale;
         }
         AdjointSeeds seeds;

@@ -36,29 +36,44 @@ fftw_plan complex_plan(int m) {
   return plan;
 }
 
-// Linear interpolation of the r2c spectrum C (m rows x (m/2+1) columns) at a fractional shift
-// along y (column 0) or along x (row 0), using Hermitian symmetry for negative x shifts.
-Complex spectrum_along_y(const fftw_complex* c, int m, double s) {
+// Cubic (4-point Lagrange) interpolation of samples a(k) at s = k0 + t, t in [0, 1):
+//   a(s) ~ -t(t-1)(t-2)/6 a(k0-1) + (t+1)(t-1)(t-2)/2 a(k0) - (t+1)t(t-2)/2 a(k0+1)
+//          + (t+1)t(t-1)/6 a(k0+2),
+// exact at the samples, error O(h^4) between them (linear interpolation: O(h^2), which at a
+// coarse pupil grid misplaced an aberrated MTF between OTF samples by up to ~0.03).
+template <typename At>
+Complex cubic_at(At&& at, double s) {
   const double f = std::floor(s);
   const double t = s - f;
+  const long k0 = static_cast<long>(f);
+  const double w_m = -t * (t - 1.0) * (t - 2.0) / 6.0;
+  const double w_0 = (t + 1.0) * (t - 1.0) * (t - 2.0) / 2.0;
+  const double w_1 = -(t + 1.0) * t * (t - 2.0) / 2.0;
+  const double w_2 = (t + 1.0) * t * (t - 1.0) / 6.0;
+  return w_m * at(k0 - 1) + w_0 * at(k0) + w_1 * at(k0 + 1) + w_2 * at(k0 + 2);
+}
+
+// The r2c spectrum C (m rows x (m/2+1) columns) at a fractional shift along y (column 0) or
+// along x (row 0, Hermitian symmetry for negative x shifts), interpolated by cubic_at. The OTF
+// of an n-cell pupil vanishes from a shift of n on (m >= 2n), so a sample past m/2 is 0.
+Complex spectrum_along_y(const fftw_complex* c, int m, double s) {
   auto at = [&](long k) {
+    if (k > m / 2 || -k > m / 2) return Complex(0, 0);
     const long row = ((k % m) + m) % m;
     const fftw_complex& v = c[static_cast<std::size_t>(row) * (m / 2 + 1)];
     return Complex(v[0], v[1]);
   };
-  const long k0 = static_cast<long>(f);
-  return (1.0 - t) * at(k0) + t * at(k0 + 1);
+  return cubic_at(at, s);
 }
 
 Complex spectrum_along_x(const fftw_complex* c, int m, double s) {
-  const double f = std::floor(s);
-  const double t = s - f;
   auto at = [&](long k) {
-    if (k >= 0) return Complex(c[k][0], c[k][1]);
-    return std::conj(Complex(c[-k][0], c[-k][1]));
+    const long a = k >= 0 ? k : -k;
+    if (a > m / 2) return Complex(0, 0);
+    const Complex v(c[a][0], c[a][1]);
+    return k >= 0 ? v : std::conj(v);
   };
-  const long k0 = static_cast<long>(f);
-  return (1.0 - t) * at(k0) + t * at(k0 + 1);
+  return cubic_at(at, s);
 }
 
 struct Scratch {

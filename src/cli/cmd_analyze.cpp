@@ -94,7 +94,8 @@ void setup_analyze(CLI::App& app) {
                   "MTF frequencies in cycles/mm for --wave (default 10,30,50)")
       ->delimiter(',');
   sub->add_option("--pupil-samples", cmd->options.wave_options.pupil_samples,
-                  "pupil grid cells across the diameter for --wave (default 64)")
+                  "pupil grid cells across the diameter for --wave (default 128: the MTF within "
+                  "~1e-3 of a converged grid; 64 is off by about 0.01 on the Tessar)")
       ->check(CLI::Range(8, 1024));
   sub->add_option("--wavelength-weights", cmd->options.wave_options.wavelength_weights,
                   "weights of the spec wavelengths for --wave (default: the lens's own "

@@ -62,7 +62,7 @@ void setup_plot(CLI::App& app) {
                   "value to compare lenses across pages");
   sub->add_option("--width", cmd->options.width_px, "page width in px (0: the kind's default)");
   sub->add_option("--pupil-samples", cmd->options.pupil_samples,
-                  "wave-optics kinds: pupil grid across the diameter (default 64)")
+                  "wave-optics kinds: pupil grid across the diameter (default 128)")
       ->check(CLI::Range(8, 1024));
   sub->add_option("--mtf-freq", cmd->options.mtf_frequency_cyc_mm,
                   "through-focus: the frequency in cycles/mm (default 30)");

@@ -30,6 +30,8 @@ std::vector<CatalogEntry> ZmxParser::load_catalogs() {
   std::vector<std::string> names;
   if (note_catalog_) names.push_back(*note_catalog_);
   for (const auto& [name, line] : gcat_) names.push_back(name);
+  // No GCAT line (and no lensopt note): OpticStudio's default glass catalog, SCHOTT.
+  if (names.empty()) names.push_back("SCHOTT");
   for (const std::string& name : names) {
     bool found = try_load(name, name);
     // OpticStudio names catalogs by family ("SCHOTT"); vendor files are often dated

@@ -282,8 +282,6 @@ void ZmxParser::system_line(const Line& line, const std::string& key) {
     values.clear();
     for (std::size_t i = 1; i < line.fields.size(); ++i)
       values.push_back(number(line, i, "a vignetting factor"));
-    if (key == "VDXN") vdxn_line_ = line.number;
-    if (key == "VANN") vann_line_ = line.number;
   } else if (key == "FWGN") {
     field_weights_.clear();
     for (std::size_t i = 1; i < line.fields.size(); ++i)

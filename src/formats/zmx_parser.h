@@ -148,8 +148,6 @@ class ZmxParser {
   int field_type_ = 0;
   std::vector<double> field_weights_;
   std::map<std::string, std::vector<double>> vignetting_;
-  int vdxn_line_ = 0;
-  int vann_line_ = 0;
   std::map<int, Wavelength> wavm_;
   std::vector<Wavelength> wavl_;
   int wavelength_line_ = 0;

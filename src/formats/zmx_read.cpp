@@ -171,6 +171,10 @@ LensSourceLines ZmxParser::build_surfaces(Lens& lens) {
             fmt::format("surface {} (the last before the image) must be followed by air, not {}",
                         raw.number, raw.glass));
   }
+  if (gcat_.empty() && !note_catalog_ && !used_catalogs.empty())
+    warn(0, fmt::format("the file has no GCAT line: its glasses come from {}, OpticStudio's "
+                        "default catalog",
+                        used_catalogs.front()));
   if (!used_catalogs.empty()) {
     lens.catalog_name = note_catalog_ && std::find(used_catalogs.begin(), used_catalogs.end(),
                                                    *note_catalog_) != used_catalogs.end()
@@ -268,7 +272,6 @@ void ZmxParser::set_fields(Specs& specs) {
     const auto it = vignetting_.find(key);
     return it != vignetting_.end() && i < it->second.size() ? it->second[i] : 0.0;
   };
-  bool dropped_vdx = false, dropped_van = false, off_axes = false;
   for (std::size_t i = 0; i < field_count; ++i) {
     const double x = i < xfln_.size() ? xfln_[i] : 0.0;
     const double y = i < yfln_.size() ? yfln_[i] : 0.0;
@@ -276,49 +279,47 @@ void ZmxParser::set_fields(Specs& specs) {
     f.value = x == 0.0 ? std::abs(y) : std::hypot(x, y);
     f.weight = i < field_weights_.size() ? field_weights_[i] : 1.0;
     // OpticStudio's factors are in the pupil's x, y; lensopt's in the frame where the field lies
-    // on +y: a field on -y mirrors y (VDY -> -VDY), a field on +-x turns the pupil by a quarter
-    // turn (y' = +-x, x' = -+y: VDY' = +-VDX, VDX' = -+VDY, VCX and VCY swap). A field off the
-    // axes keeps the factors as written (warned when any is set).
+    // on +y (lens.h: the pupil ellipse D + R(VAN) C, D = (VDX, VDY), C = diag(1 - VCX, 1 - VCY)).
+    // A field on -y mirrors y (M = diag(1, -1): M D, and M R(a) C = R(-a) C M, so VAN -> -VAN);
+    // a field on +-x turns the pupil by a quarter turn Q (y' = +-x, x' = -+y: VDY' = +-VDX,
+    // VDX' = -+VDY; Q R(a) C = R(a) Q C Q^T Q with Q C Q^T = diag(1 - VCY, 1 - VCX): VCX and VCY
+    // swap, VAN stays); a field off the axes turns by the angle b that takes it to +y (R(b): D'
+    // = R(b) D, VAN' = VAN + b, C stays).
     const double vdx = factor("VDXN", i), vdy = factor("VDYN", i);
     const double vcx = factor("VCXN", i), vcy = factor("VCYN", i);
+    const double van = factor("VANN", i);
     if (x == 0.0) {
       f.vignetting.vdx = vdx;
       f.vignetting.vdy = y < 0.0 ? -vdy : vdy;
       f.vignetting.vcx = vcx;
       f.vignetting.vcy = vcy;
+      f.vignetting.van_deg = y < 0.0 ? -van : van;
     } else if (y == 0.0) {
       const double s = x > 0.0 ? 1.0 : -1.0;
       f.vignetting.vdx = -s * vdy;
       f.vignetting.vdy = s * vdx;
       f.vignetting.vcx = vcy;
       f.vignetting.vcy = vcx;
+      f.vignetting.van_deg = van;
     } else {
-      f.vignetting.vdx = vdx;
-      f.vignetting.vdy = vdy;
       f.vignetting.vcx = vcx;
       f.vignetting.vcy = vcy;
-      off_axes = off_axes || f.vignetting.any();
+      f.vignetting.van_deg = van;
+      f.vignetting.vdx = vdx;
+      f.vignetting.vdy = vdy;
+      if (f.vignetting.any()) {
+        const double b = kPi / 2.0 - std::atan2(y, x);  // R(b) (x, y) = (0, hypot(x, y))
+        const double c = std::cos(b), sb = std::sin(b);
+        f.vignetting.vdx = c * vdx - sb * vdy;
+        f.vignetting.vdy = sb * vdx + c * vdy;
+        f.vignetting.van_deg = van + b * 180.0 / kPi;
+      }
     }
-    f.vignetting.van_deg = factor("VANN", i);
-    if (f.vignetting.vdx != 0.0) dropped_vdx = true;
-    if (f.vignetting.van_deg != 0.0) dropped_van = true;
     if (!(f.vignetting.vcx < 1.0) || !(f.vignetting.vcy < 1.0))
       fail_at(yfln_line_ > 0 ? yfln_line_ : last_line_, 1,
               fmt::format("field {}: vignetting compression VCX, VCY must be < 1", i + 1));
     specs.fields.push_back(f);
   }
-  if (dropped_vdx)
-    warn(vdxn_line_,
-         "vignetting decentres across the field (VDXN, or VDYN of a field on x) are kept in the "
-         "lens but not traced: lensopt traces half pupils symmetric about the field's meridian");
-  if (dropped_van)
-    warn(vann_line_,
-         "vignetting angles (VANN) are kept in the lens but not traced: lensopt traces half "
-         "pupils symmetric about the field's meridian");
-  if (off_axes)
-    warn(yfln_line_,
-         "vignetting factors of a field off the x and y axes are applied as if the field lay on "
-         "+y");
   if (!object.thickness_infinite) specs.object_distance_mm = object.thickness_mm * unit_mm_;
   if (specs.field_type == FieldType::kObjectHeight && specs.object_at_infinity())
     fail_at(ftyp_line_, 1, "object-height fields (FTYP 1) need a finite object distance");

@@ -79,7 +79,7 @@ SystemAdjoint design_adjoint(const TraceSystem<double>& sys, const DesignSamplin
   const int rays = static_cast<int>(sys.pupil.size());
   const int k_count = sys.lens.surface_count();
   const double n_r = static_cast<double>(field_count) * wl * rays;
-  const PupilSamples edge = pupil_edge_samples(kEdgeRays);
+  const PupilSamples edge = sys.samples_for(pupil_edge_samples(kEdgeRays));
   const double cos2_max = std::pow(std::cos(options.max_ray_angle_deg * kPi / 180.0), 2);
   std::vector<double> lower(k_count), upper(k_count);
   for (int k = 0; k < k_count; ++k) {
@@ -131,7 +131,7 @@ SystemAdjoint design_adjoint(const TraceSystem<double>& sys, const DesignSamplin
       const int h = sampled.spot_field[hf];
       const bool spot_field = h >= 0;
       // The spot of field h (evaluate_design's formula) and its seed scale.
-      double y_mean = 0.0, spot_scale = 0.0;
+      double y_mean = 0.0, x_mean = 0.0, spot_scale = 0.0;
       if (spot_field) {
         ys.assign(static_cast<std::size_t>(wl) * rays, 0.0);
         xs.assign(static_cast<std::size_t>(wl) * rays, 0.0);
@@ -149,23 +149,27 @@ SystemAdjoint design_adjoint(const TraceSystem<double>& sys, const DesignSamplin
             }
           }
         }
+        // The centroids (evaluate_design); x's is 0 on the mirrored half pupil.
         int count = 0;
-        double y_sum = 0.0, weight_sum = 0.0;
+        double y_sum = 0.0, x_sum = 0.0, weight_sum = 0.0;
         for (std::size_t i = 0; i < ys.size(); ++i)
           if (ok[i]) {
             const double o = spot_w.wavelength[i / rays];
             y_sum += o == 1.0 ? ys[i] : o * ys[i];
+            x_sum += o == 1.0 ? xs[i] : o * xs[i];
             ++count;
             weight_sum += o;
           }
         const bool any = count > 0 && weight_sum > 0.0;
         y_mean = any ? y_sum / weight_sum : 0.0;
+        x_mean = sys.full_pupil && any ? x_sum / weight_sum : 0.0;
         double s2 = 0.0;
         for (std::size_t i = 0; i < ys.size(); ++i)
           if (ok[i]) {
             const double o = spot_w.wavelength[i / rays];
             const double dy = ys[i] - y_mean;
-            s2 += o == 1.0 ? dy * dy + xs[i] * xs[i] : o * (dy * dy + xs[i] * xs[i]);
+            const double dx = xs[i] - x_mean;
+            s2 += o == 1.0 ? dy * dy + dx * dx : o * (dy * dy + dx * dx);
           }
         const double var = any ? s2 / weight_sum : 0.0;
         field_rms[h] = var > 0.0 ? std::sqrt(var) : 0.0;
@@ -216,7 +220,7 @@ SystemAdjoint design_adjoint(const TraceSystem<double>& sys, const DesignSamplin
           seed_x.resize(bundle.size());
           seed_y.resize(bundle.size());
           for (std::size_t i = 0; i < bundle.size(); ++i) {
-            seed_x[i] = bundle.x[i] * scale;
+            seed_x[i] = (bundle.x[i] - x_mean) * scale;
             seed_y[i] = (bundle.y[i] - y_mean) * scale;
           }
           seeds.x_image = seed_x.data();

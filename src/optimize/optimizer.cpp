@@ -152,12 +152,16 @@ int residual_count(const LensParameterization& param, const TraceOptions& sampli
   // The design loss's sampling (design_sampling.h): spot fields among all traced fields.
   const DesignSampling sampled = design_sampling(param.structure(), sampling);
   const int fields = sampled.spot_fields;
-  const int rays = static_cast<int>(paper_pupil_samples(sampling.rings).size());
+  // A field with VDX or VAN: every field is traced on the full pupil (system.h).
+  const bool full_pupil = needs_full_pupil(sampled.setup.vignetting);
+  const int rays =
+      static_cast<int>(paper_pupil_samples(sampling.rings).size()) * (full_pupil ? 2 : 1);
   int glasses = 0;
   for (const LensVariable& v : param.variables()) glasses += v.kind == LensVariable::Kind::kGlass0;
   return design_residual_count(loss, fields, static_cast<int>(sampled.setup.field_values.size()),
                                static_cast<int>(specs.wavelengths_nm.size()), rays,
-                               static_cast<int>(param.structure().surfaces.size()), glasses);
+                               static_cast<int>(param.structure().surfaces.size()), glasses,
+                               full_pupil);
 }
 
 // "mean spot 12.3456 um" (and the mean RMS wavefront with the wavefront merit).

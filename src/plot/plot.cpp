@@ -145,7 +145,7 @@ void draw_wave_page(Canvas& c, Rect area, const PlotContext& ctx, const PlotOpti
   wave.threads = options.trace.threads;
   wave.wavelength_weights = lens_wavelength_weights(ctx.lens, sys.wavelength_count);
   const double f_number = sys.efl_mm / sys.epd_mm;
-  const double lambda_ref_mm = kWavelengthD_nm * 1e-6;
+  const double lambda_ref_mm = ctx.lens.specs.primary_wavelength_nm * 1e-6;
   switch (options.kind) {
     case PlotKind::kMtf: {
       const WaveReport r = compute_mtf_curves(ctx, options);

@@ -103,7 +103,7 @@ SpotData compute_spots(const PlotContext& ctx, const SpotOptions& options) {
   out.wavelength_channel = ctx.wavelength_channel;
   out.mean_rms_um = ctx.report.mean_rms_spot_um.value_or(0.0);
   TraceSystem<double> sys = base;  // same aiming, fewer drawn rays
-  sys.pupil = paper_pupil_samples(options.draw_rings);
+  sys.pupil = sys.samples_for(paper_pupil_samples(options.draw_rings));
   RayBundle<double> rays;
   for (int h : field_indices(ctx, options.field_fractions)) {
     const FieldReport& report = ctx.report.fields[h];
@@ -111,6 +111,7 @@ SpotData compute_spots(const PlotContext& ctx, const SpotOptions& options) {
     f.field = h;
     f.field_deg = sys.fields_deg[h];
     f.centroid_y_mm = report.centroid_y_mm;
+    f.centroid_x_mm = report.centroid_x_mm;
     f.rms_um = report.rms_spot_um.value_or(0.0);
     for (int w = 0; w < sys.wavelength_count; ++w) {
       start_rays(sys, h, w, rays);
@@ -120,9 +121,10 @@ SpotData compute_spots(const PlotContext& ctx, const SpotOptions& options) {
           ++f.failed_rays;
           continue;
         }
-        const double x = 1000.0 * rays.x[i];
+        const double x = 1000.0 * (rays.x[i] - f.centroid_x_mm);
         const double y = 1000.0 * (rays.y[i] - f.centroid_y_mm);
-        for (double sx : {1.0, -1.0}) {  // mirrored half pupil
+        for (double sx : {1.0, -1.0}) {  // mirrored half pupil (a full pupil: each ray once)
+          if (sx < 0.0 && sys.full_pupil) break;
           f.x_um.push_back(sx * x);
           f.y_um.push_back(y);
           f.wavelength.push_back(w);

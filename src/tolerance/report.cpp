@@ -84,7 +84,7 @@ std::string format_tolerance_text(const ToleranceReport& r, int sensitivity_rows
   line(fmt::format("  {} trials, seed {}, {}; compensator: {}", o.trials, o.seed,
                    distribution_text(o.distribution), compensator_text(o.compensator)));
   line(
-      fmt::format("  sampling: {} fields x {} wavelengths x {} half-pupil rays ({} rings), ray "
+      fmt::format("  sampling: {} fields x {} wavelengths x {} pupil rays ({} rings), ray "
                   "aiming {}",
                   r.fields_deg.size(), r.wavelength_count, r.rays_per_field_wavelength, o.rings,
                   o.ray_aiming ? "on" : "off"));

@@ -100,10 +100,10 @@ std::vector<double> clear_semi_apertures_mm(const Lens& lens, const TraceLens<do
       continue;
     }
     const ParaxialRay<double> marginal =
-        paraxial_trace(tl, ParaxialRay<double>{r_ep, 0.0}, k + 1, kWavelengthD_nm);
+        paraxial_trace(tl, ParaxialRay<double>{r_ep, 0.0}, k + 1, tl.reference_nm());
     const ParaxialRay<double> chief =
         paraxial_trace(tl, ParaxialRay<double>{-par.entrance_pupil_z_mm * tan_field, tan_field},
-                       k + 1, kWavelengthD_nm);
+                       k + 1, tl.reference_nm());
     aperture[k] = std::abs(marginal.y) + std::abs(chief.y);
   }
   return aperture;
@@ -354,7 +354,8 @@ ToleranceModel::ToleranceModel(const Lens& lens, const ToleranceOptions& options
     // The nominal's chief-ray angles (deg) label the fields.
     m.fields_deg = prepare_lens_system(m.scaled_lens, to).fields_deg;
   }
-  m.rays = static_cast<int>(paper_pupil_samples(options.rings).size());
+  m.rays = static_cast<int>(paper_pupil_samples(options.rings).size()) *
+           (m.as_written && needs_full_pupil(m.written.vignetting) ? 2 : 1);
 
   // Clear semi-apertures (clear_semi_apertures_mm). An element's rim is at the larger of its
   // two surfaces' apertures; two surfaces across air meet first at the smaller one.
@@ -471,6 +472,7 @@ TrialResult ToleranceModel::evaluate(const std::vector<double>& perturbations) c
     sys.wavelength_weights = m.specs.wavelength_weights;
   const SpotWeights spot_w = spot_weights(sys);
   std::vector<ThroughFocusSpot> moments(field_count);
+  for (ThroughFocusSpot& m : moments) m.spot.full_pupil = sys.full_pupil;
   RayBundle<double> rays;
   std::vector<double> slopes;
   const int k_count = sys.lens.surface_count();

@@ -37,6 +37,26 @@ PupilSamples paper_pupil_samples(int rings) {
   return out;
 }
 
+PupilSamples mirrored_pupil(const PupilSamples& half) {
+  PupilSamples out;
+  const std::size_t n = half.size();
+  out.x.resize(2 * n);
+  out.y.resize(2 * n);
+  for (std::size_t i = 0; i < n; ++i) {
+    out.x[i] = half.x[i];
+    out.y[i] = half.y[i];
+    out.x[n + i] = -half.x[i];
+    out.y[n + i] = half.y[i];
+  }
+  return out;
+}
+
+bool needs_full_pupil(const std::vector<VignettingFactors>& vignetting) {
+  for (const VignettingFactors& v : vignetting)
+    if (v.asymmetric()) return true;
+  return false;
+}
+
 PupilSamples pupil_edge_samples(int count) {
   PupilSamples out;
   for (int j = 0; j < count; ++j) {
@@ -88,10 +108,16 @@ SystemSetup specs_setup(const Specs& specs, const TraceOptions& options) {
   for (FieldPoint& f : fields) f.value = std::abs(f.value);  // rotational symmetry
   std::stable_sort(fields.begin(), fields.end(),
                    [](const FieldPoint& a, const FieldPoint& b) { return a.value < b.value; });
-  // Fields at the same radial distance are one field (their weights add).
+  // Fields at the same radial distance are one field (their weights add), unless their
+  // vignetting factors differ (say a field on +y and one on -y with VDY set: different pupils).
+  auto same_pupil = [](const VignettingFactors& a, const VignettingFactors& b) {
+    return a.vdx == b.vdx && a.vdy == b.vdy && a.vcx == b.vcx && a.vcy == b.vcy &&
+           a.van_deg == b.van_deg;
+  };
   std::vector<FieldPoint> unique;
   for (const FieldPoint& f : fields) {
-    if (!unique.empty() && unique.back().value == f.value) {
+    if (!unique.empty() && unique.back().value == f.value &&
+        same_pupil(unique.back().vignetting, f.vignetting)) {
       unique.back().weight += f.weight;
     } else {
       unique.push_back(f);

@@ -553,3 +553,184 @@ TEST_CASE("independent: OpticStudio's first-order data and on-axis spots of a si
     CHECK(std::abs(geo - geo_ref) <= bound);
   }
 }
+
+namespace {
+
+// Appends a wavelength to a lens's specs (its channel by band, weight 1 when weights are written).
+void add_wavelength(Lens& lens, double wavelength_nm) {
+  Specs& specs = lens.specs;
+  specs.wavelengths_nm.push_back(wavelength_nm);
+  specs.wavelength_channels = default_wavelength_channels(specs.wavelengths_nm);
+  if (!specs.wavelength_weights.empty()) specs.wavelength_weights.push_back(1.0);
+}
+
+}  // namespace
+
+TEST_CASE("independent: optiland run on real .zmx files, first order and real rays at 1e-9") {
+  // tests/data/independent/optiland_run_rays.json (README there): optiland given the indices of
+  // lensopt's glass data. Rays without aiming, through the paraxial entrance pupil of the primary
+  // wavelength; the files' vignetting factors and clear apertures are not applied (optiland was
+  // given neither).
+  const nlohmann::json doc = read_json(independent_dir() / "optiland_run_rays.json");
+  const double bound = doc.at("relative_bound").get<double>();
+  int lenses = 0, paraxial_values = 0, intercepts = 0, missed = 0, surface_points = 0;
+  double worst_paraxial = 0.0, worst_ray = 0.0, worst_direction = 0.0, worst_surfaces = 0.0;
+  for (const nlohmann::json& ref : doc.at("lenses")) {
+    const std::string name = ref.at("name").get<std::string>();
+    CAPTURE(name);
+    const std::filesystem::path path = test::source_dir() / ref.at("file").get<std::string>();
+    if (name == "optiland_lens_floa") {
+      // Its stop (semi-diameter 8.5 mm, 10 mm behind a 20 mm singlet) makes a paraxial entrance
+      // pupil of 40.5 mm: F/0.499, beyond the F/0.5 of an image-space NA of 1, and its marginal
+      // and zonal rays miss the first surface in optiland too. lensopt refuses the F-number.
+      CHECK_THROWS_WITH(read_lens(path), doctest::Contains("f_number = 0.49936"));
+      ++lenses;
+      continue;
+    }
+    Lens lens = read_lens(path);
+    for (const nlohmann::json& um : ref.at("extra_wavelengths_um"))
+      add_wavelength(lens, um.get<double>() * 1000.0);
+    TraceOptions options;
+    options.rings = 4;
+    options.ray_aiming = false;
+    TraceSystem<double> sys = prepare_lens_system(lens, options);
+    REQUIRE(sys.scale == 1.0);
+    // Pupil coordinates on the paraxial entrance pupil (no vignetting factors), and no clear
+    // apertures (optiland was given none).
+    sys.vignetting.assign(sys.vignetting.size(), VignettingFactors{});
+    sys.lens.semi_diameter_mm.clear();
+    const TraceLens<double>& tl = sys.lens;
+    const double primary_nm = ref.at("primary_wavelength_um").get<double>() * 1000.0;
+    REQUIRE(std::abs(tl.wavelengths_nm.back() - primary_nm) <= 1e-9 * primary_nm);
+    auto wavelength_index = [&](double nm) {
+      for (std::size_t i = 0; i < tl.wavelengths_nm.size(); ++i)
+        if (std::abs(tl.wavelengths_nm[i] - nm) <= 1e-9 * nm) return static_cast<int>(i);
+      FAIL("wavelength " << nm << " nm not in the traced lens");
+      return -1;
+    };
+    double efl_primary = 0.0;
+    for (const nlohmann::json& p : ref.at("paraxial"))
+      if (p.at("wavelength_um").get<double>() * 1000.0 == primary_nm)
+        efl_primary = p.at("EFL").get<double>();
+    REQUIRE(efl_primary > 0.0);
+
+    // Paraxial data at each wavelength: EFL and EPD relative to themselves, positions (BFL from
+    // the last vertex, EPL from the first, XPL from the image) relative to the EFL.
+    double lens_paraxial = 0.0;
+    for (const nlohmann::json& p : ref.at("paraxial")) {
+      // The lens's own value of the wavelength (index_at_nm looks it up exactly).
+      const double nm =
+          tl.wavelengths_nm[wavelength_index(p.at("wavelength_um").get<double>() * 1000.0)];
+      const ParaxialData<double> par = paraxial_data(tl, nm);
+      const double efl = p.at("EFL").get<double>();
+      struct Item {
+        const char* what;
+        double lensopt, reference, scale;
+      };
+      std::vector<Item> items = {
+          {"EFL", par.efl_mm, efl, efl},
+          {"BFL", par.bfl_mm, p.at("BFL").get<double>(), efl},
+          {"EPL", par.entrance_pupil_z_mm, p.at("EPL").get<double>(), efl},
+          {"XPL", exit_pupil_from_image_mm(tl, nm), p.at("XPL_from_image").get<double>(), efl},
+      };
+      // The aperture is the primary wavelength's (an EPD from F/# or from the stop there).
+      if (nm == tl.wavelengths_nm.back())
+        items.push_back({"EPD", sys.epd_mm, p.at("EPD").get<double>(), p.at("EPD").get<double>()});
+      for (const Item& item : items) {
+        const double d = std::abs(item.lensopt - item.reference) / std::abs(item.scale);
+        lens_paraxial = std::max(lens_paraxial, d);
+        CAPTURE(nm);
+        CAPTURE(item.what);
+        CAPTURE(item.lensopt);
+        CAPTURE(item.reference);
+        CHECK(d <= bound);
+        ++paraxial_values;
+      }
+    }
+
+    // Image intercepts of the chief ray, the marginal rays (Px, Py) = (0, +-1), (1, 0) and the
+    // zonal rays (0, +-0.5), (0.5, 0) at each field and wavelength, relative to the EFL at the
+    // primary wavelength.
+    double lens_ray = 0.0, lens_direction = 0.0, lens_surfaces = 0.0;
+    for (const nlohmann::json& r : ref.at("rays")) {
+      const double nm = r.at("wavelength_um").get<double>() * 1000.0;
+      const double field = r.at("field_deg").get<double>();
+      int h = -1;
+      for (std::size_t i = 0; i < sys.fields_deg.size(); ++i)
+        if (sys.fields_deg[i] == field) h = static_cast<int>(i);
+      REQUIRE(h >= 0);
+      const int w = wavelength_index(nm);
+      PupilSamples pupil;
+      pupil.x = {r.at("px").get<double>()};
+      pupil.y = {r.at("py").get<double>()};
+      RayBundle<double> rays;
+      start_rays(sys, h, w, rays, &pupil);
+      trace_bundle(tl, w, tl.surface_count(), true, rays, static_cast<RayRecord<double>*>(nullptr));
+      CAPTURE(nm);
+      CAPTURE(field);
+      CAPTURE(pupil.x[0]);
+      CAPTURE(pupil.y[0]);
+      if (!r.at("traced").get<bool>()) {
+        // The ray misses a surface in optiland (the marginal rays of a very fast lens): lensopt
+        // must not return an intercept either.
+        CHECK(rays.status[0] != kRayOk);
+        ++missed;
+        continue;
+      }
+      REQUIRE(rays.status[0] == kRayOk);
+      const double d = std::max(std::abs(rays.x[0] - r.at("x").get<double>()),
+                                std::abs(rays.y[0] - r.at("y").get<double>())) /
+                       efl_primary;
+      CAPTURE(rays.y[0]);
+      CAPTURE(r.at("y").get<double>());
+      CHECK(d <= bound);
+      lens_ray = std::max(lens_ray, d);
+      // Direction cosines in image space (dimensionless).
+      const double dd = std::max({std::abs(rays.l[0] - r.at("L").get<double>()),
+                                  std::abs(rays.m[0] - r.at("M").get<double>()),
+                                  std::abs(rays.n[0] - r.at("N").get<double>())});
+      CHECK(dd <= bound);
+      lens_direction = std::max(lens_direction, dd);
+      if (r.contains("surfaces_xy")) {
+        // (x, y) on every surface of the file: lensopt's surface k + inserted, where a stop on a
+        // curved surface became a flat stop surface before it (inserted from there on).
+        const nlohmann::json& xy = r.at("surfaces_xy");
+        const bool stop_inserted = tl.surface_count() == static_cast<int>(xy.size()) + 1;
+        REQUIRE((stop_inserted || tl.surface_count() == static_cast<int>(xy.size())));
+        for (int j = 0; j < static_cast<int>(xy.size()); ++j) {
+          const int k = j + (stop_inserted && j >= tl.stop ? 1 : 0);
+          RayBundle<double> at;
+          start_rays(sys, h, w, at, &pupil);
+          trace_bundle(tl, w, k + 1, false, at, static_cast<RayRecord<double>*>(nullptr));
+          CAPTURE(k);
+          REQUIRE(at.status[0] == kRayOk);
+          const double ds = std::max(std::abs(at.x[0] - xy.at(j).at(0).get<double>()),
+                                     std::abs(at.y[0] - xy.at(j).at(1).get<double>())) /
+                            efl_primary;
+          CHECK(ds <= bound);
+          lens_surfaces = std::max(lens_surfaces, ds);
+          ++surface_points;
+        }
+      }
+      ++intercepts;
+    }
+    MESSAGE(
+        fmt::format("{}: paraxial (EFL, BFL, EPL, XPL, EPD) within {:.2e} relative; image "
+                    "intercepts within {:.2e} x EFL, directions within {:.2e}; on the "
+                    "surfaces within {:.2e} x EFL ({} wavelengths, {} fields)",
+                    name, lens_paraxial, lens_ray, lens_direction, lens_surfaces,
+                    ref.at("wavelengths_um").size(), ref.at("fields_deg").size()));
+    worst_paraxial = std::max(worst_paraxial, lens_paraxial);
+    worst_ray = std::max(worst_ray, lens_ray);
+    worst_direction = std::max(worst_direction, lens_direction);
+    worst_surfaces = std::max(worst_surfaces, lens_surfaces);
+    ++lenses;
+  }
+  MESSAGE(
+      fmt::format("{} lenses: {} paraxial values within {:.2e}; {} rays: image intercepts "
+                  "within {:.2e} x EFL, directions within {:.2e}; {} points on the surfaces "
+                  "within {:.2e} x EFL; {} rays that miss a surface in both",
+                  lenses, paraxial_values, worst_paraxial, intercepts, worst_ray, worst_direction,
+                  surface_points, worst_surfaces, missed));
+  CHECK(lenses == static_cast<int>(doc.at("lenses").size()));
+}

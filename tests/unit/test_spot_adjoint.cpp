@@ -15,28 +15,14 @@
 #include "lensopt/optimize/optimizer.h"
 #include "lensopt/optimize/profile_bounds.h"
 #include "test_support.h"
+#include "trace_checks.h"
 
 using namespace lensopt;
 
 namespace {
 
-double mean_spot(const Lens& lens, const TraceOptions& options) {
-  const TraceSystem<double> sys = prepare_system(make_trace_lens(lens), lens.specs, options);
-  return evaluate_spots(sys, options.threads).mean_rms_spot_mm;
-}
-
-// Worst relative difference of two gradients, each entry relative to the larger of its own size
-// and 1e-6 of the gradient's largest entry (an entry that is zero up to rounding).
-double worst_relative(const std::vector<double>& a, const std::vector<double>& b) {
-  double largest = 0;
-  for (double d : b) largest = std::max(largest, std::abs(d));
-  double worst = 0;
-  for (std::size_t i = 0; i < a.size(); ++i) {
-    const double denominator = std::max(std::abs(b[i]), 1e-6 * largest);
-    worst = std::max(worst, std::abs(a[i] - b[i]) / denominator);
-  }
-  return worst;
-}
+using test::mean_spot;
+using test::worst_relative;
 
 // The adjoint equals the Jet gradient within 1e-9 relative; the value equals the evaluation.
 void check_against_jets(const Lens& lens, const TraceOptions& options) {
@@ -100,21 +86,8 @@ TEST_CASE("spot adjoint: matches central finite differences, and a single thread
     options.ray_aiming = aiming;
     const SpotGradient g =
         mean_spot_gradient_adjoint<24>(make_trace_lens(lens), lens.specs, variables, options);
-    std::vector<double> fd(variables.size());
-    for (std::size_t i = 0; i < variables.size(); ++i) {
-      const double x0 = variable_value(lens, variables[i]);
-      double scale = 1.0;
-      if (variables[i].kind == PrescriptionVariable::Kind::kCurvature) scale = 0.05;
-      if (variables[i].kind == PrescriptionVariable::Kind::kVd) scale = 40.0;
-      auto central = [&](double h) {
-        Lens plus = lens, minus = lens;
-        set_variable_value(plus, variables[i], x0 + h);
-        set_variable_value(minus, variables[i], x0 - h);
-        return (mean_spot(plus, options) - mean_spot(minus, options)) / (2 * h);
-      };
-      const double h = 2e-5 * scale;
-      fd[i] = (4 * central(h / 2) - central(h)) / 3;
-    }
+    const std::vector<double> fd =
+        test::mean_spot_central_differences(lens, variables, options, 0.05);
     const double worst = worst_relative(g.gradient, fd);
     INFO("aiming ", aiming, ": worst relative error against finite differences ", worst);
     CHECK(worst < 1e-5);
@@ -617,21 +590,8 @@ TEST_CASE("spot weights: adjoint, Jets and central differences agree with unequa
   REQUIRE(!variables.empty());
   const SpotGradient g = mean_spot_gradient_adjoint<24>(make_trace_lens(vignetted), vignetted.specs,
                                                         variables, options);
-  std::vector<double> fd(variables.size());
-  for (std::size_t i = 0; i < variables.size(); ++i) {
-    const double x0 = variable_value(vignetted, variables[i]);
-    double scale = 1.0;
-    if (variables[i].kind == PrescriptionVariable::Kind::kCurvature) scale = 0.05;
-    if (variables[i].kind == PrescriptionVariable::Kind::kVd) scale = 40.0;
-    auto central = [&](double h) {
-      Lens plus = vignetted, minus = vignetted;
-      set_variable_value(plus, variables[i], x0 + h);
-      set_variable_value(minus, variables[i], x0 - h);
-      return (mean_spot(plus, options) - mean_spot(minus, options)) / (2 * h);
-    };
-    const double h = 2e-5 * scale;
-    fd[i] = (4 * central(h / 2) - central(h)) / 3;
-  }
+  const std::vector<double> fd =
+      test::mean_spot_central_differences(vignetted, variables, options, 0.05);
   const double worst = worst_relative(g.gradient, fd);
   INFO("worst relative error against finite differences ", worst);
   CHECK(worst < 1e-5);

@@ -277,6 +277,29 @@ TEST_CASE(
   }
 }
 
+TEST_CASE("zmx: a file without GCAT takes its glasses from SCHOTT, OpticStudio's default") {
+  // As optiland's test file lens_floa.zmx (tests/data/zmx-real): GLAS N-BK7 and no GCAT line.
+  const std::string text =
+      small_zmx("", "  TYPE STANDARD\n  CURV 0.02\n  DISZ 3\n  GLAS N-BK7 1 0 1.5168 64.17\n");
+  const ZmxImport imported = parse_zmx(text, "nogcat.zmx");
+  const Lens& lens = imported.lens;
+  REQUIRE(lens.surfaces.size() == 3);
+  REQUIRE(lens.surfaces[1].material.glass != nullptr);
+  CHECK(lens.surfaces[1].material.kind == Material::Kind::kCatalog);
+  CHECK(lens.surfaces[1].material.glass->catalog == "SCHOTT");
+  CHECK(lens.surfaces[1].material.glass_name == "N-BK7");
+  CHECK(lens.catalog_name == "SCHOTT");
+  bool warned = false;
+  for (const std::string& w : imported.warnings)
+    warned = warned || w.find("no GCAT line: its glasses come from SCHOTT") != std::string::npos;
+  CHECK(warned);
+  // A glass SCHOTT does not have is an error naming the catalog searched.
+  const std::string message =
+      error_of(small_zmx("", "  TYPE STANDARD\n  CURV 0.02\n  DISZ 3\n  GLAS S-BSL7 0 0\n")).what();
+  CHECK(message.find("unknown glass 'S-BSL7'") != std::string::npos);
+  CHECK(message.find("SCHOTT (") != std::string::npos);
+}
+
 TEST_CASE("zmx: catalog glasses resolve through GCAT; unknown lines are warnings with lines") {
   const std::string text =
       small_zmx("GCAT OHARA\nFOOB 1 2 3\nPFIL 0 0 0\n",

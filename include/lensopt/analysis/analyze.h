@@ -38,6 +38,7 @@ struct FieldReport {
   int vignetted_rays = 0;             // clipped by a clear aperture (not failures)
   std::optional<double> rms_spot_um;  // none if no ray reached the image
   double centroid_y_mm = 0;
+  double centroid_x_mm = 0;   // 0 unless the system traces full pupils (VDX or VAN)
   double reference_y_mm = 0;  // paraxial chief-ray height
   double distortion_percent = 0;
   double relative_illumination = 0;
@@ -58,7 +59,8 @@ struct AnalysisReport {
   double stop_radius_mm = 0;
   double total_track_mm = 0;
   int rings = 0;
-  int rays_per_field_wavelength = 0;
+  int rays_per_field_wavelength = 0;  // sys.pupil: the half pupil, or the full one (full_pupil)
+  bool full_pupil = false;            // a field's VDX or VAN is set (trace/system.h)
   int wavelength_count = 0;
   bool ray_aiming = true;
   std::string dispersion;

@@ -6,7 +6,12 @@
 // Relative illumination (Rimmer): the image-space projected solid angle of the aimed pupil,
 // approximated by the ellipse through the upper, lower and sagittal rays in direction-cosine
 // space: A_h = dM_h L_h, dM = (M_top - M_bottom) / 2, L the sagittal ray's x direction cosine, at
-// 587.6 nm; R_h = A_h / A_0 (0 where a ray fails or A_0 <= 0).
+// 587.6 nm; R_h = A_h / A_0 (0 where a ray fails or A_0 <= 0). A field whose vignetted pupil is
+// not mirror-symmetric (VDX or VAN, lens.h) has the ellipse spanned by its conjugate semi-diameters
+// instead: the rays at normalized pupil points (+-1, 0) and (0, +-1) (start_rays maps them to
+// c +- u, c +- v on the vignetted pupil) give d_u = ((L, M)(+1, 0) - (L, M)(-1, 0)) / 2 and d_v
+// likewise, and A_h = |d_u,L d_v,M - d_u,M d_v,L|, the same area as dM L for a symmetric pupil
+// (there d_u = (L, 0), d_v = (0, dM)).
 // Distortion (paper Eq. distortion): D_h = (ybar_h - y_ref,h) / y_ref,last, ybar_h the
 // polychromatic spot centroid (0 if y_ref,last = 0).
 #pragma once
@@ -68,18 +73,49 @@ bool pupil_edge_directions(const TraceSystem<T>& sys, int h, std::array<T, 3>& o
   return true;
 }
 
+// A_h of the header: the image-space projected solid angle of field h's aimed, vignetted pupil
+// (reference wavelength, clear apertures left out). Returns false if an edge ray fails.
+template <typename T>
+bool projected_pupil_area(const TraceSystem<T>& sys, int h, T& area) {
+  const VignettingFactors v =
+      h < static_cast<int>(sys.vignetting.size()) ? sys.vignetting[h] : VignettingFactors{};
+  if (!v.asymmetric()) {
+    std::array<T, 3> d;
+    if (!pupil_edge_directions(sys, h, d)) return false;
+    area = K<T>(0.5) * (d[0] - d[1]) * d[2];
+    return true;
+  }
+  const int w = sys.wavelength_count;  // reference wavelength
+  PupilSamples edge;
+  edge.x = {1.0, -1.0, 0.0, 0.0};
+  edge.y = {0.0, 0.0, 1.0, -1.0};
+  RayBundle<T> rays;
+  start_rays(sys, h, w, rays, &edge);
+  TraceLens<T> open_lens = sys.lens;
+  open_lens.semi_diameter_mm.clear();
+  trace_bundle(open_lens, w, open_lens.surface_count(), true, rays,
+               static_cast<RayRecord<T>*>(nullptr));
+  for (int i = 0; i < 4; ++i)
+    if (rays.status[i] != kRayOk) return false;
+  const T half = K<T>(0.5);
+  const T du_l = half * (rays.l[0] - rays.l[1]), du_m = half * (rays.m[0] - rays.m[1]);
+  const T dv_l = half * (rays.l[2] - rays.l[3]), dv_m = half * (rays.m[2] - rays.m[3]);
+  area = du_l * dv_m - du_m * dv_l;
+  if (value_of(area) < 0.0) area = -area;
+  return true;
+}
+
 // R_h of every field of `sys` (0 where unavailable, see the header).
 template <typename T>
 std::vector<T> relative_illuminations(const TraceSystem<T>& sys) {
   const int field_count = static_cast<int>(sys.fields_deg.size());
   std::vector<T> ri(field_count, K<T>(0.0));
-  std::array<T, 3> d;
-  if (!pupil_edge_directions(sys, 0, d)) return ri;
-  const T axis_area = K<T>(0.5) * (d[0] - d[1]) * d[2];
+  T axis_area = K<T>(0.0), area = K<T>(0.0);
+  if (!projected_pupil_area(sys, 0, axis_area)) return ri;
   if (!(value_of(axis_area) > 0.0)) return ri;
   for (int h = 0; h < field_count; ++h) {
-    if (!pupil_edge_directions(sys, h, d)) continue;
-    ri[h] = K<T>(0.5) * (d[0] - d[1]) * d[2] / axis_area;
+    if (!projected_pupil_area(sys, h, area)) continue;
+    ri[h] = area / axis_area;
   }
   // Clear apertures: times the fraction of the field's pupil rays (reference wavelength) that
   // pass every aperture, relative to the axis (the pupil samples are uniform in area).

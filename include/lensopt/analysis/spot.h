@@ -12,9 +12,14 @@
 // Equal weights give the paper's unweighted means (every normalized weight is exactly 1, so the
 // sums are the unweighted ones bit for bit). A lens without weights (the paper's, its YAML) has
 // equal weights; the paper's spec mode samples its own fields, each of weight 1.
-// The x centroid is 0 by symmetry (half pupil, mirrored). To keep precision when the spot is
-// small compared with its height, sums are taken about a reference height y0 (the first traced
-// ray): mean((y - ybar)^2) = mean((y - y0)^2) - (mean(y - y0))^2, exact for any y0.
+// The x centroid is 0 by symmetry (half pupil, mirrored). A system that traces the full pupil
+// (TraceSystem::full_pupil: some field's VDX or VAN is set) has an x centroid xbar_h as well:
+//   xbar_h = sum_{w,p} omega_w x / M_h,
+//   S_h    = sqrt( sum_{w,p} omega_w ((y - ybar_h)^2 + (x - xbar_h)^2) / M_h ),
+// which is the formula above for a mirror-symmetric spot (xbar_h = 0). To keep precision when the
+// spot is small compared with its height, sums are taken about a reference height y0 (the first
+// traced ray): mean((y - ybar)^2) = mean((y - y0)^2) - (mean(y - y0))^2, exact for any y0; x is
+// summed as it is (x_bar is of the order of the spot, not of the field height).
 #pragma once
 
 #include <omp.h>
@@ -31,7 +36,8 @@ template <typename T>
 struct SpotResult {
   std::vector<T> rms_spot_mm;          // per field
   std::vector<T> centroid_y_mm;        // per field, over all wavelengths
-  std::vector<int> traced_rays;        // per field: rays that reached the image (half pupil)
+  std::vector<T> centroid_x_mm;        // per field (0 unless the system traces full pupils)
+  std::vector<int> traced_rays;        // per field: rays that reached the image (sys.pupil)
   std::vector<int> failed_rays;        // per field (vignetted rays are counted apart)
   std::vector<int> failed_by_surface;  // per surface where the failure happened
   std::vector<int> vignetted_rays;     // per field: rays clipped by a clear aperture
@@ -43,11 +49,13 @@ struct SpotResult {
 // Accumulates the spot of one field over wavelengths.
 template <typename T>
 struct SpotAccumulator {
+  bool full_pupil = false;  // the rays cover the full pupil: x has a centroid of its own
   bool has_reference = false;
   T y0 = K<T>(0.0);
   T sum_dy = K<T>(0.0);
   T sum_dy2 = K<T>(0.0);
   T sum_x2 = K<T>(0.0);
+  T sum_x = K<T>(0.0);  // full_pupil only
   int count = 0;
   double weight_sum = 0.0;  // M_h: sum of the rays' weights (= count with unit weights)
 
@@ -65,17 +73,20 @@ struct SpotAccumulator {
       sum_dy = K<T>(0.0);
       sum_dy2 = K<T>(0.0);
       sum_x2 = K<T>(0.0);
+      sum_x = K<T>(0.0);
     }
     const T dy = y - y0;
     if (weight == 1.0) {
       sum_dy = sum_dy + dy;
       sum_dy2 = sum_dy2 + dy * dy;
       sum_x2 = sum_x2 + x * x;
+      if (full_pupil) sum_x = sum_x + x;
     } else {
       const T w = K<T>(weight);
       sum_dy = sum_dy + w * dy;
       sum_dy2 = sum_dy2 + w * (dy * dy);
       sum_x2 = sum_x2 + w * (x * x);
+      if (full_pupil) sum_x = sum_x + w * x;
     }
     ++count;
     weight_sum += weight;
@@ -87,11 +98,20 @@ struct SpotAccumulator {
     const T inv = K<T>(1.0 / weight_sum);
     const T mean_dy = sum_dy * inv;
     T var = sum_dy2 * inv - mean_dy * mean_dy + sum_x2 * inv;
+    if (full_pupil) {
+      const T mean_x = sum_x * inv;
+      var = var - mean_x * mean_x;
+    }
     if (!(var > K<T>(0.0))) return K<T>(0.0);
     return sqrt(var);
   }
   T centroid() const {
     return count == 0 || !(weight_sum > 0.0) ? K<T>(0.0) : y0 + sum_dy * K<T>(1.0 / weight_sum);
+  }
+  // xbar_h: 0 for a mirrored half pupil (by symmetry).
+  T centroid_x() const {
+    return !full_pupil || count == 0 || !(weight_sum > 0.0) ? K<T>(0.0)
+                                                            : sum_x * K<T>(1.0 / weight_sum);
   }
 };
 
@@ -138,11 +158,14 @@ void ray_slopes(const double* l, const double* m, const double* n, std::size_t c
 // (x, y) on the reference plane with slopes (sx, sy) = (l/n, m/n) lands at (x + tau sx,
 // y + tau sy). With dy = y - y0, ds = sy - sy0 (y0, sy0 of the first ray):
 //   S^2(tau) = var(dy) + 2 tau cov(dy, ds) + tau^2 var(ds) + E[x^2] + 2 tau E[x sx] + tau^2 E[sx^2]
-// At tau = 0 it is SpotAccumulator's rms and centroid, the same numbers.
+// At tau = 0 it is SpotAccumulator's rms and centroid, the same numbers. On a full pupil
+// (spot.full_pupil) x is taken about its centroid too: the x terms become
+//   var(x) + 2 tau cov(x, sx) + tau^2 var(sx).
 struct ThroughFocusSpot {
   SpotAccumulator<double> spot;  // the tau = 0 moments: y0, sum_dy, sum_dy2, sum_x2, count
   double sy0 = 0;
   double sum_ds = 0, sum_dyds = 0, sum_ds2 = 0, sum_xsx = 0, sum_sx2 = 0;
+  double sum_sx = 0;  // spot.full_pupil only
 
   int count() const { return spot.count; }
   void add(const RayBundle<double>& rays, double weight = 1.0) {
@@ -171,12 +194,14 @@ struct ThroughFocusSpot {
         sum_ds2 += ds * ds;
         sum_xsx += rays.x[i] * sx;
         sum_sx2 += sx * sx;
+        if (spot.full_pupil) sum_sx += sx;
       } else {
         sum_ds += weight * ds;
         sum_dyds += weight * (dy * ds);
         sum_ds2 += weight * (ds * ds);
         sum_xsx += weight * (rays.x[i] * sx);
         sum_sx2 += weight * (sx * sx);
+        if (spot.full_pupil) sum_sx += weight * sx;
       }
     }
   }
@@ -185,9 +210,15 @@ struct ThroughFocusSpot {
     const double inv = 1.0 / spot.weight_sum;
     const double mean_dy = spot.sum_dy * inv;
     const double mean_ds = sum_ds * inv;
-    const double a = spot.sum_dy2 * inv - mean_dy * mean_dy + spot.sum_x2 * inv;
-    const double b = sum_dyds * inv - mean_dy * mean_ds + sum_xsx * inv;
-    const double c = sum_ds2 * inv - mean_ds * mean_ds + sum_sx2 * inv;
+    double a = spot.sum_dy2 * inv - mean_dy * mean_dy + spot.sum_x2 * inv;
+    double b = sum_dyds * inv - mean_dy * mean_ds + sum_xsx * inv;
+    double c = sum_ds2 * inv - mean_ds * mean_ds + sum_sx2 * inv;
+    if (spot.full_pupil) {
+      const double mean_x = spot.sum_x * inv, mean_sx = sum_sx * inv;
+      a -= mean_x * mean_x;
+      b -= mean_x * mean_sx;
+      c -= mean_sx * mean_sx;
+    }
     return a + tau * (2.0 * b + tau * c);
   }
   // RMS radius (mm) at shift tau; 0 when no ray arrived.
@@ -214,6 +245,7 @@ SpotResult<T> evaluate_spots(const TraceSystem<T>& sys, int threads = 0) {
   SpotResult<T> out;
   out.rms_spot_mm.assign(field_count, K<T>(0.0));
   out.centroid_y_mm.assign(field_count, K<T>(0.0));
+  out.centroid_x_mm.assign(field_count, K<T>(0.0));
   out.traced_rays.assign(field_count, 0);
   out.failed_rays.assign(field_count, 0);
   out.failed_by_surface.assign(sys.lens.surface_count(), 0);
@@ -229,6 +261,7 @@ SpotResult<T> evaluate_spots(const TraceSystem<T>& sys, int threads = 0) {
 #pragma omp for schedule(dynamic, 1)
     for (int h = 0; h < field_count; ++h) {
       SpotAccumulator<T> acc;
+      acc.full_pupil = sys.full_pupil;
       int failed = 0;
       for (int w = 0; w < sys.wavelength_count; ++w) {
         start_rays(sys, h, w, rays);
@@ -248,6 +281,7 @@ SpotResult<T> evaluate_spots(const TraceSystem<T>& sys, int threads = 0) {
       }
       out.rms_spot_mm[h] = acc.rms();
       out.centroid_y_mm[h] = acc.centroid();
+      out.centroid_x_mm[h] = acc.centroid_x();
       out.traced_rays[h] = acc.count;
       out.failed_rays[h] = failed;
     }

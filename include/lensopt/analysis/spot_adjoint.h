@@ -12,14 +12,15 @@
 //      spot S_h, centroid ybar_h and weight sum M_h (analysis/spot.h's weighted definition); then
 //      per wavelength a taped forward trace and the backward pass (trace/adjoint.h) with the
 //      seeds of L = sum_h phi_h S_h / sum_h phi_h (omega_w, phi_h the normalized weights):
-//        dL/dY_i = phi_h omega_w (Y_i - ybar_h) / (Phi M_h S_h),   dL/dX_i = phi_h omega_w X_i /
-//        (...)
-//      (Phi = sum_h phi_h; the centroid's own derivative drops out: sum_i omega_w (Y_i - ybar_h)
-//      = 0), 0 for failed rays and for fields with S_h = 0. The backward pass sums the adjoints
-//      a_c, a_t, a_mu per surface and, with the field's vignetting factors (x0 = s_x (1 - VCX)
-//      p_x, y0 = o_y + s_y (VDY + (1 - VCY) p_y)), a_sx = sum_i a_x0,i (1 - VCX) p_x,i, a_oy =
-//      sum_i a_y0,i, a_sy = sum_i a_y0,i (VDY + (1 - VCY) p_y,i), a_zEP = sum_i a_z0,i per (field,
-//      wavelength). Per-field sums are added in field order (deterministic).
+//        dL/dY_i = phi_h omega_w (Y_i - ybar_h) / (Phi M_h S_h),   dL/dX_i = phi_h omega_w (X_i -
+//        xbar_h) / (...)
+//      (Phi = sum_h phi_h; xbar_h = 0 on a mirrored half pupil; the centroids' own derivatives
+//      drop out: sum_i omega_w (Y_i - ybar_h) = 0), 0 for failed rays and for fields with S_h = 0.
+//      The backward pass sums the adjoints a_c, a_t, a_mu per surface and, with the field's
+//      vignetted pupil point (px', py') = VignettingFactors::pupil_point(p_x, p_y) (x0 = s_x px',
+//      y0 = o_y + s_y py', start_rays), a_sx = sum_i a_x0,i px'_i, a_oy = sum_i a_y0,i, a_sy =
+//      sum_i a_y0,i py'_i, a_zEP = sum_i a_z0,i per (field, wavelength). Per-field sums are added
+//      in field order (deterministic).
 //   3. Chain rule with the Jets of step 1: dL/dv_j = sum over parameters P of a_P dP/dv_j.
 // Supported: spherical, conic and even-asphere surfaces without clear apertures (the kernel of
 // trace/kernel.h and the profiles of trace/profile.h; the profile's backward step in
@@ -103,6 +104,7 @@ TraceSystem<double> system_values(const TraceSystem<J>& in) {
   }
   out.wavelength_count = in.wavelength_count;
   out.pupil = in.pupil;
+  out.full_pupil = in.full_pupil;
   return out;
 }
 

@@ -18,7 +18,8 @@
 // s cells, computed as the FFT of the PSF (no aliasing for M >= 2n). A shift of s cells is the
 // spatial frequency nu = s |du| (2/n) / lambda; the cutoff is s = n: nu_c = 2 |du| / lambda
 // (= 1/(lambda N)). Tangential: frequencies along y (the meridional plane); sagittal: along x.
-// Values at arbitrary frequencies interpolate the complex OTF linearly in s.
+// Values at arbitrary frequencies interpolate the complex OTF in s through its 4 nearest samples
+// (cubic Lagrange, error O(cell^4); linear interpolation erred by up to ~0.03 at n = 64).
 // Polychromatic: OTF = sum_w omega_w OTF_w / sum_w omega_w (each PSF of unit energy), MTF = |OTF|;
 // the polychromatic Strehl is sum_w omega_w S_w / sum_w omega_w.
 // Geometric MTF: the Fourier transform of the ray spot, G(nu) = |sum_p a_p exp(-i 2 pi nu y_p)|
@@ -37,7 +38,7 @@
 namespace lensopt {
 
 struct WaveOptions {
-  int pupil_samples = 64;                  // n: grid cells across the pupil diameter
+  int pupil_samples = 128;                 // n: grid cells across the pupil diameter
   int padding = 2;                         // Q: FFT size >= Q n (2 = Nyquist)
   std::vector<double> wavelength_weights;  // per spec wavelength; empty: equal weights
   double focus_shift_mm = 0;               // image plane moved away from the lens

@@ -32,7 +32,8 @@
 // tracer's half-pupil spots assume): only the cells with x_p > 0, each weighted twice (it
 // stands for its mirror (-x_p, y_p), whose W is the same), and the x_p = 0 column of an odd n
 // once. The full grid's sums follow: the x-tilt is 0 and the piston and y-tilt fits, RMS and P-V
-// are those of the full grid, at half the rays.
+// are those of the full grid, at half the rays. A system that traces full pupils (a field's VDX or
+// VAN set, TraceSystem::full_pupil) is not symmetric: it takes the full grid (a half grid throws).
 #pragma once
 
 #include <algorithm>
@@ -40,6 +41,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "lensopt/core/error.h"
 #include "lensopt/core/scalar.h"
 #include "lensopt/trace/system.h"
 
@@ -184,6 +186,10 @@ Wavefront<T> compute_wavefront(const TraceSystem<T>& sys, int h, int w, const Pu
                                const ReferenceSphere<T>& sphere, double focus_shift_mm,
                                RayBundle<T>& rays, RayRecord<T>& record) {
   using std::sqrt;
+  if (grid.mirrored && sys.full_pupil)
+    throw Error(
+        "a half pupil grid assumes a pupil symmetric about the meridional plane; this "
+        "system's vignetting (VDX or VAN) needs the full grid");
   const std::size_t count = grid.size();
   const int k_count = sys.lens.surface_count();
   // Grid samples and, last, the chief ray of this wavelength.

@@ -19,6 +19,7 @@
 #include <string>
 #include <vector>
 
+#include "lensopt/core/constants.h"
 #include "lensopt/glass/dispersion.h"
 #include "lensopt/glass/glass.h"
 
@@ -85,20 +86,30 @@ enum class ApertureType {
 // Field types, as OpticStudio's FTYP numbers them (0..3).
 enum class FieldType { kAngle, kObjectHeight, kParaxialImageHeight, kRealImageHeight };
 
-// OpticStudio's vignetting factors of one field: the normalized pupil point (px, py) is moved to
-//   px' = VDX + (1 - VCX) px,   py' = VDY + (1 - VCY) py
-// (decentre and compression; the pupil of that field is smaller, so fewer rays are clipped), and
-// VAN (deg) turns that ellipse about the pupil centre. The factors are in the frame in which the
-// field lies on +y (the .zmx reader turns a field on -y or +-x into it). The tracer applies VDY,
-// VCX and VCY; VDX and VAN, which make the pupil asymmetric in x (lensopt traces half pupils
-// mirrored in x), are kept (TOML, .zmx) but not traced, and the readers warn when they are not 0.
+// OpticStudio's vignetting factors of one field. The normalized pupil point (px, py) of a ray is
+// compressed, turned by VAN about the pupil centre and decentred:
+//   u = (1 - VCX) px,  t = (1 - VCY) py,   a = VAN (deg, counterclockwise from +x towards +y)
+//   px' = VDX + u cos a - t sin a,   py' = VDY + u sin a + t cos a
+// so VAN = 0 is OpticStudio's px' = VDX + (1 - VCX) px, py' = VDY + (1 - VCY) py, and VAN turns the
+// compressed ellipse about its (decentred) centre. The factors are in the frame in which the field
+// lies on +y (the .zmx reader turns any field into it). A pupil with VDX or VAN set is not
+// mirror-symmetric about the meridional (y-z) plane: such a field is traced on the full pupil
+// (TraceSystem::full_pupil), the others on the mirrored half pupil.
 struct VignettingFactors {
   double vdx = 0.0, vdy = 0.0, vcx = 0.0, vcy = 0.0, van_deg = 0.0;
   bool any() const {
     return vdx != 0.0 || vdy != 0.0 || vcx != 0.0 || vcy != 0.0 || van_deg != 0.0;
   }
-  // Factors the half-pupil tracer cannot apply (VDX, VAN) are set.
+  // VDX or VAN is set: the pupil is not mirror-symmetric about the field's meridian.
   bool asymmetric() const { return vdx != 0.0 || van_deg != 0.0; }
+  // (px', py') of (px, py) by the definition above.
+  void pupil_point(double px, double py, double& qx, double& qy) const {
+    const double a = van_deg * kDegToRad;
+    const double c = std::cos(a), s = std::sin(a);
+    const double u = (1.0 - vcx) * px, t = (1.0 - vcy) * py;
+    qx = vdx + (c * u - s * t);
+    qy = vdy + (s * u + c * t);
+  }
 };
 
 // One field point as written: its value (deg for kAngle, mm for the heights), its weight and its

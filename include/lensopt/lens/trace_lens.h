@@ -17,6 +17,7 @@
 #pragma once
 
 #include <cstdint>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -121,11 +122,17 @@ struct TraceLens {
     return n;
   }
   // Same at a wavelength given in nm: the traced index (with the catalog correction) when it is
-  // one of wavelengths_nm, else the abbe model.
+  // one of wavelengths_nm; elsewhere the abbe model's A + B / l^2, which is the lens's own index
+  // only for the abbe model: a catalog-model lens holds its catalog's corrections at its own
+  // wavelengths alone, so any other wavelength is a caller's error (std::logic_error), not a
+  // silent switch of dispersion model.
   T index_at_nm(int k, double wavelength_nm) const {
     if (k < 0 || !is_glass[k]) return K<T>(1.0);
     for (int w = static_cast<int>(wavelengths_nm.size()) - 1; w >= 0; --w)
       if (wavelengths_nm[w] == wavelength_nm) return index(k, w);
+    if (!catalog_offset.empty())
+      throw std::logic_error("TraceLens::index_at_nm: " + std::to_string(wavelength_nm) +
+                             " nm is not one of the lens's wavelengths (catalog dispersion)");
     return abbe_index(nd[k], vd[k], wavelength_nm);
   }
   // The primary (reference) wavelength: the last one.

@@ -13,7 +13,9 @@
 // domain) as squared hinges, profile_bound_loss; in l_lens only (LM adds them as residuals of
 // their own, optimizer.cpp).
 // Least squares (Ceres minimizes 1/2 sum r_i^2), residuals in this order:
-//   spot:  r = sqrt(a_h / N_h) (y - ybar_h) and sqrt(a_h / N_h) x for every traced ray of field h
+//   spot:  r = sqrt(a_h / N_h) (y - ybar_h) and sqrt(a_h / N_h) (x - xbar_h) for every traced ray
+//          of field h (xbar_h = 0 on the mirrored half pupil; a system with VDX or VAN traces the
+//          full pupil, TraceSystem::full_pupil, and then the x centroid is its own)
 //          (N_h = W P rays; a failed ray gives 0). With the per-field weights
 //          a_h = 1 / (F S_h0), S_h0 the field's RMS at the current point (iteratively reweighted),
 //          sum of squares = sum_h S_h^2 / (F S_h0) = l_S at S = S_0, and its gradient is
@@ -34,14 +36,15 @@
 // Wavefront merit (DesignMerit::kWavefront, `optimize --merit wavefront`): l_S is replaced by
 //   l_W  = mean_h W_h,  W_h = sqrt(sum_w omega_w RMS_{h,w}^2 / sum_w omega_w)     (waves)
 // the RMS wavefront with piston and tilt removed (analysis/wavefront.h, the same code as
-// `analyze --wave`) on the half x_p > 0 of a polar Gauss quadrature of the pupil
-// (wavefront_merit_pupil: n / 2 rings and n azimuths per half for n = wavefront_pupil_samples,
-// exact for wavefronts of degree n - 1; mirrored, exact for the meridionally symmetric systems
-// the tracer assumes), omega the lens's wavelength weights. The analysis judges on a square grid
-// of cells, which converges to the same integral at first order in the cell size (its rim cells);
-// the quadrature samples the 2-3 waves of high-order aberration of a fast lens at full field
-// closer to that limit than a grid of as many rays (BENCHMARKS.md, wave-merit). Its residuals,
-// one per (field, wavelength, quadrature node):
+// `analyze --wave`) on a polar Gauss quadrature of the pupil (wavefront_merit_pupil: n / 2
+// rings and n azimuths per half for n = wavefront_pupil_samples, exact for wavefronts of degree
+// n - 1), its half x_p > 0 mirrored (exact for the meridionally symmetric systems the tracer
+// assumes) or the whole pupil when the system traces full pupils (a field's VDX or VAN set,
+// TraceSystem::full_pupil), omega the lens's wavelength weights. The analysis judges on a square
+// grid of cells, which converges to the same integral at first order in the cell size (its rim
+// cells); the quadrature samples the 2-3 waves of high-order aberration of a fast lens at full
+// field closer to that limit than a grid of as many rays (BENCHMARKS.md, wave-merit). Its
+// residuals, one per (field, wavelength, quadrature node):
 //   r = sqrt(a_h omega_w / sum omega) sqrt(g_i / sum g) (W_i - piston - tilt)
 // (rms_wavefront_residuals), times sqrt(u) for the unit u = wavefront_unit_mm (mm per wave; 1
 // when 0), so sum of squares = u sum_h a_h W_h^2 = u l_W at W = W_0 with the reweighting above;
@@ -152,33 +155,36 @@ inline int design_residual_count(int fields, int constraint_fields, int waveleng
   return fields * wavelengths * rays * 2 + constraint_fields * surfaces * 3 + glasses * 2;
 }
 
-// The wavefront merit's pupil samples for n = wavefront_pupil_samples (header): the mirrored
-// polar quadrature of ceil(n / 2) rings and n azimuths per half (so n^2 / 2 rays per field and
-// wavelength for an even n).
+// The wavefront merit's pupil samples for n = wavefront_pupil_samples (header): the polar
+// quadrature of ceil(n / 2) rings and n azimuths per half, the half x_p > 0 mirrored (n^2 / 2 rays
+// per field and wavelength for an even n), or both halves when the system traces full pupils
+// (TraceSystem::full_pupil).
 inline int wavefront_merit_rings(int n) {
   return (n + 1) / 2;
 }
 inline int wavefront_merit_half_azimuths(int n) {
   return n;
 }
-inline PupilGrid wavefront_merit_pupil(int n) {
-  return make_pupil_quadrature(wavefront_merit_rings(n), wavefront_merit_half_azimuths(n), true);
+inline PupilGrid wavefront_merit_pupil(int n, bool full_pupil = false) {
+  return make_pupil_quadrature(wavefront_merit_rings(n), wavefront_merit_half_azimuths(n),
+                               !full_pupil);
 }
 
-// The merit's residuals per spot field: 2 per ring ray and wavelength (spot), or one per
-// quadrature node and wavelength (wavefront).
-inline int merit_residuals_per_field(const DesignLossOptions& options, int wavelengths, int rays) {
+// The merit's residuals per spot field: 2 per ring ray and wavelength (spot; `rays` the traced
+// pupil samples, sys.pupil), or one per quadrature node and wavelength (wavefront).
+inline int merit_residuals_per_field(const DesignLossOptions& options, int wavelengths, int rays,
+                                     bool full_pupil = false) {
   if (options.merit == DesignMerit::kWavefront)
     return wavelengths * wavefront_merit_rings(options.wavefront_pupil_samples) *
-           wavefront_merit_half_azimuths(options.wavefront_pupil_samples);
+           wavefront_merit_half_azimuths(options.wavefront_pupil_samples) * (full_pupil ? 2 : 1);
   return wavelengths * rays * 2;
 }
 
 // design_residual_count for the merit of `options`.
 inline int design_residual_count(const DesignLossOptions& options, int fields,
                                  int constraint_fields, int wavelengths, int rays, int surfaces,
-                                 int glasses) {
-  return fields * merit_residuals_per_field(options, wavelengths, rays) +
+                                 int glasses, bool full_pupil = false) {
+  return fields * merit_residuals_per_field(options, wavelengths, rays, full_pupil) +
          constraint_fields * surfaces * 3 + glasses * 2;
 }
 
@@ -239,9 +245,11 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
   const int wl = sys.wavelength_count;
   const bool wavefront = options.merit == DesignMerit::kWavefront;
   const double wave_unit = options.wavefront_unit_mm > 0.0 ? options.wavefront_unit_mm : 1.0;
-  // The half pupil: the lens is symmetric about the meridional plane (as the half-pupil spot).
+  // The half pupil: the lens is symmetric about the meridional plane (as the half-pupil spot);
+  // the full pupil when a field's vignetting is not (sys.full_pupil).
   const PupilGrid grid =
-      wavefront ? wavefront_merit_pupil(options.wavefront_pupil_samples) : PupilGrid{};
+      wavefront ? wavefront_merit_pupil(options.wavefront_pupil_samples, sys.full_pupil)
+                : PupilGrid{};
   // Rays per field and wavelength that carry the merit (and the spot).
   const int rays = wavefront ? static_cast<int>(grid.size()) : static_cast<int>(sys.pupil.size());
   const int k_count = lens.surface_count();
@@ -266,7 +274,7 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
     phi_sum = field_count;
   }
   const bool equal_fields = phi_sum == field_count;
-  const PupilSamples edge = pupil_edge_samples(kEdgeRays);
+  const PupilSamples edge = sys.samples_for(pupil_edge_samples(kEdgeRays));
   const double cos2_max = std::pow(std::cos(options.max_ray_angle_deg * kPi / 180.0), 2);
   // Bounds per space: air >= min_air; glass in [min, max]; the last (image) >= clearance.
   std::vector<double> lower(k_count), upper(k_count);
@@ -292,7 +300,7 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
     e.min_travel_mm.assign(k_count, std::numeric_limits<double>::infinity());
     e.max_travel_mm.assign(k_count, -std::numeric_limits<double>::infinity());
   }
-  const int spot_block = merit_residuals_per_field(options, wl, rays);
+  const int spot_block = merit_residuals_per_field(options, wl, rays, sys.full_pupil);
   const int path_offset = field_count * spot_block;
   const int angle_offset = path_offset + all_fields * k_count;
   const int glass_offset = angle_offset + all_fields * k_count * 2;
@@ -429,6 +437,18 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
         }
       const bool any = count > 0 && weight_sum > 0.0;
       const T y_mean = any ? y_sum / K<T>(weight_sum) : K<T>(0.0);
+      // The x centroid of a full pupil (0 by symmetry on the mirrored half pupil): x about it.
+      if (sys.full_pupil && any) {
+        T x_sum = K<T>(0.0);
+        for (std::size_t i = 0; i < xs.size(); ++i)
+          if (ok[i]) {
+            const double o = spot_w.wavelength[i / rays];
+            x_sum = o == 1.0 ? x_sum + xs[i] : x_sum + K<T>(o) * xs[i];
+          }
+        const T x_mean = x_sum / K<T>(weight_sum);
+        for (std::size_t i = 0; i < xs.size(); ++i)
+          if (ok[i]) xs[i] = xs[i] - x_mean;
+      }
       T s2 = K<T>(0.0);
       for (std::size_t i = 0; i < ys.size(); ++i)
         if (ok[i]) {

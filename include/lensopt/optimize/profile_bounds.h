@@ -43,10 +43,10 @@ std::vector<T> paraxial_clear_semi_apertures(const TraceLens<T>& lens, const Spe
   const double tan_field = std::tan(specs.half_field_deg * kPi / 180.0);
   for (int k = 0; k < k_count; ++k) {
     const ParaxialRay<T> marginal =
-        paraxial_trace(lens, ParaxialRay<T>{r_ep, K<T>(0.0)}, k + 1, kWavelengthD_nm);
+        paraxial_trace(lens, ParaxialRay<T>{r_ep, K<T>(0.0)}, k + 1, lens.reference_nm());
     const ParaxialRay<T> chief = paraxial_trace(
         lens, ParaxialRay<T>{-par.entrance_pupil_z_mm * K<T>(tan_field), K<T>(tan_field)}, k + 1,
-        kWavelengthD_nm);
+        lens.reference_nm());
     const T h = abs(marginal.y) + abs(chief.y);
     out[k] = std::isfinite(value_of(h)) ? h : K<T>(0.0);
   }

@@ -37,10 +37,10 @@ std::string plot_kind_name(PlotKind kind);
 
 struct PlotOptions {
   PlotKind kind = PlotKind::kReport;
-  double spot_box_um = 0;  // width of each spot-diagram box; 0: fit the largest spot
-  double width_px = 0;     // page width; 0: the kind's default
-  TraceOptions trace;      // analysis sampling (defaults: 21 fields, 32 rings, ray aiming)
-  int pupil_samples = 64;  // wave-optics kinds: pupil grid across the diameter
+  double spot_box_um = 0;   // width of each spot-diagram box; 0: fit the largest spot
+  double width_px = 0;      // page width; 0: the kind's default
+  TraceOptions trace;       // analysis sampling (defaults: 21 fields, 32 rings, ray aiming)
+  int pupil_samples = 128;  // wave-optics kinds: pupil grid across the diameter
   double mtf_frequency_cyc_mm = 30;  // through-focus: the frequency
 
   // Throws Error for out-of-range values.

@@ -5,6 +5,8 @@
 // Spot diagram of field h: the image-plane points (x, y) of every traced ray over all spec
 // wavelengths, mirrored to the full pupil (x -> -x), relative to the polychromatic centroid
 // (0, ybar_h); its RMS radius is analyze's S_h = sqrt(mean((y - ybar)^2 + x^2)) at full sampling.
+// A lens with VDX or VAN (traced on the full pupil, no mirror) is drawn relative to (xbar_h,
+// ybar_h).
 //
 // Ray fans about the chief ray of the reference wavelength (587.6 nm) at field h, pupil
 // coordinate p in [-1, 1] on the aimed pupil of wavelength w:
@@ -78,6 +80,7 @@ struct SpotField {
   int field = 0;  // into sys.fields_deg
   double field_deg = 0;
   double centroid_y_mm = 0;  // polychromatic centroid (full sampling)
+  double centroid_x_mm = 0;  // its x (0 but on a full pupil: VDX or VAN)
   double rms_um = 0;         // analyze's RMS spot radius
   // Points relative to the centroid, um, with their wavelength number.
   std::vector<double> x_um, y_um;

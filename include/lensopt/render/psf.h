@@ -16,6 +16,9 @@
 // exponentials and (2S+1)^2 products, no allocation.
 // Symmetry: the tracer samples the half pupil x >= 0; every ray is mirrored to (-x, y), which is
 // done once per grid by adding the grid to its left-right mirror (the bins are symmetric in u).
+// A system that traces full pupils (TraceSystem::full_pupil: a field's VDX or VAN is set) has
+// every ray traced, so there is no mirror, and the factor 2 below is 1; the grid stays centred
+// on (0, ybar_h), so an x shift of the spot shows in the PSF.
 // Channels: channel k (0 = R, 1 = G, 2 = B) collects the rays of the wavelengths w with
 // channels[w] == k, each ray with equal energy. Before normalization the energy share inside the
 // grid is E_k = (grid sum) / (2 N_k), N_k the traced (unfailed) half-pupil rays of channel k;
@@ -205,13 +208,14 @@ FieldPsf<T> field_psf(const TraceSystem<T>& sys, int h, const std::vector<int>& 
     std::array<int, 4>& b = out.support[k];
     if (b[1] <= b[0] || b[3] <= b[2]) {
       b = {0, 0, 0, 0};
-    } else {  // the mirror makes the columns symmetric: [min(c0, g - c1), max(c1, g - c0))
+    } else if (!sys.full_pupil) {  // the mirror makes the columns symmetric: [min(c0, g - c1),
+                                   // max(c1, g - c0))
       const int c0 = std::min(b[2], g - b[3]), c1 = std::max(b[3], g - b[2]);
       b[2] = c0;
       b[3] = c1;
     }
-    // Mirror across the y axis: every ray (x, y) also stands for (-x, y).
-    for (int r = b[0]; r < b[1]; ++r) {
+    // Mirror across the y axis: every ray (x, y) also stands for (-x, y) (half pupil only).
+    for (int r = b[0]; r < b[1] && !sys.full_pupil; ++r) {
       T* line = grid.data() + static_cast<std::size_t>(r) * g;
       for (int i = b[2]; i < g / 2; ++i) {
         const T sum = line[i] + line[g - 1 - i];
@@ -224,7 +228,8 @@ FieldPsf<T> field_psf(const TraceSystem<T>& sys, int h, const std::vector<int>& 
     for (int r = b[0]; r < b[1]; ++r)
       for (int i = b[2]; i < b[3]; ++i) total = total + grid[static_cast<std::size_t>(r) * g + i];
     const int n = out.traced_rays[k];
-    out.energy_share[k] = n > 0 ? total / K<T>(2.0 * n) : K<T>(0.0);
+    const double mirror = sys.full_pupil ? 1.0 : 2.0;
+    out.energy_share[k] = n > 0 ? total / K<T>(mirror * n) : K<T>(0.0);
     if (value_of(total) > 0.0) {
       const T inv = K<T>(1.0) / total;
       for (int r = b[0]; r < b[1]; ++r)

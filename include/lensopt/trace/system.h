@@ -5,7 +5,9 @@
 // i = 0..R-1 has 2i+1 rays at azimuths a_j = ((j + 1/2) / (2i+1) - 1/2) pi and normalized radius
 //   r = 2i / (2R-1) + ((k + i) mod 2) / (2R-1),
 // k the ray's running index over all rings; (x_p, y_p) = r (cos a, sin a). R^2 rays (1024),
-// mirrored across the y axis to 2 R^2 by symmetry.
+// mirrored across the y axis to 2 R^2 by symmetry. When a field's vignetting factors break that
+// symmetry (VDX or VAN set, lens.h), the system traces the full pupil instead: the R^2 samples and
+// their mirrors (-x_p, y_p), 2 R^2 rays of equal weight (TraceSystem::full_pupil), every field.
 // Fields: F equidistant angles 0..hfov in the y-z plane (21). A ray of field theta starts on the
 // entrance-pupil plane z_EP at (R_EP x_p', R_EP y_p') with direction (0, sin theta, cos theta).
 //
@@ -54,6 +56,14 @@ struct PupilSamples {
 };
 PupilSamples paper_pupil_samples(int rings);
 
+// The full pupil of half-pupil samples: the samples, then their mirrors (-x, y) in the same order
+// (2 N samples; a sample on x = 0 appears twice, as in the mirrored half pupil).
+PupilSamples mirrored_pupil(const PupilSamples& half);
+
+// True when some field's vignetting factors are not mirror-symmetric about the meridional plane
+// (VDX or VAN set): the system then traces full pupils (TraceSystem::full_pupil).
+bool needs_full_pupil(const std::vector<VignettingFactors>& vignetting);
+
 // `count` samples on the edge of the half pupil (r = 1), azimuths from -90 to +90 deg inclusive:
 // the meridional top and bottom rays and the sagittal ray are among them for odd counts.
 PupilSamples pupil_edge_samples(int count);
@@ -98,7 +108,15 @@ struct TraceSystem {
   const PupilMap<T>& pupil_map(int h, int w) const {
     return pupil_maps[static_cast<std::size_t>(h) * (wavelength_count + 1) + w];
   }
+  // The pupil samples every field is traced with: the half pupil x_p >= 0 (each ray standing for
+  // itself and its mirror (-x_p, y_p), whose image is the mirror (-x, y)), or, when full_pupil,
+  // the full pupil (mirrored_pupil: the half and its mirror, each ray for itself).
   PupilSamples pupil;
+  bool full_pupil = false;
+  // Half-pupil samples as this system traces them: `half`, or its mirrored_pupil when full_pupil.
+  PupilSamples samples_for(const PupilSamples& half) const {
+    return full_pupil ? mirrored_pupil(half) : half;
+  }
 };
 
 namespace detail {
@@ -266,7 +284,8 @@ TraceSystem<T> prepare_system(const TraceLens<T>& lens_in, const SystemSetup& se
   sys.wavelength_count = reference_w;
   if (static_cast<int>(setup.wavelength_weights.size()) == reference_w)
     sys.wavelength_weights = setup.wavelength_weights;
-  sys.pupil = paper_pupil_samples(options.rings);
+  sys.full_pupil = needs_full_pupil(setup.vignetting);
+  sys.pupil = sys.samples_for(paper_pupil_samples(options.rings));
 
   // Fields: every written value as the chief-ray angle in object space (and, for a finite
   // object, the object point). Heights on the image are solved for: paraxially (linear in
@@ -386,8 +405,12 @@ TraceSystem<T> prepare_system(const TraceLens<T>& lens_in, double focal_length_m
 }
 
 // Fills `rays` with rays of field h and wavelength w at the entrance pupil, for normalized pupil
-// samples `pupil` (default: the system's half-pupil pattern) under the field's vignetting factors
-// (px' = (1 - VCX) px, py' = VDY + (1 - VCY) py) and then the aimed pupil map.
+// samples `pupil` (default: the system's pattern, sys.pupil) under the field's vignetting factors
+// (px', py') = VignettingFactors::pupil_point(px, py) (lens.h) and then the aimed pupil map:
+//   x = R_EP scale_x px',   y = R_EP (offset_y + scale_y py').
+// This is the one place where pupil points get the vignetting factors. Without VDX and VAN the
+// same map is taken factored (x = [R_EP scale_x (1 - VCX)] px, y = R_EP (offset_y + scale_y VDY)
+// + [R_EP scale_y (1 - VCY)] py), as before those two were traced (the same bits).
 template <typename T>
 void start_rays(const TraceSystem<T>& sys, int h, int w, RayBundle<T>& rays,
                 const PupilSamples* samples = nullptr) {
@@ -400,10 +423,22 @@ void start_rays(const TraceSystem<T>& sys, int h, int w, RayBundle<T>& rays,
   const VignettingFactors v =
       h < static_cast<int>(sys.vignetting.size()) ? sys.vignetting[h] : VignettingFactors{};
   const T r_ep = sys.epd_mm / K<T>(2.0);
+  const double object_y = sys.field_object_y_mm.empty() ? 0.0 : sys.field_object_y_mm[h];
+  if (v.asymmetric()) {
+    const T ax = r_ep * map.scale_x;
+    const T ay = r_ep * map.scale_y;
+    const T oy0 = r_ep * map.offset_y;
+    double qx = 0.0, qy = 0.0;
+    for (std::size_t i = 0; i < count; ++i) {
+      v.pupil_point(pupil.x[i], pupil.y[i], qx, qy);
+      start_pupil_ray(rays, i, ax * K<T>(qx), oy0 + ay * K<T>(qy), sys.entrance_pupil_z_mm,
+                      sys.object_distance_mm, sin_t, cos_t, object_y);
+    }
+    return;
+  }
   const T sx = r_ep * map.scale_x * K<T>(1.0 - v.vcx);
   const T sy = r_ep * map.scale_y * K<T>(1.0 - v.vcy);
   const T oy = r_ep * (map.offset_y + map.scale_y * K<T>(v.vdy));
-  const double object_y = sys.field_object_y_mm.empty() ? 0.0 : sys.field_object_y_mm[h];
   for (std::size_t i = 0; i < count; ++i)
     start_pupil_ray(rays, i, sx * K<T>(pupil.x[i]), oy + sy * K<T>(pupil.y[i]),
                     sys.entrance_pupil_z_mm, sys.object_distance_mm, sin_t, cos_t, object_y);
