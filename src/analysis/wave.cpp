@@ -273,6 +273,52 @@ PupilGrid make_half_pupil_grid(int n) {
   return half;
 }
 
+PupilGrid make_pupil_quadrature(int rings, int half_azimuths, bool mirrored) {
+  if (rings < 1 || rings > 512 || half_azimuths < 1 || half_azimuths > 2048)
+    throw Error(
+        fmt::format("pupil quadrature of {} rings x {} azimuths per half: rings must be "
+                    "in [1, 512], azimuths in [1, 2048]",
+                    rings, half_azimuths));
+  // Gauss-Legendre nodes t_i of [-1, 1] by Newton's method on P_R (three-term recurrence
+  // (k + 1) P_{k+1} = (2k + 1) t P_k - k P_{k-1}; P_R'(t) = R (t P_R - P_{R-1}) / (t^2 - 1)),
+  // weights 2 / ((1 - t^2) P_R'(t)^2); mapped to u = (1 + t) / 2 in [0, 1] with weight w / 2.
+  std::vector<double> u(rings), w(rings);
+  for (int i = 0; i < rings; ++i) {
+    double t = std::cos(kPi * (i + 0.75) / (rings + 0.5));  // the i-th root, approximately
+    double derivative = 1.0;
+    for (int iteration = 0; iteration < 100; ++iteration) {
+      double p0 = 1.0, p1 = t;
+      for (int k = 1; k < rings; ++k) {
+        const double p2 = ((2.0 * k + 1.0) * t * p1 - k * p0) / (k + 1.0);
+        p0 = p1;
+        p1 = p2;
+      }
+      derivative = rings * (t * p1 - p0) / (t * t - 1.0);
+      const double step = p1 / derivative;
+      t -= step;
+      if (std::abs(step) < 1e-15) break;
+    }
+    u[i] = 0.5 * (1.0 + t);
+    w[i] = 1.0 / ((1.0 - t * t) * derivative * derivative);  // (2 / (...)) / 2
+  }
+  PupilGrid grid;
+  grid.n = 0;
+  grid.mirrored = mirrored;
+  const int azimuths = 2 * half_azimuths;
+  for (int i = rings - 1; i >= 0; --i) {  // inner ring first
+    const double r = std::sqrt(u[i]);
+    for (int j = 0; j < (mirrored ? half_azimuths : azimuths); ++j) {
+      const double theta = (j + 0.5) * kPi / half_azimuths;
+      grid.column.push_back(j);
+      grid.row.push_back(rings - 1 - i);
+      grid.weight.push_back((mirrored ? 2.0 : 1.0) * kPi * w[i] / azimuths);
+      grid.samples.x.push_back(r * std::sin(theta));
+      grid.samples.y.push_back(r * std::cos(theta));
+    }
+  }
+  return grid;
+}
+
 void WaveOptions::validate(int wavelength_count) const {
   if (pupil_samples < 8 || pupil_samples > 1024)
     throw Error(fmt::format("pupil samples = {} must be in [8, 1024]", pupil_samples));

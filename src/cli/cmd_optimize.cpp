@@ -307,7 +307,8 @@ void setup_optimize(CLI::App& app) {
                   "wavefront error, piston and tilt removed, exact Jacobian)")
       ->check(CLI::IsMember({"spot", "wavefront"}));
   sub->add_option("--wavefront-pupil-samples", cmd->wavefront_pupil_samples,
-                  "pupil grid cells across the diameter for --merit wavefront (default 12)")
+                  "pupil samples across the diameter for --merit wavefront: a polar Gauss "
+                  "quadrature of n/2 rings x n azimuths per half pupil (default 8)")
       ->check(CLI::Range(4, 256));
   sub->add_option(
          "--freeze", cmd->freeze,

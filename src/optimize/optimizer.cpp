@@ -27,6 +27,9 @@ namespace {
 
 // Jet widths for the Jacobian: the smallest that covers the lens's variables in one pass.
 constexpr int kStride = 24;
+// The stall test of the wavefront merit's strict rounds (ProgressCallback).
+constexpr int kStallWindow = 10;
+constexpr double kStallRelative = 1e-3;
 
 struct DesignFunctor {
   const LensParameterization* param;
@@ -99,21 +102,44 @@ double profile_violation(const LensParameterization& param, const std::vector<do
 
 class ProgressCallback : public ceres::IterationCallback {
  public:
-  ProgressCallback(std::string phase, bool verbose, const std::atomic<bool>* interrupt)
-      : phase_(std::move(phase)), verbose_(verbose), interrupt_(interrupt) {}
+  // stall_window > 0: the round ends once the best cost of the last stall_window iterations is
+  // not below (1 - stall_relative) times the best cost stall_window iterations earlier (a creeping
+  // round: LM's per-iteration function tolerance sees each small step as progress).
+  ProgressCallback(std::string phase, bool verbose, const std::atomic<bool>* interrupt,
+                   int stall_window = 0, double stall_relative = 0.0)
+      : phase_(std::move(phase)),
+        verbose_(verbose),
+        interrupt_(interrupt),
+        stall_window_(stall_window),
+        stall_relative_(stall_relative) {}
   ceres::CallbackReturnType operator()(const ceres::IterationSummary& s) override {
     if (verbose_) {
       fmt::print(stderr, "  [{}] iter {:3d}  cost {:.6e}  |step| {:.2e}  lm radius {:.1e}\n",
                  phase_, s.iteration, s.cost, s.step_norm, s.trust_region_radius);
     }
     if (interrupt_ && interrupt_->load()) return ceres::SOLVER_TERMINATE_SUCCESSFULLY;
+    if (s.iteration == 0 || s.step_is_successful)
+      best_.push_back(best_.empty() ? s.cost : std::min(best_.back(), s.cost));
+    else
+      best_.push_back(best_.back());
+    const int n = static_cast<int>(best_.size());
+    if (stall_window_ > 0 && n > stall_window_ &&
+        !(best_[n - 1] < (1.0 - stall_relative_) * best_[n - 1 - stall_window_])) {
+      stalled_ = true;
+      return ceres::SOLVER_TERMINATE_SUCCESSFULLY;
+    }
     return ceres::SOLVER_CONTINUE;
   }
+  bool stalled() const { return stalled_; }
 
  private:
   std::string phase_;
   bool verbose_;
   const std::atomic<bool>* interrupt_;
+  int stall_window_;
+  double stall_relative_;
+  std::vector<double> best_;  // the best cost after each iteration
+  bool stalled_ = false;
 };
 
 DesignLoss<double> evaluate_double(const LensParameterization& param, const std::vector<double>& x,
@@ -239,14 +265,20 @@ DesignLoss<double> run_phase(const LensParameterization& param, std::vector<doub
     solver.linear_solver_type = ceres::DENSE_QR;
     solver.max_num_iterations = max_iterations;
     solver.initial_trust_region_radius = radius;
+    // (1e-5 for the wavefront merit saved the Cooke's creeping strict rounds but stopped the
+    // AC254-100 achromat at 0.186 waves against 0.092: BENCHMARKS.md, wave-merit.)
     solver.function_tolerance = 1e-6;
     solver.gradient_tolerance = 1e-12;
     solver.parameter_tolerance = 1e-8;
     solver.num_threads = 1;  // the loss parallelizes over fields itself
     solver.update_state_every_iteration = true;
     solver.logging_type = ceres::SILENT;
+    // The wavefront merit's strict rounds creep (the Cooke's: 1 % of the cost in 30-50
+    // iterations, l_RP of nanometres traded against the merit's fourth digit), so they end when
+    // 10 iterations gain less than 0.1 % (BENCHMARKS.md, wave-merit).
+    const bool creeping = loss.merit == DesignMerit::kWavefront && !loss.paper_penalties;
     ProgressCallback progress(fmt::format("{} round {}", name, round + 1), options.verbose,
-                              options.interrupt);
+                              options.interrupt, creeping ? kStallWindow : 0, kStallRelative);
     solver.callbacks.push_back(&progress);
     ceres::Solver::Summary summary;
     ceres::Solve(solver, &problem, &summary);
@@ -282,7 +314,11 @@ DesignLoss<double> run_phase(const LensParameterization& param, std::vector<doub
                  next.failed_rays, summary.iterations.size());
     }
     current = next;
-    if (!violated && change < 2e-3 && glass_weight_growth == 1.0) break;
+    // A round that ran out of iterations has not converged, however little it changed the merit
+    // (a short round can spend its iterations shrinking the trust region from its start): the
+    // next round continues from its radius.
+    const bool converged = summary.termination_type != ceres::NO_CONVERGENCE;
+    if (!violated && change < 2e-3 && glass_weight_growth == 1.0 && converged) break;
   }
   return current;
 }
@@ -360,6 +396,7 @@ void DesignLossOptions::validate() const {
   if (!(max_ray_angle_deg > 0.0 && max_ray_angle_deg < 90.0))
     throw Error(fmt::format("max_ray_angle_deg = {} must be in (0, 90)", max_ray_angle_deg));
   positive(weight_profile, "weight_profile");
+  positive(wavefront_unit_mm, "wavefront_unit_mm");
   if (wavefront_pupil_samples < 4 || wavefront_pupil_samples > 256)
     throw Error(
         fmt::format("wavefront_pupil_samples = {} must be in [4, 256]", wavefront_pupil_samples));
@@ -623,6 +660,23 @@ class LensOptimization {
     if (wavefront_) result_.start_wavefront_waves = full_wavefront_waves(start_, full_.trace);
   }
 
+  // The loss of the first phases, which pick the basin (focus, soft start): the paper's soft
+  // penalties, and the spot merit whatever the merit. The wavefront merit starts from the spot
+  // merit's basin: with the soft penalties, whose weights are set against a merit in mm (the
+  // spot, ~0.02 mm on the Cooke; the wavefront is ~2 waves), it crosses the bounds a hundred
+  // times further than the spot merit does (Cooke: l_RP 5.5e-4 against 1.5e-7 mm) and the
+  // strict phases then lose more walking it back than it gained (2.05 -> 2.51 waves at the
+  // optimization sampling); with the penalties rescaled to the wavefront's unit it lands in a
+  // worse basin (3.26 waves). The RMS spot is the RMS slope of the wavefront (transverse ray
+  // aberration = -(R / r_p) dW/drho), the smoother merit for finding the basin; the wavefront
+  // merit then takes over at the strict phases (BENCHMARKS.md, wave-merit).
+  DesignLossOptions basin_loss() const {
+    DesignLossOptions loss = options_.loss;
+    loss.paper_penalties = true;
+    loss.merit = DesignMerit::kSpot;
+    return loss;
+  }
+
   // Focus first: a start far from focus (a perturbed last spacing is a defocus of a tenth of the
   // back focal length) has a spot dominated by defocus, and LM's first steps on all variables
   // then bend the curvatures to compensate and land in a poor basin. The defocus alone is
@@ -639,8 +693,7 @@ class LensOptimization {
         all_but_defocus.push_back(i);
     }
     if (!defocus_free) return;
-    DesignLossOptions focus_loss = options_.loss;
-    focus_loss.paper_penalties = true;
+    DesignLossOptions focus_loss = basin_loss();
     const DesignLoss<double> f = phase(x_, GlassMode::kFixed, fixed_, all_but_defocus, focus_loss,
                                        "focus", 1, options_.max_iterations);
     result_.log.push_back(fmt::format("focus: {} (optimization sampling)", merit_text(f)));
@@ -652,8 +705,7 @@ class LensOptimization {
   // design crosses its bounds only slightly, and the continuation then walks it inside.
   void soft_start() {
     if (soft_ || !options_.soft_start || interrupted()) return;
-    DesignLossOptions soft_loss = options_.loss;
-    soft_loss.paper_penalties = true;
+    DesignLossOptions soft_loss = basin_loss();
     const DesignLoss<double> s =
         phase(x_, GlassMode::kFixed, fixed_, frozen_all_, soft_loss, "soft penalties",
               options_.max_rounds, options_.max_iterations);
@@ -662,13 +714,26 @@ class LensOptimization {
 
   // The bounds continued from the start's extremes to the targets (25, 50, 75 %), then LM with
   // the fixed glasses at the target bounds: the design every later phase must beat.
+  // The wavefront merit skips the continuation when its strict phases start from a spot-merit
+  // soft design (basin_loss) that crosses its bounds only slightly (within 0.01 mm and 0.5 deg:
+  // the Cooke's, l_RP 1.5e-7 mm, l_RA 1.6e-6): each stage, changing the merit as well, ran to its
+  // 20-iteration limit (63 of the 266 iterations of the Cooke run) for a design the target round
+  // then moves anyway. A start still far outside (short rounds) is walked in as before.
   void fixed_glasses() {
     DesignExtremes start_extremes;
     evaluate_double(param_, x_, GlassMode::kFixed, fixed_, options_.sampling, loss_,
                     &start_extremes);
     const DesignLossOptions target_loss = loss_;
+    const DesignLossOptions from = continued_bounds(target_loss, start_extremes, start_, 0.0);
+    const double length_gap_mm =
+        std::max({std::abs(from.min_air_mm - target_loss.min_air_mm),
+                  std::abs(from.min_glass_mm - target_loss.min_glass_mm),
+                  std::abs(from.max_glass_mm - target_loss.max_glass_mm),
+                  std::abs(from.min_image_clearance_mm - target_loss.min_image_clearance_mm)});
+    const double angle_gap_deg = std::abs(from.max_ray_angle_deg - target_loss.max_ray_angle_deg);
+    const bool nearly_inside = length_gap_mm <= 0.01 && angle_gap_deg <= 0.5;
     for (double t : {0.25, 0.5, 0.75}) {
-      if (interrupted() || soft_) break;
+      if (interrupted() || soft_ || (wavefront_ && options_.soft_start && nearly_inside)) break;
       DesignLossOptions stage = continued_bounds(target_loss, start_extremes, start_, t);
       phase(x_, GlassMode::kFixed, fixed_, frozen_all_, stage,
             fmt::format("constraints {:.0f}%", 100 * t), 1, std::min(options_.max_iterations, 20));
@@ -855,7 +920,13 @@ class LensOptimization {
 
 OptimizeResult optimize_lens(const Lens& start, const OptimizeOptions& options) {
   options.validate();
-  return LensOptimization(start, options).run();
+  if (options.loss.merit != DesignMerit::kWavefront || options.loss.wavefront_unit_mm > 0.0)
+    return LensOptimization(start, options).run();
+  // The wavefront merit in mm (design_loss.h): the start's defocus unit, fixed for the run.
+  OptimizeOptions with_unit = options;
+  const double unit = wavefront_mm_per_wave(prepare_lens_system(start, options.sampling));
+  if (std::isfinite(unit) && unit > 0.0) with_unit.loss.wavefront_unit_mm = unit;
+  return LensOptimization(start, with_unit).run();
 }
 
 AdamResult adam_on_design_loss(const LensParameterization& param, std::vector<double> x,

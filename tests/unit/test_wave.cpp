@@ -5,7 +5,10 @@
 #include <ceres/jet.h>
 #include <doctest/doctest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <utility>
+#include <vector>
 
 #include "lensopt/analysis/wave.h"
 #include "lensopt/analysis/wavefront.h"
@@ -64,6 +67,51 @@ TEST_CASE("wave: pupil grid weights add up to the unit disk's area") {
     CAPTURE(n);
     CHECK(area == doctest::Approx(kPi).epsilon(2e-4));
   }
+}
+
+TEST_CASE("wave: the polar pupil quadrature integrates polynomials up to its degree exactly") {
+  // int_disk x^a y^b dA for even a, b: 2 Gamma((a+1)/2) Gamma((b+1)/2) / ((a+b+2) Gamma((a+b)/2+1))
+  // (0 when a or b is odd).
+  auto exact = [](int a, int b) {
+    if (a % 2 || b % 2) return 0.0;
+    return 2.0 * std::tgamma((a + 1) / 2.0) * std::tgamma((b + 1) / 2.0) /
+           ((a + b + 2) * std::tgamma((a + b) / 2.0 + 1.0));
+  };
+  for (const auto& [rings, half] : std::vector<std::pair<int, int>>{{1, 1}, {3, 6}, {6, 12}}) {
+    const int degree = std::min(4 * rings - 1, 2 * half - 1);
+    for (bool mirrored : {false, true}) {
+      const PupilGrid q = make_pupil_quadrature(rings, half, mirrored);
+      REQUIRE(q.size() == static_cast<std::size_t>(rings * half * (mirrored ? 1 : 2)));
+      CHECK(q.mirrored == mirrored);
+      for (std::size_t i = 0; i < q.size(); ++i) {
+        const double r2 = q.samples.x[i] * q.samples.x[i] + q.samples.y[i] * q.samples.y[i];
+        CHECK(r2 < 1.0);
+        if (mirrored) CHECK(q.samples.x[i] > 0.0);
+      }
+      // Every monomial up to the rule's degree; a mirrored rule only the even ones in x_p
+      // (those its mirror images double).
+      for (int a = 0; a <= degree; ++a)
+        for (int b = 0; a + b <= degree; ++b) {
+          if (mirrored && a % 2) continue;
+          double sum = 0;
+          for (std::size_t i = 0; i < q.size(); ++i)
+            sum += q.weight[i] * std::pow(q.samples.x[i], a) * std::pow(q.samples.y[i], b);
+          CAPTURE(rings);
+          CAPTURE(half);
+          CAPTURE(a);
+          CAPTURE(b);
+          CHECK(sum == doctest::Approx(exact(a, b)).epsilon(1e-12).scale(1.0));
+        }
+    }
+  }
+  // One degree beyond: r^{4 R} is not integrated exactly (the rule's degree is sharp).
+  const PupilGrid q = make_pupil_quadrature(3, 12, false);
+  double sum = 0;
+  for (std::size_t i = 0; i < q.size(); ++i)
+    sum += q.weight[i] *
+           std::pow(q.samples.x[i] * q.samples.x[i] + q.samples.y[i] * q.samples.y[i], 6);
+  CHECK(std::abs(sum - kPi / 7.0) > 1e-6);
+  CHECK_THROWS_AS(make_pupil_quadrature(0, 4, true), Error);
 }
 
 TEST_CASE("wave: the aberration-free singlet gives the diffraction-limited MTF, Airy ring, S = 1") {
@@ -322,6 +370,41 @@ TEST_CASE("wave: a wavefront made of known Zernike terms is recovered to 1e-10")
     CHECK(fit.residual_rms_waves < 1e-10);
     // Fewer terms than the wavefront holds leave a misfit.
     CHECK(fit_zernike(wf, grid, 10, ordering).residual_rms_waves > 1e-3);
+  }
+}
+
+TEST_CASE("wave: wavefront_mm_per_wave is the RMS spot per wave of RMS wavefront of a defocus") {
+  // The aberration-free slow singlet with its image plane dz beyond the paraxial focus F: the
+  // RMS radius of its rays about the chief ray's point (the wavefront's own image positions, on
+  // the quadrature) over its RMS wavefront is 4 sqrt(6) N' lambda, N' = (R + dz) / (2 r_p) the
+  // f-number of the cone from the exit pupil (radius r_p, at R before F) to the plane: the
+  // sphere about the plane's point has radius R + dz, so W020 = r_p^2 dz / (2 R (R + dz)) /
+  // lambda while the spot grows as r_p dz / R. At dz -> 0 that is wavefront_mm_per_wave.
+  const Lens lens = slow_singlet();
+  const TraceSystem<double> sys = prepare(lens);
+  const double focus = sys.bfl_mm - sys.lens.thickness_mm.back();
+  const double radius = focus - exit_pupil_from_image_mm(sys.lens, 587.56);
+  const PupilGrid q = make_pupil_quadrature(8, 16, false);
+  RayBundle<double> rays;
+  RayRecord<double> record;
+  const double unit = wavefront_mm_per_wave(sys);
+  CHECK(unit == doctest::Approx(4 * std::sqrt(6.0) * 40.0 * 587.5618e-6).epsilon(1e-3).scale(0));
+  for (double dz : {2.0, 10.0, 30.0}) {  // W020 ~ dz / (8 N^2 lambda): 0.27, 1.3 and 4 waves
+    const ReferenceSphere<double> sphere = reference_sphere(sys, 0, focus + dz);
+    const Wavefront<double> wf = compute_wavefront(sys, 0, 0, q, sphere, focus + dz, rays, record);
+    double sum = 0, weight = 0;
+    for (std::size_t i = 0; i < q.size(); ++i) {
+      REQUIRE(wf.ok[i]);
+      sum +=
+          q.weight[i] * (wf.image_x_mm[i] * wf.image_x_mm[i] + wf.image_y_mm[i] * wf.image_y_mm[i]);
+      weight += q.weight[i];
+    }
+    const double spot_mm = std::sqrt(sum / weight);
+    CAPTURE(dz);
+    CAPTURE(wf.rms_waves);
+    CHECK(wf.rms_waves > 0.07);  // far above the singlet's own (< 1e-3 waves)
+    CHECK(spot_mm / wf.rms_waves ==
+          doctest::Approx(unit * (radius + dz) / radius).epsilon(5e-3).scale(0));
   }
 }
 

@@ -63,6 +63,19 @@ PupilGrid make_pupil_grid(int n);
 // Its half x_p >= 0 with the weights of the header (mirrored).
 PupilGrid make_half_pupil_grid(int n);
 
+// A polar Gauss quadrature of the unit pupil (the optimizer's wavefront merit; no cells, n = 0).
+// In u = r^2 the area element is dA = du dtheta / 2, so
+//   int_disk f dA ~= sum_{i,j} (pi w_i / A) f(r_i sin theta_j, r_i cos theta_j)
+// with r_i = sqrt(u_i), (u_i, w_i) the `rings` Gauss-Legendre nodes and weights of [0, 1]
+// (sum w_i = 1) and A = 2 * `half_azimuths` equally spaced azimuths theta_j = (j + 1/2) pi /
+// half_azimuths, j = 0..A-1 (theta from +y_p towards +x_p; no sample on the x_p = 0 line).
+// The rule is exact for every polynomial in (x_p, y_p) of degree <= min(4 rings - 1, A - 1)
+// (an odd monomial's azimuthal sum vanishes, an even one r^{2k} trig_d is exact for k < 2 rings
+// and d < A), where a square grid of cells errs at first order at the rim. Its weights sum to pi
+// (the pupil area). `mirrored`: only the azimuths with x_p > 0 (j < half_azimuths), each
+// weighted twice, as make_half_pupil_grid (exact for meridionally symmetric systems).
+PupilGrid make_pupil_quadrature(int rings, int half_azimuths, bool mirrored);
+
 // The exit pupil's axial position relative to the image plane (mm, negative: in front of the
 // image), paraxial at `wavelength_nm`: the stop centre imaged by the surfaces after the stop.
 // A (nearly) telecentric image space returns -1e9 mm (the sphere becomes a plane).
@@ -80,6 +93,16 @@ T exit_pupil_from_image_mm(const TraceLens<T>& lens, double wavelength_nm) {
   const T u = w / lens.index_at_nm(k_count - 1, wavelength_nm);
   if (!(abs(value_of(u)) > 1e-12)) return K<T>(-1e9);
   return -y / u - lens.thickness_mm[k_count - 1];
+}
+
+// The RMS spot radius (mm) per wave of RMS wavefront of a pure defocus W = W020 rho^2 in a
+// system of f-number N = EFL / EPD at wavelength lambda (the reference one): the transverse ray
+// aberration is -2 N lambda dW/drho = -4 N lambda W020 rho, of RMS 2 sqrt(2) N lambda W020 over
+// the pupil, and the RMS of W020 rho^2 without piston is W020 / (2 sqrt(3)), so
+//   mm per wave = 4 sqrt(6) N lambda   (Cooke, f/2 at 587.6 nm: 0.0115 mm per wave).
+inline double wavefront_mm_per_wave(const TraceSystem<double>& sys) {
+  const double lambda_mm = sys.lens.wavelengths_nm[sys.wavelength_count] * 1e-6;
+  return 4.0 * std::sqrt(6.0) * (sys.efl_mm / sys.epd_mm) * lambda_mm;
 }
 
 // The reference sphere of one field: centre on the (focus-shifted) image plane, signed radius.

@@ -36,14 +36,24 @@
 // Wavefront merit (DesignMerit::kWavefront, `optimize --merit wavefront`): l_S is replaced by
 //   l_W  = mean_h W_h,  W_h = sqrt(sum_w omega_w RMS_{h,w}^2 / sum_w omega_w)     (waves)
 // the RMS wavefront with piston and tilt removed (analysis/wavefront.h, the same code as
-// `analyze --wave`) on the half x_p >= 0 of an n x n pupil grid (wavefront_pupil_samples; the
-// mirrored half grid of wavefront.h, exact for meridionally symmetric pupils; the full grid when
-// the system traces full pupils), omega the lens's wavelength weights. Its residuals, one per
-// (field, wavelength, grid cell):
+// `analyze --wave`) on a polar Gauss quadrature of the pupil (wavefront_merit_pupil: n / 2
+// rings and n azimuths per half for n = wavefront_pupil_samples, exact for wavefronts of degree
+// n - 1), its half x_p > 0 mirrored (exact for the meridionally symmetric systems the tracer
+// assumes) or the whole pupil when the system traces full pupils (a field's VDX or VAN set,
+// TraceSystem::full_pupil), omega the lens's wavelength weights. The analysis judges on a square
+// grid of cells, which converges to the same integral at first order in the cell size (its rim
+// cells); the quadrature samples the 2-3 waves of high-order aberration of a fast lens at full
+// field closer to that limit than a grid of as many rays (BENCHMARKS.md, wave-merit). Its
+// residuals, one per (field, wavelength, quadrature node):
 //   r = sqrt(a_h omega_w / sum omega) sqrt(g_i / sum g) (W_i - piston - tilt)
-// (rms_wavefront_residuals), so sum of squares = sum_h a_h W_h^2 = l_W at W = W_0 with the
-// reweighting above. The grid rays (and each wavelength's chief ray) also carry the path and
-// angle penalties in place of the ring rays; l_S is still reported, from the grid rays.
+// (rms_wavefront_residuals), times sqrt(u) for the unit u = wavefront_unit_mm (mm per wave; 1
+// when 0), so sum of squares = u sum_h a_h W_h^2 = u l_W at W = W_0 with the reweighting above;
+// l_lens has u l_W in place of l_S. The unit matters for the strict phases: with the merit in
+// waves (~2 on the Cooke against its spot's ~0.02 mm) the penalties weigh a hundredth of what
+// they weigh against the spot, the designs of each round cross their bounds a hundred times
+// further and LM spends its iteration limit on every round (BENCHMARKS.md, wave-merit).
+// The quadrature rays (and each wavelength's chief ray) also carry the path and angle penalties
+// in place of the ring rays; l_S is still reported, from the quadrature rays.
 #pragma once
 
 #include <omp.h>
@@ -90,10 +100,16 @@ struct DesignLossOptions {
   // kPaperHingeSmoothing of the bound so LM has a derivative), fixed weights; a design may then
   // cross a bound where the trade-off pays, as the paper's own baselines do.
   bool paper_penalties = false;
-  // The merit: the paper's RMS spot, or the RMS wavefront (weight_spot weighs it) on a grid of
-  // wavefront_pupil_samples cells across the pupil.
+  // The merit: the paper's RMS spot, or the RMS wavefront (weight_spot weighs it) on a polar
+  // quadrature of the pupil with wavefront_pupil_samples samples across its diameter
+  // (wavefront_merit_pupil).
   DesignMerit merit = DesignMerit::kSpot;
-  int wavefront_pupil_samples = 12;
+  int wavefront_pupil_samples = 8;
+  // The wavefront merit's unit in the least squares and in l_lens: mm per wave (0: 1, the merit
+  // in waves). The optimizer sets wavefront_mm_per_wave of the start (analysis/wavefront.h), the
+  // RMS spot of a pure defocus per wave of RMS wavefront, so the penalties, whose weights are
+  // set against the spot in mm, weigh the same against either merit (header).
+  double wavefront_unit_mm = 0.0;
 
   void validate() const;  // throws Error naming the bad value
 };
@@ -139,19 +155,28 @@ inline int design_residual_count(int fields, int constraint_fields, int waveleng
   return fields * wavelengths * rays * 2 + constraint_fields * surfaces * 3 + glasses * 2;
 }
 
-// The wavefront merit's pupil grid: the mirrored half grid, or the full one when the system traces
-// full pupils (TraceSystem::full_pupil).
-inline PupilGrid merit_wavefront_grid(const DesignLossOptions& options, bool full_pupil) {
-  return full_pupil ? make_pupil_grid(options.wavefront_pupil_samples)
-                    : make_half_pupil_grid(options.wavefront_pupil_samples);
+// The wavefront merit's pupil samples for n = wavefront_pupil_samples (header): the polar
+// quadrature of ceil(n / 2) rings and n azimuths per half, the half x_p > 0 mirrored (n^2 / 2 rays
+// per field and wavelength for an even n), or both halves when the system traces full pupils
+// (TraceSystem::full_pupil).
+inline int wavefront_merit_rings(int n) {
+  return (n + 1) / 2;
+}
+inline int wavefront_merit_half_azimuths(int n) {
+  return n;
+}
+inline PupilGrid wavefront_merit_pupil(int n, bool full_pupil = false) {
+  return make_pupil_quadrature(wavefront_merit_rings(n), wavefront_merit_half_azimuths(n),
+                               !full_pupil);
 }
 
 // The merit's residuals per spot field: 2 per ring ray and wavelength (spot; `rays` the traced
-// pupil samples, sys.pupil), or one per grid cell and wavelength (wavefront).
+// pupil samples, sys.pupil), or one per quadrature node and wavelength (wavefront).
 inline int merit_residuals_per_field(const DesignLossOptions& options, int wavelengths, int rays,
                                      bool full_pupil = false) {
   if (options.merit == DesignMerit::kWavefront)
-    return wavelengths * static_cast<int>(merit_wavefront_grid(options, full_pupil).size());
+    return wavelengths * wavefront_merit_rings(options.wavefront_pupil_samples) *
+           wavefront_merit_half_azimuths(options.wavefront_pupil_samples) * (full_pupil ? 2 : 1);
   return wavelengths * rays * 2;
 }
 
@@ -219,9 +244,12 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
   const int field_count = sampled.spot_fields;
   const int wl = sys.wavelength_count;
   const bool wavefront = options.merit == DesignMerit::kWavefront;
-  // The half grid: the lens is symmetric about the meridional plane (as the half-pupil spot);
-  // the full grid when a field's vignetting is not (sys.full_pupil).
-  const PupilGrid grid = wavefront ? merit_wavefront_grid(options, sys.full_pupil) : PupilGrid{};
+  const double wave_unit = options.wavefront_unit_mm > 0.0 ? options.wavefront_unit_mm : 1.0;
+  // The half pupil: the lens is symmetric about the meridional plane (as the half-pupil spot);
+  // the full pupil when a field's vignetting is not (sys.full_pupil).
+  const PupilGrid grid =
+      wavefront ? wavefront_merit_pupil(options.wavefront_pupil_samples, sys.full_pupil)
+                : PupilGrid{};
   // Rays per field and wavelength that carry the merit (and the spot).
   const int rays = wavefront ? static_cast<int>(grid.size()) : static_cast<int>(sys.pupil.size());
   const int k_count = lens.surface_count();
@@ -357,7 +385,8 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
               if (r) {
                 T* rw = r + static_cast<std::size_t>(w) * rays;
                 rms_wavefront_residuals(wf, grid, rw);
-                const T scale = K<T>(std::sqrt(options.weight_spot * a_h * omega[w] / omega_sum));
+                const T scale =
+                    K<T>(std::sqrt(options.weight_spot * wave_unit * a_h * omega[w] / omega_sum));
                 for (int p = 0; p < rays; ++p) rw[p] = scale * rw[p];
               }
             });
@@ -477,7 +506,7 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
   for (int h = 0; h < static_cast<int>(field_wave.size()); ++h)
     wave = phi[h] == 1.0 ? wave + field_wave[h] : wave + K<T>(phi[h]) * field_wave[h];
   wave = wave / K<T>(phi_sum);
-  const T merit = wavefront ? wave : spot / K<T>(phi_sum);
+  const T merit = wavefront ? K<T>(wave_unit) * wave : spot / K<T>(phi_sum);
   for (int hf = 0; hf < all_fields; ++hf) {
     path = path + path_linear[hf];
     angle = angle + angle_linear[hf];
