@@ -10,9 +10,11 @@
 #include <fstream>
 #include <map>
 #include <nlohmann/json.hpp>
+#include <regex>
 #include <string>
 #include <vector>
 
+#include "lensopt/analysis/analyze.h"
 #include "lensopt/core/error.h"
 #include "lensopt/formats/zmx.h"
 #include "lensopt/glass/dispersion.h"
@@ -166,6 +168,26 @@ TEST_CASE("zmx-real: lens_floa's FLOA stop gives a paraxial F/0.499: it imports 
   Lens slower = lens;
   slower.specs.f_number = kMinFNumber;
   CHECK(f_number_warnings(slower).empty());
+
+  // analyze counts the rays that miss a surface (the aimed pupil reaches beyond the 9.68 mm rim
+  // where the singlet's surfaces meet: they miss surface 2), and the relative illumination,
+  // whose edge rays fail, is unavailable: n/a in the text, null in the JSON, never 0 or NaN.
+  const AnalysisReport r = analyze_lens(lens, AnalyzeOptions{});
+  REQUIRE(r.fields.size() == 1);
+  CHECK(r.ray_failures > 0);
+  CHECK(r.ray_failures < r.fields[0].traced_rays + r.ray_failures);  // some rays arrive
+  REQUIRE(r.failures_by_surface.size() >= 2);
+  CHECK(r.failures_by_surface[1] == r.ray_failures);
+  CHECK(r.fields[0].failed_rays == r.ray_failures);
+  CHECK_FALSE(r.fields[0].relative_illumination);
+  REQUIRE(r.fields[0].rms_spot_um);
+  CHECK(std::isfinite(*r.fields[0].rms_spot_um));
+  const std::string text = format_report_text(r), json = format_report_json(r);
+  CHECK(text.find("n/a") != std::string::npos);
+  CHECK(json.find("\"relative_illumination\": [\n    null") != std::string::npos);
+  for (const std::string& out : {text, json}) {
+    CHECK_FALSE(std::regex_search(out, std::regex("\\b(nan|inf)\\b")));  // not "infinity"
+  }
 }
 
 TEST_CASE("zmx-real: unsupported features are one line naming the feature and file:line") {
