@@ -305,9 +305,9 @@ std::vector<std::string> f_number_warnings(const Lens& lens) {
   if (specs.mode == SpecMode::kPaper || !(specs.f_number < kMinFNumber)) return {};
   const std::string where = lens.source_path.empty() ? lens.name : lens.source_path;
   return {fmt::format(
-      "{}: paraxial F-number EFL / EPD = {:.5g} is below {:g}, the working F-number of an "
-      "image-space NA of 1 in air: its outer rays cannot all reach the image (those that miss a "
-      "surface are counted as failed)",
+      "{}: paraxial F-number EFL / EPD = {:.5g} is below {:g}, the smallest real working "
+      "F-number in air (image-space NA 1): the full aperture cannot be imaged sharply (the sine "
+      "condition fails), and rays that miss a surface are counted as failed",
       where, specs.f_number, kMinFNumber)};
 }
 

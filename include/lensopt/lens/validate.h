@@ -37,8 +37,9 @@ void validate_lens(const Lens& lens, const LensSourceLines& lines = {});
 std::vector<std::string> glass_range_warnings(const Lens& lens);
 
 // One message, naming the lens's file and its F-number, when a lens traced as written has a
-// paraxial F-number EFL / EPD below kMinFNumber: its marginal rays cannot all reach the image in
-// air (they are counted as failed or vignetted where they miss). Empty otherwise.
+// paraxial F-number EFL / EPD below kMinFNumber: in air its full aperture cannot satisfy the
+// sine condition (h = EFL sin U' would need sin U' > 1), so it cannot be imaged sharply, and
+// often its outer rays miss a surface (counted as failed). Empty otherwise.
 std::vector<std::string> f_number_warnings(const Lens& lens);
 
 // The physical bounds of Lens::validate.
@@ -47,10 +48,10 @@ std::vector<std::string> f_number_warnings(const Lens& lens);
 // it, so a requested F-number (the paper's spec mode, `search`) below kMinFNumber asks for a lens
 // that cannot exist, and is refused. The paraxial F-number of a lens as written (a .zmx or TOML
 // lens with its own aperture: FLOA, ENPD, OBNA or FNUM) is not bounded by physics: a stop imaged
-// with a large magnification gives EFL / EPD < 0.5 with its outer rays missing a surface, and
-// OpticStudio and optiland load such files. It is accepted with a warning (f_number_warnings);
-// kMinParaxialFNumber only refuses nonsense (an entrance pupil more than ten focal lengths
-// across: a unit slip in DIAM or ENPD, not a lens).
+// with a large magnification can give EFL / EPD < 0.5 (optiland's lens_floa.zmx: its outer rays
+// miss a surface), and OpticStudio and optiland load such files. It is accepted with a warning
+// (f_number_warnings); kMinParaxialFNumber only refuses nonsense (an entrance pupil more than ten
+// focal lengths across: a unit slip in DIAM or ENPD, not a lens).
 inline constexpr double kMinFNumber = 0.5, kMaxFNumber = 1000.0;
 inline constexpr double kMinParaxialFNumber = 0.05;
 inline constexpr double kMinHalfFieldDeg = 1e-3;
