@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "lensopt/analysis/analyze.h"
+#include "lensopt/analysis/apertures.h"
 #include "lensopt/core/error.h"
 #include "lensopt/formats/zmx.h"
 #include "lensopt/glass/dispersion.h"
@@ -185,6 +186,13 @@ TEST_CASE("zmx-real: lens_floa's FLOA stop gives a paraxial F/0.499: it imports 
   const std::string text = format_report_text(r), json = format_report_json(r);
   CHECK(text.find("n/a") != std::string::npos);
   CHECK(json.find("\"relative_illumination\": [\n    null") != std::string::npos);
+  // Its automatic semi-diameters: surface 1 has one (the marginal rays reach it), surface 2,
+  // which they miss, has none, and the .zmx writer writes no DIAM for it (not "DIAM 0 0").
+  const std::vector<double> automatic = automatic_semi_diameters(lens);
+  REQUIRE(automatic.size() >= 2);
+  CHECK(automatic[0] > 0.0);
+  CHECK(std::isnan(automatic[1]));
+  CHECK(format_zmx(lens).find("DIAM 0 0") == std::string::npos);
   for (const std::string& out : {text, json}) {
     CHECK_FALSE(std::regex_search(out, std::regex("\\b(nan|inf)\\b")));  // not "infinity"
   }
