@@ -91,7 +91,7 @@ class FieldReport:
     centroid_y_mm: float
     reference_y_mm: float
     distortion_percent: float
-    relative_illumination: float
+    relative_illumination: Optional[float]
     traced_rays: int
     failed_rays: int
     aiming_error: float

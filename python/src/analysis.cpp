@@ -70,7 +70,8 @@ void bind_analysis(py::module_& m) {
       .def_readonly("centroid_y_mm", &FieldReport::centroid_y_mm)
       .def_readonly("reference_y_mm", &FieldReport::reference_y_mm)
       .def_readonly("distortion_percent", &FieldReport::distortion_percent)
-      .def_readonly("relative_illumination", &FieldReport::relative_illumination)
+      .def_readonly("relative_illumination", &FieldReport::relative_illumination,
+                    "None if an edge ray of the field or of the axis fails")
       .def_readonly("traced_rays", &FieldReport::traced_rays)
       .def_readonly("failed_rays", &FieldReport::failed_rays)
       .def_readonly("aiming_error", &FieldReport::aiming_error);

@@ -11,6 +11,7 @@
 #include "lensopt/formats/zmx.h"
 #include "lensopt/glass/glass.h"
 #include "lensopt/lens/lens_io.h"
+#include "lensopt/lens/validate.h"
 
 PYBIND11_MAKE_OPAQUE(std::vector<lensopt::Surface>)
 
@@ -152,19 +153,26 @@ void bind_lens(py::module_& m) {
   m.def(
       "load_lens",
       [](const std::string& path) {
+        std::vector<std::string> warnings;
+        Lens lens;
         if (lower_extension(path) == ".zmx") {
           ZmxImport imported = read_zmx(path);
-          if (!imported.warnings.empty()) {
-            py::object warn = py::module_::import("warnings").attr("warn");
-            for (const std::string& w : imported.warnings) warn(w);
-          }
-          return imported.lens;
+          warnings = std::move(imported.warnings);
+          lens = std::move(imported.lens);
+        } else {
+          lens = read_lens(path);
         }
-        return read_lens(path);
+        for (std::string& w : f_number_warnings(lens)) warnings.push_back(std::move(w));
+        if (!warnings.empty()) {
+          py::object warn = py::module_::import("warnings").attr("warn");
+          for (const std::string& w : warnings) warn(w);
+        }
+        return lens;
       },
       py::arg("path"),
-      "Reads a lens: .toml, the paper's .yml/.yaml or Zemax .zmx (its ignored lines become "
-      "Python warnings). Raises LensoptError with file:line:column.");
+      "Reads a lens: .toml, the paper's .yml/.yaml or Zemax .zmx (its ignored lines and a "
+      "paraxial F-number below 0.5 become Python warnings). Raises LensoptError with "
+      "file:line:column.");
   m.def(
       "parse_lens",
       [](const std::string& text, const std::string& format, const std::string& source_name) {

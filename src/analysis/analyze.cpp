@@ -71,7 +71,8 @@ AnalysisReport analyze_lens(const Lens& lens_in, const AnalyzeOptions& options) 
   const int field_count = static_cast<int>(sys.fields_deg.size());
   const std::vector<double> y_ref = reference_heights(sys);
   const double y_ref_last = y_ref.back();
-  const std::vector<double> ri = relative_illuminations(sys);
+  std::vector<char> ri_known;
+  const std::vector<double> ri = relative_illuminations(sys, &ri_known);
 
   double spot_sum = 0, weight_sum = 0;
   bool all_fields_traced = true;
@@ -95,7 +96,7 @@ AnalysisReport analyze_lens(const Lens& lens_in, const AnalyzeOptions& options) 
     f.reference_y_mm = y_ref[h];
     f.distortion_percent =
         f.traced_rays > 0 ? 100.0 * field_distortion(f.centroid_y_mm, y_ref[h], y_ref_last) : 0.0;
-    f.relative_illumination = ri[h];
+    if (ri_known[h]) f.relative_illumination = ri[h];
     // Ray-aiming error over all wavelengths (and the reference one).
     double worst = 0;
     for (int w = 0; w <= sys.wavelength_count; ++w) {
@@ -142,7 +143,8 @@ void check_forms_image(const AnalysisReport& r) {
       continue;
     }
     if (!f.rms_spot_um || !std::isfinite(*f.rms_spot_um) || !std::isfinite(f.distortion_percent) ||
-        !std::isfinite(f.relative_illumination) || !std::isfinite(f.centroid_y_mm))
+        (f.relative_illumination && !std::isfinite(*f.relative_illumination)) ||
+        !std::isfinite(f.centroid_y_mm))
       problems.push_back(
           fmt::format("field {:g} deg has a non-finite spot, distortion or "
                       "illumination",
@@ -192,11 +194,13 @@ std::string format_report_text(const AnalysisReport& r) {
                   "aiming err (%)  failed rays  vignetted",
                   head));
   for (const FieldReport& f : r.fields) {
-    line(fmt::format("  {:11.3f}  {:11.3f}  {:>13}  {:14.4f}  {:11.4f}  {:14.4f}  {:11d}  {:9d}",
+    line(fmt::format("  {:11.3f}  {:11.3f}  {:>13}  {:14.4f}  {:>11}  {:14.4f}  {:11d}  {:9d}",
                      f.field_value, f.field_deg,
                      f.rms_spot_um ? fmt::format("{:.3f}", *f.rms_spot_um) : std::string("n/a"),
-                     f.distortion_percent, f.relative_illumination, 100.0 * f.aiming_error,
-                     f.failed_rays, f.vignetted_rays));
+                     f.distortion_percent,
+                     f.relative_illumination ? fmt::format("{:.4f}", *f.relative_illumination)
+                                             : std::string("n/a"),
+                     100.0 * f.aiming_error, f.failed_rays, f.vignetted_rays));
   }
   line("");
   line(fmt::format("  mean RMS spot: {}", r.mean_rms_spot_um
@@ -256,7 +260,8 @@ std::string format_report_json(const AnalysisReport& r) {
     fields.push_back(f.field_deg);
     spots.push_back(f.rms_spot_um ? finite_or_null(*f.rms_spot_um) : json(nullptr));
     distortion.push_back(finite_or_null(f.distortion_percent));
-    ri.push_back(finite_or_null(f.relative_illumination));
+    ri.push_back(f.relative_illumination ? finite_or_null(*f.relative_illumination)
+                                         : json(nullptr));
     failed.push_back(f.failed_rays);
     centroid.push_back(finite_or_null(f.centroid_y_mm));
     aiming.push_back(finite_or_null(f.aiming_error));

@@ -39,7 +39,7 @@ void run_analyze(const AnalyzeCommand& cmd) {
   Lens lens = read_lens(cmd.lens_path);
   if (cmd.mode == "paper") lens.specs.mode = SpecMode::kPaper;
   if (cmd.mode == "as-written") lens.specs.mode = SpecMode::kAsWritten;
-  check_glass_ranges(lens, "analyze", cmd.strict);
+  check_lens_warnings(lens, "analyze", cmd.strict);
   const AnalysisReport report = analyze_lens(lens, options);
   check_forms_image(report);  // a lens without an image is an error (exit 1), not nulls
   if (cmd.json) {

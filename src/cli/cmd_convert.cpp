@@ -1,6 +1,7 @@
 // lensopt convert IN OUT: between lensopt TOML, the paper's YAML (read only) and Zemax .zmx,
 // chosen by the files' extensions. Import warnings (lines a .zmx has that lensopt does not model)
-// go to stderr; the output is written atomically.
+// and the lens's own (glass ranges, a paraxial F-number below 0.5) go to stderr; the output is
+// written atomically.
 #include <fmt/core.h>
 
 #include <algorithm>
@@ -10,6 +11,7 @@
 #include <string>
 
 #include "commands.h"
+#include "lens_checks.h"
 #include "lensopt/core/atomic_file.h"
 #include "lensopt/core/error.h"
 #include "lensopt/core/output_checks.h"
@@ -55,6 +57,7 @@ void run_convert(const ConvertCommand& cmd) {
                             output.extension().string()));
   check_output_file(output, {cmd.input_path});
   const Lens lens = read_input(cmd.input_path);
+  check_lens_warnings(lens, "convert", false);
   if (out_extension == ".zmx") {
     write_zmx(lens, output);
   } else {

@@ -117,7 +117,7 @@ BoundsMode parse_bounds(const std::string& name) {
 void run_optimize(const OptimizeCommand& cmd) {
   const std::filesystem::path out_path = checked_output_path(cmd);
   const Lens lens = read_lens(cmd.lens_path);
-  check_glass_ranges(lens, "optimize", false);
+  check_lens_warnings(lens, "optimize", false);
   OptimizeOptions options;
   // Bounds first (the paper's for the paper's lenses, else from the lens itself), then the lens
   // file's [optimize] table and the command line override single values.

@@ -30,7 +30,7 @@ void run_plot(const PlotCommand& cmd) {
   options.validate();
   check_output_file(cmd.output, {cmd.lens_path, cmd.compare_path});
   const Lens lens = read_lens(cmd.lens_path);
-  check_glass_ranges(lens, "plot", false);
+  check_lens_warnings(lens, "plot", false);
   std::unique_ptr<Lens> compare;
   if (!cmd.compare_path.empty()) compare = std::make_unique<Lens>(read_lens(cmd.compare_path));
   const plot::PlotSummary summary = plot::write_plot(lens, compare.get(), options, cmd.output);

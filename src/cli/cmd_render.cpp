@@ -234,7 +234,7 @@ void run_render(const RenderCommand& cmd) {
   }
 
   const Lens lens = read_lens(cmd.lens_path);
-  check_glass_ranges(lens, "render", false);
+  check_lens_warnings(lens, "render", false);
   const auto t0 = Clock::now();
   TraceOptions trace;
   trace.threads = cmd.jobs;

@@ -68,7 +68,7 @@ void run_tolerance_command(const ToleranceCommand& cmd) {
       check_output_file(out,
                         {cmd.lens_path, cmd.csv_path == out ? cmd.histogram_path : cmd.csv_path});
   const Lens lens = read_lens(cmd.lens_path);
-  check_glass_ranges(lens, "tolerance", false);
+  check_lens_warnings(lens, "tolerance", false);
   const ToleranceSettings table = tolerance_settings_of(lens);
 
   ToleranceOptions options;

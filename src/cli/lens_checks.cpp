@@ -8,12 +8,13 @@
 
 namespace lensopt::cli {
 
-void check_glass_ranges(const Lens& lens, const char* command, bool strict) {
-  const std::vector<std::string> warnings = glass_range_warnings(lens);
-  if (warnings.empty()) return;
-  if (strict)
-    throw Error(SourceLocation{lens.source_path}, warnings.front() + " (refused with --strict)");
-  for (const std::string& w : warnings) fmt::print(stderr, "lensopt {}: warning: {}\n", command, w);
+void check_lens_warnings(const Lens& lens, const char* command, bool strict) {
+  const std::vector<std::string> glass = glass_range_warnings(lens);
+  if (strict && !glass.empty())
+    throw Error(SourceLocation{lens.source_path}, glass.front() + " (refused with --strict)");
+  for (const std::string& w : glass) fmt::print(stderr, "lensopt {}: warning: {}\n", command, w);
+  for (const std::string& w : f_number_warnings(lens))
+    fmt::print(stderr, "lensopt {}: warning: {}\n", command, w);
 }
 
 }  // namespace lensopt::cli

@@ -5,8 +5,9 @@
 
 namespace lensopt::cli {
 
-// Prints glass_range_warnings(lens) as "lensopt <command>: warning: ..."; with `strict` a
-// wavelength outside a glass's range is an Error instead.
-void check_glass_ranges(const Lens& lens, const char* command, bool strict);
+// Prints glass_range_warnings(lens) and f_number_warnings(lens) as
+// "lensopt <command>: warning: ..."; with `strict` a wavelength outside a glass's range is an
+// Error instead.
+void check_lens_warnings(const Lens& lens, const char* command, bool strict);
 
 }  // namespace lensopt::cli

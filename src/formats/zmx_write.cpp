@@ -162,7 +162,8 @@ std::string format_zmx(const Lens& lens) {
            ? std::string("  DISZ INFINITY")
            : fmt::format("  DISZ {}", number_text(specs.object_distance_mm)));
   // Surfaces without a clear aperture get OpticStudio's automatic semi-diameter ("DIAM r 0",
-  // not an aperture when read back); none if the lens cannot be traced.
+  // not an aperture when read back); none if the lens cannot be traced, or where a marginal ray
+  // misses the surface (apertures.h).
   std::vector<double> automatic;
   try {
     automatic = automatic_semi_diameters(lens);

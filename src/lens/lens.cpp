@@ -177,9 +177,16 @@ void validate_lens(const Lens& lens, const LensSourceLines& lines) {
   if (stops > 1)
     fail(fmt::format("{} surfaces are marked as the aperture stop; one must be", stops));
   if (!surfaces.back().material.is_air()) fail("the last surface must be followed by air");
-  if (!(specs.f_number >= kMinFNumber && specs.f_number <= kMaxFNumber))
-    fail_at(lines.f_number, fmt::format("f_number = {} must be in [{:g}, {:g}]", specs.f_number,
-                                        kMinFNumber, kMaxFNumber));
+  // A requested F-number (the paper's mode) is bounded by physics, a lens's own one only by
+  // sanity (validate.h).
+  const bool paper = specs.mode == SpecMode::kPaper;
+  const double min_f_number = paper ? kMinFNumber : kMinParaxialFNumber;
+  if (!(specs.f_number >= min_f_number && specs.f_number <= kMaxFNumber))
+    fail_at(lines.f_number,
+            fmt::format("f_number = {} must be in [{:g}, {:g}]{}", specs.f_number, min_f_number,
+                        kMaxFNumber,
+                        paper ? " (the paper's spec mode: F/0.5 is an image-space NA of 1 in air)"
+                              : " (the paraxial EFL / EPD of a lens as written)"));
   // The paper's spec mode derives the focal length from the field; a lens traced as written
   // (its own fields, possibly one on axis) needs neither.
   if (specs.mode == SpecMode::kPaper) {
@@ -291,6 +298,17 @@ std::vector<std::string> glass_range_warnings(const Lens& lens) {
         m.glass->max_wavelength_um * 1000.0));
   }
   return out;
+}
+
+std::vector<std::string> f_number_warnings(const Lens& lens) {
+  const Specs& specs = lens.specs;
+  if (specs.mode == SpecMode::kPaper || !(specs.f_number < kMinFNumber)) return {};
+  const std::string where = lens.source_path.empty() ? lens.name : lens.source_path;
+  return {fmt::format(
+      "{}: paraxial F-number EFL / EPD = {:.5g} is below {:g}, the smallest real working "
+      "F-number in air (image-space NA 1): the full aperture cannot be imaged sharply (the sine "
+      "condition fails), and rays that miss a surface are counted as failed",
+      where, specs.f_number, kMinFNumber)};
 }
 
 Lens scaled(const Lens& lens, double scale) {

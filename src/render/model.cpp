@@ -52,7 +52,12 @@ ImagingModel build_imaging_model(const Lens& lens, const TraceOptions& trace,
     model.reference_y_mm.push_back(f.reference_y_mm);
     model.centroid_y_mm.push_back(f.centroid_y_mm);
     model.distortion.push_back(f.distortion_percent / 100.0);
-    model.relative_illumination.push_back(f.relative_illumination);
+    if (!f.relative_illumination)
+      throw Error(SourceLocation{where},
+                  fmt::format("cannot render: the relative illumination of field {:.2f} deg is "
+                              "unknown (an edge ray of its pupil or of the axis fails)",
+                              f.field_deg));
+    model.relative_illumination.push_back(*f.relative_illumination);
   }
   for (std::size_t h = 1; h < model.reference_y_mm.size(); ++h) {
     if (!(model.reference_y_mm[h] > model.reference_y_mm[h - 1])) {

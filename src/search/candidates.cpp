@@ -15,6 +15,7 @@
 #include "lensopt/core/error.h"
 #include "lensopt/formats/lens_file.h"
 #include "lensopt/lens/lens_io.h"
+#include "lensopt/lens/validate.h"
 #include "lensopt/search/search.h"
 #include "optimize/optimize_table.h"
 #include "search_detail.h"
@@ -89,8 +90,10 @@ void SearchOptions::validate() const {
     if (!g.stops.front && !g.stops.between && !g.stops.rear)
       throw Error("stops: give at least one stop position");
   }
-  if (!(f_number > 0.0) || !std::isfinite(f_number))
-    throw Error(fmt::format("f_number = {} must be > 0", f_number));
+  // A requested F-number: below F/0.5 no lens in air can meet it (lens/validate.h).
+  if (!(f_number >= kMinFNumber && f_number <= kMaxFNumber))
+    throw Error(
+        fmt::format("f_number = {} must be in [{:g}, {:g}]", f_number, kMinFNumber, kMaxFNumber));
   if (!(half_field_deg > 0.0 && half_field_deg < 90.0))
     throw Error(fmt::format("half_field_deg = {} must be in (0, 90)", half_field_deg));
   if (!(sensor_diagonal_mm > 0.0) || !std::isfinite(sensor_diagonal_mm))

@@ -69,6 +69,21 @@ class AnalyzeMatchesCli(unittest.TestCase):
 
 
 class Lenses(unittest.TestCase):
+    def test_fast_lens_as_written_loads_with_a_warning(self):
+        # optiland's lens_floa.zmx: its FLOA stop gives a paraxial F/0.49936 (below the F/0.5 of
+        # an image-space NA of 1); it loads, with a warning naming the file and the value, and
+        # its relative illumination (edge rays fail) is None, not 0.
+        path = LENSES.parent / "tests" / "data" / "zmx-real" / "optiland_lens_floa.zmx"
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            lens = lensopt.load_lens(str(path))
+        fast = [str(w.message) for w in caught if "0.49936" in str(w.message)]
+        self.assertEqual(len(fast), 1)
+        self.assertIn("optiland_lens_floa.zmx", fast[0])
+        report = lensopt.analyze(lens, rings=8)
+        self.assertIsNone(report.fields[0].relative_illumination)
+        self.assertGreater(report.fields[0].failed_rays, 0)
+
     def test_round_trip_every_writable_format(self):
         lens = load(LENSES / "cooke.toml")
         with tempfile.TemporaryDirectory() as tmp:

@@ -445,6 +445,14 @@ TEST_CASE(
   CHECK(o.optimize.loss.paper_penalties);
   CHECK(o.optimize.sampling.rings == 6);
   o.validate();
+  {
+    // A requested F-number below 0.5 (an image-space NA above 1) is refused before any work,
+    // even for a start that, traced as written, may have a paraxial F-number below 0.5.
+    SearchOptions fast = o;
+    fast.f_number = 0.4;
+    fast.f_number_given = true;
+    CHECK_THROWS_WITH(fast.validate(), doctest::Contains("f_number = 0.4 must be in [0.5, 1000]"));
+  }
   // Cooke: stops front, between (2 gaps), cementing: 4 patterns -> 1 + ... ; generated: 1 layout
   // x 2.
   const auto candidates = make_candidates(o);

@@ -10,14 +10,18 @@
 #include <fstream>
 #include <map>
 #include <nlohmann/json.hpp>
+#include <regex>
 #include <string>
 #include <vector>
 
+#include "lensopt/analysis/analyze.h"
+#include "lensopt/analysis/apertures.h"
 #include "lensopt/core/error.h"
 #include "lensopt/formats/zmx.h"
 #include "lensopt/glass/dispersion.h"
 #include "lensopt/lens/lens.h"
 #include "lensopt/lens/trace_lens.h"
+#include "lensopt/lens/validate.h"
 #include "lensopt/paraxial/paraxial.h"
 #include "test_support.h"
 
@@ -49,10 +53,7 @@ const std::vector<RealFile>& real_files() {
       {"thorlabs_AC254-100-A.zmx", Expect::kImports, "", 0},
       {"thorlabs_AC254-125-A.zmx", Expect::kImports, "", 0},
       {"rayoptics_US00583336-2-scaled.zmx", Expect::kImports, "", 0},
-      {"optiland_lens_floa.zmx", Expect::kPending,
-       "an F-number of at least 0.5: its FLOA stop gives F/0.499 (its marginal rays miss surface 1 "
-       "in optiland too; tests/data/independent/optiland_run_rays.json)",
-       0},
+      {"optiland_lens_floa.zmx", Expect::kImports, "", 0},
       {"optiland_thorlabs_AL1815-C_iso_8859_1.zmx", Expect::kImports, "", 0},
       {"rayoptics_HoO-V2C18Ex03.zmx", Expect::kUnsupported, "mirror", 86},
       {"rayoptics_zmax_37992.zmx", Expect::kUnsupported, "COORDBRK", 86},
@@ -133,8 +134,68 @@ TEST_CASE("zmx-real: spherical refractive files import with the shipped catalogs
       ++compared;
     }
   }
-  CHECK(imported == 5);
+  CHECK(imported == 6);
   CHECK(compared == 2);
+}
+
+TEST_CASE("zmx-real: lens_floa's FLOA stop gives a paraxial F/0.499: it imports with a warning") {
+  // Its stop (semi-diameter 8.5 mm, 10 mm behind a 20 mm singlet) is imaged into an entrance
+  // pupil of 40.47 mm: EFL / EPD = 20.2107 / 40.4730 = 0.49936, below the F/0.5 of an image-space
+  // NA of 1. OpticStudio and optiland load the file (their outer rays miss a surface); lensopt
+  // imports it as written and says so, naming the file and the F-number.
+  const auto path = real_dir() / "optiland_lens_floa.zmx";
+  ZmxImport result;
+  REQUIRE_NOTHROW(result = read_zmx(path));
+  const Lens& lens = result.lens;
+  CHECK(lens.specs.aperture_type == ApertureType::kFloatByStop);
+  CHECK(lens.specs.f_number == doctest::Approx(0.49936).epsilon(1e-5));
+  const std::vector<std::string> warnings = f_number_warnings(lens);
+  REQUIRE(warnings.size() == 1);
+  CAPTURE(warnings[0]);
+  CHECK(warnings[0].find("optiland_lens_floa.zmx") != std::string::npos);
+  CHECK(warnings[0].find("0.49936") != std::string::npos);
+  CHECK(warnings[0].find('\n') == std::string::npos);
+  // The same F-number is refused where it is a request: the paper's spec mode.
+  Lens paper = lens;
+  paper.specs.mode = SpecMode::kPaper;
+  paper.specs.half_field_deg = 10.0;
+  CHECK(f_number_warnings(paper).empty());
+  CHECK_THROWS_WITH(validate_lens(paper), doctest::Contains("f_number = 0.49936"));
+  // A lens as written keeps a sanity bound: an entrance pupil of more than ten focal lengths.
+  Lens nonsense = lens;
+  nonsense.specs.f_number = 0.5 * kMinParaxialFNumber;
+  CHECK_THROWS_WITH(validate_lens(nonsense), doctest::Contains("must be in [0.05, 1000]"));
+  // At F/0.5 and above nothing is said.
+  Lens slower = lens;
+  slower.specs.f_number = kMinFNumber;
+  CHECK(f_number_warnings(slower).empty());
+
+  // analyze counts the rays that miss a surface (the aimed pupil reaches beyond the 9.68 mm rim
+  // where the singlet's surfaces meet: they miss surface 2), and the relative illumination,
+  // whose edge rays fail, is unavailable: n/a in the text, null in the JSON, never 0 or NaN.
+  const AnalysisReport r = analyze_lens(lens, AnalyzeOptions{});
+  REQUIRE(r.fields.size() == 1);
+  CHECK(r.ray_failures > 0);
+  CHECK(r.ray_failures < r.fields[0].traced_rays + r.ray_failures);  // some rays arrive
+  REQUIRE(r.failures_by_surface.size() >= 2);
+  CHECK(r.failures_by_surface[1] == r.ray_failures);
+  CHECK(r.fields[0].failed_rays == r.ray_failures);
+  CHECK_FALSE(r.fields[0].relative_illumination);
+  REQUIRE(r.fields[0].rms_spot_um);
+  CHECK(std::isfinite(*r.fields[0].rms_spot_um));
+  const std::string text = format_report_text(r), json = format_report_json(r);
+  CHECK(text.find("n/a") != std::string::npos);
+  CHECK(json.find("\"relative_illumination\": [\n    null") != std::string::npos);
+  // Its automatic semi-diameters: surface 1 has one (the marginal rays reach it), surface 2,
+  // which they miss, has none, and the .zmx writer writes no DIAM for it (not "DIAM 0 0").
+  const std::vector<double> automatic = automatic_semi_diameters(lens);
+  REQUIRE(automatic.size() >= 2);
+  CHECK(automatic[0] > 0.0);
+  CHECK(std::isnan(automatic[1]));
+  CHECK(format_zmx(lens).find("DIAM 0 0") == std::string::npos);
+  for (const std::string& out : {text, json}) {
+    CHECK_FALSE(std::regex_search(out, std::regex("\\b(nan|inf)\\b")));  // not "infinity"
+  }
 }
 
 TEST_CASE("zmx-real: unsupported features are one line naming the feature and file:line") {

@@ -105,17 +105,22 @@ bool projected_pupil_area(const TraceSystem<T>& sys, int h, T& area) {
   return true;
 }
 
-// R_h of every field of `sys` (0 where unavailable, see the header).
+// R_h of every field of `sys` (0 where unavailable, see the header). With `known`, also whether
+// each R_h is available (1) or not (0: an edge ray of the field or of the axis fails, or no
+// on-axis ray passes the clear apertures).
 template <typename T>
-std::vector<T> relative_illuminations(const TraceSystem<T>& sys) {
+std::vector<T> relative_illuminations(const TraceSystem<T>& sys,
+                                      std::vector<char>* known = nullptr) {
   const int field_count = static_cast<int>(sys.fields_deg.size());
   std::vector<T> ri(field_count, K<T>(0.0));
+  if (known) known->assign(field_count, 0);
   T axis_area = K<T>(0.0), area = K<T>(0.0);
   if (!projected_pupil_area(sys, 0, axis_area)) return ri;
   if (!(value_of(axis_area) > 0.0)) return ri;
   for (int h = 0; h < field_count; ++h) {
     if (!projected_pupil_area(sys, h, area)) continue;
     ri[h] = area / axis_area;
+    if (known) (*known)[h] = 1;
   }
   // Clear apertures: times the fraction of the field's pupil rays (reference wavelength) that
   // pass every aperture, relative to the axis (the pupil samples are uniform in area).
@@ -133,6 +138,7 @@ std::vector<T> relative_illuminations(const TraceSystem<T>& sys) {
     const double axis = passed(0);
     for (int h = 0; h < field_count; ++h)
       ri[h] = axis > 0.0 ? ri[h] * K<T>(passed(h) / axis) : K<T>(0.0);
+    if (known && !(axis > 0.0)) known->assign(field_count, 0);
   }
   return ri;
 }
