@@ -8,6 +8,7 @@
 #include "lensopt/core/passive_threads.h"
 
 int main(int argc, char** argv) {
+  lensopt::use_passive_omp_wait(argv);
   CLI::App app{"lensopt: compound lens design with exact, differentiable ray tracing"};
   app.require_subcommand(1);
   app.set_version_flag("--version", "lensopt 0.1.0");

@@ -23,4 +23,11 @@ grep -q -- "--no-relative-illumination" "$tmp/optimize.txt" ||
   --no-sensitivity -q > /dev/null || fail "tolerance --jobs (alias)"
 "$lensopt" tolerance lenses/doublet.toml --threads 1 --trials 2 --rings 2 --fields 2 \
   --no-sensitivity --quiet > /dev/null || fail "tolerance --threads"
+# OpenMP threads wait passively unless the user says otherwise (core/passive_threads.h): the
+# spin count libgomp finally runs with is 0, and a user's OMP_WAIT_POLICY is kept.
+spin() { OMP_DISPLAY_ENV=verbose "$@" --version 2>&1 >/dev/null | sed -n "s/.*GOMP_SPINCOUNT = '\(.*\)'/\1/p" | tail -1; }
+[ "$(env -u OMP_WAIT_POLICY bash -c "$(declare -f spin); spin '$lensopt'")" = 0 ] ||
+  fail "OpenMP threads spin by default"
+[ "$(OMP_WAIT_POLICY=active bash -c "$(declare -f spin); spin '$lensopt'")" != 0 ] ||
+  fail "the user's OMP_WAIT_POLICY=active is not kept"
 echo "PASS"

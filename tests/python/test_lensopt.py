@@ -2,7 +2,9 @@
 
 import json
 import math
+import os
 import subprocess
+import sys
 import tempfile
 import unittest
 import warnings
@@ -290,3 +292,23 @@ class Optimization(unittest.TestCase):
 
 if __name__ == "__main__":
     unittest.main()
+
+
+class PassiveOpenMpThreads(unittest.TestCase):
+    def test_import_sets_passive_wait_unless_set(self):
+        # In a fresh interpreter (libgomp not yet loaded): the package sets OMP_WAIT_POLICY before
+        # it loads _lensopt, so libgomp runs with a spin count of 0; a user's value is kept.
+        code = ("import os, sys; sys.path[:0] = sys.argv[1:]; import lensopt; "
+                "print(os.environ['OMP_WAIT_POLICY'])")
+        paths = [str(Path(lensopt.__file__).resolve().parents[1])]
+        env = {k: v for k, v in os.environ.items() if k != "OMP_WAIT_POLICY"}
+        env["OMP_DISPLAY_ENV"] = "verbose"
+        run = subprocess.run([sys.executable, "-c", code, *paths], env=env, capture_output=True,
+                             text=True, check=True)
+        self.assertEqual(run.stdout.strip(), "PASSIVE")
+        self.assertIn("GOMP_SPINCOUNT = '0'", run.stderr)
+        env["OMP_WAIT_POLICY"] = "active"
+        run = subprocess.run([sys.executable, "-c", code, *paths], env=env, capture_output=True,
+                             text=True, check=True)
+        self.assertEqual(run.stdout.strip(), "active")
+        self.assertNotIn("GOMP_SPINCOUNT = '0'", run.stderr)
