@@ -198,12 +198,16 @@ void setup_search(CLI::App& app) {
                   "stop positions --vary-stop tries: front,between,rear (default all)")
       ->delimiter(',');
   sub->add_option("--glass-seeds", cmd->glass_seeds,
-                  "glass seeds per start and layout (seed 0: the start's)");
+                  "glass seeds per start and layout (seed 0: the start's)")
+      ->check(CLI::Range(1, 1000));
   sub->add_option("--generate", cmd->generate, "generated starts with these element counts (1..4)")
       ->delimiter(',');
-  sub->add_option("--top", cmd->top, "best lenses written to best/ (default 5)");
-  sub->add_option("-j,--jobs", cmd->jobs, "candidates in parallel (default: every core)");
-  sub->add_option("--threads", cmd->threads, "threads per optimization (default 1; 0: every core)");
+  sub->add_option("--top", cmd->top, "best lenses written to best/ (default 5)")
+      ->check(CLI::Range(0, 1000000));
+  sub->add_option("-j,--jobs", cmd->jobs, "candidates in parallel (default: every core)")
+      ->check(CLI::Range(0, 1024));
+  sub->add_option("--threads", cmd->threads, "threads per optimization (default 1; 0: every core)")
+      ->check(CLI::Range(0, 1024));
   sub->add_option("--shard", cmd->shard,
                   "run slice I of N (1-based): candidates with index mod N = I-1");
   sub->add_option("--glass-search", cmd->glass_search, "none (default) | snap | neighbours")
@@ -211,15 +215,19 @@ void setup_search(CLI::App& app) {
   sub->add_option("--constraints", cmd->constraints,
                   "strict (default) | paper | paper+strict (paper penalties, then strict bounds)")
       ->check(CLI::IsMember({"strict", "paper", "paper+strict"}));
-  sub->add_option("--rings", cmd->rings, "pupil rings during optimization (default 8)");
-  sub->add_option("--fields", cmd->fields, "fields during optimization (default 11)");
-  sub->add_option("--max-iterations", cmd->max_iterations, "LM iterations per round (default 50)");
-  sub->add_option("--max-rounds", cmd->max_rounds, "reweighting rounds per phase (default 4)");
+  sub->add_option("--rings", cmd->rings, "pupil rings during optimization (default 8)")
+      ->check(CLI::Range(1, 256));
+  sub->add_option("--fields", cmd->fields, "fields during optimization (default 11)")
+      ->check(CLI::Range(1, 1000));
+  sub->add_option("--max-iterations", cmd->max_iterations, "LM iterations per round (default 50)")
+      ->check(CLI::Range(1, 1000000));
+  sub->add_option("--max-rounds", cmd->max_rounds, "reweighting rounds per phase (default 4)")
+      ->check(CLI::Range(1, 1000));
   sub->add_flag(
       "--no-soft-start", cmd->no_soft_start,
       "strict constraints: skip the optimizer's first phase on the paper's soft penalties");
-  sub->add_option("--neighbours", cmd->neighbours,
-                  "catalog glasses tried per element (neighbours)");
+  sub->add_option("--neighbours", cmd->neighbours, "catalog glasses tried per element (neighbours)")
+      ->check(CLI::Range(0, 64));
   sub->add_option("--f-number", cmd->f_number,
                   "f-number of every candidate (default: a lens file's own; generated starts 2)");
   sub->add_option("--half-field-deg", cmd->half_field_deg,
