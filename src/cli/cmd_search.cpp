@@ -160,6 +160,15 @@ void run_search_command(const SearchCommand& cmd) {
                s.leaderboard.size(), s.candidates_in_run);
     throw ExitCode{130};
   }
+  // Failed candidates are reported and skipped; a search in which every one failed has no
+  // result, and does not exit 0.
+  if (!s.leaderboard.empty() && s.failed == static_cast<int>(s.leaderboard.size())) {
+    fmt::print(stderr,
+               "lensopt: error: {}: every candidate failed ({} of {}); the reasons are in the "
+               "leaderboard above and in {}/leaderboard.csv\n",
+               cmd.inputs.empty() ? out : cmd.inputs.front(), s.failed, s.leaderboard.size(), out);
+    throw ExitCode{1};
+  }
 }
 
 void run_merge_command(const MergeCommand& cmd) {
