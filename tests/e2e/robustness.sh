@@ -3,7 +3,8 @@
 # inputs are refused with a message; unwritable outputs are found before any work; Latin-1 text
 # and non-UTF-8 paths give valid JSON; degenerate lenses exit 1 naming file:line; a wavelength
 # outside a glass's range warns once per glass and is refused with --strict; `catalog` says why
-# a value is missing; duplicate YAML keys are errors; tolerance reports sensitivity progress.
+# a value is missing; duplicate YAML keys are errors; tolerance reports sensitivity progress; a
+# folder given for a file is named as one.
 set -euo pipefail
 lensopt="$1"
 tmp=$(mktemp -d)
@@ -123,4 +124,18 @@ status=0
 # 7. Tolerance: sensitivity progress without --quiet.
 "$lensopt" tolerance "$tmp/L.toml" --trials 4 --rings 3 --fields 3 > /dev/null 2> "$tmp/stderr"
 grep -q "sensitivity [0-9]*/[0-9]* evaluations" "$tmp/stderr" || fail "no sensitivity progress: $(cat "$tmp/stderr")"
+# 8. A folder where a file belongs is named as one (it used to read as empty text: "no
+# [[surfaces]]", "0 SURF blocks", "catalog not found").
+mkdir -p "$tmp/dir.toml" "$tmp/dir.zmx" "$tmp/dir.yml" "$tmp/dir.agf"
+for d in dir.toml dir.zmx dir.yml; do
+  status=0
+  "$lensopt" analyze "$tmp/$d" > /dev/null 2> "$tmp/stderr" || status=$?
+  [ "$status" -eq 1 ] && grep -q "$d: .*is a directory" "$tmp/stderr" ||
+    fail "analyze of a folder $d: exit $status: $(cat "$tmp/stderr")"
+done
+status=0
+"$lensopt" catalog "$tmp/dir.agf" > /dev/null 2> "$tmp/stderr" || status=$?
+[ "$status" -eq 1 ] && grep -q "dir.agf: .*is a directory" "$tmp/stderr" ||
+  fail "catalog of a folder: exit $status: $(cat "$tmp/stderr")"
+
 echo "ok"
