@@ -4,7 +4,7 @@
 # and non-UTF-8 paths give valid JSON; degenerate lenses exit 1 naming file:line; a wavelength
 # outside a glass's range warns once per glass and is refused with --strict; `catalog` says why
 # a value is missing; duplicate YAML keys are errors; tolerance reports sensitivity progress; a
-# folder given for a file is named as one.
+# folder given for a file is named as one; an input folder with no image is a failed input.
 set -euo pipefail
 lensopt="$1"
 tmp=$(mktemp -d)
@@ -125,8 +125,9 @@ status=0
 "$lensopt" tolerance "$tmp/L.toml" --trials 4 --rings 3 --fields 3 > /dev/null 2> "$tmp/stderr"
 grep -q "sensitivity [0-9]*/[0-9]* evaluations" "$tmp/stderr" || fail "no sensitivity progress: $(cat "$tmp/stderr")"
 # 8. A folder where a file belongs is named as one (it used to read as empty text: "no
-# [[surfaces]]", "0 SURF blocks", "catalog not found").
-mkdir -p "$tmp/dir.toml" "$tmp/dir.zmx" "$tmp/dir.yml" "$tmp/dir.agf"
+# [[surfaces]]", "0 SURF blocks", "catalog not found"); a folder with no image to render is a
+# failed input, not an empty run with exit 0.
+mkdir -p "$tmp/dir.toml" "$tmp/dir.zmx" "$tmp/dir.yml" "$tmp/dir.agf" "$tmp/empty"
 for d in dir.toml dir.zmx dir.yml; do
   status=0
   "$lensopt" analyze "$tmp/$d" > /dev/null 2> "$tmp/stderr" || status=$?
@@ -137,5 +138,9 @@ status=0
 "$lensopt" catalog "$tmp/dir.agf" > /dev/null 2> "$tmp/stderr" || status=$?
 [ "$status" -eq 1 ] && grep -q "dir.agf: .*is a directory" "$tmp/stderr" ||
   fail "catalog of a folder: exit $status: $(cat "$tmp/stderr")"
+status=0
+"$lensopt" render "$tmp/L.toml" "$tmp/empty" -o "$tmp/r-empty" -q > /dev/null 2> "$tmp/stderr" || status=$?
+[ "$status" -eq 1 ] && grep -q "empty: no image to render" "$tmp/stderr" ||
+  fail "render of an empty folder: exit $status: $(cat "$tmp/stderr")"
 
 echo "ok"
