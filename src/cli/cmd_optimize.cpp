@@ -328,15 +328,20 @@ void setup_optimize(CLI::App& app) {
   sub->add_option("--threads", cmd->threads, "threads (0: all cores)")->check(CLI::Range(0, 1024));
   sub->add_option("--max-iterations", cmd->max_iterations, "LM iterations per round (default 50)")
       ->check(CLI::Range(1, 1000000));
-  sub->add_option("--weight-ray-path", cmd->weight_ray_path, "lambda_RP (default 100)");
-  sub->add_option("--weight-ray-angle", cmd->weight_ray_angle, "lambda_RA (default 100)");
-  sub->add_option("--weight-glass", cmd->weight_glass, "lambda_GV (default 0.01)");
-  sub->add_option("--min-air-mm", cmd->min_air_mm, "smallest air gap (paper: 0.01)");
-  sub->add_option("--min-glass-mm", cmd->min_glass_mm, "thinnest glass (paper: 1)");
-  sub->add_option("--max-glass-mm", cmd->max_glass_mm, "thickest glass (paper: 3)");
+  sub->add_option("--weight-ray-path", cmd->weight_ray_path, "lambda_RP (default 100)")
+      ->check(kFinite);
+  sub->add_option("--weight-ray-angle", cmd->weight_ray_angle, "lambda_RA (default 100)")
+      ->check(kFinite);
+  sub->add_option("--weight-glass", cmd->weight_glass, "lambda_GV (default 0.01)")->check(kFinite);
+  sub->add_option("--min-air-mm", cmd->min_air_mm, "smallest air gap (paper: 0.01)")
+      ->check(kFinite);
+  sub->add_option("--min-glass-mm", cmd->min_glass_mm, "thinnest glass (paper: 1)")->check(kFinite);
+  sub->add_option("--max-glass-mm", cmd->max_glass_mm, "thickest glass (paper: 3)")->check(kFinite);
   sub->add_option("--min-image-clearance-mm", cmd->min_image_clearance_mm,
-                  "image clearance (paper: 12)");
-  sub->add_option("--max-ray-angle-deg", cmd->max_ray_angle_deg, "largest ray angle (paper: 60)");
+                  "image clearance (paper: 12)")
+      ->check(kFinite);
+  sub->add_option("--max-ray-angle-deg", cmd->max_ray_angle_deg, "largest ray angle (paper: 60)")
+      ->check(kFinite);
   sub->add_flag("--compare-adam", cmd->compare_adam,
                 "also report loss evaluations of LM vs a plain Adam loop on the same loss");
   sub->add_option("--adam-steps", cmd->adam_steps,

@@ -238,11 +238,14 @@ void setup_search(CLI::App& app) {
   sub->add_option("--neighbours", cmd->neighbours, "catalog glasses tried per element (neighbours)")
       ->check(CLI::Range(0, 64));
   sub->add_option("--f-number", cmd->f_number,
-                  "f-number of every candidate (default: a lens file's own; generated starts 2)");
+                  "f-number of every candidate (default: a lens file's own; generated starts 2)")
+      ->check(kFinite);
   sub->add_option("--half-field-deg", cmd->half_field_deg,
-                  "half field of view (default: a lens file's own; generated starts 25)");
+                  "half field of view (default: a lens file's own; generated starts 25)")
+      ->check(kFinite);
   sub->add_option("--focal-length-mm", cmd->focal_length_mm,
-                  "focal length (default 17.156: 16 mm diagonal)");
+                  "focal length (default 17.156: 16 mm diagonal)")
+      ->check(kFinite);
   sub->add_flag("--list", cmd->list, "print the candidate list (index, shard, id) and exit");
   sub->add_flag("-q,--quiet", cmd->quiet, "no line per finished candidate on stderr");
 
