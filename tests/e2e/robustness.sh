@@ -4,7 +4,8 @@
 # and non-UTF-8 paths give valid JSON; degenerate lenses exit 1 naming file:line; a wavelength
 # outside a glass's range warns once per glass and is refused with --strict; `catalog` says why
 # a value is missing; duplicate YAML keys are errors; tolerance reports sensitivity progress; a
-# folder given for a file is named as one; an input folder with no image is a failed input.
+# folder given for a file is named as one; an input folder with no image is a failed input;
+# surfaces that cross are named.
 set -euo pipefail
 lensopt="$1"
 tmp=$(mktemp -d)
@@ -142,5 +143,13 @@ status=0
 "$lensopt" render "$tmp/L.toml" "$tmp/empty" -o "$tmp/r-empty" -q > /dev/null 2> "$tmp/stderr" || status=$?
 [ "$status" -eq 1 ] && grep -q "empty: no image to render" "$tmp/stderr" ||
   fail "render of an empty folder: exit $status: $(cat "$tmp/stderr")"
+
+# 9. Elements through each other (the second element's front 2.4 mm before the first's rear)
+# are named with a warning; analyze used to report only failed rays on a later surface.
+sed 's/^thickness_mm = 6.902040481567383/thickness_mm = -8.0/' "$tmp/L.toml" > "$tmp/cross.toml"
+"$lensopt" analyze "$tmp/cross.toml" --rings 3 --fields 3 > /dev/null 2> "$tmp/stderr" || true
+grep -q "cross.toml: surfaces 2 and 4 cross" "$tmp/stderr" || fail "no crossing warning: $(cat "$tmp/stderr")"
+"$lensopt" analyze "$tmp/L.toml" --rings 3 --fields 3 > /dev/null 2> "$tmp/stderr"
+! grep -q "cross" "$tmp/stderr" || fail "a crossing warning for the doublet: $(cat "$tmp/stderr")"
 
 echo "ok"
