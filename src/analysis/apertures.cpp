@@ -43,4 +43,50 @@ std::vector<double> automatic_semi_diameters(const Lens& lens) {
   return automatic_semi_diameters(prepare_lens_system(lens, options));
 }
 
+std::vector<SurfaceCrossing> crossing_surfaces(const Lens& lens) {
+  const auto& s = lens.surfaces;
+  const int k_count = static_cast<int>(s.size());
+  std::vector<double> automatic;
+  try {
+    automatic = automatic_semi_diameters(lens);
+  } catch (const std::exception&) {
+    // No traced apertures (the lens's own checks report why): the vertex gaps alone.
+  }
+  auto aperture = [&](int k) {
+    if (s[k].semi_diameter_mm > 0.0) return s[k].semi_diameter_mm;
+    const double h = k < static_cast<int>(automatic.size()) ? automatic[k] : 0.0;
+    return std::isfinite(h) ? h : 0.0;
+  };
+  auto dummy = [&](int k) {
+    const bool air_before = k == 0 || s[k - 1].material.is_air();
+    return s[k].is_stop || (s[k].curvature_per_mm == 0.0 && s[k].is_spherical() && air_before &&
+                            s[k].material.is_air());
+  };
+  constexpr int kHeights = 8;
+  std::vector<SurfaceCrossing> out;
+  int previous = -1;
+  double axial_mm = 0.0;  // t_previous + ... up to the current surface
+  for (int k = 0; k < k_count; ++k) {
+    if (dummy(k)) {
+      if (previous >= 0) axial_mm += s[k].thickness_mm;
+      continue;
+    }
+    if (previous >= 0) {
+      const double h = std::min(aperture(previous), aperture(k));
+      for (int m = 0; m <= kHeights; ++m) {
+        const double r = h * m / kHeights;
+        if (m > 0 && !(r > 0.0)) break;
+        const double gap = axial_mm + s[k].sag_mm(r) - s[previous].sag_mm(r);
+        if (gap < 0.0) {
+          out.push_back(SurfaceCrossing{previous, k, r, gap});
+          break;
+        }
+      }
+    }
+    previous = k;
+    axial_mm = s[k].thickness_mm;
+  }
+  return out;
+}
+
 }  // namespace lensopt

@@ -294,7 +294,8 @@ void setup_optimize(CLI::App& app) {
   sub->add_option("--glass-search", cmd->glass_search,
                   "none (default: keep the start's glasses) | snap | neighbours")
       ->check(CLI::IsMember({"none", "snap", "neighbours", "neighbors"}));
-  sub->add_option("--neighbours", cmd->neighbours, "catalog glasses tried per element");
+  sub->add_option("--neighbours", cmd->neighbours, "catalog glasses tried per element")
+      ->check(CLI::Range(0, 64));
   sub->add_option("--bounds", cmd->bounds,
                   "auto (default: the paper's bounds for the paper's lenses, else derived from "
                   "the lens: its focal length and start values) | lens | paper")
@@ -320,23 +321,32 @@ void setup_optimize(CLI::App& app) {
       ->delimiter(',');
   sub->add_flag("--no-soft-start", cmd->no_soft_start,
                 "strict constraints: skip the first phase on the paper's soft penalties");
-  sub->add_option("--rings", cmd->rings, "pupil rings during optimization (default 8)");
-  sub->add_option("--fields", cmd->fields, "fields during optimization (default 11)");
-  sub->add_option("--threads", cmd->threads, "threads (0: all cores)");
-  sub->add_option("--max-iterations", cmd->max_iterations, "LM iterations per round (default 50)");
-  sub->add_option("--weight-ray-path", cmd->weight_ray_path, "lambda_RP (default 100)");
-  sub->add_option("--weight-ray-angle", cmd->weight_ray_angle, "lambda_RA (default 100)");
-  sub->add_option("--weight-glass", cmd->weight_glass, "lambda_GV (default 0.01)");
-  sub->add_option("--min-air-mm", cmd->min_air_mm, "smallest air gap (paper: 0.01)");
-  sub->add_option("--min-glass-mm", cmd->min_glass_mm, "thinnest glass (paper: 1)");
-  sub->add_option("--max-glass-mm", cmd->max_glass_mm, "thickest glass (paper: 3)");
+  sub->add_option("--rings", cmd->rings, "pupil rings during optimization (default 8)")
+      ->check(CLI::Range(1, 256));
+  sub->add_option("--fields", cmd->fields, "fields during optimization (default 11)")
+      ->check(CLI::Range(1, 1000));
+  sub->add_option("--threads", cmd->threads, "threads (0: all cores)")->check(CLI::Range(0, 1024));
+  sub->add_option("--max-iterations", cmd->max_iterations, "LM iterations per round (default 50)")
+      ->check(CLI::Range(1, 1000000));
+  sub->add_option("--weight-ray-path", cmd->weight_ray_path, "lambda_RP (default 100)")
+      ->check(kFinite);
+  sub->add_option("--weight-ray-angle", cmd->weight_ray_angle, "lambda_RA (default 100)")
+      ->check(kFinite);
+  sub->add_option("--weight-glass", cmd->weight_glass, "lambda_GV (default 0.01)")->check(kFinite);
+  sub->add_option("--min-air-mm", cmd->min_air_mm, "smallest air gap (paper: 0.01)")
+      ->check(kFinite);
+  sub->add_option("--min-glass-mm", cmd->min_glass_mm, "thinnest glass (paper: 1)")->check(kFinite);
+  sub->add_option("--max-glass-mm", cmd->max_glass_mm, "thickest glass (paper: 3)")->check(kFinite);
   sub->add_option("--min-image-clearance-mm", cmd->min_image_clearance_mm,
-                  "image clearance (paper: 12)");
-  sub->add_option("--max-ray-angle-deg", cmd->max_ray_angle_deg, "largest ray angle (paper: 60)");
+                  "image clearance (paper: 12)")
+      ->check(kFinite);
+  sub->add_option("--max-ray-angle-deg", cmd->max_ray_angle_deg, "largest ray angle (paper: 60)")
+      ->check(kFinite);
   sub->add_flag("--compare-adam", cmd->compare_adam,
                 "also report loss evaluations of LM vs a plain Adam loop on the same loss");
   sub->add_option("--adam-steps", cmd->adam_steps,
-                  "largest Adam step count for --compare-adam (default 20000)");
+                  "largest Adam step count for --compare-adam (default 20000)")
+      ->check(CLI::Range(1, 100000000));
   sub->add_flag("--joint", cmd->joint,
                 "joint lens + network optimization by Adam (options under 'joint', see README)");
   const auto run_joint = setup_optimize_joint(*sub);

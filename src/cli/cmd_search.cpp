@@ -160,6 +160,15 @@ void run_search_command(const SearchCommand& cmd) {
                s.leaderboard.size(), s.candidates_in_run);
     throw ExitCode{130};
   }
+  // Failed candidates are reported and skipped; a search in which every one failed has no
+  // result, and does not exit 0.
+  if (!s.leaderboard.empty() && s.failed == static_cast<int>(s.leaderboard.size())) {
+    fmt::print(stderr,
+               "lensopt: error: {}: every candidate failed ({} of {}); the reasons are in the "
+               "leaderboard above and in {}/leaderboard.csv\n",
+               cmd.inputs.empty() ? out : cmd.inputs.front(), s.failed, s.leaderboard.size(), out);
+    throw ExitCode{1};
+  }
 }
 
 void run_merge_command(const MergeCommand& cmd) {
@@ -198,12 +207,16 @@ void setup_search(CLI::App& app) {
                   "stop positions --vary-stop tries: front,between,rear (default all)")
       ->delimiter(',');
   sub->add_option("--glass-seeds", cmd->glass_seeds,
-                  "glass seeds per start and layout (seed 0: the start's)");
+                  "glass seeds per start and layout (seed 0: the start's)")
+      ->check(CLI::Range(1, 1000));
   sub->add_option("--generate", cmd->generate, "generated starts with these element counts (1..4)")
       ->delimiter(',');
-  sub->add_option("--top", cmd->top, "best lenses written to best/ (default 5)");
-  sub->add_option("-j,--jobs", cmd->jobs, "candidates in parallel (default: every core)");
-  sub->add_option("--threads", cmd->threads, "threads per optimization (default 1; 0: every core)");
+  sub->add_option("--top", cmd->top, "best lenses written to best/ (default 5)")
+      ->check(CLI::Range(0, 1000000));
+  sub->add_option("-j,--jobs", cmd->jobs, "candidates in parallel (default: every core)")
+      ->check(CLI::Range(0, 1024));
+  sub->add_option("--threads", cmd->threads, "threads per optimization (default 1; 0: every core)")
+      ->check(CLI::Range(0, 1024));
   sub->add_option("--shard", cmd->shard,
                   "run slice I of N (1-based): candidates with index mod N = I-1");
   sub->add_option("--glass-search", cmd->glass_search, "none (default) | snap | neighbours")
@@ -211,21 +224,28 @@ void setup_search(CLI::App& app) {
   sub->add_option("--constraints", cmd->constraints,
                   "strict (default) | paper | paper+strict (paper penalties, then strict bounds)")
       ->check(CLI::IsMember({"strict", "paper", "paper+strict"}));
-  sub->add_option("--rings", cmd->rings, "pupil rings during optimization (default 8)");
-  sub->add_option("--fields", cmd->fields, "fields during optimization (default 11)");
-  sub->add_option("--max-iterations", cmd->max_iterations, "LM iterations per round (default 50)");
-  sub->add_option("--max-rounds", cmd->max_rounds, "reweighting rounds per phase (default 4)");
+  sub->add_option("--rings", cmd->rings, "pupil rings during optimization (default 8)")
+      ->check(CLI::Range(1, 256));
+  sub->add_option("--fields", cmd->fields, "fields during optimization (default 11)")
+      ->check(CLI::Range(1, 1000));
+  sub->add_option("--max-iterations", cmd->max_iterations, "LM iterations per round (default 50)")
+      ->check(CLI::Range(1, 1000000));
+  sub->add_option("--max-rounds", cmd->max_rounds, "reweighting rounds per phase (default 4)")
+      ->check(CLI::Range(1, 1000));
   sub->add_flag(
       "--no-soft-start", cmd->no_soft_start,
       "strict constraints: skip the optimizer's first phase on the paper's soft penalties");
-  sub->add_option("--neighbours", cmd->neighbours,
-                  "catalog glasses tried per element (neighbours)");
+  sub->add_option("--neighbours", cmd->neighbours, "catalog glasses tried per element (neighbours)")
+      ->check(CLI::Range(0, 64));
   sub->add_option("--f-number", cmd->f_number,
-                  "f-number of every candidate (default: a lens file's own; generated starts 2)");
+                  "f-number of every candidate (default: a lens file's own; generated starts 2)")
+      ->check(kFinite);
   sub->add_option("--half-field-deg", cmd->half_field_deg,
-                  "half field of view (default: a lens file's own; generated starts 25)");
+                  "half field of view (default: a lens file's own; generated starts 25)")
+      ->check(kFinite);
   sub->add_option("--focal-length-mm", cmd->focal_length_mm,
-                  "focal length (default 17.156: 16 mm diagonal)");
+                  "focal length (default 17.156: 16 mm diagonal)")
+      ->check(kFinite);
   sub->add_flag("--list", cmd->list, "print the candidate list (index, shard, id) and exit");
   sub->add_flag("-q,--quiet", cmd->quiet, "no line per finished candidate on stderr");
 

@@ -16,6 +16,17 @@ struct ExitCode {
   int code;
 };
 
+// CLI11 check of a number option that must be finite: "nan" and "inf" parse as doubles, NaN is
+// the commands' "not given" (a NaN typed in was ignored without a word), and CLI::Range and
+// CLI::PositiveNumber let NaN through (every comparison with it is false).
+inline const CLI::Validator kFinite(
+    [](std::string& text) -> std::string {
+      double value = 0;
+      if (!CLI::detail::lexical_cast(text, value)) return "not a number: " + text;
+      return std::isfinite(value) ? std::string() : "must be a finite number, not " + text;
+    },
+    "FINITE");
+
 // What `optimize` passes to its --joint mode (cmd_optimize_joint.cpp): the options the two modes
 // share. NaN / -1: not given.
 struct OptimizeShared {

@@ -250,6 +250,11 @@ int remove_stale_temp_files(const fs::path& dir, bool recursive) {
 }
 
 std::string read_file(const fs::path& path) {
+  // A folder opens as a stream on Linux and reads as empty text: every format would then report
+  // a missing section instead of the user's mistake.
+  std::error_code ec;
+  if (fs::is_directory(path, ec))
+    throw Error(SourceLocation{path.string()}, "cannot read: it is a directory, not a file");
   std::ifstream in(path, std::ios::binary);
   if (!in) {
     throw Error(SourceLocation{path.string()},

@@ -30,6 +30,10 @@ Lens read_lens(const std::filesystem::path& path) {
       fmt::print(stderr, "lensopt: warning: {}\n", warning);
     return std::move(imported.lens);
   }
+  std::error_code ec;
+  if (std::filesystem::is_directory(path, ec))
+    throw Error(SourceLocation{path.string()},
+                "it is a directory, not a lens file (.toml, the paper's .yml/.yaml or .zmx)");
   throw Error(SourceLocation{path.string()},
               fmt::format("unknown lens file type '{}'; lensopt reads .toml, the paper's "
                           ".yml/.yaml and Zemax .zmx",

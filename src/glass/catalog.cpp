@@ -192,6 +192,8 @@ std::shared_ptr<const Catalog> load_catalog(std::string_view name_or_path) {
   std::error_code ec;
   const std::filesystem::path as_path{std::string(name_or_path)};
   if (std::filesystem::is_regular_file(as_path, ec)) return load_cached(as_path);
+  if (std::filesystem::is_directory(as_path, ec))
+    throw Error(SourceLocation{as_path.string()}, "it is a directory, not a glass catalog (.agf)");
   // A name with a folder in it is a path that does not exist.
   if (as_path.has_parent_path()) {
     throw Error(SourceLocation{as_path.string()}, "glass catalog file not found");

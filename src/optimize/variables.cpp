@@ -73,13 +73,21 @@ LensParameterization::LensParameterization(const Lens& lens, GlassSpace glasses,
     : structure_(lens), glasses_(std::move(glasses)) {
   lens.validate();
   focal_length_mm_ = lens.specs.focal_length_mm();
-  if (!std::isfinite(focal_length_mm_) || !(focal_length_mm_ > 0.0))
+  if (!std::isfinite(focal_length_mm_) || !(focal_length_mm_ > 0.0)) {
+    // A lens traced as written has no sensor diagonal of its own (16 mm is a default): on axis
+    // only, the message names what to add, not d / (2 tan 0).
+    if (lens.specs.mode == SpecMode::kAsWritten && lens.specs.half_field_deg == 0.0)
+      throw Error(SourceLocation{lens.source_path},
+                  "the optimizer needs an off-axis field (it works at the spec focal length "
+                  "d / (2 tan hfov), and every field of this lens is on axis); add a field "
+                  "(a .zmx YFLN value or a TOML [system] fields entry above 0)");
     throw Error(
         SourceLocation{lens.source_path},
         fmt::format("the optimizer works at the spec focal length d / (2 tan hfov), which "
                     "is {} mm for half_field_deg = {} and sensor_diagonal_mm = {}; give "
                     "the lens a field",
                     focal_length_mm_, lens.specs.half_field_deg, lens.specs.sensor_diagonal_mm));
+  }
   const int k_count = static_cast<int>(lens.surfaces.size());
   const int last = k_count - 1;
   if (lens.surfaces[last - 1].material.is_air()) {

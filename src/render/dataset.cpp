@@ -149,6 +149,15 @@ std::vector<ImageRecord> collect_inputs(const DatasetOptions& options) {
         if (is_inside(p, options.output_dir)) continue;
         files.push_back(p);
       }
+      if (files.empty()) {
+        // Reported and counted as a failure: a folder that gives nothing to render is a mistake
+        // (a wrong path), not a finished run.
+        ImageRecord r;
+        r.input = input;
+        r.error = "no image to render in this folder or below (PNG, JPEG, TIFF, EXR)";
+        records.push_back(r);
+        continue;
+      }
       std::sort(files.begin(), files.end());
       for (const fs::path& f : files) {
         ImageRecord r;

@@ -332,6 +332,7 @@ std::vector<SearchCandidate> make_candidates(const SearchOptions& options) {
     c.source = source;
     c.layout = layout;
     c.glass_seed = seed;
+    c.from_lens_file = own_specs;
     c.id = fmt::format("{}:{}:g{}", source, layout, seed);
     try {
       c.start = build();

@@ -126,7 +126,7 @@ std::string file_safe_id(const std::string& id) {
   return out;
 }
 
-CandidateResult run_candidate(const SearchCandidate& candidate, const OptimizeOptions& options,
+CandidateResult run_candidate(const SearchCandidate& candidate, const OptimizeOptions& base,
                               bool paper_then_strict, bool& interrupted) {
   interrupted = false;
   CandidateResult r;
@@ -143,6 +143,11 @@ CandidateResult run_candidate(const SearchCandidate& candidate, const OptimizeOp
     return r;
   }
   try {
+    // A lens file gets the bounds `lensopt optimize` gives it: the paper's bounds (glass 1..3 mm,
+    // image clearance 12 mm) would drive a 100 mm lens's thick glasses to negative thickness.
+    OptimizeOptions options = base;
+    if (candidate.from_lens_file)
+      options.loss = bounds_for(candidate.start, base.loss, BoundsMode::kAuto);
     OptimizeResult o;
     int stage_iterations = 0, stage_evaluations = 0;
     double start_spot_um = 0;

@@ -76,10 +76,12 @@ std::string format_tolerance_text(const ToleranceReport& r, int sensitivity_rows
   const ToleranceOptions& o = r.options;
   line(fmt::format("Tolerancing: {}{}", r.lens_name,
                    r.source_path.empty() ? "" : fmt::format(" ({})", r.source_path)));
-  line(
-      fmt::format("  prescription scaled by {:.6f} to f = {:.4f} mm; tolerances apply to the "
-                  "scaled lens",
-                  r.scale, r.spec_focal_length_mm));
+  if (r.scaled_to_spec)
+    line(fmt::format(
+        "  prescription scaled by {:.6f} to f = {:.4f} mm; tolerances apply to the scaled lens",
+        r.scale, r.spec_focal_length_mm));
+  else
+    line("  traced as written (not scaled); tolerances apply to the prescription");
   line(fmt::format("  tolerances: {}", tolerance_line(o.tolerances)));
   line(fmt::format("  {} trials, seed {}, {}; compensator: {}", o.trials, o.seed,
                    distribution_text(o.distribution), compensator_text(o.compensator)));
@@ -161,7 +163,8 @@ std::string format_tolerance_json(const ToleranceReport& r) {
   j["lens"] = r.lens_name;
   j["source"] = r.source_path;
   j["scale"] = num(r.scale);
-  j["spec_focal_length_mm"] = num(r.spec_focal_length_mm);
+  j["scaled_to_spec"] = r.scaled_to_spec;
+  if (r.scaled_to_spec) j["spec_focal_length_mm"] = num(r.spec_focal_length_mm);
   j["trials"] = o.trials;
   j["seed"] = o.seed;
   j["distribution"] = to_string(o.distribution);
@@ -202,8 +205,9 @@ std::string format_tolerance_json(const ToleranceReport& r) {
   summary["p99_um"] = num(r.spot.p99);
   summary["best_um"] = num(r.spot.best);
   summary["worst_um"] = num(r.spot.worst);
-  summary["max_spot_um"] = o.max_spot_um ? num(*o.max_spot_um) : json(nullptr);
-  summary["yield"] = r.yield ? num(*r.yield) : json(nullptr);
+  // The yield limit and the yield only when a limit is given (no null in an output).
+  if (o.max_spot_um) summary["max_spot_um"] = num(*o.max_spot_um);
+  if (r.yield) summary["yield"] = num(*r.yield);
   summary["efl_mm"] = {{"nominal", num(r.nominal.efl_mm)},
                        {"mean", num(r.efl_mean_mm)},
                        {"std", num(r.efl_std_mm)},

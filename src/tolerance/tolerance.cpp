@@ -560,7 +560,8 @@ ToleranceReport run_tolerance(const Lens& lens, const ToleranceOptions& options)
   report.lens_name = lens.name;
   report.source_path = lens.source_path;
   report.scale = model.scale();
-  report.spec_focal_length_mm = lens.specs.focal_length_mm();
+  report.scaled_to_spec = specs_setup(lens.specs, TraceOptions{}).scale;
+  report.spec_focal_length_mm = report.scaled_to_spec ? lens.specs.focal_length_mm() : 0.0;
   report.options = options;
   report.options.progress = nullptr;
   report.options.sensitivity_progress = nullptr;

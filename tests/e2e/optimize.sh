@@ -82,4 +82,14 @@ r = json.load(open(sys.argv[1]), parse_constant=no_nan)
 assert r["final_constraints"]["all_pass"] is False, "f/0.5 doublet reported feasible"
 PY
 grep -q "does not meet" "$tmp/f05.err" || fail "impossible spec without a message: $(cat "$tmp/f05.err")"
+# A lens traced as written with every field on axis (a vendor's achromat) is refused naming the
+# file and what to add, not "inf mm for ... sensor_diagonal_mm = 16" (a default it never wrote).
+status=0
+"$lensopt" optimize tests/data/zmx-real/thorlabs_AC254-100-A.zmx -o "$tmp/axis.toml" -q \
+  > /dev/null 2> "$tmp/axis.err" || status=$?
+[ "$status" -eq 1 ] || fail "on-axis lens: exit $status"
+grep -q "thorlabs_AC254-100-A.zmx: the optimizer needs an off-axis field" "$tmp/axis.err" ||
+  fail "on-axis lens message: $(cat "$tmp/axis.err")"
+! grep -q "inf mm" "$tmp/axis.err" || fail "on-axis lens message names an infinite focal length"
+[ ! -e "$tmp/axis.toml" ] || fail "on-axis lens: a lens was written"
 echo "optimize e2e: all checks passed"

@@ -30,4 +30,24 @@ spin() { OMP_DISPLAY_ENV=verbose "$@" --version 2>&1 >/dev/null | sed -n "s/.*GO
   fail "OpenMP threads spin by default"
 [ "$(OMP_WAIT_POLICY=active bash -c "$(declare -f spin); spin '$lensopt'")" != 0 ] ||
   fail "the user's OMP_WAIT_POLICY=active is not kept"
+# Out-of-range counts and non-finite numbers are refused by name before any work (-1, 0, a
+# negative number or nan used to be taken silently as "not given" and the default run).
+out_of_range() {
+  local status=0
+  "$lensopt" "$@" > "$tmp/range.out" 2> "$tmp/range.err" || status=$?
+  [ "$status" -ne 0 ] && grep -q -- "$3" "$tmp/range.err" ||
+    fail "$* was accepted (exit $status): $(cat "$tmp/range.err")"
+  [ ! -e "$tmp/o.toml" ] || fail "$* wrote a lens"
+}
+for bad in "--threads -1" "--rings 0" "--fields -3" "--max-iterations -5" "--neighbours -2" \
+  "--adam-steps 0" "--min-glass-mm nan" "--weight-glass nan" "--max-ray-angle-deg inf"; do
+  # shellcheck disable=SC2086
+  out_of_range optimize lenses/doublet.toml $bad -o "$tmp/o.toml" -q
+done
+for bad in "--threads -1" "--jobs -1" "--rings 0" "--fields 0" "--max-iterations -5" \
+  "--max-rounds 0" "--glass-seeds 0" "--top -1" "--neighbours -1" "--f-number nan" \
+  "--half-field-deg nan" "--focal-length-mm inf"; do
+  # shellcheck disable=SC2086
+  out_of_range search lenses/doublet.toml $bad -o "$tmp/s" -q --list
+done
 echo "PASS"

@@ -3,7 +3,9 @@
 # inputs are refused with a message; unwritable outputs are found before any work; Latin-1 text
 # and non-UTF-8 paths give valid JSON; degenerate lenses exit 1 naming file:line; a wavelength
 # outside a glass's range warns once per glass and is refused with --strict; `catalog` says why
-# a value is missing; duplicate YAML keys are errors; tolerance reports sensitivity progress.
+# a value is missing; duplicate YAML keys are errors; tolerance reports sensitivity progress; a
+# folder given for a file is named as one; an input folder with no image is a failed input;
+# surfaces that cross are named.
 set -euo pipefail
 lensopt="$1"
 tmp=$(mktemp -d)
@@ -123,4 +125,31 @@ status=0
 # 7. Tolerance: sensitivity progress without --quiet.
 "$lensopt" tolerance "$tmp/L.toml" --trials 4 --rings 3 --fields 3 > /dev/null 2> "$tmp/stderr"
 grep -q "sensitivity [0-9]*/[0-9]* evaluations" "$tmp/stderr" || fail "no sensitivity progress: $(cat "$tmp/stderr")"
+# 8. A folder where a file belongs is named as one (it used to read as empty text: "no
+# [[surfaces]]", "0 SURF blocks", "catalog not found"); a folder with no image to render is a
+# failed input, not an empty run with exit 0.
+mkdir -p "$tmp/dir.toml" "$tmp/dir.zmx" "$tmp/dir.yml" "$tmp/dir.agf" "$tmp/empty"
+for d in dir.toml dir.zmx dir.yml; do
+  status=0
+  "$lensopt" analyze "$tmp/$d" > /dev/null 2> "$tmp/stderr" || status=$?
+  [ "$status" -eq 1 ] && grep -q "$d: .*is a directory" "$tmp/stderr" ||
+    fail "analyze of a folder $d: exit $status: $(cat "$tmp/stderr")"
+done
+status=0
+"$lensopt" catalog "$tmp/dir.agf" > /dev/null 2> "$tmp/stderr" || status=$?
+[ "$status" -eq 1 ] && grep -q "dir.agf: .*is a directory" "$tmp/stderr" ||
+  fail "catalog of a folder: exit $status: $(cat "$tmp/stderr")"
+status=0
+"$lensopt" render "$tmp/L.toml" "$tmp/empty" -o "$tmp/r-empty" -q > /dev/null 2> "$tmp/stderr" || status=$?
+[ "$status" -eq 1 ] && grep -q "empty: no image to render" "$tmp/stderr" ||
+  fail "render of an empty folder: exit $status: $(cat "$tmp/stderr")"
+
+# 9. Elements through each other (the second element's front 2.4 mm before the first's rear)
+# are named with a warning; analyze used to report only failed rays on a later surface.
+sed 's/^thickness_mm = 6.902040481567383/thickness_mm = -8.0/' "$tmp/L.toml" > "$tmp/cross.toml"
+"$lensopt" analyze "$tmp/cross.toml" --rings 3 --fields 3 > /dev/null 2> "$tmp/stderr" || true
+grep -q "cross.toml: surfaces 2 and 4 cross" "$tmp/stderr" || fail "no crossing warning: $(cat "$tmp/stderr")"
+"$lensopt" analyze "$tmp/L.toml" --rings 3 --fields 3 > /dev/null 2> "$tmp/stderr"
+! grep -q "cross" "$tmp/stderr" || fail "a crossing warning for the doublet: $(cat "$tmp/stderr")"
+
 echo "ok"

@@ -141,4 +141,21 @@ if "$lensopt" search "$tmp/desc.toml" -o "$tmp/desc" > /dev/null 2> "$tmp/err.tx
   fail "unknown key accepted"
 fi
 grep -q "desc.toml:3:.*glas_seeds" "$tmp/err.txt" || fail "unknown key message: $(cat "$tmp/err.txt")"
+# 6. A lens that is not the paper's (a 100 mm double Gauss with 14 mm glasses) is searched with
+# the bounds `optimize` gives it (its own), not the paper's glass 1..3 mm, which drove a glass to
+# a negative thickness: the candidate failed. A search in which every candidate fails exits 1
+# naming the input.
+"$lensopt" search lenses/zmx/double_gauss_100.zmx --rings 3 --fields 3 --max-iterations 3 \
+  --max-rounds 1 -q -o "$tmp/dg" > "$tmp/dg.txt" 2> "$tmp/err.txt" || fail "double Gauss search: $(cat "$tmp/err.txt")"
+grep -q "0 failed" "$tmp/dg.txt" || fail "double Gauss candidate failed: $(cat "$tmp/dg.txt")"
+python3 - "$tmp/dg/leaderboard.json" <<'PY' || fail "double Gauss leaderboard"
+import json, sys
+(row,) = json.load(open(sys.argv[1]))["leaderboard"]
+assert row["status"] == "ok" and row["final_mean_rms_spot_um"] > 0, row
+PY
+rc=0
+"$lensopt" search tests/data/zmx-real/thorlabs_AC254-100-A.zmx -q -o "$tmp/onaxis" > /dev/null 2> "$tmp/err.txt" || rc=$?
+[ "$rc" -eq 1 ] || fail "a search whose every candidate failed: exit $rc"
+grep -q "thorlabs_AC254-100-A.zmx: every candidate failed (1 of 1)" "$tmp/err.txt" ||
+  fail "every-candidate-failed message: $(cat "$tmp/err.txt")"
 echo "search e2e: ok"

@@ -93,4 +93,30 @@ printf '\n[tolerance]\nnd = 1e-3\ntrials = 7\n' >>"$TMP/table.toml"
 grep -q '"nd": 0.0' "$TMP/table.json" || fail "--nd did not override the table"
 grep -q '"trials": 7' "$TMP/table.json" || fail "trials from the table not used"
 
+# 3. A lens traced as written (a vendor's .zmx, one field on axis) is not scaled: the report says
+# so, and its JSON has no null (no spec focal length d / (2 tan 0) = inf, no yield without a
+# limit); every trial of this lens is valid.
+"$LENSOPT" tolerance tests/data/zmx-real/thorlabs_AC254-100-A.zmx --trials 5 --rings 4 --quiet \
+  2>/dev/null >"$TMP/written.txt" || fail "tolerance of a .zmx"
+grep -q "traced as written (not scaled)" "$TMP/written.txt" || fail "as-written: $(head -3 "$TMP/written.txt")"
+! grep -q "inf mm" "$TMP/written.txt" || fail "an infinite focal length in the text"
+if command -v python3 >/dev/null 2>&1; then
+  "$LENSOPT" tolerance tests/data/zmx-real/thorlabs_AC254-100-A.zmx --trials 5 --rings 4 --quiet \
+    --json 2>/dev/null >"$TMP/written.json" || fail "tolerance --json of a .zmx"
+  python3 - "$TMP/written.json" <<'EOF' || fail "null or non-finite values in the JSON of a .zmx"
+import json, math, sys
+def bad(j, path="$"):
+    if j is None or (isinstance(j, float) and not math.isfinite(j)):
+        return [path]
+    if isinstance(j, dict):
+        return [p for k, v in j.items() for p in bad(v, path + "." + k)]
+    if isinstance(j, list):
+        return [p for i, v in enumerate(j) for p in bad(v, f"{path}[{i}]")]
+    return []
+j = json.load(open(sys.argv[1]), parse_constant=lambda c: None)
+assert j["scaled_to_spec"] is False and "spec_focal_length_mm" not in j, j.get("spec_focal_length_mm")
+assert not bad(j), bad(j)[:5]
+EOF
+fi
+
 echo "tolerance e2e: ok"

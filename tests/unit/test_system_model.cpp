@@ -496,3 +496,40 @@ TEST_CASE("system: optimize and tolerance sample an as-written lens at its field
   const ToleranceModel paper_model(cooke, t);
   CHECK(paper_model.fields_deg() == field_angles_deg(cooke.specs.half_field_deg, 5));
 }
+
+TEST_CASE("apertures: crossing surfaces are found at the vertex and inside the clear aperture") {
+  const Lens doublet = read_lens(test::source_dir() / "lenses" / "doublet.toml");
+  CHECK(crossing_surfaces(doublet).empty());
+  // The stop moved 4 mm before the front vertex (a negative air thickness next to a dummy): a
+  // virtual plane, not a crossing.
+  Lens front_stop = doublet;
+  front_stop.surfaces[1].thickness_mm = -5.6;
+  CHECK(crossing_surfaces(front_stop).empty());
+  // The second element's front vertex 2.4 mm before the first element's rear vertex (the stop's
+  // thickness -8 mm): surfaces 2 and 4 cross on the axis, g(0) = t_2 + t_3 = 5.6015 - 8.
+  Lens through = doublet;
+  through.surfaces[2].thickness_mm = -8.0;
+  const std::vector<SurfaceCrossing> axis = crossing_surfaces(through);
+  REQUIRE(axis.size() == 1);
+  CHECK(axis[0].first == 1);
+  CHECK(axis[0].second == 3);
+  CHECK(axis[0].height_mm == 0.0);
+  CHECK(axis[0].gap_mm == doctest::Approx(doublet.surfaces[1].thickness_mm - 8.0).epsilon(1e-12));
+  // A glass whose edge thickness is negative inside the given semi-diameter: a biconvex element
+  // R = +-10 mm, 0.5 mm thick at the centre, semi-diameter 4 mm: g(4) = 0.5 - 2 (10 - sqrt(84)).
+  Lens thin = doublet;
+  thin.surfaces[0].curvature_per_mm = 0.1;
+  thin.surfaces[1].curvature_per_mm = -0.1;
+  thin.surfaces[0].thickness_mm = 0.5;
+  thin.surfaces[0].semi_diameter_mm = 4.0;
+  thin.surfaces[1].semi_diameter_mm = 4.0;
+  const std::vector<SurfaceCrossing> rim = crossing_surfaces(thin);
+  REQUIRE(!rim.empty());
+  CHECK(rim[0].first == 0);
+  CHECK(rim[0].second == 1);
+  CHECK(rim[0].height_mm > 0.0);
+  CHECK(rim[0].height_mm <= 4.0);
+  const double r = rim[0].height_mm;
+  CHECK(rim[0].gap_mm ==
+        doctest::Approx(0.5 - 2.0 * (10.0 - std::sqrt(100.0 - r * r))).epsilon(1e-12));
+}

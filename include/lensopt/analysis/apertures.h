@@ -19,4 +19,20 @@ std::vector<double> automatic_semi_diameters(const TraceSystem<double>& sys, int
 // The same for a lens traced in its own spec mode (prepare_lens_system, ray aiming on).
 std::vector<double> automatic_semi_diameters(const Lens& lens);
 
+// Two surfaces that cross: elements through each other, or a glass of negative edge thickness.
+// For each two consecutive surfaces i < j that are not dummies (a dummy is the stop, or a flat
+// surface with air on both sides), the gap between them at height r is
+//   g(r) = t_i + ... + t_(j-1) + sag_j(r) - sag_i(r)      (Surface::sag_mm)
+// checked at r = 0 and r = m h / 8, m = 1..8, with h the smaller clear semi-aperture of the two
+// (the written semi-diameters, else automatic_semi_diameters; unknown: r = 0 only). The first
+// r where g < 0 is reported: there the second surface lies before the first, which no lens can
+// be (a dummy may: a stop before the front vertex is traced as a virtual plane). Surfaces are
+// 0-based; lengths in the lens's own units.
+struct SurfaceCrossing {
+  int first = 0, second = 0;
+  double height_mm = 0;  // r where the gap is first below 0
+  double gap_mm = 0;     // g(r) < 0
+};
+std::vector<SurfaceCrossing> crossing_surfaces(const Lens& lens);
+
 }  // namespace lensopt

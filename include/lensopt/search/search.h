@@ -180,6 +180,9 @@ struct SearchCandidate {
   int glass_seed = 0;
   Lens start;         // the starting lens (when error is empty)
   std::string error;  // why the start could not be built (reported as a failed candidate)
+  // From a lens file (not a generated start): optimized with the bounds `lensopt optimize` gives
+  // that file (BoundsMode::kAuto: the paper's for the paper's lenses, else the lens's own).
+  bool from_lens_file = false;
 };
 
 // Every candidate of the search, in order (not only the shard's). Unreadable lens files throw.
@@ -211,7 +214,8 @@ struct CandidateResult : OptimizeSummary {
 
 // Optimizes one candidate (twice with `paper_then_strict`: paper penalties, then strict bounds
 // from that result; iterations, evaluations and time are summed, the start spot is the
-// candidate's own); an error (rays fail, the optimizer throws) is a result, not a throw.
+// candidate's own); an error (rays fail, the optimizer throws) is a result, not a throw. A
+// candidate from a lens file takes bounds_for(start, options.loss, BoundsMode::kAuto).
 // `interrupted` is set when options.interrupt stopped it (the result is then not final).
 CandidateResult run_candidate(const SearchCandidate& candidate, const OptimizeOptions& options,
                               bool paper_then_strict, bool& interrupted);

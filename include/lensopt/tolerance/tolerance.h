@@ -202,8 +202,12 @@ struct ToleranceReport {
   std::string lens_name;
   std::string source_path;
   double scale = 1;  // applied to the prescription to reach the spec focal length
-  double spec_focal_length_mm = 0;
-  ToleranceOptions options;  // as run (progress callback dropped)
+  // Whether the prescription is scaled to the spec focal length d / (2 tan hfov) (the paper's
+  // spec mode); a lens traced as written keeps scale 1 and has no spec focal length (on axis
+  // only it would be infinite).
+  bool scaled_to_spec = true;
+  double spec_focal_length_mm = 0;  // when scaled_to_spec
+  ToleranceOptions options;         // as run (progress callback dropped)
   int threads = 1;
   int wavelength_count = 0;
   int rays_per_field_wavelength = 0;
