@@ -862,15 +862,29 @@ class LensOptimization {
 
   // The result at full sampling, never behind the start, and the counters.
   void finish() {
-    ConstraintReport final_constraints = restore_feasibility();
-    result_.lens = result_lens(x_);
-    const AnalysisReport final_report = analyze_lens(result_.lens, full_);
-    result_.final_spot_um =
-        final_report.mean_rms_spot_um.value_or(std::numeric_limits<double>::infinity());
-    for (const FieldReport& f : final_report.fields)
-      result_.final_field_spot_um.push_back(f.rms_spot_um.value_or(0.0));
-    result_.final_constraints = std::move(final_constraints);
-    if (wavefront_) result_.final_wavefront_waves = full_wavefront_waves(result_.lens, full_.trace);
+    // A design that is not a lens (the penalties are soft: a glass thickness driven below 0 by
+    // bounds far from the lens's own, as the paper's 1..3 mm on a 100 mm double Gauss) cannot
+    // be analysed; it is behind every start.
+    std::string not_a_lens;
+    try {
+      ConstraintReport final_constraints = restore_feasibility();
+      result_.lens = result_lens(x_);
+      result_.lens.validate();
+      const AnalysisReport final_report = analyze_lens(result_.lens, full_);
+      result_.final_spot_um =
+          final_report.mean_rms_spot_um.value_or(std::numeric_limits<double>::infinity());
+      for (const FieldReport& f : final_report.fields)
+        result_.final_field_spot_um.push_back(f.rms_spot_um.value_or(0.0));
+      result_.final_constraints = std::move(final_constraints);
+      if (wavefront_)
+        result_.final_wavefront_waves = full_wavefront_waves(result_.lens, full_.trace);
+    } catch (const Error& e) {
+      not_a_lens = e.what();
+      result_.final_spot_um = result_.final_wavefront_waves =
+          std::numeric_limits<double>::infinity();
+      result_.log.push_back(
+          fmt::format("the final design is not a valid lens ({}); the start is kept", not_a_lens));
+    }
     // Never return a worse lens than the start: designs are ordered by (every constraint met at
     // full sampling, then the merit at full sampling: mean spot, or mean RMS wavefront); a start
     // that is not behind the result in this order is returned instead (a feasible start is never
@@ -882,7 +896,7 @@ class LensOptimization {
     const double final_merit = wavefront_ ? result_.final_wavefront_waves : result_.final_spot_um;
     const bool start_not_behind =
         (start_ok && !final_ok) || (start_ok == final_ok && !(final_merit < start_merit));
-    if (start_not_behind || !std::isfinite(final_merit)) {
+    if (!not_a_lens.empty() || start_not_behind || !std::isfinite(final_merit)) {
       result_.lens = start_;
       result_.final_spot_um = result_.start_spot_um;
       result_.final_field_spot_um = result_.start_field_spot_um;

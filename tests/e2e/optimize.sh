@@ -92,4 +92,10 @@ grep -q "thorlabs_AC254-100-A.zmx: the optimizer needs an off-axis field" "$tmp/
   fail "on-axis lens message: $(cat "$tmp/axis.err")"
 ! grep -q "inf mm" "$tmp/axis.err" || fail "on-axis lens message names an infinite focal length"
 [ ! -e "$tmp/axis.toml" ] || fail "on-axis lens: a lens was written"
+# A design that is not a lens (the paper's glass bounds on a 100 mm double Gauss drive a glass
+# thickness below 0) is behind every start: the start is kept and written, not an error.
+"$lensopt" optimize lenses/zmx/double_gauss_100.zmx --bounds paper -o "$tmp/dg_paper.toml" \
+  > "$tmp/dg_paper.out" 2> "$tmp/dg_paper.err" || fail "double Gauss --bounds paper: $(cat "$tmp/dg_paper.err")"
+grep -q "start kept" "$tmp/dg_paper.out" || fail "double Gauss --bounds paper: start not kept"
+"$lensopt" analyze "$tmp/dg_paper.toml" > /dev/null || fail "double Gauss --bounds paper: output unreadable"
 echo "optimize e2e: all checks passed"
