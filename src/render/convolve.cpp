@@ -32,6 +32,7 @@ struct Renderer::GridEntry {
 Renderer::Renderer(ImagingModel model, RenderOptions options)
     : model_(std::move(model)), options_(options) {
   options_.validate();
+  if (options_.relative_illumination) require_relative_illumination(model_);
 }
 
 Renderer::~Renderer() = default;

@@ -234,6 +234,7 @@ void ExportOptions::validate() const {
 ExportSummary export_imaging_model(const ImagingModel& model, const ExportOptions& options,
                                    const DiffractionPsfs* diffraction) {
   options.validate();
+  require_relative_illumination(model);  // written below; checked before any file
   ExportSummary summary;
   const fs::path& dir = options.output_dir;
   std::error_code ec;

@@ -52,12 +52,15 @@ ImagingModel build_imaging_model(const Lens& lens, const TraceOptions& trace,
     model.reference_y_mm.push_back(f.reference_y_mm);
     model.centroid_y_mm.push_back(f.centroid_y_mm);
     model.distortion.push_back(f.distortion_percent / 100.0);
-    if (!f.relative_illumination)
-      throw Error(SourceLocation{where},
-                  fmt::format("cannot render: the relative illumination of field {:.2f} deg is "
-                              "unknown (an edge ray of its pupil or of the axis fails)",
-                              f.field_deg));
-    model.relative_illumination.push_back(*f.relative_illumination);
+    if (!f.relative_illumination && model.unknown_relative_illumination.empty())
+      model.unknown_relative_illumination =
+          Error(SourceLocation{where},
+                fmt::format("the relative illumination of field {:.2f} deg is unknown (an edge "
+                            "ray of its pupil or of the axis fails): render with "
+                            "--no-relative-illumination",
+                            f.field_deg))
+              .what();
+    model.relative_illumination.push_back(f.relative_illumination.value_or(0.0));
   }
   for (std::size_t h = 1; h < model.reference_y_mm.size(); ++h) {
     if (!(model.reference_y_mm[h] > model.reference_y_mm[h - 1])) {
@@ -88,7 +91,13 @@ double SensorGeometry::radius_mm(int i, int j) const {
   return pitch_mm * std::sqrt(dx * dx + dy * dy);
 }
 
+void require_relative_illumination(const ImagingModel& model) {
+  if (!model.unknown_relative_illumination.empty())
+    throw Error(model.unknown_relative_illumination);
+}
+
 double relative_illumination_at(const ImagingModel& model, double radius_mm) {
+  require_relative_illumination(model);
   return interpolate_linear(model.reference_y_mm, model.relative_illumination, radius_mm, false);
 }
 

@@ -116,6 +116,23 @@ assert j["image"]["width"] == 320 and len(j["patches"]) == 81
 PY
 oiiotool --info "$tmp/exp/psf/field_05.exr" | grep -q "65 x   65, 3 channel, float openexr" || fail "PSF EXR"
 
+# A lens whose relative illumination is unknown (optiland's lens_floa: its on-axis edge rays miss
+# a surface) renders without it, and refuses, naming the file and the way out, with it; export
+# (which writes the map) refuses before writing anything.
+floa=tests/data/zmx-real/optiland_lens_floa.zmx
+status=0
+"$lensopt" render "$floa" "$tmp/in/chart.png" -o "$tmp/floa" -q 2> "$tmp/floa.err" > /dev/null || status=$?
+[ "$status" -eq 1 ] || fail "floa render with relative illumination: exit $status"
+grep -q "optiland_lens_floa.zmx: the relative illumination of field 0.00 deg is unknown.*--no-relative-illumination" \
+  "$tmp/floa.err" || fail "floa render message: $(cat "$tmp/floa.err")"
+"$lensopt" render "$floa" "$tmp/in/chart.png" -o "$tmp/floa_nori" -q --no-relative-illumination \
+  > /dev/null 2>&1 || fail "floa render --no-relative-illumination"
+[ -f "$tmp/floa_nori/chart.png" ] || fail "floa render --no-relative-illumination: no image"
+status=0
+"$lensopt" export "$floa" -o "$tmp/floa_export" > /dev/null 2>&1 || status=$?
+[ "$status" -eq 1 ] || fail "floa export: exit $status"
+[ -z "$(ls -A "$tmp/floa_export" 2> /dev/null)" ] || fail "floa export wrote files before failing"
+
 # The sample photo (needs ../shared).
 shared="${LENSOPT_SHARED_DIR:-../shared}"
 if [ ! -f "$shared/data/images/sample_image.png" ]; then

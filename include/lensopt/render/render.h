@@ -86,7 +86,10 @@ struct ImagingModel {
   std::vector<double> reference_y_mm;         // paraxial chief-ray heights y_ref,h (587.6 nm)
   std::vector<double> centroid_y_mm;          // ybar_h over all wavelengths
   std::vector<double> distortion;             // D_h, a fraction of y_ref,last
-  std::vector<double> relative_illumination;  // R_h
+  std::vector<double> relative_illumination;  // R_h (0 where unknown)
+  // Empty when every R_h is known; else the error that using it raises (a field whose pupil or
+  // axis edge ray fails): require_relative_illumination.
+  std::string unknown_relative_illumination;
   PsfSet<double> psfs;
   TraceOptions trace;
   int ray_failures = 0;
@@ -170,7 +173,12 @@ int overlap_window_extents(const std::vector<std::vector<double>>& windows, std:
 // Throws Error if a W x H image is smaller than a PSF of `max_radius` pixels.
 void check_image_holds_psf(int width, int height, int max_radius, double pitch_um);
 
-// Relative illumination and distortion at a radial height (mm), by the interpolation above.
+// Throws the model's unknown_relative_illumination error, if any: a render that applies the
+// relative illumination, or an export that writes it, needs every field's.
+void require_relative_illumination(const ImagingModel& model);
+
+// Relative illumination and distortion at a radial height (mm), by the interpolation above
+// (relative_illumination_at throws as require_relative_illumination).
 double relative_illumination_at(const ImagingModel& model, double radius_mm);
 double distortion_at(const ImagingModel& model, double radius_mm);  // D(r)
 // The inverse distortion: the undistorted height r whose image lies at r'. Throws Error if the
