@@ -21,14 +21,14 @@ namespace lensopt {
 
 // q^2 = 1 - (1 + k) c^2 rho (one_plus_k = 1 + k).
 template <typename T>
-inline T profile_q2(const T& c, const T& one_plus_k, const T& rho) {
+inline __attribute__((always_inline)) T profile_q2(const T& c, const T& one_plus_k, const T& rho) {
   return K<T>(1.0) - one_plus_k * c * c * rho;
 }
 
 // P(rho) = a2 + a4 rho + ... + a16 rho^7 (a[0..7] = a2..a16), Horner written out (no inner loop,
 // so a ray loop around it vectorizes).
 template <typename T>
-inline T asphere_poly(const T* a, const T& rho) {
+inline __attribute__((always_inline)) T asphere_poly(const T* a, const T& rho) {
   return a[0] +
          rho * (a[1] +
                 rho * (a[2] +
@@ -37,7 +37,7 @@ inline T asphere_poly(const T* a, const T& rho) {
 
 // (rho P)'(rho) = a2 + 2 a4 rho + 3 a6 rho^2 + ... + 8 a16 rho^7.
 template <typename T>
-inline T asphere_poly_slope(const T* a, const T& rho) {
+inline __attribute__((always_inline)) T asphere_poly_slope(const T* a, const T& rho) {
   return a[0] +
          rho *
              (K<T>(2.0) * a[1] +
@@ -50,13 +50,15 @@ inline T asphere_poly_slope(const T* a, const T& rho) {
 
 // S(rho) = c rho / (1 + q) + rho P(rho), q >= 0 given by the caller (see header).
 template <typename T>
-inline T profile_sag_at_q(const T& c, const T* a, const T& rho, const T& q) {
+inline __attribute__((always_inline)) T profile_sag_at_q(const T& c, const T* a, const T& rho,
+                                                         const T& q) {
   return c * rho / (K<T>(1.0) + q) + rho * asphere_poly(a, rho);
 }
 
 // S'(rho) = c / (2 q) + (rho P)'(rho), q > 0 given by the caller (see header).
 template <typename T>
-inline T profile_slope_at_q(const T& c, const T* a, const T& rho, const T& q) {
+inline __attribute__((always_inline)) T profile_slope_at_q(const T& c, const T* a, const T& rho,
+                                                           const T& q) {
   return c / (K<T>(2.0) * q) + asphere_poly_slope(a, rho);
 }
 
