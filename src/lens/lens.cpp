@@ -9,6 +9,7 @@
 #include "lensopt/core/constants.h"
 #include "lensopt/core/error.h"
 #include "lensopt/glass/glass_range.h"
+#include "lensopt/lens/profile_sag.h"
 #include "lensopt/lens/validate.h"
 
 namespace lensopt {
@@ -262,12 +263,13 @@ bool Surface::has_asphere() const {
 
 double Surface::sag_mm(double r_mm) const {
   const double rho = r_mm * r_mm;
-  const double q2 = 1.0 - (1.0 + conic) * curvature_per_mm * curvature_per_mm * rho;
+  const double c = curvature_per_mm;
+  const double q2 = profile_q2(c, 1.0 + conic, rho);
+  // Outside the conic's domain the profile does not exist: NaN (lens.h).
   if (q2 < 0.0) return std::numeric_limits<double>::quiet_NaN();
-  double poly = 0.0;
-  for (int j = kAsphereOrders - 1; j >= 0; --j) poly = (poly + asphere[j]) * rho;
-  poly = (poly * rho + asphere_r2_per_mm * rho);
-  return curvature_per_mm * rho / (1.0 + std::sqrt(q2)) + poly;
+  const double a[kAsphereOrders + 1] = {asphere_r2_per_mm, asphere[0], asphere[1], asphere[2],
+                                        asphere[3],        asphere[4], asphere[5], asphere[6]};
+  return profile_sag_at_q(c, a, rho, std::sqrt(q2));
 }
 
 std::vector<std::string> glass_range_warnings(const Lens& lens) {

@@ -23,15 +23,15 @@ void profile_extremes(const TraceLens<double>& lens, const std::vector<double>& 
     const double* a = lens.asphere.data() + static_cast<std::size_t>(k) * kAsphereTerms;
     for (int j = 1; j <= kProfileBoundRadii; ++j) {
       const double r = heights_mm[k] * j / kProfileBoundRadii;
-      const double q2 = 1.0 - (1.0 + lens.conic[k]) * c * c * r * r;
+      const double rho = r * r;
+      const double q2 = profile_q2(c, 1.0 + lens.conic[k], rho);
       min_q2 = std::min(min_q2, q2);
       if (!(q2 > 0.0)) {
         max_slope_deg = 90.0;  // outside the domain: a vertical (or no) surface
         continue;
       }
-      double dp = 8.0 * a[7];
-      for (int i = 6; i >= 0; --i) dp = (i + 1.0) * a[i] + r * r * dp;
-      const double slope = std::abs(2.0 * r * (c / (2.0 * std::sqrt(q2)) + dp));
+      // S' (lens/profile_sag.h), inside the domain.
+      const double slope = std::abs(2.0 * r * profile_slope_at_q(c, a, rho, std::sqrt(q2)));
       max_slope_deg = std::max(max_slope_deg, std::atan(slope) * 180.0 / kPi);
     }
   }

@@ -6,6 +6,7 @@
 #include <cmath>
 
 #include "lensopt/core/error.h"
+#include "lensopt/lens/profile_sag.h"
 #include "lensopt/plot/style.h"
 #include "lensopt/trace/kernel.h"
 
@@ -15,13 +16,12 @@ namespace {
 constexpr int kProfilePoints = 49;
 constexpr double kSphereLimit = 0.995;  // |c| y stays below this on a drawn sphere
 
-// The profile's sag (lens/lens.h): conic plus even-asphere terms a[0..7] = a2..a16.
+// The profile's sag (lens/profile_sag.h): conic plus even-asphere terms a[0..7] = a2..a16, q
+// clamped at 0 beyond the conic's domain (not reached: sphere_limit stops short of it).
 double sag(double c, double k, const std::array<double, 8>& a, double y) {
   const double rho = y * y;
-  const double cy2 = c * rho;
-  double poly = 0.0;
-  for (int j = 7; j >= 0; --j) poly = (poly + a[j]) * rho;
-  return cy2 / (1.0 + std::sqrt(std::max(0.0, 1.0 - (1.0 + k) * c * cy2))) + poly;
+  const double q = std::sqrt(std::max(0.0, profile_q2(c, 1.0 + k, rho)));
+  return profile_sag_at_q(c, a.data(), rho, q);
 }
 
 // How far a profile is drawn: short of the conic's domain edge (1 + k) c^2 r^2 = 1.

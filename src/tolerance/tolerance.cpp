@@ -16,6 +16,7 @@
 #include "lensopt/core/error.h"
 #include "lensopt/core/random.h"
 #include "lensopt/core/threads.h"
+#include "lensopt/lens/profile_sag.h"
 #include "lensopt/paraxial/paraxial.h"
 #include "lensopt/trace/system.h"
 
@@ -85,26 +86,13 @@ std::string format_limit(double value, const char* unit) {
 }
 
 // Clear semi-aperture per surface (mm): its semi-diameter when the lens gives one, else the
-// paraxial estimate |y_marginal| + |y_chief| (marginal ray at the entrance-pupil edge, chief
-// ray through the pupil centre at the largest field).
+// paraxial estimate |y_marginal| + |y_chief| (paraxial.h, the optimizer's profile bounds' too).
 std::vector<double> clear_semi_apertures_mm(const Lens& lens, const TraceLens<double>& tl) {
-  const int k_count = tl.surface_count();
-  const ParaxialData<double> par = paraxial_data(tl, tl.reference_nm());
-  const double r_ep = par.efl_mm / lens.specs.f_number / 2.0;
-  const double tan_field = std::tan(lens.specs.half_field_deg * kPi / 180.0);
-  std::vector<double> aperture(k_count, 0.0);
-  for (int k = 0; k < k_count; ++k) {
+  // Non-finite where the paraxial estimate is (the edge-gap check then skips that space).
+  std::vector<double> aperture = paraxial_clear_semi_apertures_or_nonfinite(tl, lens.specs);
+  for (int k = 0; k < tl.surface_count(); ++k) {
     const double given = lens.surfaces[k].semi_diameter_mm;
-    if (given > 0.0) {
-      aperture[k] = given;
-      continue;
-    }
-    const ParaxialRay<double> marginal =
-        paraxial_trace(tl, ParaxialRay<double>{r_ep, 0.0}, k + 1, tl.reference_nm());
-    const ParaxialRay<double> chief =
-        paraxial_trace(tl, ParaxialRay<double>{-par.entrance_pupil_z_mm * tan_field, tan_field},
-                       k + 1, tl.reference_nm());
-    aperture[k] = std::abs(marginal.y) + std::abs(chief.y);
+    if (given > 0.0) aperture[k] = given;
   }
   return aperture;
 }
@@ -260,22 +248,20 @@ struct ToleranceModel::Impl {
   std::vector<double> gap_height_mm;
   std::vector<char> gap_checked;
 
-  // Axial distance from surface k to k+1 at height h: t_k + sag_{k+1}(h) - sag_k(h), with the
-  // sphere's sag c h^2 / (1 + sqrt(1 - c^2 h^2)) (h is kept inside every sphere), or the
-  // profile's c h^2 / (1 + q) + a2 h^2 + ... + a16 h^16 (q clamped at 0 outside the conic's
-  // domain).
+  // Axial distance from surface k to k+1 at height h: t_k + sag_{k+1}(h) - sag_k(h), the
+  // profile's sag c h^2 / (1 + q) + a2 h^2 + ... + a16 h^16 (lens/profile_sag.h) with q clamped
+  // at 0 outside the conic's domain (for a sphere: h kept inside it, |c| h > 1 gives c h^2).
   static double edge_gap_mm(const TraceLens<double>& tl, int k, double h) {
-    auto sag = [&tl, h](int i) {
+    const double rho = h * h;
+    const double spherical[kAsphereTerms] = {};
+    auto sag = [&tl, rho, &spherical](int i) {
       const double c = tl.curvature_per_mm[i];
-      if (!tl.has_profiles() || tl.profile[i] == kProfileSphere) {
-        const double ch = std::min(std::abs(c) * h, 1.0);
-        return c * h * h / (1.0 + std::sqrt(1.0 - ch * ch));
-      }
-      const double rho = h * h;
-      const double q = std::sqrt(std::max(1.0 - (1.0 + tl.conic[i]) * c * c * rho, 0.0));
-      double p = 0.0;
-      for (int j = kAsphereTerms - 1; j >= 0; --j) p = tl.asphere_term(i, j) + rho * p;
-      return c * rho / (1.0 + q) + rho * p;
+      const bool profiled = tl.has_profiles();
+      const double one_plus_k = profiled ? 1.0 + tl.conic[i] : 1.0;
+      const double* a =
+          profiled ? tl.asphere.data() + static_cast<std::size_t>(i) * kAsphereTerms : spherical;
+      const double q = std::sqrt(std::max(profile_q2(c, one_plus_k, rho), 0.0));  // the clamp
+      return profile_sag_at_q(c, a, rho, q);
     };
     return tl.thickness_mm[k] + sag(k + 1) - sag(k);
   }

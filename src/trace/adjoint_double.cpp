@@ -199,6 +199,7 @@ void trace_surface_adjoint_profile_double(double c, double conic, const double* 
   const double mu2 = mu * mu;
   const double a0 = a[0], a1 = a[1], a2 = a[2], a3 = a[3], a4 = a[4], a5 = a[5], a6 = a[6],
                a7 = a[7];
+  const double coeff[8] = {a0, a1, a2, a3, a4, a5, a6, a7};
   double sum_c = 0.0, sum_t = 0.0, sum_mu = 0.0, sum_k = 0.0;
   double s0_ = 0.0, s1_ = 0.0, s2_ = 0.0, s3_ = 0.0, s4_ = 0.0, s5_ = 0.0, s6_ = 0.0, s7_ = 0.0;
 #pragma omp simd reduction(+ : sum_c, sum_t, sum_mu, sum_k, s0_, s1_, s2_, s3_, s4_, s5_, s6_, s7_)
@@ -215,17 +216,12 @@ void trace_surface_adjoint_profile_double(double c, double conic, const double* 
     const double x2 = x1 + s * l;
     const double y2 = y1 + s * m;
     const double rho_raw = x2 * x2 + y2 * y2;
-    const double q2_raw = 1.0 - opk * c * c * rho_raw;
+    const double q2_raw = profile_q2(c, opk, rho_raw);
     // Rays not followed (missed, not live) are evaluated on the axis (their results unused).
     const double rho = (run & (q2_raw > 0.0)) ? rho_raw : 0.0;
-    const double q = std::sqrt(1.0 - opk * c * c * rho);
+    const double q = std::sqrt(profile_q2(c, opk, rho));
     // rho P(rho) = sum a_i rho^(i+1): d1 = its first, d2 its second derivative in rho.
-    const double d1 =
-        a0 + rho * (2.0 * a1 +
-                    rho * (3.0 * a2 +
-                           rho * (4.0 * a3 +
-                                  rho * (5.0 * a4 +
-                                         rho * (6.0 * a5 + rho * (7.0 * a6 + rho * 8.0 * a7))))));
+    const double d1 = asphere_poly_slope(coeff, rho);  // lens/profile_sag.h
     const double d2 =
         2.0 * a1 +
         rho * (6.0 * a2 +

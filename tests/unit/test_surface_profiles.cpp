@@ -1,9 +1,11 @@
 // Surface profiles (trace/profile.h): exact geometry of conics (Cartesian ovals focus perfectly,
 // a paraboloid and an ellipsoid by their reflective properties), the even-asphere sag against its
-// closed form, the paraxial power of the r^2 term, Jet derivatives with respect to k and every
+// closed form, the one sag formula (lens/profile_sag.h) against a sphere, a paraboloid and an
+// a4 term, the paraxial power of the r^2 term, Jet derivatives with respect to k and every
 // asphere coefficient against central finite differences, and the spherical path kept.
 #include <doctest/doctest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <vector>
 
@@ -12,6 +14,7 @@
 #include "lensopt/core/random.h"
 #include "lensopt/formats/lens_file.h"
 #include "lensopt/lens/lens_io.h"
+#include "lensopt/lens/profile_sag.h"
 #include "lensopt/trace/kernel.h"
 #include "test_support.h"
 
@@ -213,6 +216,65 @@ TEST_CASE("even-asphere sag equals its closed form") {
   const double r = 6.0;
   const double expected = 0.05 * 36 / (1 + std::sqrt(1 + 1.5 * 0.0025 * 36)) + 1e-3 * 36;
   CHECK(t.sag_mm(r) == doctest::Approx(expected).epsilon(1e-15));
+}
+
+TEST_CASE("the one sag formula (lens/profile_sag.h) against closed forms, and its callers") {
+  const double zeros[8] = {};
+  // Sphere of radius R: z = R - sqrt(R^2 - r^2), dz/dr = r / sqrt(R^2 - r^2), so S' = dz/dr /
+  // (2 r) = 1 / (2 sqrt(R^2 - r^2)); the closed form in long double (no cancellation left).
+  for (double radius : {25.0, -40.0}) {
+    const double c = 1.0 / radius;
+    for (double r : {1.0, 5.0, 12.0, 20.0, 24.9}) {
+      if (r >= std::abs(radius)) continue;
+      const double rho = r * r;
+      const long double big = std::abs(radius);
+      const long double root = std::sqrt(big * big - (long double)rho);
+      const double sign = radius > 0 ? 1.0 : -1.0;
+      const double expected = sign * static_cast<double>(big - root);
+      const double expected_slope = sign * static_cast<double>(0.5L / root);
+      const double q = std::sqrt(profile_q2(c, 1.0, rho));
+      CHECK(std::abs(profile_sag_at_q(c, zeros, rho, q) - expected) <= 1e-14 * std::abs(expected));
+      CHECK(std::abs(profile_slope_at_q(c, zeros, rho, q) - expected_slope) <=
+            1e-14 * std::abs(expected_slope));
+    }
+  }
+  // Paraboloid (k = -1): q = 1, z = r^2 / (2 R), S' = 1 / (2 R), at every height.
+  const double radius = 30.0;
+  for (double r : {0.5, 10.0, 45.0, 200.0}) {
+    const double rho = r * r;
+    const double q = std::sqrt(profile_q2(1.0 / radius, 0.0, rho));
+    CHECK(q == 1.0);
+    CHECK(profile_sag_at_q(1.0 / radius, zeros, rho, q) ==
+          doctest::Approx(rho / (2.0 * radius)).epsilon(1e-15));
+    CHECK(profile_slope_at_q(1.0 / radius, zeros, rho, q) ==
+          doctest::Approx(1.0 / (2.0 * radius)).epsilon(1e-15));
+  }
+  // A flat plate with only a4: z = a4 r^4, S' = 2 a4 r^2.
+  const double a4[8] = {0.0, 2.5e-5, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
+  for (double r : {0.5, 3.0, 8.0}) {
+    const double rho = r * r;
+    const double q = std::sqrt(profile_q2(0.0, 1.0, rho));
+    CHECK(profile_sag_at_q(0.0, a4, rho, q) == doctest::Approx(2.5e-5 * std::pow(r, 4)));
+    CHECK(profile_slope_at_q(0.0, a4, rho, q) == doctest::Approx(5e-5 * rho));
+  }
+  // Every caller is that formula: Surface::sag_mm and profile_sag (the tracer's) give the same bits
+  // inside the domain; outside it (|c| r > 1 on a sphere) sag_mm is NaN by contract, and a
+  // caller that clamps q at 0 (the tolerance edge gap, the plot) gets the rim's c r^2.
+  Surface s;
+  s.curvature_per_mm = 1.0 / 18.0;
+  s.conic = -0.6;
+  s.asphere_r2_per_mm = 2e-4;
+  s.asphere = {1.1e-5, -2.3e-8, 3.7e-10, -4.1e-12, 5.3e-14, -6.7e-16, 7.9e-18};
+  const double a[8] = {2e-4, 1.1e-5, -2.3e-8, 3.7e-10, -4.1e-12, 5.3e-14, -6.7e-16, 7.9e-18};
+  for (double r : {0.0, 1.0, 4.0, 9.0, 15.0}) {
+    CHECK(s.sag_mm(r) == profile_sag<double>(s.curvature_per_mm, s.conic, a, r));
+  }
+  Surface sphere;
+  sphere.curvature_per_mm = 0.1;
+  CHECK(std::isnan(sphere.sag_mm(10.5)));
+  const double rho = 10.5 * 10.5;
+  const double clamped = std::sqrt(std::max(profile_q2(0.1, 1.0, rho), 0.0));
+  CHECK(profile_sag_at_q(0.1, zeros, rho, clamped) == doctest::Approx(0.1 * rho));
 }
 
 TEST_CASE("paraxial power: the r^2 term counts as a curvature 2 a2, conic and a4+ do not") {

@@ -22,6 +22,7 @@
 
 #include "lensopt/core/scalar.h"
 #include "lensopt/lens/lens.h"
+#include "lensopt/lens/profile_sag.h"
 #include "lensopt/lens/trace_lens.h"
 #include "lensopt/paraxial/paraxial.h"
 #include "lensopt/trace/system.h"
@@ -32,24 +33,12 @@ inline constexpr int kProfileBoundRadii = 8;
 inline constexpr double kProfileMinDomain = 1e-3;
 
 // Paraxial clear semi-aperture (mm) of every surface of `lens` for its specs (paper sampling:
-// entrance-pupil radius f / (2 N), the largest field); 0 where it cannot be computed.
+// entrance-pupil radius f / (2 N), the largest field; paraxial.h); 0 where it cannot be computed.
 template <typename T>
 std::vector<T> paraxial_clear_semi_apertures(const TraceLens<T>& lens, const Specs& specs) {
-  using std::abs;
-  const int k_count = lens.surface_count();
-  std::vector<T> out(k_count, K<T>(0.0));
-  const ParaxialData<T> par = paraxial_data(lens, lens.reference_nm());
-  const T r_ep = par.efl_mm / K<T>(specs.f_number) / K<T>(2.0);
-  const double tan_field = std::tan(specs.half_field_deg * kPi / 180.0);
-  for (int k = 0; k < k_count; ++k) {
-    const ParaxialRay<T> marginal =
-        paraxial_trace(lens, ParaxialRay<T>{r_ep, K<T>(0.0)}, k + 1, lens.reference_nm());
-    const ParaxialRay<T> chief = paraxial_trace(
-        lens, ParaxialRay<T>{-par.entrance_pupil_z_mm * K<T>(tan_field), K<T>(tan_field)}, k + 1,
-        lens.reference_nm());
-    const T h = abs(marginal.y) + abs(chief.y);
-    out[k] = std::isfinite(value_of(h)) ? h : K<T>(0.0);
-  }
+  std::vector<T> out = paraxial_clear_semi_apertures_or_nonfinite(lens, specs);
+  for (T& h : out)
+    if (!std::isfinite(value_of(h))) h = K<T>(0.0);  // not computable: 0
   return out;
 }
 std::vector<double> paraxial_clear_semi_apertures_mm(const TraceLens<double>& lens,
@@ -90,12 +79,11 @@ void profile_bound_residuals(const TraceLens<T>& lens, const std::vector<H>& hei
     for (int j = 1; j <= kProfileBoundRadii; ++j) {
       const H r = heights_mm[k] * K<H>(static_cast<double>(j)) / K<H>(kProfileBoundRadii);
       const T rho = to_t(r * r);
-      const T q2 = K<T>(1.0) - one_plus_k * c * c * rho;
-      // S' with q^2 held at the floor where the domain bound is violated (see header).
+      const T q2 = profile_q2(c, one_plus_k, rho);
+      // S' (lens/profile_sag.h) with q^2 held at the floor where the domain bound is violated
+      // (see header).
       const T q = sqrt(q2 > floor ? q2 : floor);
-      T dp = a[7] * K<T>(8.0);
-      for (int i = 6; i >= 0; --i) dp = a[i] * K<T>(i + 1.0) + rho * dp;
-      const T slope = abs(to_t(K<H>(2.0) * r) * (c / (K<T>(2.0) * q) + dp));
+      const T slope = abs(to_t(K<H>(2.0) * r) * profile_slope_at_q(c, a, rho, q));
       const T over = slope - tan_max;
       residuals[out++] = root_w * (over > zero ? over : zero);
       const T short_of = floor - q2;

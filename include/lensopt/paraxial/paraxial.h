@@ -17,7 +17,9 @@
 #pragma once
 
 #include <cmath>
+#include <vector>
 
+#include "lensopt/core/constants.h"
 #include "lensopt/core/scalar.h"
 #include "lensopt/lens/trace_lens.h"
 
@@ -123,6 +125,32 @@ T solve_last_curvature(const TraceLens<T>& lens, const T& efl_mm, double wavelen
   const T n_before = lens.index_at_nm(last - 1, wavelength_nm);
   const T paraxial = (ray.w + K<T>(1.0) / efl_mm) / (ray.y * (K<T>(1.0) - n_before));
   return lens.asphere.empty() ? paraxial : paraxial - K<T>(2.0) * lens.asphere_term(last, 0);
+}
+
+// Paraxial clear semi-aperture (mm) of every surface of `lens` for `specs` (paper sampling):
+//   h_k = |y_marginal,k| + |y_chief,k|,
+// the marginal ray from the entrance-pupil edge r_EP = EFL / (2 N), the chief ray through the
+// entrance-pupil centre at the largest field hfov (y_0 = -z_EP tan hfov, w_0 = tan hfov): the
+// heights the rays reach. Non-finite where the paraxial rays are (an afocal lens, an entrance
+// pupil at infinity): each caller says what it makes of that.
+template <typename T>
+std::vector<T> paraxial_clear_semi_apertures_or_nonfinite(const TraceLens<T>& lens,
+                                                          const Specs& specs) {
+  using std::abs;
+  const int k_count = lens.surface_count();
+  std::vector<T> out(k_count, K<T>(0.0));
+  const ParaxialData<T> par = paraxial_data(lens, lens.reference_nm());
+  const T r_ep = par.efl_mm / K<T>(specs.f_number) / K<T>(2.0);
+  const double tan_field = std::tan(specs.half_field_deg * kPi / 180.0);
+  for (int k = 0; k < k_count; ++k) {
+    const ParaxialRay<T> marginal =
+        paraxial_trace(lens, ParaxialRay<T>{r_ep, K<T>(0.0)}, k + 1, lens.reference_nm());
+    const ParaxialRay<T> chief = paraxial_trace(
+        lens, ParaxialRay<T>{-par.entrance_pupil_z_mm * K<T>(tan_field), K<T>(tan_field)}, k + 1,
+        lens.reference_nm());
+    out[k] = abs(marginal.y) + abs(chief.y);
+  }
+  return out;
 }
 
 }  // namespace lensopt

@@ -53,6 +53,7 @@
 #include <type_traits>
 
 #include "lensopt/core/scalar.h"
+#include "lensopt/lens/profile_sag.h"
 
 namespace lensopt {
 
@@ -72,30 +73,15 @@ inline constexpr int kNewtonIterations = 40;       // safeguarded scalar Newton 
 inline constexpr int kVectorNewtonSteps = 8;       // branch-free Newton on a chunk (stage a)
 inline constexpr std::size_t kAsphereChunk = 256;  // rays per chunk (stack scratch)
 
-// S(rho) and S'(rho) of an even asphere with terms a[0..7] = a2..a16; q2 = 1 - (1+k) c^2 rho must
-// be > 0 (the caller has checked the domain).
+// S(rho) and S'(rho) of an even asphere with terms a[0..7] = a2..a16 (lens/profile_sag.h); q^2 =
+// 1 - (1+k) c^2 rho must be > 0 (the caller has checked the domain).
 template <typename T>
 inline void asphere_sag(const T& c, const T& one_plus_k, const T* a, const T& rho, T& sag,
                         T& slope) {
   using std::sqrt;
-  const T one = K<T>(1.0);
-  const T q = sqrt(one - one_plus_k * c * c * rho);
-  // Horner in rho, written out (no inner loop, so a ray loop around it vectorizes):
-  // P / rho = a2 + a4 rho + ... + a16 rho^7,  P' = a2 + 2 a4 rho + ... + 8 a16 rho^7.
-  const T p =
-      a[0] +
-      rho * (a[1] +
-             rho * (a[2] + rho * (a[3] + rho * (a[4] + rho * (a[5] + rho * (a[6] + rho * a[7]))))));
-  const T dp =
-      a[0] +
-      rho * (K<T>(2.0) * a[1] +
-             rho * (K<T>(3.0) * a[2] +
-                    rho * (K<T>(4.0) * a[3] +
-                           rho * (K<T>(5.0) * a[4] +
-                                  rho * (K<T>(6.0) * a[5] +
-                                         rho * (K<T>(7.0) * a[6] + rho * (K<T>(8.0) * a[7])))))));
-  sag = c * rho / (one + q) + rho * p;
-  slope = c / (K<T>(2.0) * q) + dp;
+  const T q = sqrt(profile_q2(c, one_plus_k, rho));
+  sag = profile_sag_at_q(c, a, rho, q);
+  slope = profile_slope_at_q(c, a, rho, q);
 }
 
 // Refraction at unit normal (nx, ny, nz) of the direction (l, m, n): the new direction
@@ -197,7 +183,8 @@ inline __attribute__((always_inline)) void trace_surface_conic(
 }
 
 // One Newton step of the header for the asphere in double at path s from (x1, y1, 0): the step
-// ds = g / g', g' and whether the step converges. S and S' share one division:
+// ds = g / g', g' and whether the step converges. S and S' (lens/profile_sag.h) share one division
+// here, for speed (so their last bits may differ from profile_sag_at_q's):
 //   u = 1 / (q (1 + q)),  c rho / (1 + q) = c rho q u,  c / (2 q) = c (1 + q) u / 2,
 // and the test is the header's: |ds| <= tol, or Newton's own error estimate after the step,
 // |g'' / (2 g')| ds^2 <= tol / 10 (quadratic convergence: one step fewer than waiting for a
@@ -215,18 +202,9 @@ inline __attribute__((always_inline)) void asphere_newton_step(double c, double 
   const double q = std::sqrt(1.0 - domain * rho);
   const double one_q = 1.0 + q;
   const double u = 1.0 / (q * one_q);
-  // rho P = sum a_i rho^(i+1): p = P, d1 = (rho P)', d2 = (rho P)''.
-  const double p =
-      a[0] +
-      rho * (a[1] +
-             rho * (a[2] + rho * (a[3] + rho * (a[4] + rho * (a[5] + rho * (a[6] + rho * a[7]))))));
-  const double d1 =
-      a[0] +
-      rho * (2.0 * a[1] +
-             rho * (3.0 * a[2] +
-                    rho * (4.0 * a[3] +
-                           rho * (5.0 * a[4] +
-                                  rho * (6.0 * a[5] + rho * (7.0 * a[6] + rho * (8.0 * a[7])))))));
+  // rho P = sum a_i rho^(i+1): p = P, d1 = (rho P)', d2 = (rho P)'' (lens/profile_sag.h).
+  const double p = asphere_poly(a, rho);
+  const double d1 = asphere_poly_slope(a, rho);
   const double d2 =
       2.0 * a[1] +
       rho * (6.0 * a[2] +
