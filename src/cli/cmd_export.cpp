@@ -41,6 +41,8 @@ void run_export(const ExportCommand& cmd) {
   TraceOptions trace;
   trace.threads = cmd.jobs;
   const ImagingModel model = build_imaging_model(lens, trace);
+  for (const std::string& w : model.warnings)
+    fmt::print(stderr, "lensopt export: warning: {}\n", w);
   std::optional<DiffractionPsfs> diffraction;
   if (cmd.diffraction) {
     WaveOptions wave;

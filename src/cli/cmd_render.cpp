@@ -239,6 +239,8 @@ void run_render(const RenderCommand& cmd) {
   TraceOptions trace;
   trace.threads = cmd.jobs;
   ImagingModel model = build_imaging_model(lens, trace);
+  for (const std::string& w : model.warnings)
+    fmt::print(stderr, "lensopt render: warning: {}\n", w);
   // The geometric PSFs stay as they are; diffraction / auto replace them per field and channel.
   WaveOptions wave;
   wave.pupil_samples = cmd.pupil_samples;

@@ -41,6 +41,33 @@ ImagingModel build_imaging_model(const Lens& lens, const TraceOptions& trace,
   model.ray_failures = report.ray_failures;
   model.psfs = compute_psfs(sys, lens.specs.wavelength_channels, psf, trace.threads);
   const std::string where = lens.source_path.empty() ? lens.name : lens.source_path;
+  // The PSF window's energy share E_k (psf.h): below 99 % the rays outside the G x D um grid are
+  // lost and the kernel, renormalized, is sharper than the spot.
+  constexpr double kWindowShare = 0.99;
+  int short_fields = 0, worst_field = -1, worst_channel = 0;
+  double worst_share = 1.0;
+  for (std::size_t h = 0; h < model.psfs.fields.size(); ++h) {
+    bool short_field = false;
+    for (int k = 0; k < kColourChannels; ++k) {
+      const FieldPsf<double>& f = model.psfs.fields[h];
+      if (f.traced_rays[k] == 0 || !(f.energy_share[k] < kWindowShare)) continue;
+      short_field = true;
+      if (f.energy_share[k] < worst_share) {
+        worst_share = f.energy_share[k];
+        worst_field = static_cast<int>(h);
+        worst_channel = k;
+      }
+    }
+    short_fields += short_field;
+  }
+  if (worst_field >= 0)
+    model.warnings.push_back(fmt::format(
+        "{}: the geometric PSF window ({} x {:g} um = {:g} um) holds {:.1f} % of the traced rays' "
+        "energy at field {:.2f} deg ({}), and less than {:.0f} % at {} of {} fields: the blur "
+        "outside it is cut off, so the image there is sharper than the lens",
+        where, psf.grid_size, psf.bin_um, psf.grid_size * psf.bin_um, 100.0 * worst_share,
+        sys.fields_deg[worst_field], "RGB"[worst_channel], 100.0 * kWindowShare, short_fields,
+        model.psfs.fields.size()));
   for (std::size_t h = 0; h < report.fields.size(); ++h) {
     const FieldReport& f = report.fields[h];
     if (f.traced_rays == 0) {

@@ -128,6 +128,15 @@ grep -q "optiland_lens_floa.zmx: the relative illumination of field 0.00 deg is 
 "$lensopt" render "$floa" "$tmp/in/chart.png" -o "$tmp/floa_nori" -q --no-relative-illumination \
   > /dev/null 2>&1 || fail "floa render --no-relative-illumination"
 [ -f "$tmp/floa_nori/chart.png" ] || fail "floa render --no-relative-illumination: no image"
+# Its 12.5 mm spot does not fit the 260 um PSF window: the render says that its blur is cut off;
+# the Cooke's spots fit, and nothing is said.
+"$lensopt" render "$floa" "$tmp/in/chart.png" -o "$tmp/floa_nori" -q --no-relative-illumination \
+  --force > /dev/null 2> "$tmp/floa_window.err" || fail "floa render --force"
+grep -q "optiland_lens_floa.zmx: the geometric PSF window (65 x 4 um = 260 um) holds 0.2 % .* field 0.00 deg" \
+  "$tmp/floa_window.err" || fail "floa: no PSF window warning: $(cat "$tmp/floa_window.err")"
+"$lensopt" render lenses/cooke.toml "$tmp/in/chart.png" -o "$tmp/cooke_window" -q \
+  > /dev/null 2> "$tmp/cooke_window.err" || fail "cooke render"
+! grep -q "PSF window" "$tmp/cooke_window.err" || fail "cooke: a PSF window warning"
 status=0
 "$lensopt" export "$floa" -o "$tmp/floa_export" > /dev/null 2>&1 || status=$?
 [ "$status" -eq 1 ] || fail "floa export: exit $status"

@@ -90,6 +90,9 @@ struct ImagingModel {
   // Empty when every R_h is known; else the error that using it raises (a field whose pupil or
   // axis edge ray fails): require_relative_illumination.
   std::string unknown_relative_illumination;
+  // What the commands print as warnings (build_imaging_model): the fields whose spot does not fit
+  // the geometric PSF window (psf.h: G x D um), whose energy outside it is cut off.
+  std::vector<std::string> warnings;
   PsfSet<double> psfs;
   TraceOptions trace;
   int ray_failures = 0;
