@@ -33,7 +33,7 @@ py::array_t<float> numpy_of(FloatImage&& img) {
 
 struct PyRenderer {
   std::unique_ptr<Renderer> renderer;
-  std::vector<std::string> psf_warnings;  // apply_psf_kind's (undersampled wavefronts)
+  std::vector<std::string> psf_warnings;  // the model's and apply_psf_kind's
 };
 
 }  // namespace
@@ -43,36 +43,41 @@ void bind_render(py::module_& m) {
       m, "Renderer",
       "Renders images through a lens (`lensopt render`): spatially varying PSF blur on 9 x 9 "
       "patches, relative illumination and distortion. The PSFs are sampled once here.")
-      .def(py::init([](const Lens& lens, int rings, int fields, int res_factor, bool distortion,
-                       bool relative_illumination, int threads, const std::string& psf,
-                       int pupil_samples) {
-             const TraceOptions t = trace_options(rings, fields, true, true, threads);
-             RenderOptions o;
-             o.res_factor = res_factor;
-             o.distortion = distortion;
-             o.relative_illumination = relative_illumination;
-             o.threads = threads;
-             o.validate();
-             lens.validate();
-             const PsfKind kind = parse_psf_kind(psf);
-             if (pupil_samples < 8 || pupil_samples > 1024)
-               throw Error("pupil_samples must be in [8, 1024], not " +
-                           std::to_string(pupil_samples));
-             WaveOptions wave;
-             wave.pupil_samples = pupil_samples;
-             wave.threads = threads;
-             py::gil_scoped_release release;
-             ImagingModel model = build_imaging_model(lens, t);
-             const PsfChoice choice = apply_psf_kind(model, lens, kind, wave);
-             return PyRenderer{std::make_unique<Renderer>(std::move(model), o), choice.warnings};
-           }),
-           py::arg("lens"), py::kw_only(), py::arg("rings") = 32, py::arg("fields") = 21,
-           py::arg("res_factor") = 1, py::arg("distortion") = true,
-           py::arg("relative_illumination") = true, py::arg("threads") = 0,
-           py::arg("psf") = "geometric", py::arg("pupil_samples") = 64,
-           "psf (`render --psf`): 'geometric' (ray density), 'diffraction' (FFT of the pupil "
-           "function on a pupil_samples grid, `--pupil-samples`) or 'auto' (per field and colour "
-           "channel the larger blur, by RMS radius); Renderer.psf says which were used.")
+      .def(
+          py::init([](const Lens& lens, int rings, int fields, int res_factor, bool distortion,
+                      bool relative_illumination, int threads, const std::string& psf,
+                      int pupil_samples) {
+            const TraceOptions t = trace_options(rings, fields, true, true, threads);
+            RenderOptions o;
+            o.res_factor = res_factor;
+            o.distortion = distortion;
+            o.relative_illumination = relative_illumination;
+            o.threads = threads;
+            o.validate();
+            lens.validate();
+            const PsfKind kind = parse_psf_kind(psf);
+            if (pupil_samples < 8 || pupil_samples > 1024)
+              throw Error("pupil_samples must be in [8, 1024], not " +
+                          std::to_string(pupil_samples));
+            WaveOptions wave;
+            wave.pupil_samples = pupil_samples;
+            wave.threads = threads;
+            py::gil_scoped_release release;
+            ImagingModel model = build_imaging_model(lens, t);
+            const PsfChoice choice = apply_psf_kind(model, lens, kind, wave);
+            // The model's (a spot larger than the geometric PSF window), then the wave
+            // analysis's.
+            std::vector<std::string> warnings = model.warnings;
+            warnings.insert(warnings.end(), choice.warnings.begin(), choice.warnings.end());
+            return PyRenderer{std::make_unique<Renderer>(std::move(model), o), std::move(warnings)};
+          }),
+          py::arg("lens"), py::kw_only(), py::arg("rings") = 32, py::arg("fields") = 21,
+          py::arg("res_factor") = 1, py::arg("distortion") = true,
+          py::arg("relative_illumination") = true, py::arg("threads") = 0,
+          py::arg("psf") = "geometric", py::arg("pupil_samples") = 64,
+          "psf (`render --psf`): 'geometric' (ray density), 'diffraction' (FFT of the pupil "
+          "function on a pupil_samples grid, `--pupil-samples`) or 'auto' (per field and colour "
+          "channel the larger blur, by RMS radius); Renderer.psf says which were used.")
       .def(
           "render",
           [](const PyRenderer& r, const FloatArray& image) {
@@ -150,7 +155,8 @@ void bind_render(py::module_& m) {
           "'diffraction' or 'auto'), diffraction (fields x 3 bool: the diffraction PSF is used "
           "for that field and colour channel R, G, B; auto: where its blur is the larger), "
           "diffraction_channels (their count), the diffraction PSFs' pupil_samples, padding and "
-          "fft_n (0 for geometric) and the wave analysis's warnings.");
+          "fft_n (0 for geometric) and the warnings (a spot larger than the geometric PSF window; "
+          "the wave analysis's).");
 
   m.def(
       "read_image",

@@ -185,6 +185,11 @@ class Rendering(unittest.TestCase):
         self.assertEqual(geometric.psf["diffraction"].shape, (3, 3))
         self.assertFalse(geometric.psf["diffraction"].any())
         self.assertEqual(geometric.psf["pupil_samples"], 0)
+        # The Doublet's full-field spot does not fit the 260 um PSF window (the CLI warns too).
+        self.assertTrue(any("PSF window" in w for w in geometric.psf["warnings"]),
+                        geometric.psf["warnings"])
+        cooke = lensopt.Renderer(load(LENSES / "cooke.toml"), rings=4, fields=3)
+        self.assertFalse(any("PSF window" in w for w in cooke.psf["warnings"]))
         diffraction = lensopt.Renderer(lens, rings=4, fields=3, psf="diffraction",
                                        pupil_samples=16)
         self.assertTrue(diffraction.psf["diffraction"].all())
