@@ -96,6 +96,7 @@ void bind_render(py::module_& m) {
           "maps",
           [](const PyRenderer& r, int width, int height) {
             const ImagingModel& model = r.renderer->model();
+            require_relative_illumination(model);
             const SensorGeometry geo = SensorGeometry::make(
                 width, height, r.renderer->options().res_factor, model.sensor_diagonal_mm);
             std::vector<double> ri(static_cast<std::size_t>(width) * height), distortion(ri.size()),

@@ -124,13 +124,10 @@ class ProgressCallback : public ceres::IterationCallback {
       best_.push_back(best_.back());
     const int n = static_cast<int>(best_.size());
     if (stall_window_ > 0 && n > stall_window_ &&
-        !(best_[n - 1] < (1.0 - stall_relative_) * best_[n - 1 - stall_window_])) {
-      stalled_ = true;
+        !(best_[n - 1] < (1.0 - stall_relative_) * best_[n - 1 - stall_window_]))
       return ceres::SOLVER_TERMINATE_SUCCESSFULLY;
-    }
     return ceres::SOLVER_CONTINUE;
   }
-  bool stalled() const { return stalled_; }
 
  private:
   std::string phase_;
@@ -139,7 +136,6 @@ class ProgressCallback : public ceres::IterationCallback {
   int stall_window_;
   double stall_relative_;
   std::vector<double> best_;  // the best cost after each iteration
-  bool stalled_ = false;
 };
 
 DesignLoss<double> evaluate_double(const LensParameterization& param, const std::vector<double>& x,
@@ -864,8 +860,7 @@ class LensOptimization {
   void finish() {
     // A design that is not a lens (the penalties are soft: a glass thickness driven below 0 by
     // bounds far from the lens's own, as the paper's 1..3 mm on a 100 mm double Gauss) cannot
-    // be analysed; it is behind every start.
-    std::string not_a_lens;
+    // be analysed; it is behind every start (an infinite merit below keeps the start).
     try {
       ConstraintReport final_constraints = restore_feasibility();
       result_.lens = result_lens(x_);
@@ -879,11 +874,10 @@ class LensOptimization {
       if (wavefront_)
         result_.final_wavefront_waves = full_wavefront_waves(result_.lens, full_.trace);
     } catch (const Error& e) {
-      not_a_lens = e.what();
       result_.final_spot_um = result_.final_wavefront_waves =
           std::numeric_limits<double>::infinity();
       result_.log.push_back(
-          fmt::format("the final design is not a valid lens ({}); the start is kept", not_a_lens));
+          fmt::format("the final design is not a valid lens ({}); the start is kept", e.what()));
     }
     // Never return a worse lens than the start: designs are ordered by (every constraint met at
     // full sampling, then the merit at full sampling: mean spot, or mean RMS wavefront); a start
@@ -896,7 +890,7 @@ class LensOptimization {
     const double final_merit = wavefront_ ? result_.final_wavefront_waves : result_.final_spot_um;
     const bool start_not_behind =
         (start_ok && !final_ok) || (start_ok == final_ok && !(final_merit < start_merit));
-    if (!not_a_lens.empty() || start_not_behind || !std::isfinite(final_merit)) {
+    if (start_not_behind || !std::isfinite(final_merit)) {
       result_.lens = start_;
       result_.final_spot_um = result_.start_spot_um;
       result_.final_field_spot_um = result_.start_field_spot_um;

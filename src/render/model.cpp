@@ -124,7 +124,6 @@ void require_relative_illumination(const ImagingModel& model) {
 }
 
 double relative_illumination_at(const ImagingModel& model, double radius_mm) {
-  require_relative_illumination(model);
   return interpolate_linear(model.reference_y_mm, model.relative_illumination, radius_mm, false);
 }
 

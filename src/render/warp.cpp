@@ -67,6 +67,7 @@ __attribute__((target_clones("arch=x86-64-v3", "default"))) void warp_row(const 
 std::shared_ptr<const std::vector<float>> Renderer::illumination_map(int width, int height) const {
   std::lock_guard<std::mutex> lock(mutex_);
   if (auto found = illumination_maps_.find(width, height)) return found;
+  require_relative_illumination(model_);  // here, not inside the parallel loop
   const SensorGeometry geo =
       SensorGeometry::make(width, height, options_.res_factor, model_.sensor_diagonal_mm);
   auto map = std::make_shared<std::vector<float>>(static_cast<std::size_t>(width) * height);

@@ -33,37 +33,7 @@ std::filesystem::path fresh_dir(const std::string& name) {
   return dir;
 }
 
-// Six generated 192 x 112 scenes (COCO) in dir/data.
-std::filesystem::path tiny_dataset(const std::filesystem::path& dir) {
-  SceneSetOptions s;
-  s.count = 6;
-  s.width = 192;
-  s.height = 112;
-  s.seed = 5;
-  write_detection_scenes(dir / "data", s);
-  return dir / "data" / "annotations.json";
-}
-
-JointOptions tiny_detection_options(const std::filesystem::path& dir) {
-  JointOptions o;
-  o.task = "detection";
-  o.data.annotations = tiny_dataset(dir);
-  o.data.crop_px = 64;
-  o.data.batch_size = 2;
-  o.data.eval_crops = 3;
-  o.data.holdout_fraction = 0.34;
-  o.imaging.sampling.rings = 4;
-  o.imaging.sampling.fields = 5;
-  o.imaging.res_factor = 2;
-  o.design_sampling.rings = 4;
-  o.design_sampling.fields = 3;
-  o.task_options.learning_rate = 2e-3;
-  o.constant_steps = 2;
-  o.decay_steps = 2;
-  o.verbose = false;
-  o.log_csv = dir / "log.csv";
-  return o;
-}
+using test::tiny_detection_options;
 
 }  // namespace
 
@@ -202,7 +172,7 @@ TEST_CASE(
   io.res_factor = 2;
   DifferentiableImaging imaging(param, GlassMode::kContinuous, {}, io);
   DataOptions d;
-  d.annotations = tiny_dataset(dir);
+  d.annotations = test::tiny_detection_dataset(dir);
   d.crop_px = 48;
   JointData data(d);
   std::vector<Sample> samples;

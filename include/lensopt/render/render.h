@@ -181,7 +181,7 @@ void check_image_holds_psf(int width, int height, int max_radius, double pitch_u
 void require_relative_illumination(const ImagingModel& model);
 
 // Relative illumination and distortion at a radial height (mm), by the interpolation above
-// (relative_illumination_at throws as require_relative_illumination).
+// (relative_illumination_at: the caller has checked require_relative_illumination once).
 double relative_illumination_at(const ImagingModel& model, double radius_mm);
 double distortion_at(const ImagingModel& model, double radius_mm);  // D(r)
 // The inverse distortion: the undistorted height r whose image lies at r'. Throws Error if the
