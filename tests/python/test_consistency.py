@@ -54,7 +54,9 @@ class FieldDataMatchesAnalyze(unittest.TestCase):
                 if all(n > 0 for n in spots["traced_rays"]):
                     psf = lensopt.psfs(lens, rings=8, fields=7, grid_size=33)
                     self.assertEqual(psf["centroid_y_mm"], expected["centroid_y_mm"])
-                    np.testing.assert_allclose(psf["psf"].sum(axis=(2, 3)), 1.0, atol=1e-12)
+                    # Each channel sums to 1, or to 0 where its whole spot is outside the grid.
+                    sums = psf["psf"].sum(axis=(2, 3))
+                    self.assertTrue(np.all((np.abs(sums - 1.0) < 1e-12) | (sums == 0.0)), sums)
                 checked += 1
         self.assertGreaterEqual(checked, 20)
 

@@ -61,7 +61,7 @@ std::vector<Case> corpus() {
     try {
       out.push_back({p.filename().string(), read_lens(p)});
     } catch (const Error& e) {
-      MESSAGE("not in the corpus (refused with a message): " << e.what());
+      MESSAGE("not in the corpus (refused with a message): " << std::string(e.what()));
     }
   }
   // Variants of a 100 mm achromat as written and of a 50 mm Cooke triplet.
@@ -191,7 +191,7 @@ TEST_CASE("consistency: analyze, field optics, the imaging model and PSFs agree 
     try {
       report = analyze_lens(c.lens, options);
     } catch (const Error& e) {
-      MESSAGE(c.name << ": analyze refuses it: " << e.what());
+      MESSAGE(c.name << ": analyze refuses it: " << std::string(e.what()));
       continue;
     }
     const TraceSystem<double> sys = prepare_lens_system(c.lens, options.trace);
@@ -223,7 +223,7 @@ TEST_CASE("consistency: analyze, field optics, the imaging model and PSFs agree 
     try {
       model = build_imaging_model(c.lens, options.trace);
     } catch (const Error& e) {
-      MESSAGE(c.name << ": the imaging model refuses it: " << e.what());
+      MESSAGE(c.name << ": the imaging model refuses it: " << std::string(e.what()));
       continue;
     }
     REQUIRE(model.fields_deg.size() == report.fields.size());
