@@ -5,7 +5,7 @@
 
 #include "bindings.h"
 #include "lensopt/analysis/analyze.h"
-#include "lensopt/analysis/field_maps.h"
+#include "lensopt/analysis/field_optics.h"
 #include "lensopt/analysis/spot.h"
 #include "lensopt/analysis/zernike.h"
 #include "lensopt/core/error.h"
@@ -14,7 +14,9 @@
 namespace lensopt::python {
 namespace {
 
-// The lens with an optional dispersion override, traced and prepared.
+// The lens with an optional dispersion override, traced and prepared in its own spec mode, as
+// the CLI prepares it (prepare_lens_system); a half field given (trace_pupil) traces the paper's
+// mode with that field.
 TraceSystem<double> system_of(const Lens& lens_in, const TraceOptions& options,
                               const std::string& dispersion, double half_field_deg = -1) {
   Lens lens = lens_in;
@@ -25,8 +27,9 @@ TraceSystem<double> system_of(const Lens& lens_in, const TraceOptions& options,
   else if (!dispersion.empty())
     throw Error("dispersion must be 'abbe' or 'catalog', not '" + dispersion + "'");
   lens.validate();
+  if (half_field_deg < 0) return prepare_lens_system(lens, options);
   return prepare_system(make_trace_lens(lens), lens.specs.focal_length_mm(), lens.specs.f_number,
-                        half_field_deg >= 0 ? half_field_deg : lens.specs.half_field_deg, options);
+                        half_field_deg, options);
 }
 
 // Wavelength index of the system: -1 the reference (587.6 nm), else 0..W-1.
@@ -277,11 +280,25 @@ void bind_analysis(py::module_& m) {
           s = evaluate_spots(sys, threads);
         }
         py::dict d;
-        std::vector<double> um;
-        for (double v : s.rms_spot_mm) um.push_back(v * 1000.0);
+        // None for a field no ray reaches (and then for the mean), as `lensopt analyze --json`
+        // writes null: a spot of 0 would be a number the lens does not have.
+        py::list um;
+        bool all_traced = true;
+        for (std::size_t h = 0; h < s.rms_spot_mm.size(); ++h) {
+          if (s.traced_rays[h] > 0) {
+            um.append(s.rms_spot_mm[h] * 1000.0);
+          } else {
+            um.append(py::none());
+            all_traced = false;
+          }
+        }
+        d["field_values"] = sys.field_values;
         d["fields_deg"] = sys.fields_deg;
         d["rms_spot_um"] = um;
-        d["mean_rms_spot_um"] = s.mean_rms_spot_mm * 1000.0;
+        if (all_traced)
+          d["mean_rms_spot_um"] = s.mean_rms_spot_mm * 1000.0;
+        else
+          d["mean_rms_spot_um"] = py::none();
         d["centroid_y_mm"] = s.centroid_y_mm;
         d["traced_rays"] = s.traced_rays;
         d["failed_rays"] = s.failed_rays;
@@ -338,22 +355,28 @@ void bind_analysis(py::module_& m) {
       [](const Lens& lens, int rings, int fields, bool ray_aiming, int threads) {
         const TraceOptions o = trace_options(rings, fields, ray_aiming, true, threads);
         const TraceSystem<double> sys = system_of(lens, o, "");
-        std::vector<double> yref, ri;
-        SpotResult<double> s;
+        FieldOpticsOptions fo;
+        fo.threads = threads;
+        FieldOptics<double> f;
         {
           py::gil_scoped_release release;
-          yref = reference_heights(sys);
-          ri = relative_illuminations(sys);
-          s = evaluate_spots(sys, threads);
+          f = measure_fields(sys, fo);
         }
-        std::vector<double> distortion;
-        for (std::size_t h = 0; h < yref.size(); ++h)
-          distortion.push_back(field_distortion(s.centroid_y_mm[h], yref[h], yref.back()));
+        // The relative illumination where it is known, None where an edge ray fails (as
+        // `lensopt analyze --json` writes null there).
+        py::list ri;
+        for (std::size_t h = 0; h < f.size(); ++h) {
+          if (f.relative_illumination_known[h])
+            ri.append(f.relative_illumination[h]);
+          else
+            ri.append(py::none());
+        }
         py::dict d;
-        d["fields_deg"] = sys.fields_deg;
-        d["reference_y_mm"] = yref;
-        d["centroid_y_mm"] = s.centroid_y_mm;
-        d["distortion"] = distortion;
+        d["fields_deg"] = f.fields_deg;
+        d["field_values"] = f.field_values;
+        d["reference_y_mm"] = f.reference_y_mm;
+        d["centroid_y_mm"] = f.spots.centroid_y_mm;
+        d["distortion"] = f.distortion;
         d["relative_illumination"] = ri;
         return d;
       },

@@ -7,9 +7,8 @@
 #include <nlohmann/json.hpp>
 
 #include "core/json_number.h"
-#include "lensopt/analysis/field_maps.h"
+#include "lensopt/analysis/field_optics.h"
 #include "lensopt/analysis/forms_image.h"
-#include "lensopt/analysis/spot.h"
 #include "lensopt/core/error.h"
 #include "lensopt/paraxial/paraxial.h"
 
@@ -27,7 +26,10 @@ AnalysisReport analyze_lens(const Lens& lens_in, const AnalyzeOptions& options) 
   Lens lens = lens_in;
   if (options.dispersion) lens.specs.dispersion = *options.dispersion;
   const TraceSystem<double> sys = prepare_lens_system(lens, options.trace);
-  const SpotResult<double> spots = evaluate_spots(sys, options.trace.threads);
+  FieldOpticsOptions field_options;
+  field_options.threads = options.trace.threads;
+  const FieldOptics<double> measured = measure_fields(sys, field_options);
+  const SpotResult<double>& spots = measured.spots;
 
   AnalysisReport r;
   r.lens_name = lens.name;
@@ -69,10 +71,6 @@ AnalysisReport analyze_lens(const Lens& lens_in, const AnalyzeOptions& options) 
   r.primary_wavelength_nm = sys.lens.reference_nm();
 
   const int field_count = static_cast<int>(sys.fields_deg.size());
-  const std::vector<double> y_ref = reference_heights(sys);
-  const double y_ref_last = y_ref.back();
-  std::vector<char> ri_known;
-  const std::vector<double> ri = relative_illuminations(sys, &ri_known);
 
   double spot_sum = 0, weight_sum = 0;
   bool all_fields_traced = true;
@@ -93,10 +91,10 @@ AnalysisReport analyze_lens(const Lens& lens_in, const AnalyzeOptions& options) 
     }
     f.centroid_y_mm = spots.centroid_y_mm[h];
     f.centroid_x_mm = spots.centroid_x_mm[h];
-    f.reference_y_mm = y_ref[h];
-    f.distortion_percent =
-        f.traced_rays > 0 ? 100.0 * field_distortion(f.centroid_y_mm, y_ref[h], y_ref_last) : 0.0;
-    if (ri_known[h]) f.relative_illumination = ri[h];
+    f.reference_y_mm = measured.reference_y_mm[h];
+    f.distortion_percent = 100.0 * measured.distortion[h];
+    if (measured.relative_illumination_known[h])
+      f.relative_illumination = measured.relative_illumination[h];
     // Ray-aiming error over all wavelengths (and the reference one).
     double worst = 0;
     for (int w = 0; w <= sys.wavelength_count; ++w) {

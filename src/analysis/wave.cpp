@@ -21,21 +21,6 @@ namespace {
 
 using Complex = std::complex<double>;
 
-// In-place complex 2-D plans, one per size, made under a lock (FFTW's planner is not
-// thread-safe); executing them on other arrays of the same alignment is.
-fftw_plan complex_plan(int m) {
-  static std::mutex mutex;
-  static std::map<int, fftw_plan> cache;
-  std::lock_guard<std::mutex> lock(mutex);
-  auto it = cache.find(m);
-  if (it != cache.end()) return it->second;
-  ComplexBuffer buffer(static_cast<std::size_t>(m) * m);
-  fftw_plan plan = fftw_plan_dft_2d(m, m, buffer.data, buffer.data, FFTW_FORWARD, FFTW_ESTIMATE);
-  if (!plan) throw Error(fmt::format("FFTW cannot plan {}x{}", m, m));
-  cache.emplace(m, plan);
-  return plan;
-}
-
 // Cubic (4-point Lagrange) interpolation of samples a(k) at s = k0 + t, t in [0, 1):
 //   a(s) ~ -t(t-1)(t-2)/6 a(k0-1) + (t+1)(t-1)(t-2)/2 a(k0) - (t+1)t(t-2)/2 a(k0+1)
 //          + (t+1)t(t-1)/6 a(k0+2),
@@ -160,7 +145,7 @@ MonoWave mono_wave(const TraceSystem<double>& sys, int h, int w, const PupilGrid
           std::max(out.max_step_waves, std::abs(wf.opd_waves[j] - wf.opd_waves[i]));
     }
   }
-  fftw_execute_dft(complex_plan(m), field, field);
+  fftw_execute_dft(complex_fft_plan(m), field, field);
   double* intensity = scratch.intensity->data;
   const double norm = 1.0 / (amplitude_sum * amplitude_sum);
   double peak = 0;
@@ -410,7 +395,7 @@ WaveReport analyze_wave(const TraceSystem<double>& sys, const WaveOptions& optio
     report.fields[f].mono.resize(wl_count);
   }
   const int nthreads = thread_count(options.threads);
-  complex_plan(m);
+  complex_fft_plan(m);
   fft_plans(m, m);
 #pragma omp parallel num_threads(nthreads)
   {

@@ -21,10 +21,20 @@ int fft_size(int m) {
   }
 }
 
+namespace {
+
+// FFTW's planner is not thread-safe: every plan of the process is made under this one lock (the
+// real plans of the renderer and the complex plans of wave optics alike).
+std::mutex& planner_mutex() {
+  static std::mutex mutex;
+  return mutex;
+}
+
+}  // namespace
+
 FftPlans fft_plans(int ny, int nx) {
-  static std::mutex planner_mutex;
   static std::map<std::pair<int, int>, FftPlans> cache;
-  std::lock_guard<std::mutex> lock(planner_mutex);
+  std::lock_guard<std::mutex> lock(planner_mutex());
   auto it = cache.find({ny, nx});
   if (it != cache.end()) return it->second;
   RealBuffer real(static_cast<std::size_t>(ny) * nx);
@@ -36,6 +46,18 @@ FftPlans fft_plans(int ny, int nx) {
   if (!plans.forward || !plans.backward) throw Error(fmt::format("FFTW cannot plan {}x{}", ny, nx));
   cache.emplace(std::make_pair(ny, nx), plans);
   return plans;
+}
+
+fftw_plan complex_fft_plan(int m) {
+  static std::map<int, fftw_plan> cache;
+  std::lock_guard<std::mutex> lock(planner_mutex());
+  auto it = cache.find(m);
+  if (it != cache.end()) return it->second;
+  ComplexBuffer buffer(static_cast<std::size_t>(m) * m);
+  fftw_plan plan = fftw_plan_dft_2d(m, m, buffer.data, buffer.data, FFTW_FORWARD, FFTW_ESTIMATE);
+  if (!plan) throw Error(fmt::format("FFTW cannot plan {}x{}", m, m));
+  cache.emplace(m, plan);
+  return plan;
 }
 
 }  // namespace lensopt

@@ -48,6 +48,11 @@ struct FftPlans {
 };
 FftPlans fft_plans(int ny, int nx);
 
+// The in-place complex forward m x m plan (wave optics' pupil FFT), made once per size under the
+// same planner lock as fft_plans; executing it on other arrays of the same alignment
+// (fftw_execute_dft) is thread-safe.
+fftw_plan complex_fft_plan(int m);
+
 // Symmetric reflection of index i into [0, n): ..., 1, 0 | 0, 1, ..., n-1 | n-1, ...
 inline int reflect_index(int i, int n) {
   const int period = 2 * n;

@@ -9,7 +9,7 @@
 #include <type_traits>
 
 #include "imaging_detail.h"
-#include "lensopt/analysis/field_maps.h"
+#include "lensopt/analysis/field_optics.h"
 #include "lensopt/core/error.h"
 #include "lensopt/core/jet_width.h"
 #include "lensopt/core/threads.h"
@@ -54,14 +54,21 @@ Optics sample_optics_as(const LensParameterization& param, GlassMode mode,
     xj[j] = seed_variable(x[j], static_cast<int>(j), static_cast<J*>(nullptr));
   const TraceLens<J> lens = param.to_trace_lens(xj.data(), mode, fixed_glasses);
   const TraceSystem<J> sys = prepare_system(lens, specs, options.sampling);
-  const std::vector<J> y_ref = reference_heights(sys);
-  const std::vector<J> ri = relative_illuminations(sys);
+  const int trace_threads =
+      options.sampling.threads > 0 ? options.sampling.threads : options.threads;
+  // One trace for the field maps and the PSFs (analysis/field_optics.h): the centroid that
+  // centres each PSF is the one the distortion is measured with, as in `lensopt render`.
+  FieldOpticsOptions field_options;
+  field_options.threads = trace_threads;
+  PsfRayCollector<J> rays(sys);
+  const FieldOptics<J> measured = measure_fields(sys, field_options, rays);
+  const std::vector<J>& y_ref = measured.reference_y_mm;
+  const std::vector<J>& ri = measured.relative_illumination;
   timings.trace_s = seconds_since(start);
 
   start = Clock::now();
-  const int trace_threads =
-      options.sampling.threads > 0 ? options.sampling.threads : options.threads;
-  const PsfSet<J> psfs = compute_psfs(sys, specs.wavelength_channels, options.psf, trace_threads);
+  const PsfSet<J> psfs = psfs_from_rays(sys, measured.spots, rays, specs.wavelength_channels,
+                                        options.psf, trace_threads);
   Optics o;
   o.variables = n;  // 0: values only
   o.fields_deg = sys.fields_deg;

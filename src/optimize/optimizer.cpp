@@ -515,7 +515,7 @@ bool is_paper_lens_impl(const Lens& lens) {
 
 DesignLossOptions lens_derived_bounds(const Lens& lens, const DesignLossOptions& paper) {
   DesignLossOptions out = paper;
-  const double f = std::abs(lens.specs.focal_length_mm());
+  const double f = std::abs(design_focal_length_mm(lens));
   const double s = std::isfinite(f) && f > 0.0 ? f / 50.0 : 1.0;
   out.min_air_mm = s * paper.min_air_mm;
   out.min_glass_mm = s * paper.min_glass_mm;

@@ -68,11 +68,25 @@ std::vector<int> GlassSpace::by_distance(const Eigen::Vector2d& g) const {
   return order;
 }
 
+double design_focal_length_mm(const Lens& lens) {
+  if (lens.specs.mode != SpecMode::kAsWritten || lens.specs.half_field_deg == 0.0)
+    return lens.specs.focal_length_mm();
+  const TraceLens<double> trace = make_trace_lens(lens);
+  return paraxial_data(trace, trace.reference_nm()).efl_mm;
+}
+
 LensParameterization::LensParameterization(const Lens& lens, GlassSpace glasses,
                                            const std::vector<std::string>& profile_variables)
     : structure_(lens), glasses_(std::move(glasses)) {
   lens.validate();
-  focal_length_mm_ = lens.specs.focal_length_mm();
+  focal_length_mm_ = design_focal_length_mm(lens);
+  if (lens.specs.mode == SpecMode::kAsWritten && lens.specs.half_field_deg != 0.0 &&
+      !(focal_length_mm_ > 0.0))
+    throw Error(SourceLocation{lens.source_path},
+                fmt::format("the optimizer holds a lens's own focal length, and this lens's "
+                            "paraxial focal length is {:.6g} mm: only lenses of positive power "
+                            "can be optimized yet",
+                            focal_length_mm_));
   if (!std::isfinite(focal_length_mm_) || !(focal_length_mm_ > 0.0)) {
     // A lens traced as written has no sensor diagonal of its own (16 mm is a default): on axis
     // only, the message names what to add, not d / (2 tan 0).

@@ -110,8 +110,13 @@ double psf_rms_radius_um(const std::vector<double>& grid, const PsfOptions& opti
 
 DiffractionPsfs model_diffraction_psfs(const ImagingModel& model, const Lens& lens,
                                        const WaveOptions& wave) {
-  const TraceSystem<double> sys =
-      prepare_system(make_trace_lens(lens), lens_setup(lens, model.trace), model.trace);
+  // The model's own traced system (build_imaging_model prepares it once), else one of the same
+  // lens and sampling.
+  const TraceSystem<double> own =
+      model.system
+          ? TraceSystem<double>{}
+          : prepare_system(make_trace_lens(lens), lens_setup(lens, model.trace), model.trace);
+  const TraceSystem<double>& sys = model.system ? *model.system : own;
   WaveOptions w = wave;
   if (w.threads == 0) w.threads = model.trace.threads;
   return diffraction_psfs(sys, lens.specs.wavelength_channels,

@@ -3,8 +3,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <memory>
 
-#include "lensopt/analysis/analyze.h"
+#include "lensopt/analysis/field_optics.h"
 #include "lensopt/core/error.h"
 #include "lensopt/core/interpolate.h"
 #include "lensopt/render/render.h"
@@ -28,18 +29,25 @@ ImagingModel build_imaging_model(const Lens& lens, const TraceOptions& trace,
   psf.validate();
   validate_wavelength_channels(lens.specs.wavelength_channels,
                                static_cast<int>(lens.specs.wavelengths_nm.size()));
-  AnalyzeOptions analyze_options;
-  analyze_options.trace = trace;
-  const AnalysisReport report = analyze_lens(lens, analyze_options);
-  const TraceLens<double> trace_lens = make_trace_lens(lens);
-  const TraceSystem<double> sys = prepare_system(trace_lens, lens_setup(lens, trace), trace);
+  // One prepared system and one trace: the spot, centroids, distortion and relative illumination
+  // (analysis/field_optics.h, the numbers `lensopt analyze` prints) and the geometric PSFs come
+  // from the same rays.
+  auto sys_ptr = std::make_shared<const TraceSystem<double>>(
+      prepare_system(make_trace_lens(lens), lens_setup(lens, trace), trace));
+  const TraceSystem<double>& sys = *sys_ptr;
+  FieldOpticsOptions field_options;
+  field_options.threads = trace.threads;
+  PsfRayCollector<double> rays(sys);
+  const FieldOptics<double> measured = measure_fields(sys, field_options, rays);
 
   ImagingModel model;
   model.lens_name = lens.name;
   model.sensor_diagonal_mm = lens.specs.sensor_diagonal_mm;
   model.trace = trace;
-  model.ray_failures = report.ray_failures;
-  model.psfs = compute_psfs(sys, lens.specs.wavelength_channels, psf, trace.threads);
+  model.system = sys_ptr;
+  model.ray_failures = measured.spots.total_failed;
+  model.psfs =
+      psfs_from_rays(sys, measured.spots, rays, lens.specs.wavelength_channels, psf, trace.threads);
   const std::string where = lens.source_path.empty() ? lens.name : lens.source_path;
   // The PSF window's energy share E_k (psf.h): below 99 % the rays outside the G x D um grid are
   // lost and the kernel, renormalized, is sharper than the spot.
@@ -68,26 +76,26 @@ ImagingModel build_imaging_model(const Lens& lens, const TraceOptions& trace,
         where, psf.grid_size, psf.bin_um, psf.grid_size * psf.bin_um, 100.0 * worst_share,
         sys.fields_deg[worst_field], "RGB"[worst_channel], 100.0 * kWindowShare, short_fields,
         model.psfs.fields.size()));
-  for (std::size_t h = 0; h < report.fields.size(); ++h) {
-    const FieldReport& f = report.fields[h];
-    if (f.traced_rays == 0) {
-      throw Error(
-          SourceLocation{where},
-          fmt::format("cannot render: no ray of field {:.2f} deg reaches the image", f.field_deg));
+  for (std::size_t h = 0; h < measured.size(); ++h) {
+    if (measured.spots.traced_rays[h] == 0) {
+      throw Error(SourceLocation{where},
+                  fmt::format("cannot render: no ray of field {:.2f} deg reaches the image",
+                              measured.fields_deg[h]));
     }
-    model.fields_deg.push_back(f.field_deg);
-    model.reference_y_mm.push_back(f.reference_y_mm);
-    model.centroid_y_mm.push_back(f.centroid_y_mm);
-    model.distortion.push_back(f.distortion_percent / 100.0);
-    if (!f.relative_illumination && model.unknown_relative_illumination.empty())
+    model.fields_deg.push_back(measured.fields_deg[h]);
+    model.reference_y_mm.push_back(measured.reference_y_mm[h]);
+    model.centroid_y_mm.push_back(measured.spots.centroid_y_mm[h]);
+    model.distortion.push_back(measured.distortion[h]);
+    if (!measured.relative_illumination_known[h] && model.unknown_relative_illumination.empty())
       model.unknown_relative_illumination =
           Error(SourceLocation{where},
                 fmt::format("the relative illumination of field {:.2f} deg is unknown (an edge "
                             "ray of its pupil or of the axis fails): render with "
                             "--no-relative-illumination",
-                            f.field_deg))
+                            measured.fields_deg[h]))
               .what();
-    model.relative_illumination.push_back(f.relative_illumination.value_or(0.0));
+    model.relative_illumination.push_back(
+        measured.relative_illumination_known[h] ? measured.relative_illumination[h] : 0.0);
   }
   for (std::size_t h = 1; h < model.reference_y_mm.size(); ++h) {
     if (!(model.reference_y_mm[h] > model.reference_y_mm[h - 1])) {

@@ -12,6 +12,7 @@
 #include "lensopt/lens/lens_io.h"
 #include "lensopt/optimize/free_jacobian.h"
 #include "lensopt/optimize/optimizer.h"
+#include "lensopt/paraxial/paraxial.h"
 #include "test_support.h"
 
 using namespace lensopt;
@@ -420,4 +421,35 @@ TEST_CASE("optimize: the free-variable Jacobian in several Jet passes, all varia
   evaluate_cost(*none, x, r, jac);
   for (int row = 0; row < 5; ++row) CHECK(r[row] == r_ref[row]);
   for (double v : jac) CHECK(v == 0.0);
+}
+
+TEST_CASE("optimize: a lens traced as written keeps its own focal length, at a finite object too") {
+  // A 100 mm achromat (as written: EFL ~100 mm) at a 300 mm object, object-height fields, with
+  // the paper's sensor and field defaults (16 mm, 25 deg) left in its specs: the optimizer held
+  // d / (2 tan 25 deg) = 17.156 mm and returned a 17 mm lens.
+  Lens lens = read_lens(test::source_dir() / "lenses" / "zmx" / "achromat_ac254_100.zmx");
+  lens.specs.object_distance_mm = 300.0;
+  lens.specs.field_type = FieldType::kObjectHeight;
+  lens.specs.fields = {{0.0, 1.0, {}}, {6.0, 1.0, {}}, {12.0, 1.0, {}}};
+  lens.specs.sensor_diagonal_mm = 16.0;
+  lens.specs.half_field_deg = 25.0;
+  REQUIRE(lens.specs.mode == SpecMode::kAsWritten);
+  const TraceLens<double> start_trace = make_trace_lens(lens);
+  const double efl_start = paraxial_data(start_trace, start_trace.reference_nm()).efl_mm;
+  CHECK(design_focal_length_mm(lens) == efl_start);
+  CHECK(efl_start > 99.0);
+  OptimizeOptions options;
+  options.sampling = small_sampling();
+  options.glass_search = GlassSearch::kNone;
+  options.max_iterations = 15;
+  options.max_rounds = 1;
+  options.verbose = false;
+  options.loss = bounds_for(lens, options.loss, BoundsMode::kAuto);
+  const OptimizeResult result = optimize_lens(lens, options);
+  const TraceLens<double> final_trace = make_trace_lens(result.lens);
+  const double efl_final = paraxial_data(final_trace, final_trace.reference_nm()).efl_mm;
+  MESSAGE("achromat at 300 mm: EFL ", efl_start, " -> ", efl_final, " mm; spot ",
+          result.start_spot_um, " -> ", result.final_spot_um, " um");
+  CHECK(std::abs(efl_final - efl_start) <= 1e-6 * efl_start);
+  CHECK(result.final_spot_um <= result.start_spot_um);
 }

@@ -237,10 +237,14 @@ struct ThroughFocusSpot {
   }
 };
 
-// Traces every field, wavelength and pupil sample of `sys` and returns the spot sizes. Fields
-// are spread over threads (OpenMP); `threads` <= 0 uses all.
-template <typename T>
-SpotResult<T> evaluate_spots(const TraceSystem<T>& sys, int threads = 0) {
+// Traces every field, wavelength and pupil sample of `sys` once and returns the spot sizes.
+// Fields are spread over threads (OpenMP); `threads` <= 0 uses all. `on_rays(h, w, rays)` is
+// called with every traced bundle (field h, spec wavelength w) inside the parallel loop, from
+// the thread that traces field h: whatever it stores per field is written by one thread only.
+// This is the one trace of the field products (analysis/field_optics.h measure_fields, the
+// geometric PSFs of render/psf.h): they read these rays instead of tracing their own.
+template <typename T, typename OnRays>
+SpotResult<T> trace_fields(const TraceSystem<T>& sys, int threads, OnRays&& on_rays) {
   const int field_count = static_cast<int>(sys.fields_deg.size());
   SpotResult<T> out;
   out.rms_spot_mm.assign(field_count, K<T>(0.0));
@@ -278,6 +282,7 @@ SpotResult<T> evaluate_spots(const TraceSystem<T>& sys, int threads = 0) {
           if (rays.failed_surface[i] >= 0) ++failed_at[h][rays.failed_surface[i]];
         }
         acc.add(rays, weights.wavelength[w]);
+        on_rays(h, w, static_cast<const RayBundle<T>&>(rays));
       }
       out.rms_spot_mm[h] = acc.rms();
       out.centroid_y_mm[h] = acc.centroid();
@@ -298,6 +303,12 @@ SpotResult<T> evaluate_spots(const TraceSystem<T>& sys, int threads = 0) {
   // sum_h phi_h S_h / sum_h phi_h (the sum of the weights is F, exactly, when they are equal).
   out.mean_rms_spot_mm = weights.field_sum > 0.0 ? sum / K<T>(weights.field_sum) : K<T>(0.0);
   return out;
+}
+
+// The spot sizes alone (trace_fields without a reader of the rays).
+template <typename T>
+SpotResult<T> evaluate_spots(const TraceSystem<T>& sys, int threads = 0) {
+  return trace_fields(sys, threads, [](int, int, const RayBundle<T>&) {});
 }
 
 }  // namespace lensopt

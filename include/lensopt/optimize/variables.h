@@ -88,6 +88,13 @@ enum class GlassMode {
   kFixed,       // each glass fixed to its assigned catalog glass (g has no effect)
 };
 
+// The focal length the optimizer holds (the last curvature is solved for it): in the paper's
+// spec mode the spec focal length d / (2 tan hfov); for a lens traced as written (a .zmx, a TOML
+// with [system]) its own paraxial EFL at its primary wavelength, so a lens of another project
+// keeps its focal length (never the paper's 16 mm sensor and 25 deg defaults). An as-written
+// lens with every field on axis has no field to design over: the spec value (refused below).
+double design_focal_length_mm(const Lens& lens);
+
 // The mapping lens <-> variables.
 class LensParameterization {
  public:

@@ -2,8 +2,10 @@
 // scalar like the tracer so Jets flow through for the joint optimization.
 //
 // Grid: G x G bins (G = 65, odd) of width D = 4 um (260 um), centred on the field's polychromatic
-// spot centroid (0, ybar_h), ybar_h = mean of y over every traced ray of every wavelength (the same
-// centroid as analysis/spot.h). With c = (G - 1) / 2, bin (row r, column i) has its centre at
+// spot centroid (0, ybar_h), ybar_h the wavelength-weighted mean of y over every traced ray of
+// every wavelength: the centroid of analysis/spot.h, measured on the same traced rays
+// (trace_fields; analysis/field_optics.h), so the spot, the distortion and the PSF agree. With c =
+// (G - 1) / 2, bin (row r, column i) has its centre at
 //   u_i = (i - c) D,   v_r = (c - r) D        relative to (0, ybar_h),
 // so row 0 is the top: sensor +y (radially outward) points up when the grid is viewed as an image.
 // KDE: a traced ray at (x, y) is at (u, v) = (x, y - ybar_h) and deposits into bin (r, i)
@@ -20,8 +22,10 @@
 // every ray traced, so there is no mirror, and the factor 2 below is 1; the grid stays centred
 // on (0, ybar_h), so an x shift of the spot shows in the PSF.
 // Channels: channel k (0 = R, 1 = G, 2 = B) collects the rays of the wavelengths w with
-// channels[w] == k, each ray with equal energy. Before normalization the energy share inside the
-// grid is E_k = (grid sum) / (2 N_k), N_k the traced (unfailed) half-pupil rays of channel k;
+// channels[w] == k, each ray of wavelength w with the energy omega_w (the lens's wavelength weight
+// normalized to the largest: 1 for equal weights). Before normalization the energy share inside
+// the grid is E_k = (grid sum) / (2 sum omega_w N_kw), N_kw the traced (unfailed) half-pupil rays
+// of wavelength w in channel k;
 // then each channel is divided by its grid sum so it sums to 1. Failed rays are left out, as in
 // the spot size.
 // Support: every non-zero bin of a channel lies in rows [r0, r1) and columns [c0, c1) (the
@@ -109,7 +113,7 @@ inline void add_product(ceres::Jet<double, N>& acc, const ceres::Jet<double, N>&
 // c0, c1), if given, is widened to hold the bins written.
 template <typename T>
 void kde_deposit(const T& u_bins, const T& v_bins, const PsfOptions& options, std::vector<T>& grid,
-                 std::array<int, 4>* support = nullptr) {
+                 std::array<int, 4>* support = nullptr, double energy = 1.0) {
   using std::exp;
   constexpr int kMaxTaps = 2 * 8 + 1;
   const int g = options.grid_size;
@@ -133,7 +137,8 @@ void kde_deposit(const T& u_bins, const T& v_bins, const PsfOptions& options, st
     su = su + wu[k];
     sv = sv + wv[k];
   }
-  const T norm = K<T>(1.0) / (su * sv);
+  // The ray's energy (1: the unit energy of the paper, the same bits as without it).
+  const T norm = energy == 1.0 ? K<T>(1.0) / (su * sv) : K<T>(energy) / (su * sv);
   if (support) {
     std::array<int, 4>& b = *support;
     b[0] = std::max(0, std::min(b[0], c - (iv + s)));
@@ -156,51 +161,85 @@ void kde_deposit(const T& u_bins, const T& v_bins, const PsfOptions& options, st
 
 }  // namespace detail
 
-// Traces every wavelength of field h and returns its PSFs. `channels[w]` is the colour channel of
-// the spec wavelength w (Specs::wavelength_channels). `rays` is scratch space.
+// The arrived rays of one field, per spec wavelength (image-plane x, y in mm), as trace_fields
+// (analysis/spot.h) hands them over: the PSFs are built from the rays the field's spot,
+// centroid and distortion were measured with (analysis/field_optics.h), not from a trace of
+// their own.
 template <typename T>
-FieldPsf<T> field_psf(const TraceSystem<T>& sys, int h, const std::vector<int>& channels,
-                      const PsfOptions& options, RayBundle<T>& rays) {
-  const int wavelength_count = sys.wavelength_count;
-  const int g = options.grid_size;
-  const std::size_t cells = static_cast<std::size_t>(g) * g;
-  // Trace all wavelengths first: the grid centre is the centroid over all of them.
-  std::vector<std::vector<T>> xs(wavelength_count), ys(wavelength_count);
-  SpotAccumulator<T> spot;
-  FieldPsf<T> out;
-  for (int w = 0; w < wavelength_count; ++w) {
-    start_rays(sys, h, w, rays);
-    trace_bundle(sys.lens, w, sys.lens.surface_count(), true, rays,
-                 static_cast<RayRecord<T>*>(nullptr));
-    spot.add(rays);
-    xs[w].reserve(rays.size());
-    ys[w].reserve(rays.size());
+struct FieldRays {
+  std::vector<std::vector<T>> x_mm, y_mm;  // [w][arrived ray]
+  int failed_rays = 0;                     // over all wavelengths, vignetted included
+  // Stores the arrived rays of a bundle of spec wavelength w (wavelength_count: for the size).
+  void add(int w, int wavelength_count, const RayBundle<T>& rays) {
+    if (static_cast<int>(x_mm.size()) < wavelength_count) {
+      x_mm.resize(wavelength_count);
+      y_mm.resize(wavelength_count);
+    }
+    x_mm[w].clear();
+    y_mm[w].clear();
+    x_mm[w].reserve(rays.size());
+    y_mm[w].reserve(rays.size());
     for (std::size_t i = 0; i < rays.size(); ++i) {
       if (rays.status[i] != kRayOk) {
-        ++out.failed_rays;
+        ++failed_rays;
         continue;
       }
-      xs[w].push_back(rays.x[i]);
-      ys[w].push_back(rays.y[i]);
+      x_mm[w].push_back(rays.x[i]);
+      y_mm[w].push_back(rays.y[i]);
     }
   }
-  out.centroid_y_mm = spot.centroid();
+};
+
+// The on_rays reader of trace_fields / measure_fields that keeps every field's rays for the
+// PSFs (each field is written by the one thread that traces it).
+template <typename T>
+struct PsfRayCollector {
+  int wavelength_count = 0;
+  std::vector<FieldRays<T>> fields;
+  explicit PsfRayCollector(const TraceSystem<T>& sys)
+      : wavelength_count(sys.wavelength_count), fields(sys.fields_deg.size()) {}
+  void operator()(int h, int w, const RayBundle<T>& rays) {
+    fields[h].add(w, wavelength_count, rays);
+  }
+};
+
+// The PSFs of one field from its arrived rays, the grid centred on `centroid_y_mm` (the field's
+// wavelength-weighted centroid ybar_h, spot.h). Within a channel each ray of wavelength w
+// carries the energy omega_w (the lens's wavelength weight normalized to the largest,
+// spot_weights), so a channel fed by several wavelengths mixes them as the spot and the
+// diffraction PSF do; E_k = (grid sum) / (mirror sum of the channel's ray energies).
+template <typename T>
+FieldPsf<T> deposit_field_psf(const TraceSystem<T>& sys, const FieldRays<T>& rays,
+                              const T& centroid_y_mm, const std::vector<int>& channels,
+                              const PsfOptions& options) {
+  const int g = options.grid_size;
+  const std::size_t cells = static_cast<std::size_t>(g) * g;
+  const std::vector<double> omega =
+      normalized_spot_weights(sys.wavelength_weights, sys.wavelength_count);
+  FieldPsf<T> out;
+  out.failed_rays = rays.failed_rays;
+  out.centroid_y_mm = centroid_y_mm;
   const T inv_bin_mm = K<T>(1000.0 / options.bin_um);
   for (int k = 0; k < kColourChannels; ++k) {
     out.psf[k].assign(cells, K<T>(0.0));
     out.support[k] = {g, 0, g, 0};
   }
   const std::vector<double> spec_nm(sys.lens.wavelengths_nm.begin(),
-                                    sys.lens.wavelengths_nm.begin() + wavelength_count);
+                                    sys.lens.wavelengths_nm.begin() + sys.wavelength_count);
   const auto members = channel_wavelengths(channels, spec_nm);
+  std::array<double, kColourChannels> energy{};
   for (int k = 0; k < kColourChannels; ++k) {
     for (const int w : members[k]) {
+      if (w >= static_cast<int>(rays.x_mm.size())) continue;
       std::vector<T>& grid = out.psf[k];
-      for (std::size_t i = 0; i < xs[w].size(); ++i) {
-        detail::kde_deposit((xs[w][i]) * inv_bin_mm, (ys[w][i] - out.centroid_y_mm) * inv_bin_mm,
-                            options, grid, &out.support[k]);
+      const std::vector<T>& xs = rays.x_mm[w];
+      const std::vector<T>& ys = rays.y_mm[w];
+      for (std::size_t i = 0; i < xs.size(); ++i) {
+        detail::kde_deposit(xs[i] * inv_bin_mm, (ys[i] - out.centroid_y_mm) * inv_bin_mm, options,
+                            grid, &out.support[k], omega[w]);
       }
-      out.traced_rays[k] += static_cast<int>(xs[w].size());
+      out.traced_rays[k] += static_cast<int>(xs.size());
+      energy[k] += omega[w] * static_cast<double>(xs.size());
     }
   }
   for (int k = 0; k < kColourChannels; ++k) {
@@ -227,9 +266,8 @@ FieldPsf<T> field_psf(const TraceSystem<T>& sys, int h, const std::vector<int>& 
     T total = K<T>(0.0);
     for (int r = b[0]; r < b[1]; ++r)
       for (int i = b[2]; i < b[3]; ++i) total = total + grid[static_cast<std::size_t>(r) * g + i];
-    const int n = out.traced_rays[k];
     const double mirror = sys.full_pupil ? 1.0 : 2.0;
-    out.energy_share[k] = n > 0 ? total / K<T>(mirror * n) : K<T>(0.0);
+    out.energy_share[k] = energy[k] > 0.0 ? total / K<T>(mirror * energy[k]) : K<T>(0.0);
     if (value_of(total) > 0.0) {
       const T inv = K<T>(1.0) / total;
       for (int r = b[0]; r < b[1]; ++r)
@@ -242,10 +280,12 @@ FieldPsf<T> field_psf(const TraceSystem<T>& sys, int h, const std::vector<int>& 
   return out;
 }
 
-// The PSFs of every field of `sys` (fields spread over threads; `threads` <= 0: all cores).
+// The PSFs of every field from the rays trace_fields / measure_fields collected, each centred on
+// the field's centroid in `spots` (fields spread over threads; `threads` <= 0: all cores).
 template <typename T>
-PsfSet<T> compute_psfs(const TraceSystem<T>& sys, const std::vector<int>& channels,
-                       const PsfOptions& options, int threads = 0) {
+PsfSet<T> psfs_from_rays(const TraceSystem<T>& sys, const SpotResult<T>& spots,
+                         const PsfRayCollector<T>& rays, const std::vector<int>& channels,
+                         const PsfOptions& options, int threads = 0) {
   options.validate();
   validate_wavelength_channels(channels, sys.wavelength_count);
   PsfSet<T> set;
@@ -254,15 +294,42 @@ PsfSet<T> compute_psfs(const TraceSystem<T>& sys, const std::vector<int>& channe
   const int field_count = static_cast<int>(sys.fields_deg.size());
   set.fields.resize(field_count);
   const int nthreads = thread_count(threads);
-#pragma omp parallel num_threads(nthreads)
-  {
-    RayBundle<T> rays;
-#pragma omp for schedule(dynamic, 1)
-    for (int h = 0; h < field_count; ++h) {
-      set.fields[h] = field_psf(sys, h, channels, options, rays);
-    }
-  }
+#pragma omp parallel for schedule(dynamic, 1) num_threads(nthreads)
+  for (int h = 0; h < field_count; ++h)
+    set.fields[h] =
+        deposit_field_psf(sys, rays.fields[h], spots.centroid_y_mm[h], channels, options);
   return set;
+}
+
+// Traces every wavelength of field h alone and returns its PSFs (the same numbers as that field
+// of compute_psfs). `rays` is scratch space.
+template <typename T>
+FieldPsf<T> field_psf(const TraceSystem<T>& sys, int h, const std::vector<int>& channels,
+                      const PsfOptions& options, RayBundle<T>& rays) {
+  const SpotWeights weights = spot_weights(sys);
+  SpotAccumulator<T> spot;
+  spot.full_pupil = sys.full_pupil;
+  FieldRays<T> traced;
+  for (int w = 0; w < sys.wavelength_count; ++w) {
+    start_rays(sys, h, w, rays);
+    trace_bundle(sys.lens, w, sys.lens.surface_count(), true, rays,
+                 static_cast<RayRecord<T>*>(nullptr));
+    spot.add(rays, weights.wavelength[w]);
+    traced.add(w, sys.wavelength_count, rays);
+  }
+  return deposit_field_psf(sys, traced, spot.centroid(), channels, options);
+}
+
+// The PSFs of every field of `sys`: one trace (trace_fields), each field's grid centred on its
+// wavelength-weighted centroid (fields spread over threads; `threads` <= 0: all cores).
+template <typename T>
+PsfSet<T> compute_psfs(const TraceSystem<T>& sys, const std::vector<int>& channels,
+                       const PsfOptions& options, int threads = 0) {
+  options.validate();
+  validate_wavelength_channels(channels, sys.wavelength_count);
+  PsfRayCollector<T> collector(sys);
+  const SpotResult<T> spots = trace_fields(sys, threads, collector);
+  return psfs_from_rays(sys, spots, collector, channels, options, threads);
 }
 
 }  // namespace lensopt

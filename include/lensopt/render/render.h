@@ -78,7 +78,8 @@ struct RenderOptions {
 };
 
 // What is sampled once per lens: the field PSFs and the per-field distortion and relative
-// illumination (from analyze_lens, the same numbers `lensopt analyze` prints).
+// illumination (analysis/field_optics.h measure_fields, the same numbers `lensopt analyze`
+// prints), from one prepared system and one trace.
 struct ImagingModel {
   std::string lens_name;
   double sensor_diagonal_mm = 0;
@@ -95,6 +96,9 @@ struct ImagingModel {
   std::vector<std::string> warnings;
   PsfSet<double> psfs;
   TraceOptions trace;
+  // The traced system the model was measured on (prepared once per model; the diffraction PSFs
+  // reuse it).
+  std::shared_ptr<const TraceSystem<double>> system;
   int ray_failures = 0;
   // Which PSFs `psfs` holds (render/diffraction_psf.h apply_psf_kind, `render --psf`): the kind
   // asked for ("geometric", "diffraction" or "auto"), per field and colour channel (R, G, B)

@@ -24,6 +24,7 @@
 #include <ceres/jet.h>
 
 #include <array>
+#include <atomic>
 #include <cmath>
 #include <limits>
 #include <vector>
@@ -236,10 +237,15 @@ SystemSetup paper_setup(double focal_length_mm, double f_number, double half_fie
 // the paper does). `scale_to_spec` = false turns the paper's scaling off.
 SystemSetup lens_setup(const Lens& lens, const TraceOptions& options);
 
+// The number of systems prepare_system has prepared in this process (any scalar): a debug
+// counter, so tests can check that a command prepares its system once (a render: once per lens).
+inline std::atomic<long> prepared_system_count{0};
+
 // Prepares a lens for tracing with a setup (see SystemSetup).
 template <typename T>
 TraceSystem<T> prepare_system(const TraceLens<T>& lens_in, const SystemSetup& setup,
                               const TraceOptions& options) {
+  prepared_system_count.fetch_add(1, std::memory_order_relaxed);
   using std::atan;
   using std::cos;
   using std::sin;
