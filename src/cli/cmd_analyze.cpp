@@ -3,11 +3,13 @@
 
 #include <cmath>
 #include <memory>
+#include <nlohmann/json.hpp>
 
 #include "commands.h"
 #include "lens_checks.h"
 #include "lensopt/analysis/analyze.h"
 #include "lensopt/analysis/forms_image.h"
+#include "lensopt/analysis/seidel.h"
 #include "lensopt/core/error.h"
 #include "lensopt/formats/lens_file.h"
 #include "lensopt/lens/lens_io.h"
@@ -21,8 +23,9 @@ struct AnalyzeCommand {
   bool strict = false;
   bool no_ray_aiming = false;
   bool no_scale = false;
-  std::string dispersion;  // "" = the lens's own
-  std::string mode;        // "" = the lens's own spec mode
+  bool prescription = false;  // the surface table, first-order data and Seidel sums
+  std::string dispersion;     // "" = the lens's own
+  std::string mode;           // "" = the lens's own spec mode
   std::string zernike_order = "fringe";
   AnalyzeOptions options;
 };
@@ -42,10 +45,24 @@ void run_analyze(const AnalyzeCommand& cmd) {
   check_lens_warnings(lens, "analyze", cmd.strict);
   const AnalysisReport report = analyze_lens(lens, options);
   check_forms_image(report);  // a lens without an image is an error (exit 1), not nulls
-  if (cmd.json) {
+  std::string prescription_text, prescription_json;
+  if (cmd.prescription) {
+    Lens traced = lens;
+    if (options.dispersion) traced.specs.dispersion = *options.dispersion;
+    const TraceSystem<double> sys = prepare_lens_system(traced, options.trace);
+    const SeidelReport seidel = seidel_report(sys);
+    prescription_text = format_prescription_text(traced, sys, seidel);
+    prescription_json = format_prescription_json(traced, sys, seidel);
+  }
+  if (cmd.json && cmd.prescription) {
+    nlohmann::json j = nlohmann::json::parse(format_report_json(report));
+    j["prescription"] = nlohmann::json::parse(prescription_json);
+    fmt::print("{}\n", j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace));
+  } else if (cmd.json) {
     fmt::print("{}\n", format_report_json(report));
   } else {
     fmt::print("{}", format_report_text(report));
+    if (cmd.prescription) fmt::print("\n{}", prescription_text);
   }
   // A failed analysis (no finite first-order data, or no ray reaches the image) never exits 0.
   int traced = 0;
@@ -107,6 +124,9 @@ void setup_analyze(CLI::App& app) {
   sub->add_option("--zernike-order", cmd->zernike_order,
                   "Zernike ordering: fringe (default; unnormalized) or standard (Noll, unit RMS)")
       ->check(CLI::IsMember({"fringe", "standard"}));
+  sub->add_flag("--prescription", cmd->prescription,
+                "add the surface table, first-order data (EFL, BFL, pupils, working F/#, "
+                "magnification) and the Seidel sums per surface with primary colour");
   sub->add_flag("--strict", cmd->strict,
                 "exit with status 3 if any ray fails; refuse a wavelength outside a glass's range");
   sub->footer(
