@@ -33,16 +33,16 @@ std::string image_header_problem(std::int64_t width, std::int64_t height, std::u
   const std::int64_t limit = max_image_pixels();
   // width, height < 2^31 (every format's header field), so the product fits.
   const std::int64_t pixels = width * height;
-  if (pixels > limit)
-    return fmt::format(
-        "its header says {} x {} = {} pixels, more than the limit of {} (raise it "
-        "with --max-image-pixels or LENSOPT_MAX_IMAGE_PIXELS for a giant image)",
-        width, height, pixels, limit);
   if (file_bytes < min_file_bytes)
     return fmt::format(
         "its header says {} x {} pixels, but the file has {} bytes and that many "
         "pixels need at least {} (a corrupt, truncated or hostile header)",
         width, height, file_bytes, min_file_bytes);
+  if (pixels > limit)
+    return fmt::format(
+        "its header says {} x {} = {} pixels, more than the limit of {} (raise it "
+        "with --max-image-pixels or LENSOPT_MAX_IMAGE_PIXELS for a giant image)",
+        width, height, pixels, limit);
   return "";
 }
 

@@ -11,6 +11,7 @@
 // wavelengths. Keys other than these are ignored.
 
 #include <fmt/format.h>
+#include <yaml-cpp/eventhandler.h>
 #include <yaml-cpp/yaml.h>
 
 #include <algorithm>

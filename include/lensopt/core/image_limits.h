@@ -2,13 +2,13 @@
 // header states its width and height; decoding allocates for them (a float per sample) before it
 // finds out the data is missing, so a 138-byte PNG whose header says 20000 x 20000 cost 1.2 GB and
 // 5.6 s. A header is refused when
-//   - width x height exceeds max_image_pixels() (default kDefaultMaxImagePixels = 16384^2, the
-//     largest image lensopt makes; `render --max-image-pixels N` or LENSOPT_MAX_IMAGE_PIXELS=N
-//     raise it for giant images), or
 //   - the file is too small to hold that many pixels: deflate (PNG) never compresses more than
 //     1032 : 1, so a PNG needs at least (raw bytes) / kMaxDeflateRatio bytes; for the formats
 //     OpenImageIO reads (TIFF, EXR, JPEG, whose codecs differ) a file needs at least one byte per
-//     kMaxPixelsPerByte pixels, far beyond what any of their codecs reaches on a real image.
+//     kMaxPixelsPerByte pixels, far beyond what any of their codecs reaches on a real image; or
+//   - width x height exceeds max_image_pixels() (default kDefaultMaxImagePixels = 16384^2, the
+//     largest image lensopt makes; `render --max-image-pixels N` or LENSOPT_MAX_IMAGE_PIXELS=N
+//     raise it for giant images).
 #pragma once
 
 #include <cstdint>
