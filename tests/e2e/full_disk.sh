@@ -75,8 +75,8 @@ every() {
 }
 
 journal_seen=0
-# check NAME MODE ARGS...: ARGS with @OUT@ for the case's output folder. A reference run, then
-# for each fraction a run on a full disk and a rerun.
+# check NAME MODE ARGS...: ARGS with @OUT@ for the case's output folder (render writes to
+# @OUT@/r). A reference run, then for each fraction a run on a full disk and a rerun.
 check() {
   local name=$1 mode=$2
   shift 2
@@ -91,10 +91,10 @@ check() {
     mkdir -p "$dir"
     full "$bytes" "$dir/" "$dir" "${@//@OUT@/$dir}"
     same "$mode" "$dir" "$ref"
-    local records=-1
-    if [ "$mode" = render ] && [ -f "$dir/.render_metrics.journal" ]; then
+    local records=-1 journal="$dir/r/.render_metrics.journal"
+    if [ "$mode" = render ] && [ -f "$journal" ]; then
       # The resume journal: one complete line per image whose rename it records.
-      records=$(tr -cd '\n' < "$dir/.render_metrics.journal" | wc -c)
+      records=$(tr -cd '\n' < "$journal" | wc -c)
       journal_seen=$((journal_seen + 1))
     fi
     "$lensopt" "${@//@OUT@/$dir}" > "$tmp/stdout" 2> "$tmp/stderr" ||
@@ -104,10 +104,12 @@ check() {
       grep -q "failed 0" "$tmp/stdout" || fail "$name rerun at $pct %: $(cat "$tmp/stdout")"
       [ "$records" -lt 0 ] || grep -q "skipped $records (already there)" "$tmp/stdout" ||
         fail "$name rerun at $pct %: the journal recorded $records images: $(cat "$tmp/stdout")"
-      [ ! -e "$dir/.render_metrics.journal" ] || fail "$name rerun at $pct %: the journal is left"
-      [ -s "$dir/render_metrics.csv" ] && [ -s "$dir/render_metrics.json" ] || fail "$name: no metrics"
+      [ ! -e "$journal" ] || fail "$name rerun at $pct %: the journal is left"
+      [ -s "$dir/r/render_metrics.csv" ] && [ -s "$dir/r/render_metrics.json" ] || fail "$name: no metrics"
     fi
-    echo "  $name: $pct % ($bytes of $need bytes): refused, rerun complete"
+    local note=""
+    [ "$records" -lt 0 ] || note=" (resumed from the journal: $records images skipped)"
+    echo "  $name: $pct % ($bytes of $need bytes): refused, rerun complete$note"
   done
 }
 
