@@ -6,7 +6,8 @@
 # trace. Each runs under a 2 GB address-space cap (ulimit -v 2000000) and 60 s of CPU
 # (ulimit -t 60) and must end without a signal, with exit 1 and an error that names the file
 # (and the line, for text formats), within a few seconds of wall time. A file that is valid but
-# large may also succeed (exit 0), with no null / NaN in its JSON.
+# large may also succeed (exit 0), with no null / NaN in its JSON. Then the fuzz corpus
+# (tests/e2e/fuzz.sh, its default cases and seed) runs under the same limits.
 set -euo pipefail
 lensopt="$1"
 command -v python3 > /dev/null || { echo "skipped: python3 is needed to build the inputs"; exit 77; }
@@ -197,4 +198,10 @@ limited ok-or-error deep.json render lenses/doublet.toml "$tmp/img" -o "$tmp/r6"
   --annotations "$tmp/deep.json"
 limited ok-or-error many.json render lenses/doublet.toml "$tmp/img" -o "$tmp/r7" -q \
   --annotations "$tmp/many.json"
+echo "fuzz corpus (tests/e2e/fuzz.sh) under the same limits"
+(
+  ulimit -v 2000000
+  ulimit -t 60
+  bash tests/e2e/fuzz.sh "$lensopt"
+) || fail "the fuzz corpus under ulimit -v 2000000 -t 60"
 echo "ok"
