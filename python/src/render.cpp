@@ -2,13 +2,17 @@
 // distortion and relative-illumination maps, and the renderer on numpy H x W x C images.
 #include "lensopt/render/render.h"
 
+#include <fmt/format.h>
+
 #include <cmath>
+#include <cstdint>
 #include <memory>
 #include <string>
 #include <vector>
 
 #include "bindings.h"
 #include "lensopt/core/error.h"
+#include "lensopt/core/image_limits.h"
 #include "lensopt/render/diffraction_psf.h"
 #include "lensopt/render/image.h"
 
@@ -95,6 +99,14 @@ void bind_render(py::module_& m) {
       .def(
           "maps",
           [](const PyRenderer& r, int width, int height) {
+            // A map of no pixels has no pitch (the diagonal over 0 pixels): refused, like one
+            // beyond the image pixel limit (core/image_limits.h).
+            if (width < 1 || height < 1)
+              throw Error(
+                  fmt::format("maps({}, {}): width and height must be at least 1", width, height));
+            if (static_cast<std::int64_t>(width) * height > max_image_pixels())
+              throw Error(fmt::format("maps({}, {}): more than the image pixel limit of {}", width,
+                                      height, max_image_pixels()));
             const ImagingModel& model = r.renderer->model();
             require_relative_illumination(model);
             const SensorGeometry geo = SensorGeometry::make(

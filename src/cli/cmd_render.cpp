@@ -17,6 +17,7 @@
 #include "lens_checks.h"
 #include "lensopt/core/atomic_file.h"
 #include "lensopt/core/error.h"
+#include "lensopt/core/image_limits.h"
 #include "lensopt/core/interrupt.h"
 #include "lensopt/core/output_checks.h"
 #include "lensopt/detection/crop_boxes.h"
@@ -47,6 +48,7 @@ struct RenderCommand {
   std::string annotations;  // a COCO or BDD100K JSON of the inputs
   std::string psf = "geometric";
   int pupil_samples = 64;
+  long long max_image_pixels = 0;  // 0: core/image_limits.h's default
 };
 
 struct RenderMergeCommand {
@@ -173,6 +175,7 @@ void write_rendered_annotations(const RenderCommand& cmd, const Renderer& render
 void run_render(const RenderCommand& cmd) {
   // SIGINT / SIGTERM: start no further image, write the metrics of what is done, exit 130.
   const InterruptScope interrupt;
+  if (cmd.max_image_pixels > 0) set_max_image_pixels(cmd.max_image_pixels);
   // Every image allocates and frees buffers of tens of megabytes; by default glibc maps each
   // with mmap and unmaps it when freed, so every image faults its pages in again (about a tenth
   // of the CPU time of a dataset run). Keep freed memory in the heap for reuse instead.
@@ -354,6 +357,10 @@ void setup_render(CLI::App& app) {
   sub->add_option("--pupil-samples", cmd->pupil_samples,
                   "pupil grid cells across the diameter for the diffraction PSFs (default 64)")
       ->check(CLI::Range(8, 1024));
+  sub->add_option("--max-image-pixels", cmd->max_image_pixels,
+                  "refuse an input whose header says more pixels than this, before decoding it "
+                  "(default 268435456 = 16384^2; also LENSOPT_MAX_IMAGE_PIXELS)")
+      ->check(CLI::Range(1LL, 1LL << 40));
   sub->add_flag("--force", cmd->force, "render images whose output already exists");
   sub->add_flag("--quiet,-q", cmd->quiet, "no progress bar");
   sub->add_option("--annotations", cmd->annotations,

@@ -13,6 +13,7 @@
 #include <cstdlib>
 #include <cstring>
 
+#include "lensopt/core/image_limits.h"
 #include "lensopt/core/text.h"
 
 namespace lensopt {
@@ -90,6 +91,24 @@ bool read_impl(const std::filesystem::path& path, PngPixels& out, std::string& e
   // Large images are fine (lensopt renders up to 16384 x 16384): raise libpng's default limits.
   png_set_user_limits(png, 0x7fffffff, 0x7fffffff);
   png_read_info(png, info);
+  if (mode != ReadMode::kHeader) {
+    // Before any buffer is sized (core/image_limits.h): the pixel limit, and the file must be
+    // large enough for its header's raw rows (filter byte + packed samples) at deflate's ratio.
+    const std::uint64_t w = png_get_image_width(png, info), h = png_get_image_height(png, info);
+    const std::uint64_t bits =
+        std::uint64_t{png_get_channels(png, info)} * std::uint64_t{png_get_bit_depth(png, info)};
+    const std::uint64_t raw = h * (1 + (w * bits + 7) / 8);
+    std::error_code size_error;
+    const std::uint64_t file_bytes = std::filesystem::file_size(path, size_error);
+    const std::string problem =
+        image_header_problem(static_cast<std::int64_t>(w), static_cast<std::int64_t>(h),
+                             size_error ? 0 : file_bytes, raw / kMaxDeflateRatio);
+    if (!problem.empty()) {
+      png_destroy_read_struct(&png, &info, nullptr);
+      error = problem;
+      return false;
+    }
+  }
   set_read_transforms(png, info);
   out.width = static_cast<int>(png_get_image_width(png, info));
   out.height = static_cast<int>(png_get_image_height(png, info));

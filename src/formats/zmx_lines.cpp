@@ -252,6 +252,10 @@ void ZmxParser::system_line(const Line& line, const std::string& key) {
                      key));
   } else if (key == "WAVM") {
     const int index = integer(line, 1, "the wavelength number");
+    if (index < 1 || index > static_cast<int>(kMaxWavelengths))
+      fail(line, 1,
+           fmt::format("wavelength number {} is out of range: lensopt reads wavelengths 1 to {}",
+                       index, kMaxWavelengths));
     Wavelength w;
     w.um = number(line, 2, "the wavelength (um)");
     w.nm = micrometres_to_nm(line.fields[2], w.um);
@@ -261,6 +265,10 @@ void ZmxParser::system_line(const Line& line, const std::string& key) {
     if (wavelength_line_ == 0) wavelength_line_ = line.number;
   } else if (key == "WAVL") {
     for (std::size_t i = 1; i < line.fields.size(); ++i) {
+      if (wavl_.size() >= kMaxWavelengths)
+        fail(line, i,
+             fmt::format("more than {} wavelengths; lensopt reads at most {}", kMaxWavelengths,
+                         kMaxWavelengths));
       const double um = number(line, i, "a wavelength (um)");
       wavl_.push_back({um, micrometres_to_nm(line.fields[i], um), 1.0, line.number});
     }
@@ -278,15 +286,22 @@ void ZmxParser::system_line(const Line& line, const std::string& key) {
     if (line.fields.size() > 3) field_count_ = integer(line, 3, "the number of fields");
     if (line.fields.size() > 4) wavelength_count_ = integer(line, 4, "the number of wavelengths");
   } else if (key == "VDXN" || key == "VDYN" || key == "VCXN" || key == "VCYN" || key == "VANN") {
+    check_field_count(line);
     std::vector<double>& values = vignetting_[key];
     values.clear();
     for (std::size_t i = 1; i < line.fields.size(); ++i)
       values.push_back(number(line, i, "a vignetting factor"));
   } else if (key == "FWGN") {
+    check_field_count(line);
     field_weights_.clear();
-    for (std::size_t i = 1; i < line.fields.size(); ++i)
+    for (std::size_t i = 1; i < line.fields.size(); ++i) {
       field_weights_.push_back(number(line, i, "a field weight"));
+      if (!(field_weights_.back() >= 0.0))
+        fail(line, i, fmt::format("field weight {} must be >= 0", field_weights_.back()));
+    }
+    fwgn_line_ = line.number;
   } else if (key == "XFLN" || key == "YFLN") {
+    check_field_count(line);
     std::vector<double>& values = key == "XFLN" ? xfln_ : yfln_;
     values.clear();
     for (std::size_t i = 1; i < line.fields.size(); ++i)

@@ -17,6 +17,7 @@
 #include "lensopt/core/error.h"
 #include "lensopt/formats/zmx.h"
 #include "lensopt/glass/glass.h"
+#include "lensopt/lens/input_limits.h"
 #include "lensopt/lens/validate.h"
 #include "zmx_text.h"
 
@@ -106,6 +107,14 @@ class ZmxParser {
     return static_cast<int>(value);
   }
 
+  // A per-field line (XFLN, FWGN, VDXN, ...) of more than kMaxFields values.
+  void check_field_count(const Line& line) const {
+    if (line.fields.size() > kMaxFields + 1)
+      fail(line, kMaxFields + 1,
+           fmt::format("{} has {} fields; lensopt reads at most {}", line.fields[0],
+                       line.fields.size() - 1, kMaxFields));
+  }
+
   RawSurface& surface(const Line& line) {
     if (surfaces_.empty())
       fail(line, 0, fmt::format("'{}' comes before the first SURF line", line.fields[0]));
@@ -147,6 +156,7 @@ class ZmxParser {
   int aperture_line_ = 0;
   int field_type_ = 0;
   std::vector<double> field_weights_;
+  int fwgn_line_ = 0;
   std::map<std::string, std::vector<double>> vignetting_;
   std::map<int, Wavelength> wavm_;
   std::vector<Wavelength> wavl_;

@@ -53,6 +53,11 @@ void ZmxParser::read_lines(const std::vector<Line>& lines) {
       RawSurface s;
       s.number = integer(line, 1, "the surface number");
       s.line = line.number;
+      if (s.number > static_cast<int>(kMaxSurfaces) + 1)
+        fail(line, 1,
+             fmt::format("SURF {}: lensopt reads at most {} lens surfaces (between the object, "
+                         "SURF 0, and the image)",
+                         s.number, kMaxSurfaces));
       if (s.number != static_cast<int>(surfaces_.size()))
         fail(line, 1,
              fmt::format("SURF {} is out of order: surface {} was expected", s.number,
@@ -218,6 +223,10 @@ void ZmxParser::set_wavelengths(Specs& specs) {
     weights.push_back(w.weight);
     equal_weights = equal_weights && w.weight == waves.front().weight;
   }
+  if (std::all_of(weights.begin(), weights.end(), [](double w) { return w == 0.0; }))
+    fail_at(waves.front().line, 1,
+            "every active wavelength has weight 0: no wavelength would count; give at least one "
+            "a positive weight");
   if (note_wavelengths_nm_) {
     bool agrees = note_wavelengths_nm_->size() == wavelengths_nm.size();
     for (std::size_t i = 0; agrees && i < wavelengths_nm.size(); ++i)
@@ -320,6 +329,11 @@ void ZmxParser::set_fields(Specs& specs) {
               fmt::format("field {}: vignetting compression VCX, VCY must be < 1", i + 1));
     specs.fields.push_back(f);
   }
+  if (std::all_of(specs.fields.begin(), specs.fields.end(),
+                  [](const FieldPoint& f) { return f.weight == 0.0; }))
+    fail_at(fwgn_line_ > 0 ? fwgn_line_ : last_line_, 1,
+            "every active field has weight 0 (FWGN): no field would count; give at least one a "
+            "positive weight");
   if (!object.thickness_infinite) specs.object_distance_mm = object.thickness_mm * unit_mm_;
   if (specs.field_type == FieldType::kObjectHeight && specs.object_at_infinity())
     fail_at(ftyp_line_, 1, "object-height fields (FTYP 1) need a finite object distance");

@@ -9,6 +9,7 @@
 #include "lensopt/core/constants.h"
 #include "lensopt/core/error.h"
 #include "lensopt/glass/glass_range.h"
+#include "lensopt/lens/input_limits.h"
 #include "lensopt/lens/profile_sag.h"
 #include "lensopt/lens/validate.h"
 
@@ -120,6 +121,15 @@ void validate_lens(const Lens& lens, const LensSourceLines& lines) {
     return i < lines.surfaces.size() ? lines.surfaces[i] : 0;
   };
   if (surfaces.size() < 2) fail("a lens needs at least two surfaces");
+  if (surfaces.size() > kMaxSurfaces)
+    fail_at(surface_line(kMaxSurfaces),
+            fmt::format("the lens has {} surfaces; lensopt reads at most {}", surfaces.size(),
+                        kMaxSurfaces));
+  if (specs.wavelengths_nm.size() > kMaxWavelengths)
+    fail(fmt::format("{} wavelengths; lensopt reads at most {}", specs.wavelengths_nm.size(),
+                     kMaxWavelengths));
+  if (specs.fields.size() > kMaxFields)
+    fail(fmt::format("{} fields; lensopt reads at most {}", specs.fields.size(), kMaxFields));
   // The lens's own length scale: the bounds on radii and thicknesses are relative to it, so a
   // prescription normalized to f = 1 and one in mm are judged alike.
   double length = 0;
@@ -219,6 +229,9 @@ void validate_lens(const Lens& lens, const LensSourceLines& lines) {
     for (double w : specs.wavelength_weights)
       if (!(w >= 0.0) || !std::isfinite(w))
         fail(fmt::format("wavelength weight {} must be >= 0", w));
+    if (std::all_of(specs.wavelength_weights.begin(), specs.wavelength_weights.end(),
+                    [](double w) { return w == 0.0; }))
+      fail("every wavelength weight is 0: no wavelength would count");
   }
   if (!(specs.primary_wavelength_nm > 200.0 && specs.primary_wavelength_nm < 20000.0))
     fail(fmt::format("primary wavelength {} nm is out of range", specs.primary_wavelength_nm));
@@ -231,6 +244,9 @@ void validate_lens(const Lens& lens, const LensSourceLines& lines) {
         !std::isfinite(v.vcx) || !std::isfinite(v.vcy) || !std::isfinite(v.van_deg))
       fail("vignetting factors must be finite with VCX, VCY < 1");
   }
+  if (!specs.fields.empty() && std::all_of(specs.fields.begin(), specs.fields.end(),
+                                           [](const FieldPoint& f) { return f.weight == 0.0; }))
+    fail("every field weight is 0: no field would count");
   if (!specs.object_at_infinity() && !(specs.object_distance_mm > 0.0))
     fail(fmt::format("object distance {} mm must be > 0 (or infinite)", specs.object_distance_mm));
   if (specs.field_type == FieldType::kObjectHeight && specs.object_at_infinity())

@@ -29,6 +29,7 @@
 #include "lensopt/core/error.h"
 #include "lensopt/core/text.h"
 #include "lensopt/glass/glass.h"
+#include "lensopt/lens/input_limits.h"
 #include "lensopt/lens/lens_io.h"
 #include "lensopt/lens/validate.h"
 
@@ -242,6 +243,10 @@ Specs read_specs(const TomlReader& reader, const toml::table& table) {
   if (wavelengths) {
     const toml::array& values = reader.array(*wavelengths.node, "wavelengths_nm");
     if (values.empty()) reader.fail(*wavelengths.node, "wavelengths_nm is empty");
+    if (values.size() > kMaxWavelengths)
+      reader.fail(values[kMaxWavelengths],
+                  fmt::format("wavelengths_nm has {} wavelengths; lensopt reads at most {}",
+                              values.size(), kMaxWavelengths));
     specs.wavelengths_nm.clear();
     for (const toml::node& value : values) {
       const double w = reader.finite_number(value, "a wavelength in wavelengths_nm");
@@ -326,8 +331,17 @@ void read_system(const TomlReader& reader, const toml::table& table, Specs& spec
       reader.fail(*e.node,
                   fmt::format("wavelength_weights has {} entries for {} wavelengths",
                               specs.wavelength_weights.size(), specs.wavelengths_nm.size()));
-    for (double w : specs.wavelength_weights)
-      if (!(w >= 0.0)) reader.fail(*e.node, "wavelength weights must be >= 0");
+    const toml::array& written = *e.node->as_array();
+    double sum = 0.0;
+    for (std::size_t i = 0; i < written.size(); ++i) {
+      const double w = specs.wavelength_weights[i];
+      if (!(w >= 0.0)) reader.fail(written[i], fmt::format("wavelength weight {} must be >= 0", w));
+      sum += w;
+    }
+    if (!(sum > 0.0))
+      reader.fail(*e.node,
+                  "every wavelength weight is 0: no wavelength would count; give at "
+                  "least one a positive weight");
   }
   if (const Entry e = entry(table, "aperture"))
     specs.aperture_type =
@@ -347,6 +361,10 @@ void read_system(const TomlReader& reader, const toml::table& table, Specs& spec
       reader.fail(*e.node, "object_distance_mm must be > 0 (inf: an object at infinity)");
   }
   if (const Entry e = entry(table, "fields")) {
+    const toml::array& written = reader.array(*e.node, "fields");
+    if (written.size() > kMaxFields)
+      reader.fail(written[kMaxFields], fmt::format("fields has {} fields; lensopt reads at most {}",
+                                                   written.size(), kMaxFields));
     const std::vector<double> values = numbers(*e.node, "fields");
     if (values.empty()) reader.fail(*e.node, "fields is empty");
     specs.fields.clear();
@@ -367,10 +385,24 @@ void read_system(const TomlReader& reader, const toml::table& table, Specs& spec
       for (std::size_t i = 0; i < values.size(); ++i) assign(specs.fields[i], values[i], *e.node);
     }
   };
-  per_field("field_weights", [&](FieldPoint& f, double v, const toml::node& n) {
-    if (!(v >= 0.0)) reader.fail(n, "field weights must be >= 0");
-    f.weight = v;
-  });
+  if (const Entry e = entry(table, "field_weights")) {
+    const std::vector<double> values = numbers(*e.node, "field_weights");
+    if (values.size() != specs.fields.size())
+      reader.fail(*e.node, fmt::format("field_weights has {} entries for {} fields", values.size(),
+                                       specs.fields.size()));
+    const toml::array& written = *e.node->as_array();
+    double sum = 0.0;
+    for (std::size_t i = 0; i < values.size(); ++i) {
+      if (!(values[i] >= 0.0))
+        reader.fail(written[i], fmt::format("field weight {} must be >= 0", values[i]));
+      specs.fields[i].weight = values[i];
+      sum += values[i];
+    }
+    if (!(sum > 0.0))
+      reader.fail(*e.node,
+                  "every field weight is 0: no field would count; give at least one "
+                  "a positive weight");
+  }
   per_field("vdx", [](FieldPoint& f, double v, const toml::node&) { f.vignetting.vdx = v; });
   per_field("vdy", [](FieldPoint& f, double v, const toml::node&) { f.vignetting.vdy = v; });
   per_field("vcx", [&](FieldPoint& f, double v, const toml::node& n) {
@@ -502,6 +534,8 @@ Surface read_surface(const TomlReader& reader, const toml::table& table, int sur
 Lens parse_lens_toml(std::string_view text, const std::string& source_name) {
   const TomlReader reader(source_name);
   toml::table root;
+  // Before toml++ recurses into it (lens/input_limits.h).
+  check_toml_nesting(text, source_name);
   try {
     root = toml::parse(text, source_name);
   } catch (const toml::parse_error& e) {
@@ -558,12 +592,32 @@ Lens parse_lens_toml(std::string_view text, const std::string& source_name) {
     lines.half_field_deg = line_of("half_field_deg");
     lines.sensor_diagonal_mm = line_of("sensor_diagonal_mm");
   }
-  if (const toml::node* node = root.get("system"))
-    read_system(reader, reader.table(*node, "[system]"), lens.specs);
+  if (const toml::node* node = root.get("system")) {
+    const toml::table& system = reader.table(*node, "[system]");
+    read_system(reader, system, lens.specs);
+    // An F-number aperture of a lens traced as written takes [specs] f_number: without it the
+    // default F/2 would be traced without a word.
+    if (lens.specs.mode == SpecMode::kAsWritten &&
+        lens.specs.aperture_type == ApertureType::kFNumber && lines.f_number == 0) {
+      if (const Entry e = entry(system, "aperture"))
+        reader.fail(*e.node,
+                    "aperture = \"f-number\" needs [specs] f_number (the image-space "
+                    "F-number to trace at)");
+      reader.fail(system.source(),
+                  "[system] gives no aperture: add aperture = \"f-number\" with [specs] "
+                  "f_number, \"epd\" or \"object-na\" with aperture_value, or "
+                  "\"float-by-stop\"");
+    }
+  }
 
   const toml::node* surfaces_node = root.get("surfaces");
   if (surfaces_node == nullptr) reader.fail_file("no [[surfaces]]: a lens needs at least two");
   const toml::array& surfaces = reader.array(*surfaces_node, "surfaces");
+  if (surfaces.size() > kMaxSurfaces)
+    reader.fail(surfaces[kMaxSurfaces],
+                fmt::format("the lens has {} surfaces; lensopt reads at most {} (surface {} is "
+                            "one too many)",
+                            surfaces.size(), kMaxSurfaces, kMaxSurfaces + 1));
   for (std::size_t i = 0; i < surfaces.size(); ++i) {
     const int number = static_cast<int>(i) + 1;
     const toml::table& table = reader.table(surfaces[i], fmt::format("surface {}", number));

@@ -11,6 +11,7 @@
 // wavelengths. Keys other than these are ignored.
 
 #include <fmt/format.h>
+#include <yaml-cpp/eventhandler.h>
 #include <yaml-cpp/yaml.h>
 
 #include <algorithm>
@@ -19,11 +20,13 @@
 #include <cmath>
 #include <filesystem>
 #include <map>
+#include <sstream>
 #include <string>
 #include <vector>
 
 #include "lens_io_detail.h"
 #include "lensopt/core/error.h"
+#include "lensopt/lens/input_limits.h"
 #include "lensopt/lens/lens_io.h"
 #include "lensopt/lens/validate.h"
 
@@ -121,6 +124,94 @@ class YamlReader {
   YAML::Node root_;
 };
 
+// The limits of lens/input_limits.h from the parser's events, before any tree is walked: the
+// nesting depth, the number of aliases and the number of nodes the document expands to (an
+// alias counts the nodes of its anchor's node, so nested aliases multiply). Linear in the text.
+class AliasBudget : public YAML::EventHandler {
+ public:
+  explicit AliasBudget(std::string file) : file_(std::move(file)) {}
+
+  void OnDocumentStart(const YAML::Mark&) override {}
+  void OnDocumentEnd() override {}
+  void OnNull(const YAML::Mark& mark, YAML::anchor_t anchor) override { leaf(mark, anchor); }
+  void OnScalar(const YAML::Mark& mark, const std::string&, YAML::anchor_t anchor,
+                const std::string&) override {
+    leaf(mark, anchor);
+  }
+  void OnAlias(const YAML::Mark& mark, YAML::anchor_t anchor) override {
+    if (++aliases_ > kMaxYamlAliases)
+      fail(mark,
+           fmt::format("more than {} aliases (*name); a lens file needs none", kMaxYamlAliases));
+    add(mark, anchor < sizes_.size() && sizes_[anchor] > 0 ? sizes_[anchor] : 1);
+  }
+  void OnSequenceStart(const YAML::Mark& mark, const std::string&, YAML::anchor_t anchor,
+                       YAML::EmitterStyle::value) override {
+    open(mark, anchor);
+  }
+  void OnSequenceEnd() override { close(); }
+  void OnMapStart(const YAML::Mark& mark, const std::string&, YAML::anchor_t anchor,
+                  YAML::EmitterStyle::value) override {
+    open(mark, anchor);
+  }
+  void OnMapEnd() override { close(); }
+
+ private:
+  struct Open {
+    YAML::anchor_t anchor;
+    std::size_t nodes;
+  };
+  [[noreturn]] void fail(const YAML::Mark& mark, const std::string& message) const {
+    throw Error(SourceLocation{file_, mark.line + 1, mark.column + 1}, message);
+  }
+  // n more nodes in the expanded document (and in every open collection).
+  void add(const YAML::Mark& mark, std::size_t n) {
+    total_ += n;
+    if (total_ > kMaxYamlNodes)
+      fail(mark, fmt::format("the document expands to more than {} nodes here (nested aliases?); "
+                             "lensopt reads at most {}",
+                             kMaxYamlNodes, kMaxYamlNodes));
+    if (!open_.empty()) open_.back().nodes += n;
+  }
+  void record(YAML::anchor_t anchor, std::size_t n) {
+    if (anchor == 0) return;
+    if (anchor >= sizes_.size()) sizes_.resize(anchor + 1, 0);
+    sizes_[anchor] = n;
+  }
+  void leaf(const YAML::Mark& mark, YAML::anchor_t anchor) {
+    add(mark, 1);
+    record(anchor, 1);
+  }
+  void open(const YAML::Mark& mark, YAML::anchor_t anchor) {
+    if (open_.size() >= static_cast<std::size_t>(kMaxYamlNesting))
+      fail(mark, fmt::format("lists and maps nest more than {} levels deep here; lensopt reads at "
+                             "most {}",
+                             kMaxYamlNesting, kMaxYamlNesting));
+    add(mark, 1);
+    open_.push_back({anchor, 1});
+  }
+  void close() {
+    if (open_.empty()) return;
+    const Open done = open_.back();
+    open_.pop_back();
+    if (!open_.empty()) open_.back().nodes += done.nodes - 1;  // the 1 was added at its start
+    record(done.anchor, done.nodes);
+  }
+
+  std::string file_;
+  std::vector<Open> open_;
+  std::vector<std::size_t> sizes_;  // expanded nodes by anchor id (0: not closed yet)
+  std::size_t aliases_ = 0;
+  std::size_t total_ = 0;
+};
+
+void check_yaml_budget(const std::string& text, const std::string& source_name) {
+  std::istringstream stream(text);
+  YAML::Parser parser(stream);
+  AliasBudget budget(source_name);
+  while (parser.HandleNextDocument(budget)) {
+  }
+}
+
 // Duplicate keys in any map (yaml-cpp keeps both and its lookup takes the first): an Error at the
 // second naming the first's line.
 void check_duplicate_keys(const YamlReader& reader, const YAML::Node& node, int depth = 0) {
@@ -148,7 +239,9 @@ void check_duplicate_keys(const YamlReader& reader, const YAML::Node& node, int 
 Lens parse_lens_yaml(std::string_view text, const std::string& source_name) {
   YAML::Node root;
   try {
-    root = YAML::Load(std::string(text));
+    const std::string owned(text);
+    check_yaml_budget(owned, source_name);
+    root = YAML::Load(owned);
   } catch (const YAML::Exception& e) {
     const SourceLocation where =
         e.mark.is_null() ? SourceLocation{source_name}
@@ -167,6 +260,9 @@ Lens parse_lens_yaml(std::string_view text, const std::string& source_name) {
   std::string sequence;
   for (const YAML::Node& item : reader.list(sequence_node, "sequence")) sequence += item.Scalar();
   if (sequence.empty()) reader.fail(sequence_node, "sequence is empty");
+  if (sequence.size() > kMaxSurfaces)
+    reader.fail(sequence_node, fmt::format("sequence has {} surfaces; lensopt reads at most {}",
+                                           sequence.size(), kMaxSurfaces));
   for (std::size_t i = 0; i < sequence.size(); ++i) {
     const char letter = static_cast<char>(std::toupper(static_cast<unsigned char>(sequence[i])));
     if (letter != 'G' && letter != 'A')

@@ -5,12 +5,14 @@
 #include <algorithm>
 #include <cctype>
 #include <cmath>
+#include <cstdint>
 #include <system_error>
 
 #include "core/image_plugin.h"
 #include "core/png_io.h"
 #include "lensopt/core/atomic_file.h"
 #include "lensopt/core/error.h"
+#include "lensopt/core/image_limits.h"
 #include "lensopt/core/text.h"
 
 namespace lensopt {
@@ -107,9 +109,21 @@ LoadedImage read_image(const std::filesystem::path& path) {
   LoadedImage loaded;
   FloatImage& image = loaded.image;
   auto file_spec = std::make_shared<ImageFileSpec::Impl>();
+  // The header against the pixel limit and the file's size, before any pixel is allocated
+  // (core/image_limits.h).
+  auto check_header = [&](int width, int height, std::uint64_t min_bytes) {
+    const std::string problem = image_header_problem(width, height, size, min_bytes);
+    if (!problem.empty()) throw Error(where, fmt::format("cannot read image: {}", problem));
+  };
   if (format == "PNG") {
     PngPixels png;
     std::string error;
+    if (read_png_header(path, png, error)) {
+      // The smallest raw rows of that size (1-bit grey; read_png checks the exact ones again).
+      const std::uint64_t raw = static_cast<std::uint64_t>(std::max(png.height, 0)) *
+                                (1 + (static_cast<std::uint64_t>(std::max(png.width, 0)) + 7) / 8);
+      check_header(png.width, png.height, raw / kMaxDeflateRatio);
+    }
     if (!read_png(path, png, error))
       throw Error(where, fmt::format("cannot read image (corrupt or not a PNG file): {}", error));
     if (png.width <= 0 || png.height <= 0 || png.channels <= 0)
@@ -123,6 +137,11 @@ LoadedImage read_image(const std::filesystem::path& path) {
   } else {
     const ImagePlugin& plugin =
         image_plugin(fmt::format("{}: cannot read a {} file", path.string(), format));
+    int header_width = 0, header_height = 0;
+    if (plugin.read_size(path.string(), header_width, header_height))
+      check_header(header_width, header_height,
+                   static_cast<std::uint64_t>(header_width) *
+                       static_cast<std::uint64_t>(header_height) / kMaxPixelsPerByte);
     DecodedImage decoded;
     std::string error;
     if (!plugin.read(path.string(), decoded, error)) {

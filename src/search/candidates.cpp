@@ -11,9 +11,11 @@
 #include <optional>
 #include <set>
 
+#include "lensopt/core/atomic_file.h"
 #include "lensopt/core/constants.h"
 #include "lensopt/core/error.h"
 #include "lensopt/formats/lens_file.h"
+#include "lensopt/lens/input_limits.h"
 #include "lensopt/lens/lens_io.h"
 #include "lensopt/lens/validate.h"
 #include "lensopt/search/search.h"
@@ -29,8 +31,10 @@ SourceLocation where_of(const std::filesystem::path& path, const toml::node& nod
 }
 
 toml::table parse_toml_file(const std::filesystem::path& path) {
+  const std::string text = read_file(path);
+  check_toml_nesting(text, path.string());  // before toml++ recurses (lens/input_limits.h)
   try {
-    return toml::parse_file(path.string());
+    return toml::parse(text, path.string());
   } catch (const toml::parse_error& e) {
     throw Error(SourceLocation{path.string(), static_cast<int>(e.source().begin.line),
                                static_cast<int>(e.source().begin.column)},

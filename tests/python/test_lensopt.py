@@ -178,6 +178,13 @@ class Rendering(unittest.TestCase):
         self.assertAlmostEqual(maps["distortion"][15, 20], 0.0, places=12)
         self.assertLess(maps["relative_illumination"][0, 0], 1.0)
 
+    def test_maps_of_no_pixels_raise(self):
+        # Issue 34: maps(0, 0) returned a NaN pitch instead of raising.
+        r = lensopt.Renderer(load(LENSES / "doublet.toml"), rings=4, fields=5)
+        for width, height in [(0, 0), (0, 10), (10, 0), (-1, 5)]:
+            with self.assertRaises(ValueError):
+                r.maps(width, height)
+
     def test_psf_kind(self):
         lens = load(LENSES / "doublet.toml")
         geometric = lensopt.Renderer(lens, rings=4, fields=3)
