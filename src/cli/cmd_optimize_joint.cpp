@@ -453,7 +453,7 @@ std::function<void(const OptimizeShared&)> setup_optimize_joint(CLI::App& sub) {
   sub.add_option("--scene-height", cmd->scene_height, "built-in scene height, px (default 720)")
       ->group(g);
   sub.add_option("--holdout", cmd->holdout,
-                 "share of --images held out for evaluation (default 0.2)")
+                 "share of the images of --images or --data held out for evaluation (default 0.2)")
       ->group(g);
   sub.add_option("--eval-crops", cmd->eval_crops, "held-out crops scored (default 8)")->group(g);
   sub.add_option("--features", cmd->features, "restoration network features (default 16)")
