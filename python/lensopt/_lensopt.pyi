@@ -123,11 +123,15 @@ class AnalysisReport:
     def to_text(self) -> str: ...
     def to_dict(self) -> Dict[str, Any]: ...
 
-def analyze(lens: Lens, *, rings: int = 32, fields: int = 21, ray_aiming: bool = True,
-            scale_to_spec: bool = True, dispersion: str = "", threads: int = 0,
-            wave: bool = False, mtf_frequencies: Sequence[float] = (10.0, 30.0, 50.0),
-            pupil_samples: int = 64, wavelength_weights: Sequence[float] = (),
-            zernike_terms: int = 0, zernike_order: str = "fringe") -> AnalysisReport: ...
+# None: `lensopt analyze`'s default (32 rings, 21 fields, all threads, MTF at 10, 30, 50
+# cycles/mm, 128 pupil samples).
+def analyze(lens: Lens, *, rings: Optional[int] = None, fields: Optional[int] = None,
+            ray_aiming: bool = True, scale_to_spec: bool = True, dispersion: str = "",
+            threads: Optional[int] = None, wave: bool = False,
+            mtf_frequencies: Optional[Sequence[float]] = None,
+            pupil_samples: Optional[int] = None, wavelength_weights: Sequence[float] = (),
+            zernike_terms: int = 0, zernike_order: str = "fringe",
+            mode: str = "") -> AnalysisReport: ...
 def trace_rays(lens: Lens, positions: npt.ArrayLike, directions: npt.ArrayLike, *,
                wavelength: int = -1, scale_to_spec: bool = True,
                dispersion: str = "") -> Dict[str, np.ndarray]: ...
@@ -143,7 +147,8 @@ def field_data(lens: Lens, *, rings: int = 32, fields: int = 21, ray_aiming: boo
                threads: int = 0) -> Dict[str, List[float]]: ...
 
 class Renderer:
-    def __init__(self, lens: Lens, *, rings: int = 32, fields: int = 21, res_factor: int = 1,
+    def __init__(self, lens: Lens, *, rings: Optional[int] = None,
+                 fields: Optional[int] = None, res_factor: int = 1,
                  distortion: bool = True, relative_illumination: bool = True,
                  threads: int = 0, psf: str = "geometric", pupil_samples: int = 64) -> None: ...
     def render(self, image: npt.ArrayLike) -> np.ndarray: ...
@@ -171,12 +176,14 @@ class Parameterization:
     def to_lens(self, x: npt.ArrayLike, glass_mode: str = "quantized") -> Lens: ...
     def glasses(self, x: npt.ArrayLike) -> List[str]: ...
     def select(self, names: Sequence[str]) -> List[int]: ...
-    def design_loss(self, x: npt.ArrayLike, *, weight_spot: float = 1.0,
-                    weight_ray_path: float = 100.0, weight_ray_angle: float = 100.0,
-                    weight_glass: float = 0.01, rings: int = 8, fields: int = 11,
-                    glass_mode: str = "quantized", paper_penalties: bool = False,
-                    gradient: bool = True, merit: str = "spot",
-                    wavefront_pupil_samples: int = 12) -> Dict[str, Any]: ...
+    # None: the optimizer's default (weights 1, 100, 100, 0.01; 8 rings, 11 fields, 8 samples).
+    def design_loss(self, x: npt.ArrayLike, *, weight_spot: Optional[float] = None,
+                    weight_ray_path: Optional[float] = None,
+                    weight_ray_angle: Optional[float] = None,
+                    weight_glass: Optional[float] = None, rings: Optional[int] = None,
+                    fields: Optional[int] = None, glass_mode: str = "quantized",
+                    paper_penalties: bool = False, gradient: bool = True, merit: str = "spot",
+                    wavefront_pupil_samples: Optional[int] = None) -> Dict[str, Any]: ...
 
 class OptimizeResult:
     lens: Lens
@@ -196,11 +203,22 @@ class OptimizeResult:
     log: List[str]
     constraints_pass: bool
 
-def optimize(lens: Lens, *, max_iterations: int = 50, max_rounds: int = 4,
-             freeze: Sequence[str] = ..., glass_search: str = "none", rings: int = 8,
-             fields: int = 11, paper_penalties: bool = False,
-             verbose: bool = False, merit: str = "spot",
-             wavefront_pupil_samples: int = 12) -> OptimizeResult: ...
+# The options are resolved as `lensopt optimize` resolves them (resolve_optimize_options): the
+# defaults, the bounds for the lens (bounds="auto" | "lens" | "paper"), the lens's [optimize]
+# table, then every argument that is not None.
+def optimize(lens: Lens, *, max_iterations: Optional[int] = None,
+             max_rounds: Optional[int] = None, freeze: Sequence[str] = ...,
+             glass_search: Optional[str] = None, rings: Optional[int] = None,
+             fields: Optional[int] = None, paper_penalties: Optional[bool] = None,
+             verbose: bool = False, merit: Optional[str] = None,
+             wavefront_pupil_samples: Optional[int] = None, bounds: str = "auto",
+             vary: Optional[Sequence[str]] = None, soft_start: Optional[bool] = None,
+             neighbours: Optional[int] = None, threads: Optional[int] = None,
+             weight_ray_path: Optional[float] = None, weight_ray_angle: Optional[float] = None,
+             weight_glass: Optional[float] = None, min_air_mm: Optional[float] = None,
+             min_glass_mm: Optional[float] = None, max_glass_mm: Optional[float] = None,
+             min_image_clearance_mm: Optional[float] = None,
+             max_ray_angle_deg: Optional[float] = None) -> OptimizeResult: ...
 
 class ToleranceReport:
     lens_name: str
@@ -215,8 +233,11 @@ class ToleranceReport:
     def trials_csv(self) -> str: ...
     def to_dict(self) -> Dict[str, Any]: ...
 
-def tolerance(lens: Lens, *, trials: int = 1000, seed: int = 1, rings: int = 16, fields: int = 11,
-              distribution: str = "uniform", compensator: str = "paraxial",
+# None: `lensopt tolerance`'s value (the defaults, 10000 trials, seed 1, 16 rings, 11 fields,
+# uniform, paraxial, with the lens's [tolerance] table applied).
+def tolerance(lens: Lens, *, trials: Optional[int] = None, seed: Optional[int] = None,
+              rings: Optional[int] = None, fields: Optional[int] = None,
+              distribution: Optional[str] = None, compensator: Optional[str] = None,
               sensitivity: bool = True, max_spot_um: Optional[float] = None,
               jobs: int = 0) -> ToleranceReport: ...
 

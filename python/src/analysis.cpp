@@ -1,6 +1,7 @@
 // Analysis in Python: analyze (the CLI's report and JSON), ray tracing with numpy arrays, spots,
 // PSFs and the per-field distortion / relative-illumination data.
 #include <limits>
+#include <optional>
 #include <vector>
 
 #include "bindings.h"
@@ -145,37 +146,53 @@ void bind_analysis(py::module_& m) {
 
   m.def(
       "analyze",
-      [](const Lens& lens, int rings, int fields, bool ray_aiming, bool scale_to_spec,
-         const std::string& dispersion, int threads, bool wave,
-         const std::vector<double>& mtf_frequencies, int pupil_samples,
+      [](const Lens& lens_in, std::optional<int> rings, std::optional<int> fields, bool ray_aiming,
+         bool scale_to_spec, const std::string& dispersion, std::optional<int> threads, bool wave,
+         std::optional<std::vector<double>> mtf_frequencies, std::optional<int> pupil_samples,
          const std::vector<double>& wavelength_weights, int zernike_terms,
-         const std::string& zernike_order) {
+         const std::string& zernike_order, const std::string& mode) {
+        // `lensopt analyze`'s options: AnalyzeOptions' defaults (the CLI's), then the arguments
+        // given (None: not given).
         AnalyzeOptions o;
-        o.trace = trace_options(rings, fields, ray_aiming, scale_to_spec, threads);
+        if (rings) o.trace.rings = *rings;
+        if (fields) o.trace.fields = *fields;
+        if (threads) o.trace.threads = *threads;
+        o.trace.ray_aiming = ray_aiming;
+        o.trace.scale_to_spec = scale_to_spec;
+        o.trace.validate();
         o.wave = wave || zernike_terms > 0;
-        o.mtf_frequencies_cyc_mm = mtf_frequencies;
-        o.wave_options.pupil_samples = pupil_samples;
+        if (mtf_frequencies) o.mtf_frequencies_cyc_mm = *mtf_frequencies;
+        if (pupil_samples) o.wave_options.pupil_samples = *pupil_samples;
         o.wave_options.wavelength_weights = wavelength_weights;
         o.wave_options.zernike_terms = zernike_terms;
         o.wave_options.zernike_ordering = parse_zernike_ordering(zernike_order);
-        o.wave_options.threads = threads;
+        o.wave_options.threads = o.trace.threads;
         if (dispersion == "abbe")
           o.dispersion = DispersionModel::kAbbe;
         else if (dispersion == "catalog")
           o.dispersion = DispersionModel::kCatalog;
         else if (!dispersion.empty())
           throw Error("dispersion must be 'abbe' or 'catalog', not '" + dispersion + "'");
+        Lens lens = lens_in;
+        if (mode == "paper")
+          lens.specs.mode = SpecMode::kPaper;
+        else if (mode == "as-written")
+          lens.specs.mode = SpecMode::kAsWritten;
+        else if (!mode.empty())
+          throw Error("mode must be 'paper' or 'as-written', not '" + mode + "'");
         py::gil_scoped_release release;
         return analyze_lens(lens, o);
       },
-      py::arg("lens"), py::kw_only(), py::arg("rings") = 32, py::arg("fields") = 21,
+      py::arg("lens"), py::kw_only(), py::arg("rings") = py::none(), py::arg("fields") = py::none(),
       py::arg("ray_aiming") = true, py::arg("scale_to_spec") = true, py::arg("dispersion") = "",
-      py::arg("threads") = 0, py::arg("wave") = false,
-      py::arg("mtf_frequencies") = std::vector<double>{10, 30, 50}, py::arg("pupil_samples") = 64,
+      py::arg("threads") = py::none(), py::arg("wave") = false,
+      py::arg("mtf_frequencies") = py::none(), py::arg("pupil_samples") = py::none(),
       py::arg("wavelength_weights") = std::vector<double>{}, py::arg("zernike_terms") = 0,
-      py::arg("zernike_order") = "fringe",
+      py::arg("zernike_order") = "fringe", py::arg("mode") = "",
       "`lensopt analyze`: EFL, BFL, pupil, RMS spot per field, distortion, relative illumination, "
-      "ray failures and ray-aiming error, at the paper's sampling by default. wave=True "
+      "ray failures and ray-aiming error, with the CLI's defaults (AnalyzeOptions: 32 rings, 21 "
+      "fields, 128 pupil samples, MTF at 10, 30, 50 cycles/mm); None keeps a default. mode "
+      "(`--mode`): 'paper' or 'as-written' overrides the lens's spec mode. wave=True "
       "(`--wave`) adds the wave optics (AnalysisReport.wave): RMS wavefront, Strehl ratio and "
       "diffraction and geometric MTF at mtf_frequencies (cycles/mm, `--mtf-freqs`) on a "
       "pupil_samples grid (`--pupil-samples`), wavelengths weighted by wavelength_weights (one "

@@ -1,5 +1,7 @@
 // Optimization in Python: the paper's lens variables (Parameterization), the design loss with
 // its exact gradient, Levenberg-Marquardt optimization and Monte-Carlo tolerancing.
+#include <optional>
+
 #include "bindings.h"
 #include "lensopt/core/error.h"
 #include "lensopt/optimize/design_gradient.h"
@@ -11,16 +13,15 @@ namespace {
 
 using DoubleArray = py::array_t<double, py::array::c_style | py::array::forcecast>;
 
+// The catalog given, else the one `lensopt optimize` takes glasses from (optimizer.h).
 std::string group_catalog(const Lens& lens, const std::string& catalog) {
   if (!catalog.empty()) return catalog;
-  return lens.catalog_name.empty() ? "ohara" : lens.catalog_name;
+  return glass_catalog_for(lens);
 }
 
 // "spot" or "wavefront" (optimize --merit).
 DesignMerit merit_of(const std::string& name) {
-  if (name == "spot") return DesignMerit::kSpot;
-  if (name == "wavefront") return DesignMerit::kWavefront;
-  throw Error("merit must be 'spot' or 'wavefront', not '" + name + "'");
+  return parse_merit(name, SourceLocation{"merit"});
 }
 
 }  // namespace
@@ -107,20 +108,25 @@ void bind_optimize(py::module_& m) {
           py::arg("names"), "Indices of the variables named (or of the groups named).")
       .def(
           "design_loss",
-          [](const LensParameterization& p, const DoubleArray& x, double weight_spot,
-             double weight_ray_path, double weight_ray_angle, double weight_glass, int rings,
-             int fields, const std::string& mode, bool paper_penalties, bool gradient,
-             const std::string& merit, int wavefront_pupil_samples) {
+          [](const LensParameterization& p, const DoubleArray& x, std::optional<double> weight_spot,
+             std::optional<double> weight_ray_path, std::optional<double> weight_ray_angle,
+             std::optional<double> weight_glass, std::optional<int> rings,
+             std::optional<int> fields, const std::string& mode, bool paper_penalties,
+             bool gradient, const std::string& merit, std::optional<int> wavefront_pupil_samples) {
             const std::vector<double> v = vector_of(x, p.size());
-            const TraceOptions sampling = trace_options(rings, fields, true, false, 0);
+            // Unset arguments keep the optimizer's defaults (OptimizeOptions, DesignLossOptions).
+            const OptimizeOptions defaults;
+            const TraceOptions sampling =
+                trace_options(rings.value_or(defaults.sampling.rings),
+                              fields.value_or(defaults.sampling.fields), true, false, 0);
             DesignLossOptions o;
-            o.weight_spot = weight_spot;
-            o.weight_ray_path = weight_ray_path;
-            o.weight_ray_angle = weight_ray_angle;
-            o.weight_glass = weight_glass;
+            if (weight_spot) o.weight_spot = *weight_spot;
+            if (weight_ray_path) o.weight_ray_path = *weight_ray_path;
+            if (weight_ray_angle) o.weight_ray_angle = *weight_ray_angle;
+            if (weight_glass) o.weight_glass = *weight_glass;
             o.paper_penalties = paper_penalties;
             o.merit = merit_of(merit);
-            o.wavefront_pupil_samples = wavefront_pupil_samples;
+            if (wavefront_pupil_samples) o.wavefront_pupil_samples = *wavefront_pupil_samples;
             o.validate();
             const GlassMode gm = parse_glass_mode(mode);
             const std::vector<int> fixed = p.nearest_glasses(v.data());
@@ -154,15 +160,17 @@ void bind_optimize(py::module_& m) {
             }
             return d;
           },
-          py::arg("x"), py::kw_only(), py::arg("weight_spot") = 1.0,
-          py::arg("weight_ray_path") = 100.0, py::arg("weight_ray_angle") = 100.0,
-          py::arg("weight_glass") = 0.01, py::arg("rings") = 8, py::arg("fields") = 11,
-          py::arg("glass_mode") = "quantized", py::arg("paper_penalties") = false,
-          py::arg("gradient") = true, py::arg("merit") = "spot",
-          py::arg("wavefront_pupil_samples") = 12,
+          py::arg("x"), py::kw_only(), py::arg("weight_spot") = py::none(),
+          py::arg("weight_ray_path") = py::none(), py::arg("weight_ray_angle") = py::none(),
+          py::arg("weight_glass") = py::none(), py::arg("rings") = py::none(),
+          py::arg("fields") = py::none(), py::arg("glass_mode") = "quantized",
+          py::arg("paper_penalties") = false, py::arg("gradient") = true, py::arg("merit") = "spot",
+          py::arg("wavefront_pupil_samples") = py::none(),
           "The paper's l_lens = w_S l_S + w_RP l_RP + w_RA l_RA + w_GV l_GV at x (a dict of the "
           "terms: spot_mm, ray_path_mm, ray_angle, glass, total) and, with gradient, d total / dx "
-          "exactly (forward-mode Jets). Weights must be >= 0. merit='wavefront' (optimize "
+          "exactly (forward-mode Jets). Weights must be >= 0; None keeps the optimizer's default "
+          "(1, 100, 100, 0.01; rings 8, fields 11, wavefront_pupil_samples 8). merit='wavefront' "
+          "(optimize "
           "--merit wavefront): l_S is replaced by the mean RMS wavefront (waves, piston and tilt "
           "removed) on a wavefront_pupil_samples grid across the pupil, given as wavefront_waves "
           "and field_wavefront_waves.");
@@ -192,35 +200,50 @@ void bind_optimize(py::module_& m) {
 
   m.def(
       "optimize",
-      [](const Lens& lens, int max_iterations, int max_rounds,
-         const std::vector<std::string>& freeze, const std::string& glass_search, int rings,
-         int fields, bool paper_penalties, bool verbose, const std::string& merit,
-         int wavefront_pupil_samples) {
-        OptimizeOptions o;
-        o.loss.merit = merit_of(merit);
-        o.loss.wavefront_pupil_samples = wavefront_pupil_samples;
-        o.max_iterations = max_iterations;
-        o.max_rounds = max_rounds;
-        o.freeze = freeze;
-        if (glass_search == "none")
-          o.glass_search = GlassSearch::kNone;
-        else if (glass_search == "snap")
-          o.glass_search = GlassSearch::kSnap;
-        else if (glass_search == "neighbours")
-          o.glass_search = GlassSearch::kNeighbours;
-        else
-          throw Error("glass_search must be 'none', 'snap' or 'neighbours'");
-        o.sampling.rings = rings;
-        o.sampling.fields = fields;
-        o.loss.paper_penalties = paper_penalties;
-        o.verbose = verbose;
-        o.validate();
+      [](const Lens& lens, std::optional<int> max_iterations, std::optional<int> max_rounds,
+         const std::vector<std::string>& freeze, std::optional<std::string> glass_search,
+         std::optional<int> rings, std::optional<int> fields, std::optional<bool> paper_penalties,
+         bool verbose, std::optional<std::string> merit, std::optional<int> wavefront_pupil_samples,
+         const std::string& bounds, std::optional<std::vector<std::string>> vary,
+         std::optional<bool> soft_start, std::optional<int> neighbours, std::optional<int> threads,
+         std::optional<double> weight_ray_path, std::optional<double> weight_ray_angle,
+         std::optional<double> weight_glass, std::optional<double> min_air_mm,
+         std::optional<double> min_glass_mm, std::optional<double> max_glass_mm,
+         std::optional<double> min_image_clearance_mm, std::optional<double> max_ray_angle_deg) {
+        // The CLI's resolution (optimizer.h): defaults, bounds for the lens, its [optimize]
+        // table, then the arguments given (None: not given).
+        OptimizeOverrides v;
+        v.bounds = parse_bounds_mode(bounds, SourceLocation{"bounds"});
+        v.paper_penalties = paper_penalties;
+        if (merit) v.merit = parse_merit(*merit, SourceLocation{"merit"});
+        v.wavefront_pupil_samples = wavefront_pupil_samples;
+        if (glass_search)
+          v.glass_search = parse_glass_search(*glass_search, SourceLocation{"glass_search"});
+        v.freeze = freeze;
+        v.vary = vary;
+        v.soft_start = soft_start;
+        v.rings = rings;
+        v.fields = fields;
+        v.threads = threads;
+        v.max_iterations = max_iterations;
+        v.max_rounds = max_rounds;
+        v.glass_neighbours = neighbours;
+        v.weight_ray_path = weight_ray_path;
+        v.weight_ray_angle = weight_ray_angle;
+        v.weight_glass = weight_glass;
+        v.min_air_mm = min_air_mm;
+        v.min_glass_mm = min_glass_mm;
+        v.max_glass_mm = max_glass_mm;
+        v.min_image_clearance_mm = min_image_clearance_mm;
+        v.max_ray_angle_deg = max_ray_angle_deg;
+        v.verbose = verbose;
         OptimizeResult r;
         {
           InterruptScope interrupt(InterruptScope::Signals::kInterruptOnly);
-          o.interrupt = interrupt.flag();
           {
             py::gil_scoped_release release;
+            OptimizeOptions o = resolve_optimize_options(lens, v).options;
+            o.interrupt = interrupt.flag();
             r = optimize_lens(lens, o);
           }
           if (interrupt.interrupted()) {
@@ -230,15 +253,27 @@ void bind_optimize(py::module_& m) {
         }
         return r;
       },
-      py::arg("lens"), py::kw_only(), py::arg("max_iterations") = 50, py::arg("max_rounds") = 4,
-      py::arg("freeze") = std::vector<std::string>{}, py::arg("glass_search") = "none",
-      py::arg("rings") = 8, py::arg("fields") = 11, py::arg("paper_penalties") = false,
-      py::arg("verbose") = false, py::arg("merit") = "spot",
-      py::arg("wavefront_pupil_samples") = 12,
-      "`lensopt optimize`: Levenberg-Marquardt on the paper's design loss. Ctrl-C stops it "
-      "(KeyboardInterrupt). merit='wavefront' (`--merit wavefront`) minimizes the mean RMS "
-      "wavefront error (piston and tilt removed, exact Jacobian) on a wavefront_pupil_samples "
-      "grid instead of the RMS spot (`--wavefront-pupil-samples`).");
+      py::arg("lens"), py::kw_only(), py::arg("max_iterations") = py::none(),
+      py::arg("max_rounds") = py::none(), py::arg("freeze") = std::vector<std::string>{},
+      py::arg("glass_search") = py::none(), py::arg("rings") = py::none(),
+      py::arg("fields") = py::none(), py::arg("paper_penalties") = py::none(),
+      py::arg("verbose") = false, py::arg("merit") = py::none(),
+      py::arg("wavefront_pupil_samples") = py::none(), py::arg("bounds") = "auto",
+      py::arg("vary") = py::none(), py::arg("soft_start") = py::none(),
+      py::arg("neighbours") = py::none(), py::arg("threads") = py::none(),
+      py::arg("weight_ray_path") = py::none(), py::arg("weight_ray_angle") = py::none(),
+      py::arg("weight_glass") = py::none(), py::arg("min_air_mm") = py::none(),
+      py::arg("min_glass_mm") = py::none(), py::arg("max_glass_mm") = py::none(),
+      py::arg("min_image_clearance_mm") = py::none(), py::arg("max_ray_angle_deg") = py::none(),
+      "`lensopt optimize`: Levenberg-Marquardt on the paper's design loss, with the options "
+      "resolved as the CLI resolves them (one function, optimize/optimizer.h "
+      "resolve_optimize_options): the defaults, the bounds `bounds` selects ('auto': the "
+      "paper's for the paper's lenses, else derived from the lens, as `--bounds`), the lens's "
+      "[optimize] table, then every argument given (None: not given). The same lens gives the "
+      "same result as `lensopt optimize`. paper_penalties=True is `--constraints paper`, "
+      "soft_start=False `--no-soft-start`, merit='wavefront' `--merit wavefront` (the mean RMS "
+      "wavefront error, piston and tilt removed, on a wavefront_pupil_samples grid). Ctrl-C "
+      "stops it (KeyboardInterrupt).");
 
   py::class_<ToleranceReport>(m, "ToleranceReport", "The result of tolerance().")
       .def_readonly("lens_name", &ToleranceReport::lens_name)
@@ -263,30 +298,34 @@ void bind_optimize(py::module_& m) {
 
   m.def(
       "tolerance",
-      [](const Lens& lens, int trials, std::uint64_t seed, int rings, int fields,
-         const std::string& distribution, const std::string& compensator, bool sensitivity,
-         std::optional<double> max_spot_um, int jobs) {
-        ToleranceOptions o;
-        tolerance_settings_of(lens).apply_to(o.tolerances);
-        o.trials = trials;
-        o.seed = seed;
-        o.rings = rings;
-        o.fields = fields;
-        o.distribution = parse_tolerance_distribution(distribution);
-        o.compensator = parse_focus_compensator(compensator);
+      [](const Lens& lens, std::optional<int> trials, std::optional<std::uint64_t> seed,
+         std::optional<int> rings, std::optional<int> fields,
+         std::optional<std::string> distribution, std::optional<std::string> compensator,
+         bool sensitivity, std::optional<double> max_spot_um, int jobs) {
+        // The CLI's start (tolerance.h): the defaults and the lens's [tolerance] table, then the
+        // arguments given (None: not given).
+        ToleranceOptions o = tolerance_options_for(lens);
+        if (trials) o.trials = *trials;
+        if (seed) o.seed = *seed;
+        if (rings) o.rings = *rings;
+        if (fields) o.fields = *fields;
+        if (distribution) o.distribution = parse_tolerance_distribution(*distribution);
+        if (compensator) o.compensator = parse_focus_compensator(*compensator);
         o.sensitivity = sensitivity;
-        o.max_spot_um = max_spot_um;
+        if (max_spot_um) o.max_spot_um = *max_spot_um;
         o.jobs = jobs;
         o.validate();
         py::gil_scoped_release release;
         return run_tolerance(lens, o);
       },
-      py::arg("lens"), py::kw_only(), py::arg("trials") = 1000, py::arg("seed") = 1,
-      py::arg("rings") = 16, py::arg("fields") = 11, py::arg("distribution") = "uniform",
-      py::arg("compensator") = "paraxial", py::arg("sensitivity") = true,
-      py::arg("max_spot_um") = py::none(), py::arg("jobs") = 0,
-      "`lensopt tolerance`: Monte-Carlo trials of manufacturing errors (the lens's [tolerance] "
-      "table over the defaults), with the sensitivity table.");
+      py::arg("lens"), py::kw_only(), py::arg("trials") = py::none(), py::arg("seed") = py::none(),
+      py::arg("rings") = py::none(), py::arg("fields") = py::none(),
+      py::arg("distribution") = py::none(), py::arg("compensator") = py::none(),
+      py::arg("sensitivity") = true, py::arg("max_spot_um") = py::none(), py::arg("jobs") = 0,
+      "`lensopt tolerance`: Monte-Carlo trials of manufacturing errors, with the sensitivity "
+      "table. The options start where the CLI's do (tolerance_options_for: the defaults, 10000 "
+      "trials, seed 1, 16 rings, 11 fields, with the lens's [tolerance] table applied); an "
+      "argument given (not None) overrides them.");
 }
 
 }  // namespace lensopt::python

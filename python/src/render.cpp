@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -48,10 +49,14 @@ void bind_render(py::module_& m) {
       "Renders images through a lens (`lensopt render`): spatially varying PSF blur on 9 x 9 "
       "patches, relative illumination and distortion. The PSFs are sampled once here.")
       .def(
-          py::init([](const Lens& lens, int rings, int fields, int res_factor, bool distortion,
-                      bool relative_illumination, int threads, const std::string& psf,
-                      int pupil_samples) {
-            const TraceOptions t = trace_options(rings, fields, true, true, threads);
+          py::init([](const Lens& lens, std::optional<int> rings, std::optional<int> fields,
+                      int res_factor, bool distortion, bool relative_illumination, int threads,
+                      const std::string& psf, int pupil_samples) {
+            // `lensopt render`'s sampling: TraceOptions' defaults unless given.
+            const TraceOptions defaults;
+            const TraceOptions t =
+                trace_options(rings.value_or(defaults.rings), fields.value_or(defaults.fields),
+                              true, true, threads);
             RenderOptions o;
             o.res_factor = res_factor;
             o.distortion = distortion;
@@ -75,10 +80,10 @@ void bind_render(py::module_& m) {
             warnings.insert(warnings.end(), choice.warnings.begin(), choice.warnings.end());
             return PyRenderer{std::make_unique<Renderer>(std::move(model), o), std::move(warnings)};
           }),
-          py::arg("lens"), py::kw_only(), py::arg("rings") = 32, py::arg("fields") = 21,
-          py::arg("res_factor") = 1, py::arg("distortion") = true,
+          py::arg("lens"), py::kw_only(), py::arg("rings") = py::none(),
+          py::arg("fields") = py::none(), py::arg("res_factor") = 1, py::arg("distortion") = true,
           py::arg("relative_illumination") = true, py::arg("threads") = 0,
-          py::arg("psf") = "geometric", py::arg("pupil_samples") = 64,
+          py::arg("psf") = "geometric", py::arg("pupil_samples") = kRenderPupilSamples,
           "psf (`render --psf`): 'geometric' (ray density), 'diffraction' (FFT of the pupil "
           "function on a pupil_samples grid, `--pupil-samples`) or 'auto' (per field and colour "
           "channel the larger blur, by RMS radius); Renderer.psf says which were used.")

@@ -88,7 +88,8 @@ void setup_analyze(CLI::App& app) {
   auto cmd = std::make_shared<AnalyzeCommand>();
   CLI::App* sub = app.add_subcommand(
       "analyze", "First-order data, RMS spot per field, distortion, relative illumination");
-  sub->add_option("LENS", cmd->lens_path, "lens file (.toml, or the paper's .yml)")->required();
+  sub->add_option("LENS", cmd->lens_path, "lens file (.toml, the paper's .yml or Zemax .zmx)")
+      ->required();
   sub->add_flag("--json", cmd->json, "one JSON object on stdout");
   sub->add_option("--rings", cmd->options.trace.rings, "pupil rings (rings^2 half-pupil rays)")
       ->check(CLI::Range(1, 256));

@@ -25,6 +25,7 @@ namespace {
 struct ConvertCommand {
   std::string input_path;
   std::string output_path;
+  std::string output_option;  // -o OUT, as the other commands take their output
 };
 
 Lens read_input(const std::filesystem::path& path) {
@@ -44,7 +45,14 @@ Lens read_input(const std::filesystem::path& path) {
                           path.extension().string()));
 }
 
-void run_convert(const ConvertCommand& cmd) {
+void run_convert(ConvertCommand cmd) {
+  if (!cmd.output_option.empty()) {
+    if (!cmd.output_path.empty() && cmd.output_path != cmd.output_option)
+      throw Error(fmt::format("two outputs: OUT '{}' and -o '{}'; give one", cmd.output_path,
+                              cmd.output_option));
+    cmd.output_path = cmd.output_option;
+  }
+  if (cmd.output_path.empty()) throw Error("give the output lens: convert IN OUT (or -o OUT)");
   const std::filesystem::path output(cmd.output_path);
   const std::string out_extension = lower_extension(output);
   // Check the output type before reading, so a bad OUT fails fast.
@@ -75,7 +83,8 @@ void setup_convert(CLI::App& app) {
   CLI::App* sub = app.add_subcommand(
       "convert", "Convert a lens between .toml, the paper's .yml (read) and Zemax .zmx");
   sub->add_option("IN", cmd->input_path, "input lens (.toml, .yml/.yaml or .zmx)")->required();
-  sub->add_option("OUT", cmd->output_path, "output lens (.toml or .zmx)")->required();
+  sub->add_option("OUT", cmd->output_path, "output lens (.toml or .zmx)");
+  sub->add_option("-o,--output", cmd->output_option, "output lens (.toml or .zmx), instead of OUT");
   sub->callback([cmd] { run_convert(*cmd); });
 }
 

@@ -23,7 +23,7 @@ struct ExportCommand {
   int res_factor = 1;
   int jobs = 0;
   bool diffraction = false;
-  int pupil_samples = 64;
+  int pupil_samples = kRenderPupilSamples;
 };
 
 void run_export(const ExportCommand& cmd) {
@@ -69,7 +69,8 @@ void setup_export(CLI::App& app) {
       "export",
       "Sampled PSFs (EXR), a contact sheet (PNG), the PSF grid of an image size, distortion and "
       "relative-illumination maps (EXR) and per-field values (JSON)");
-  sub->add_option("LENS", cmd->lens_path, "lens file (.toml, or the paper's .yml)")->required();
+  sub->add_option("LENS", cmd->lens_path, "lens file (.toml, the paper's .yml or Zemax .zmx)")
+      ->required();
   sub->add_option("-o,--output", cmd->output_dir, "output folder")->required();
   sub->add_option("--image-size", cmd->image_size, "WIDTHxHEIGHT of the image (default 1280x720)");
   sub->add_option("--res-factor", cmd->res_factor, "simulated resolution factor: 1 or 2")
@@ -80,7 +81,8 @@ void setup_export(CLI::App& app) {
                 "also write diffraction PSFs (FFT of the pupil function) beside the geometric "
                 "ones: psf/field_HH_diffraction.exr, psf_sheet_diffraction.png");
   sub->add_option("--pupil-samples", cmd->pupil_samples,
-                  "pupil grid cells across the diameter for --diffraction (default 64)")
+                  fmt::format("pupil grid cells across the diameter for --diffraction (default {})",
+                              kRenderPupilSamples))
       ->check(CLI::Range(8, 1024));
   sub->callback([cmd] { run_export(*cmd); });
 }

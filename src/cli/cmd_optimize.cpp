@@ -1,11 +1,11 @@
 // lensopt optimize LENS -o OUT.toml: baseline spot-size optimization (Ceres Levenberg-Marquardt).
 #include <fmt/core.h>
-#include <toml++/toml.h>
 #include <unistd.h>
 
 #include <filesystem>
 #include <memory>
 #include <nlohmann/json.hpp>
+#include <optional>
 
 #include "commands.h"
 #include "lens_checks.h"
@@ -16,7 +16,6 @@
 #include "lensopt/formats/lens_file.h"
 #include "lensopt/lens/lens_io.h"
 #include "lensopt/optimize/optimizer.h"
-#include "optimize/optimize_table.h"
 #include "optimize/summary_json.h"
 
 namespace lensopt::cli {
@@ -45,30 +44,6 @@ struct OptimizeCommand {
   double min_air_mm = NAN, min_glass_mm = NAN, max_glass_mm = NAN, min_image_clearance_mm = NAN,
          max_ray_angle_deg = NAN;
 };
-
-// Applies the lens file's [optimize] table (when the lens is a TOML file).
-void apply_optimize_table(const Lens& lens, OptimizeOptions& options) {
-  const std::filesystem::path path = lens.source_path;
-  if (path.extension() != ".toml") return;
-  toml::table file;
-  try {
-    file = toml::parse_file(path.string());
-  } catch (const toml::parse_error& e) {
-    throw Error(SourceLocation{path.string(), static_cast<int>(e.source().begin.line),
-                               static_cast<int>(e.source().begin.column)},
-                std::string(e.description()));
-  }
-  const toml::table* table = file["optimize"].as_table();
-  if (!table) return;
-  for (const auto& [key, node] : *table) {
-    const SourceLocation where{path.string(), static_cast<int>(node.source().begin.line),
-                               static_cast<int>(node.source().begin.column)};
-    const std::string k(key.str());
-    if (!apply_optimize_key(k, node, where, options))
-      throw Error(where, fmt::format("unknown key '{}' in [optimize]; known: {}", k,
-                                     optimize_table_keys()));
-  }
-}
 
 std::string format_constraints(const ConstraintReport& c) {
   std::string out;
@@ -108,51 +83,44 @@ std::filesystem::path checked_output_path(const OptimizeCommand& cmd) {
   return out_path;
 }
 
-BoundsMode parse_bounds(const std::string& name) {
-  if (name == "paper") return BoundsMode::kPaper;
-  if (name == "lens") return BoundsMode::kLens;
-  return BoundsMode::kAuto;
-}
-
 void run_optimize(const OptimizeCommand& cmd) {
   const std::filesystem::path out_path = checked_output_path(cmd);
   const Lens lens = read_lens(cmd.lens_path);
   check_lens_warnings(lens, "optimize", false);
-  OptimizeOptions options;
-  // Bounds first (the paper's for the paper's lenses, else from the lens itself), then the lens
-  // file's [optimize] table and the command line override single values.
-  options.loss = bounds_for(lens, options.loss, parse_bounds(cmd.bounds));
-  const bool paper_bounds = parse_bounds(cmd.bounds) == BoundsMode::kPaper ||
-                            (parse_bounds(cmd.bounds) == BoundsMode::kAuto && is_paper_lens(lens));
-  apply_optimize_table(lens, options);
-  if (!cmd.constraints.empty()) options.loss.paper_penalties = cmd.constraints == "paper";
-  if (!cmd.merit.empty()) options.loss.merit = parse_merit(cmd.merit, SourceLocation{"--merit"});
+  // One resolution for the CLI and Python (optimizer.h): defaults, bounds, the [optimize] table,
+  // then what the command line sets.
+  OptimizeOverrides overrides;
+  overrides.bounds = parse_bounds_mode(cmd.bounds, SourceLocation{"--bounds"});
+  if (!cmd.constraints.empty()) overrides.paper_penalties = cmd.constraints == "paper";
+  if (!cmd.merit.empty()) overrides.merit = parse_merit(cmd.merit, SourceLocation{"--merit"});
   if (cmd.wavefront_pupil_samples > 0)
-    options.loss.wavefront_pupil_samples = cmd.wavefront_pupil_samples;
-  const bool wavefront = options.loss.merit == DesignMerit::kWavefront;
+    overrides.wavefront_pupil_samples = cmd.wavefront_pupil_samples;
   if (!cmd.glass_search.empty())
-    options.glass_search = parse_glass_search(cmd.glass_search, SourceLocation{"--glass-search"});
-  for (const std::string& f : cmd.freeze) options.freeze.push_back(f);
-  if (!cmd.vary.empty()) options.vary = cmd.vary;
-  if (cmd.no_soft_start) options.soft_start = false;
-  if (cmd.rings > 0) options.sampling.rings = cmd.rings;
-  if (cmd.fields > 0) options.sampling.fields = cmd.fields;
-  if (cmd.threads >= 0) options.sampling.threads = cmd.threads;
-  if (cmd.max_iterations > 0) options.max_iterations = cmd.max_iterations;
-  if (cmd.neighbours >= 0) options.glass_neighbours = cmd.neighbours;
-  auto override = [](double v, double& target) {
+    overrides.glass_search = parse_glass_search(cmd.glass_search, SourceLocation{"--glass-search"});
+  overrides.freeze = cmd.freeze;
+  if (!cmd.vary.empty()) overrides.vary = cmd.vary;
+  if (cmd.no_soft_start) overrides.soft_start = false;
+  if (cmd.rings > 0) overrides.rings = cmd.rings;
+  if (cmd.fields > 0) overrides.fields = cmd.fields;
+  if (cmd.threads >= 0) overrides.threads = cmd.threads;
+  if (cmd.max_iterations > 0) overrides.max_iterations = cmd.max_iterations;
+  if (cmd.neighbours >= 0) overrides.glass_neighbours = cmd.neighbours;
+  auto given = [](double v, std::optional<double>& target) {
     if (!std::isnan(v)) target = v;
   };
-  override(cmd.weight_ray_path, options.loss.weight_ray_path);
-  override(cmd.weight_ray_angle, options.loss.weight_ray_angle);
-  override(cmd.weight_glass, options.loss.weight_glass);
-  override(cmd.min_air_mm, options.loss.min_air_mm);
-  override(cmd.min_glass_mm, options.loss.min_glass_mm);
-  override(cmd.max_glass_mm, options.loss.max_glass_mm);
-  override(cmd.min_image_clearance_mm, options.loss.min_image_clearance_mm);
-  override(cmd.max_ray_angle_deg, options.loss.max_ray_angle_deg);
-  options.verbose = !cmd.quiet;
-  options.validate();
+  given(cmd.weight_ray_path, overrides.weight_ray_path);
+  given(cmd.weight_ray_angle, overrides.weight_ray_angle);
+  given(cmd.weight_glass, overrides.weight_glass);
+  given(cmd.min_air_mm, overrides.min_air_mm);
+  given(cmd.min_glass_mm, overrides.min_glass_mm);
+  given(cmd.max_glass_mm, overrides.max_glass_mm);
+  given(cmd.min_image_clearance_mm, overrides.min_image_clearance_mm);
+  given(cmd.max_ray_angle_deg, overrides.max_ray_angle_deg);
+  overrides.verbose = !cmd.quiet;
+  const ResolvedOptimizeOptions resolved = resolve_optimize_options(lens, overrides);
+  OptimizeOptions options = resolved.options;
+  const bool paper_bounds = resolved.paper_bounds;
+  const bool wavefront = options.loss.merit == DesignMerit::kWavefront;
 
   if (!cmd.quiet && !cmd.json)
     fmt::print(stderr,
@@ -245,8 +213,7 @@ void run_optimize(const OptimizeCommand& cmd) {
     fixed.glass_search = GlassSearch::kNone;
     fixed.verbose = false;
     const OptimizeResult lm = optimize_lens(lens, fixed);
-    const LensParameterization param(
-        lens, GlassSpace(*load_catalog(lens.catalog_name.empty() ? "ohara" : lens.catalog_name)));
+    const LensParameterization param(lens, GlassSpace(*load_catalog(glass_catalog_for(lens))));
     const std::vector<double> x0 = param.from_lens(lens);
     const std::vector<int> glasses = param.nearest_glasses(x0.data());
     const std::vector<double> x_lm = param.from_lens(lm.lens);
@@ -284,9 +251,10 @@ void run_optimize(const OptimizeCommand& cmd) {
 
 void setup_optimize(CLI::App& app) {
   auto cmd = std::make_shared<OptimizeCommand>();
-  CLI::App* sub =
-      app.add_subcommand("optimize", "Optimize a lens for spot size (Ceres Levenberg-Marquardt)");
-  sub->add_option("LENS", cmd->lens_path, "starting lens (.toml or the paper's .yml)")->required();
+  CLI::App* sub = app.add_subcommand(
+      "optimize", "Optimize a lens for spot size or wavefront (Ceres Levenberg-Marquardt)");
+  sub->add_option("LENS", cmd->lens_path, "starting lens (.toml, the paper's .yml or Zemax .zmx)")
+      ->required();
   sub->add_option("-o,--output", cmd->output_path, "optimized lens (.toml), written atomically");
   sub->add_flag("--in-place", cmd->in_place, "overwrite the input lens (TOML)");
   sub->add_flag("--json", cmd->json, "report as one JSON object on stdout");

@@ -26,6 +26,7 @@ struct JointCommand {
   std::string task = "restoration";
   std::string images;
   std::string data;
+  std::string classes;  // a TOML file with a [classes] map
   std::string detector;
   int steps = 300;
   int perfect_steps = 0;
@@ -155,6 +156,13 @@ JointOptions joint_options(const JointCommand& cmd, const OptimizeShared& shared
   if (shared.threads > 0) options.task_options.threads = shared.threads;
   options.data.images_dir = cmd.images;
   options.data.annotations = annotations_path(cmd.data);
+  if (!cmd.classes.empty()) {
+    if (cmd.data.empty())
+      throw Error(SourceLocation{"--classes"},
+                  "--classes maps a detection dataset's categories: "
+                  "give --data too");
+    options.data.classes = cmd.classes;
+  }
   options.pretrained_task = cmd.detector;
   options.perfect_steps = cmd.perfect_steps;
   options.data.batch_size = cmd.batch;
@@ -244,6 +252,11 @@ void print_joint_json(const Lens& lens, const std::filesystem::path& out_path,
       row["ap75"] = finite_or_null(s.ap75);
       row["psnr_db"] = finite_or_null(s.psnr_db);
       row["ssim"] = finite_or_null(s.ssim);
+      nlohmann::json per_category = nlohmann::json::array();
+      for (const JointSettingResult::CategoryAp& c : s.ap_per_category)
+        per_category.push_back(
+            {{"category_id", c.category_id}, {"name", c.name}, {"ap", finite_or_null(c.ap)}});
+      row["ap_per_category"] = per_category;
     }
     settings.push_back(row);
   }
@@ -376,6 +389,11 @@ std::function<void(const OptimizeShared&)> setup_optimize_joint(CLI::App& sub) {
                  "(lensopt chart --detection); runs perfect optics, fixed/fixed, fixed/trained "
                  "and joint")
       ->group(g);
+  sub.add_option("--classes", cmd->classes,
+                 "with --data: a TOML file whose [classes] table gathers the dataset's "
+                 "categories by name into the detector's classes (docs/detection.md); default: "
+                 "COCO's own categories in order of id, BDD100K's through the paper's six")
+      ->group(g);
   sub.add_option("--perfect-steps", cmd->perfect_steps,
                  "with --data: training steps of the base perfect-optics detector, the start of "
                  "fixed/trained and joint (default: --steps); the perfect-optics row trains "
@@ -435,7 +453,7 @@ std::function<void(const OptimizeShared&)> setup_optimize_joint(CLI::App& sub) {
   sub.add_option("--scene-height", cmd->scene_height, "built-in scene height, px (default 720)")
       ->group(g);
   sub.add_option("--holdout", cmd->holdout,
-                 "share of --images held out for evaluation (default 0.2)")
+                 "share of the images of --images or --data held out for evaluation (default 0.2)")
       ->group(g);
   sub.add_option("--eval-crops", cmd->eval_crops, "held-out crops scored (default 8)")->group(g);
   sub.add_option("--features", cmd->features, "restoration network features (default 16)")

@@ -48,7 +48,8 @@ void setup_plot(CLI::App& app) {
   auto cmd = std::make_shared<PlotCommand>();
   CLI::App* sub = app.add_subcommand(
       "plot", "Lens layout with rays, spot diagrams, ray fans, field curves, PSFs (SVG or PNG)");
-  sub->add_option("LENS", cmd->lens_path, "lens file (.toml, or the paper's .yml)")->required();
+  sub->add_option("LENS", cmd->lens_path, "lens file (.toml, the paper's .yml or Zemax .zmx)")
+      ->required();
   sub->add_option(
       "--kind,-k", cmd->kind,
       "layout, spot, fan, field, psf, report (default), mtf, through-focus, wavefront or "

@@ -46,8 +46,9 @@ struct RenderCommand {
   bool quiet = false;
   std::string shard;
   std::string annotations;  // a COCO or BDD100K JSON of the inputs
+  std::string classes;      // a TOML file with a [classes] map for the annotations
   std::string psf = "geometric";
-  int pupil_samples = 64;
+  int pupil_samples = kRenderPupilSamples;
   long long max_image_pixels = 0;  // 0: core/image_limits.h's default
 };
 
@@ -221,8 +222,14 @@ void run_render(const RenderCommand& cmd) {
   // --annotations: read (and so checked) before any work; its output is no input.
   DetectionDataset annotations;
   fs::path annotations_out;
+  if (!cmd.classes.empty() && cmd.annotations.empty())
+    throw Error(SourceLocation{"--classes"},
+                "--classes maps the categories of --annotations: "
+                "give --annotations too");
   if (!cmd.annotations.empty()) {
-    annotations = read_detection_dataset(cmd.annotations, paper_class_map());
+    ClassMap classes;
+    if (!cmd.classes.empty()) classes = read_class_map(cmd.classes);
+    annotations = read_detection_dataset(cmd.annotations, cmd.classes.empty() ? nullptr : &classes);
     for (const std::string& note : annotations.notes)
       fmt::print(stderr, "lensopt render: {}: {}\n", cmd.annotations, note);
     if (dataset.shard_count > 1)
@@ -333,7 +340,7 @@ void setup_render(CLI::App& app) {
       "render",
       "Aberrated images: spatially varying PSF blur, relative illumination and distortion of a "
       "lens, for image files or whole folders (PNG, JPEG, TIFF, EXR)");
-  sub->add_option("LENS", cmd->lens_path, "lens file (.toml, or the paper's .yml)");
+  sub->add_option("LENS", cmd->lens_path, "lens file (.toml, the paper's .yml or Zemax .zmx)");
   sub->add_option("INPUT", cmd->inputs,
                   "image files or folders (searched recursively); none: the built-in test chart");
   sub->add_option("-o,--output", cmd->output_dir,
@@ -354,8 +361,10 @@ void setup_render(CLI::App& app) {
                   "function) or auto (per field and colour channel the larger blur, by RMS "
                   "radius)")
       ->check(CLI::IsMember({"geometric", "diffraction", "auto"}));
-  sub->add_option("--pupil-samples", cmd->pupil_samples,
-                  "pupil grid cells across the diameter for the diffraction PSFs (default 64)")
+  sub->add_option(
+         "--pupil-samples", cmd->pupil_samples,
+         fmt::format("pupil grid cells across the diameter for the diffraction PSFs (default {})",
+                     kRenderPupilSamples))
       ->check(CLI::Range(8, 1024));
   sub->add_option("--max-image-pixels", cmd->max_image_pixels,
                   "refuse an input whose header says more pixels than this, before decoding it "
@@ -367,6 +376,11 @@ void setup_render(CLI::App& app) {
                   "detection annotations of the inputs (COCO or BDD100K JSON): also write them as "
                   "the rendered images show them (boxes distorted, clipped), as COCO, to "
                   "OUT/<its name>");
+  sub->add_option("--classes", cmd->classes,
+                  "with --annotations: a TOML file whose [classes] table gathers the "
+                  "annotations' categories by name (docs/detection.md); the written COCO has the "
+                  "map's classes. Default: COCO's categories as written, BDD100K's through the "
+                  "paper's six classes");
   sub->add_option("--shard", cmd->shard,
                   "render slice I of N (1-based): the images at positions k (input order) with "
                   "k mod N = I-1; metrics in render_metrics-shardIofN.csv/.json; join them with "

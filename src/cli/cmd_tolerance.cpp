@@ -22,7 +22,8 @@ namespace {
 
 struct ToleranceCommand {
   std::string lens_path;
-  int trials = 10000;
+  // Values of options given on the command line; the defaults are ToleranceOptions'.
+  int trials = 0;
   std::uint64_t seed = 1;
   int jobs = 0;
   std::string csv_path;
@@ -34,8 +35,8 @@ struct ToleranceCommand {
   std::string distribution = "uniform";
   std::string compensator = "paraxial";
   Tolerances tolerances;
-  int rings = 16;
-  int fields = 11;
+  int rings = 0;
+  int fields = 0;
   int sensitivity_rows = 12;
   // Options given on the command line (they override the [tolerance] table).
   CLI::Option* trials_opt = nullptr;
@@ -43,6 +44,8 @@ struct ToleranceCommand {
   CLI::Option* max_spot_opt = nullptr;
   CLI::Option* distribution_opt = nullptr;
   CLI::Option* compensator_opt = nullptr;
+  CLI::Option* rings_opt = nullptr;
+  CLI::Option* fields_opt = nullptr;
   CLI::Option* tolerance_opts[6] = {};
 };
 
@@ -69,29 +72,25 @@ void run_tolerance_command(const ToleranceCommand& cmd) {
                         {cmd.lens_path, cmd.csv_path == out ? cmd.histogram_path : cmd.csv_path});
   const Lens lens = read_lens(cmd.lens_path);
   check_lens_warnings(lens, "tolerance", false);
-  const ToleranceSettings table = tolerance_settings_of(lens);
-
-  ToleranceOptions options;
-  table.apply_to(options.tolerances);
+  // The lens's [tolerance] table over the defaults (one function for the CLI and Python), then
+  // what the command line gives.
+  ToleranceOptions options = tolerance_options_for(lens);
   double* targets[6] = {
       &options.tolerances.curvature_pct,    &options.tolerances.glass_thickness_mm,
       &options.tolerances.air_thickness_mm, &options.tolerances.nd,
       &options.tolerances.vd_pct,           &options.tolerances.asphere_sag_um};
   for (int i = 0; i < 6; ++i)
     if (cmd.tolerance_opts[i]->count() > 0) *targets[i] = cli_values[i];
-  if (table.distribution) options.distribution = *table.distribution;
   if (cmd.distribution_opt->count() > 0)
     options.distribution = parse_tolerance_distribution(cmd.distribution);
-  if (table.compensator) options.compensator = *table.compensator;
   if (cmd.compensator_opt->count() > 0)
     options.compensator = parse_focus_compensator(cmd.compensator);
-  options.max_spot_um = table.max_spot_um;
   if (cmd.max_spot_opt->count() > 0) options.max_spot_um = cmd.max_spot_um;
-  options.trials = cmd.trials_opt->count() > 0 ? cmd.trials : table.trials.value_or(cmd.trials);
-  options.seed = cmd.seed_opt->count() > 0 ? cmd.seed : table.seed.value_or(cmd.seed);
+  if (cmd.trials_opt->count() > 0) options.trials = cmd.trials;
+  if (cmd.seed_opt->count() > 0) options.seed = cmd.seed;
   options.jobs = cmd.jobs;
-  options.rings = cmd.rings;
-  options.fields = cmd.fields;
+  if (cmd.rings_opt->count() > 0) options.rings = cmd.rings;
+  if (cmd.fields_opt->count() > 0) options.fields = cmd.fields;
   options.sensitivity = !cmd.no_sensitivity;
   if (!cmd.quiet) {
     // On a terminal one line rewritten in place; otherwise a line every 5 s and at the end.
@@ -138,7 +137,9 @@ void setup_tolerance(CLI::App& app) {
   auto cmd = std::make_shared<ToleranceCommand>();
   CLI::App* sub = app.add_subcommand(
       "tolerance", "Monte-Carlo tolerancing with a refocus compensator and a sensitivity table");
-  sub->add_option("LENS", cmd->lens_path, "lens file (.toml with an optional [tolerance] table)")
+  sub->add_option(
+         "LENS", cmd->lens_path,
+         "lens file (.toml with an optional [tolerance] table, the paper's .yml or Zemax .zmx)")
       ->required();
   cmd->trials_opt = sub->add_option("--trials", cmd->trials, "Monte-Carlo trials (default 10000)")
                         ->check(CLI::Range(1, 100000000));
@@ -175,11 +176,13 @@ void setup_tolerance(CLI::App& app) {
       "--asphere-sag-um", cmd->tolerances.asphere_sag_um,
       "conic and asphere terms of non-spherical surfaces: +- sag at the clear semi-aperture, um, "
       "each term alone (default 1)");
-  sub->add_option("--rings", cmd->rings,
-                  "pupil rings per trial (default 16; the paper's full sampling is 32)")
-      ->check(CLI::Range(1, 256));
-  sub->add_option("--fields", cmd->fields, "field angles per trial (default 11; full: 21)")
-      ->check(CLI::Range(1, 1000));
+  cmd->rings_opt =
+      sub->add_option("--rings", cmd->rings,
+                      "pupil rings per trial (default 16; the paper's full sampling is 32)")
+          ->check(CLI::Range(1, 256));
+  cmd->fields_opt =
+      sub->add_option("--fields", cmd->fields, "field angles per trial (default 11; full: 21)")
+          ->check(CLI::Range(1, 1000));
   sub->add_option("--sensitivity-rows", cmd->sensitivity_rows,
                   "rows of the sensitivity table in the text summary")
       ->check(CLI::Range(0, 100000));

@@ -132,7 +132,7 @@ ClassMap read_class_map(const std::filesystem::path& path) {
   return m;
 }
 
-DetectionDataset read_coco(const std::filesystem::path& path) {
+DetectionDataset read_coco(const std::filesystem::path& path, const ClassMap* classes) {
   const json j = parse_json(path);
   const SourceLocation where{path.string(), 0, 0};
   if (!j.is_object() || !j.contains("images") || !j["images"].is_array())
@@ -159,6 +159,15 @@ DetectionDataset read_coco(const std::filesystem::path& path) {
     for (const json& c : j["categories"])
       if (c.is_object() && c.contains("id") && c["id"].is_number_integer())
         d.categories.push_back({c["id"].get<int>(), c.value("name", std::string())});
+  // A user's class map: the file's category ids -> the map's classes, by name.
+  std::map<int, int> class_of_id;
+  std::map<std::string, int> unmapped;
+  if (classes) {
+    for (const DetectionCategory& c : d.categories) {
+      const auto it = classes->class_of_name.find(lower(c.name));
+      if (it != classes->class_of_name.end()) class_of_id[c.id] = it->second;
+    }
+  }
   auto has_category = [&](int id) {
     return std::any_of(d.categories.begin(), d.categories.end(),
                        [&](const DetectionCategory& c) { return c.id == id; });
@@ -204,8 +213,25 @@ DetectionDataset read_coco(const std::filesystem::path& path) {
                                       label, x, y, w, h));
         continue;
       }
+      if (classes) {
+        const auto it = class_of_id.find(g.category);
+        if (it == class_of_id.end()) {
+          std::string name = fmt::format("id {}", g.category);
+          for (const DetectionCategory& c : d.categories)
+            if (c.id == g.category) name = fmt::format("'{}' (id {})", c.name, c.id);
+          ++unmapped[name];
+          continue;
+        }
+        g.category = it->second;
+      }
       d.annotations.push_back(g);
     }
+  }
+  if (classes) {
+    d.categories = classes->classes;
+    for (const auto& [name, count] : unmapped)
+      d.notes.push_back(
+          fmt::format("{} annotation(s) of category {} are in no class: skipped", count, name));
   }
   return d;
 }
@@ -261,12 +287,58 @@ DetectionDataset read_bdd100k(const std::filesystem::path& path, const ClassMap&
   return d;
 }
 
-DetectionDataset read_detection_dataset(const std::filesystem::path& path, const ClassMap& map) {
+DetectionDataset read_detection_dataset(const std::filesystem::path& path,
+                                        const ClassMap* classes) {
   const json j = parse_json(path);
-  if (j.is_object() && j.contains("images")) return read_coco(path);
-  if (j.is_array() || (j.is_object() && j.contains("frames"))) return read_bdd100k(path, map);
+  if (j.is_object() && j.contains("images")) return read_coco(path, classes);
+  if (j.is_array() || (j.is_object() && j.contains("frames")))
+    return read_bdd100k(path, classes ? *classes : paper_class_map());
   throw Error(SourceLocation{path.string(), 0, 0},
               "neither COCO (an object with \"images\") nor BDD100K (a list of frames)");
+}
+
+int CategoryMap::class_of(int category_id) const {
+  const auto it = class_of_category.find(category_id);
+  return it == class_of_category.end() ? 0 : it->second;
+}
+
+int CategoryMap::category_of(int class_index) const {
+  if (class_index < 1 || class_index > class_count())
+    throw Error(fmt::format("class index {} is outside the dataset's classes 1..{}", class_index,
+                            class_count()));
+  return category_of_class[static_cast<std::size_t>(class_index - 1)];
+}
+
+CategoryMap category_map(const DetectionDataset& dataset) {
+  std::map<int, std::string> by_id;
+  for (const DetectionCategory& c : dataset.categories) by_id.emplace(c.id, c.name);
+  for (const GroundTruth& g : dataset.annotations)
+    by_id.emplace(g.category, fmt::format("category {}", g.category));
+  CategoryMap m;
+  for (const auto& [id, name] : by_id) {
+    const int k = m.class_count() + 1;
+    m.classes.push_back({k, name});
+    m.class_of_category[id] = k;
+    m.category_of_class.push_back(id);
+  }
+  return m;
+}
+
+void to_class_indices(std::vector<GroundTruth>& boxes, const CategoryMap& map) {
+  for (GroundTruth& g : boxes) {
+    const int k = map.class_of(g.category);
+    if (k == 0)
+      throw Error(fmt::format("category id {} is not one of the dataset's categories", g.category));
+    g.category = k;
+  }
+}
+
+void to_category_ids(std::vector<Detection>& detections, const CategoryMap& map) {
+  for (Detection& d : detections) d.category = map.category_of(d.category);
+}
+
+void to_category_ids(CocoStats& stats, const CategoryMap& map) {
+  for (int& c : stats.categories) c = map.category_of(c);
 }
 
 std::string coco_json(const DetectionDataset& dataset) {

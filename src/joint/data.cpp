@@ -239,8 +239,11 @@ void JointData::split_scenes(const std::string& source) {
 
 void JointData::load_detection_dataset() {
   const std::filesystem::path json = options_.annotations;
-  const DetectionDataset dataset = read_detection_dataset(json, paper_class_map());
-  categories_ = dataset.categories;
+  ClassMap user_classes;
+  if (!options_.classes.empty()) user_classes = read_class_map(options_.classes);
+  const DetectionDataset dataset =
+      read_detection_dataset(json, options_.classes.empty() ? nullptr : &user_classes);
+  category_map_ = lensopt::category_map(dataset);
   for (const std::string& note : dataset.notes) notes_.push_back(note);
   std::filesystem::path dir = options_.images_dir;
   if (dir.empty()) {
@@ -266,6 +269,7 @@ void JointData::load_detection_dataset() {
         continue;
       }
       Scene scene{image.file_name, std::move(pixels), {}, dataset.annotations_of(image.id)};
+      to_class_indices(scene.boxes, category_map_);
       for (GroundTruth& g : scene.boxes) g.image = static_cast<int>(scenes_.size());
       boxes += static_cast<int>(scene.boxes.size());
       scenes_.push_back(std::move(scene));
@@ -279,7 +283,12 @@ void JointData::load_detection_dataset() {
                             "optimization needs at least 2 (one is held out for evaluation)",
                             scenes_.size(), c, c, dir.string()));
   notes_.push_back(fmt::format("detection dataset {}: {} images, {} boxes, {} categories",
-                               json.string(), scenes_.size(), boxes, categories_.size()));
+                               json.string(), scenes_.size(), boxes, category_map_.class_count()));
+  std::string classes;
+  for (int k = 1; k <= category_map_.class_count(); ++k)
+    classes += fmt::format("{}{} {} (id {})", k == 1 ? "" : ", ", k,
+                           category_map_.classes[k - 1].name, category_map_.category_of(k));
+  notes_.push_back("detector classes: " + classes);
   split_scenes(dir.string());
 }
 

@@ -106,7 +106,11 @@ double number_of(const nlohmann::json& j, const char* key) {
 
 nlohmann::json settings_json(const std::vector<JointSettingResult>& settings) {
   nlohmann::json j = nlohmann::json::array();
-  for (const auto& s : settings)
+  for (const auto& s : settings) {
+    nlohmann::json per_category = nlohmann::json::array();
+    for (const JointSettingResult::CategoryAp& c : s.ap_per_category)
+      per_category.push_back(
+          {{"category_id", c.category_id}, {"name", c.name}, {"ap", finite_or_null(c.ap)}});
     j.push_back({{"name", s.name},
                  {"metric", finite_or_null(s.metric)},
                  {"mean_spot_um", finite_or_null(s.mean_spot_um)},
@@ -114,7 +118,9 @@ nlohmann::json settings_json(const std::vector<JointSettingResult>& settings) {
                  {"ap75", finite_or_null(s.ap75)},
                  {"psnr_db", finite_or_null(s.psnr_db)},
                  {"ssim", finite_or_null(s.ssim)},
+                 {"ap_per_category", per_category},
                  {"done", s.done}});
+  }
   return j;
 }
 
@@ -350,13 +356,19 @@ std::filesystem::path JointRun::temporary_dir() {
 
 void JointRun::check_categories() const {
   if (options_.task != "detection") return;
-  for (const Scene& scene : data_.scenes())
-    for (const GroundTruth& g : scene.boxes)
-      if (g.category < 1 || g.category > kDetectorClasses)
-        throw Error(SourceLocation{options_.data.annotations.string()},
-                    fmt::format("{}: category id {} is outside the built-in detector's classes "
-                                "1..{} (the paper's six, detection/dataset.h)",
-                                scene.name, g.category, kDetectorClasses));
+  // The boxes hold class indices 1..K (JointData::category_map); the built-in detector has
+  // kDetectorClasses outputs.
+  const CategoryMap& classes = data_.category_map();
+  if (classes.class_count() > kDetectorClasses) {
+    std::string names;
+    for (const DetectionCategory& c : classes.classes)
+      names += (names.empty() ? "" : ", ") + c.name;
+    throw Error(SourceLocation{options_.data.annotations.string()},
+                fmt::format("the dataset has {} categories ({}); the built-in detector has {} "
+                            "classes: gather them with --classes FILE.toml (a [classes] map, "
+                            "docs/detection.md)",
+                            classes.class_count(), names, kDetectorClasses));
+  }
 }
 
 const BoxDistortion* JointRun::distortion_for(const FloatImage& scene, bool perfect) {
@@ -436,6 +448,11 @@ Progress JointRun::read_checkpoint(const std::filesystem::path& dir) {
           r.ap75 = number_of(s, "ap75");
           r.psnr_db = number_of(s, "psnr_db");
           r.ssim = number_of(s, "ssim");
+          r.ap_per_category.clear();
+          if (s.contains("ap_per_category"))
+            for (const auto& c : s.at("ap_per_category"))
+              r.ap_per_category.push_back({c.at("category_id").get<int>(),
+                                           c.at("name").get<std::string>(), number_of(c, "ap")});
           r.done = s.at("done").get<bool>();
         }
     }
@@ -759,6 +776,15 @@ void JointRun::score_detection(JointSettingResult& setting, bool perfect,
     }
   }
   const CocoStats stats = evaluate_coco(truths, detections);
+  // Reported by the dataset's own category ids (the detector works on class indices 1..K).
+  const CategoryMap& classes = data_.category_map();
+  setting.ap_per_category.clear();
+  for (std::size_t i = 0; i < stats.categories.size(); ++i) {
+    const int k = stats.categories[i];
+    if (k < 1 || k > classes.class_count()) continue;  // a detector class the dataset lacks
+    setting.ap_per_category.push_back(
+        {classes.category_of(k), classes.classes[k - 1].name, stats.ap_per_category[i]});
+  }
   setting.metric = stats.ap;
   setting.ap50 = stats.ap50;
   setting.ap75 = stats.ap75;

@@ -2,7 +2,11 @@
 
 #include <fmt/format.h>
 
+#include <cmath>
 #include <cstdint>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
 
 namespace lensopt {
 
@@ -29,6 +33,13 @@ DesignMerit parse_merit(const std::string& name, const SourceLocation& where) {
   if (name == "spot") return DesignMerit::kSpot;
   if (name == "wavefront") return DesignMerit::kWavefront;
   throw Error(where, fmt::format("merit = '{}' must be spot or wavefront", name));
+}
+
+BoundsMode parse_bounds_mode(const std::string& name, const SourceLocation& where) {
+  if (name == "auto") return BoundsMode::kAuto;
+  if (name == "lens") return BoundsMode::kLens;
+  if (name == "paper") return BoundsMode::kPaper;
+  throw Error(where, fmt::format("bounds = '{}' must be auto, lens or paper", name));
 }
 
 const char* optimize_table_keys() {
@@ -129,6 +140,89 @@ bool apply_optimize_key(const std::string& key, const toml::node& node, const So
     return false;
   }
   return true;
+}
+
+}  // namespace lensopt
+
+namespace lensopt {
+
+void apply_optimize_table(const Lens& lens, OptimizeOptions& options) {
+  // The source file gives exact line numbers; extra_toml (the tables after the lens) is the
+  // fallback for a lens built in memory or parsed from text.
+  std::string text, name;
+  const std::filesystem::path path = lens.source_path;
+  if (!lens.source_path.empty() && path.extension() == ".toml") {
+    std::ifstream in(path, std::ios::binary);
+    if (in) {
+      std::ostringstream buffer;
+      buffer << in.rdbuf();
+      text = buffer.str();
+      name = lens.source_path;
+    }
+  }
+  if (name.empty()) {
+    if (lens.extra_toml.empty()) return;
+    text = lens.extra_toml;
+    name = lens.source_path.empty() ? std::string("[optimize] table")
+                                    : fmt::format("{} (tables after the lens)", lens.source_path);
+  }
+  toml::table file;
+  try {
+    file = toml::parse(text, name);
+  } catch (const toml::parse_error& e) {
+    throw Error(SourceLocation{name, static_cast<int>(e.source().begin.line),
+                               static_cast<int>(e.source().begin.column)},
+                std::string(e.description()));
+  }
+  const toml::table* table = file["optimize"].as_table();
+  if (!table) return;
+  for (const auto& [key, node] : *table) {
+    const SourceLocation where{name, static_cast<int>(node.source().begin.line),
+                               static_cast<int>(node.source().begin.column)};
+    const std::string k(key.str());
+    if (!apply_optimize_key(k, node, where, options))
+      throw Error(where, fmt::format("unknown key '{}' in [optimize]; known: {}", k,
+                                     optimize_table_keys()));
+  }
+}
+
+ResolvedOptimizeOptions resolve_optimize_options(const Lens& lens,
+                                                 const OptimizeOverrides& overrides) {
+  ResolvedOptimizeOptions r;
+  OptimizeOptions& o = r.options;
+  // Bounds first (the paper's for the paper's lenses, else from the lens itself), then the lens
+  // file's [optimize] table, then the caller's values.
+  o.loss = bounds_for(lens, o.loss, overrides.bounds);
+  r.paper_bounds = overrides.bounds == BoundsMode::kPaper ||
+                   (overrides.bounds == BoundsMode::kAuto && is_paper_lens(lens));
+  apply_optimize_table(lens, o);
+  auto set = [](const auto& value, auto& target) {
+    if (value) target = *value;
+  };
+  set(overrides.paper_penalties, o.loss.paper_penalties);
+  set(overrides.merit, o.loss.merit);
+  set(overrides.wavefront_pupil_samples, o.loss.wavefront_pupil_samples);
+  set(overrides.glass_search, o.glass_search);
+  for (const std::string& f : overrides.freeze) o.freeze.push_back(f);
+  set(overrides.vary, o.vary);
+  set(overrides.soft_start, o.soft_start);
+  set(overrides.rings, o.sampling.rings);
+  set(overrides.fields, o.sampling.fields);
+  set(overrides.threads, o.sampling.threads);
+  set(overrides.max_iterations, o.max_iterations);
+  set(overrides.max_rounds, o.max_rounds);
+  set(overrides.glass_neighbours, o.glass_neighbours);
+  set(overrides.weight_ray_path, o.loss.weight_ray_path);
+  set(overrides.weight_ray_angle, o.loss.weight_ray_angle);
+  set(overrides.weight_glass, o.loss.weight_glass);
+  set(overrides.min_air_mm, o.loss.min_air_mm);
+  set(overrides.min_glass_mm, o.loss.min_glass_mm);
+  set(overrides.max_glass_mm, o.loss.max_glass_mm);
+  set(overrides.min_image_clearance_mm, o.loss.min_image_clearance_mm);
+  set(overrides.max_ray_angle_deg, o.loss.max_ray_angle_deg);
+  set(overrides.verbose, o.verbose);
+  o.validate();
+  return r;
 }
 
 }  // namespace lensopt

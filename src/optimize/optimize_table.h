@@ -13,18 +13,17 @@
 
 namespace lensopt {
 
-// "none", "snap", "neighbours" (or "neighbors"); throws Error at `where` otherwise.
-GlassSearch parse_glass_search(const std::string& name, const SourceLocation& where);
-std::string glass_search_name(GlassSearch search);
-
-// "spot" or "wavefront" (DesignLossOptions::merit); throws Error at `where` otherwise.
-DesignMerit parse_merit(const std::string& name, const SourceLocation& where);
+// parse_glass_search, glass_search_name and parse_merit are declared in optimizer.h.
 
 // Applies one key of an [optimize] table to `options`. Returns false for an unknown key (the
 // caller may know keys of its own); throws Error at `where` for a value of the wrong type or
 // out of range.
 bool apply_optimize_key(const std::string& key, const toml::node& node, const SourceLocation& where,
                         OptimizeOptions& options);
+
+// Applies the [optimize] table of a lens (its TOML source file, else Lens::extra_toml) to
+// `options`; an unknown key or a bad value throws Error with file:line:column.
+void apply_optimize_table(const Lens& lens, OptimizeOptions& options);
 
 // The keys apply_optimize_key knows, comma-separated, for error messages.
 const char* optimize_table_keys();

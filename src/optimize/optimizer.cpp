@@ -412,6 +412,8 @@ namespace {
 
 bool is_paper_lens_impl(const Lens& lens);
 
+}  // namespace
+
 // The catalog the optimizer picks glasses from: the lens's own; for a lens of model glasses
 // (nd, vd), the paper's for the paper's lenses, else the catalog whose glasses lie nearest to
 // the lens's (the least sum over its glasses of the squared glass-map distance
@@ -450,6 +452,8 @@ std::string glass_catalog_for(const Lens& lens) {
   }
   return best;
 }
+
+namespace {
 
 GlassSpace glass_space_for(const Lens& lens) {
   return GlassSpace(*load_catalog(glass_catalog_for(lens)));

@@ -217,4 +217,16 @@ ToleranceSettings tolerance_settings_of(const Lens& lens) {
   return parse_tolerance_table(lens.extra_toml, name);
 }
 
+ToleranceOptions tolerance_options_for(const Lens& lens) {
+  const ToleranceSettings table = tolerance_settings_of(lens);
+  ToleranceOptions options;
+  table.apply_to(options.tolerances);
+  if (table.distribution) options.distribution = *table.distribution;
+  if (table.compensator) options.compensator = *table.compensator;
+  options.max_spot_um = table.max_spot_um;
+  if (table.trials) options.trials = *table.trials;
+  if (table.seed) options.seed = *table.seed;
+  return options;
+}
+
 }  // namespace lensopt

@@ -95,6 +95,24 @@ for command in "convert $tmp/bad.zmx $tmp/bad.toml" "analyze $tmp/bad.zmx"; do
 done
 [ -e "$tmp/bad.toml" ] && fail "a failed convert left its output"
 
+# `convert IN -o OUT` as the other commands take their output (issue 29: the README's
+# `convert ... -o dg.toml` exited 109); the same file as `convert IN OUT`; two outputs or none
+# are an error.
+"$lensopt" convert lenses/zmx/double_gauss_100.zmx -o "$tmp/dg-o.toml" >/dev/null 2>&1 ||
+  fail "convert IN -o OUT failed"
+"$lensopt" convert lenses/zmx/double_gauss_100.zmx "$tmp/dg-pos.toml" >/dev/null 2>&1 ||
+  fail "convert IN OUT failed"
+cmp -s "$tmp/dg-o.toml" "$tmp/dg-pos.toml" || fail "convert -o OUT and convert OUT differ"
+if "$lensopt" convert lenses/zmx/double_gauss_100.zmx "$tmp/a.toml" -o "$tmp/b.toml" \
+  >/dev/null 2>"$tmp/two.err"; then
+  fail "convert accepted two outputs"
+fi
+grep -q "two outputs" "$tmp/two.err" || fail "two outputs: $(cat "$tmp/two.err")"
+if "$lensopt" convert lenses/zmx/double_gauss_100.zmx >/dev/null 2>"$tmp/none.err"; then
+  fail "convert without an output exited 0"
+fi
+grep -q "give the output lens" "$tmp/none.err" || fail "no output: $(cat "$tmp/none.err")"
+
 if [ "$failures" -gt 0 ]; then
   echo "convert.sh: $failures failure(s)" >&2
   exit 1

@@ -267,6 +267,85 @@ TEST_CASE("dataset: COCO round trip, bad annotations reported and skipped") {
   CHECK_THROWS_WITH_AS(read_coco(temp_file("bad.json")), doctest::Contains("bad.json"), Error);
 }
 
+// Issue 29: official COCO ids (person 1, car 3, dog 18) are not class indices. The loader keeps
+// them; category_map numbers them 1..K in order of id; evaluation reports the file's ids.
+TEST_CASE("dataset: COCO ids 1, 3, 18 become classes 1, 2, 3 and evaluate back to their ids") {
+  const auto path = temp_file("coco-ids.json");
+  {
+    std::ofstream f(path);
+    f << R"({"images": [{"id": 7, "file_name": "a.png", "width": 64, "height": 48}],
+             "categories": [{"id": 18, "name": "dog"}, {"id": 1, "name": "person"},
+                            {"id": 3, "name": "car"}],
+             "annotations": [
+               {"id": 1, "image_id": 7, "category_id": 18, "bbox": [1, 2, 10, 20]},
+               {"id": 2, "image_id": 7, "category_id": 1, "bbox": [30, 4, 8, 16]},
+               {"id": 3, "image_id": 7, "category_id": 3, "bbox": [40, 30, 20, 12]}]})";
+  }
+  const DetectionDataset d = read_coco(path);
+  REQUIRE(d.annotations.size() == 3);
+  CHECK(d.annotations[0].category == 18);  // the file's ids, as written
+  const CategoryMap map = category_map(d);
+  REQUIRE(map.class_count() == 3);
+  CHECK(map.classes[0].name == "person");
+  CHECK(map.classes[1].name == "car");
+  CHECK(map.classes[2].name == "dog");
+  CHECK(map.class_of(1) == 1);
+  CHECK(map.class_of(3) == 2);
+  CHECK(map.class_of(18) == 3);
+  CHECK(map.class_of(2) == 0);
+  CHECK(map.category_of(3) == 18);
+  CHECK_THROWS_AS(map.category_of(4), Error);
+  std::vector<GroundTruth> truths = d.annotations;
+  to_class_indices(truths, map);
+  CHECK(truths[0].category == 3);  // dog
+  CHECK(truths[1].category == 1);  // person
+  CHECK(truths[2].category == 2);  // car
+
+  // A detector in class indices: the person and the dog found exactly, and the car called a dog
+  // with a higher score than the dog.
+  std::vector<Detection> found = {det(7, 1, truths[1].box, 0.9), det(7, 3, truths[0].box, 0.8),
+                                  det(7, 3, truths[2].box, 0.95)};
+  CocoStats stats = evaluate_coco(truths, found);
+  REQUIRE(stats.categories == std::vector<int>{1, 2, 3});
+  to_category_ids(stats, map);
+  CHECK(stats.categories == std::vector<int>{1, 3, 18});
+  REQUIRE(stats.ap_per_category.size() == 3);
+  CHECK(stats.ap_per_category[0] == doctest::Approx(1.0));  // person (id 1)
+  CHECK(stats.ap_per_category[1] == doctest::Approx(0.0));  // car (id 3): never found
+  CHECK(stats.ap_per_category[2] == doctest::Approx(0.5));  // dog (id 18): a false positive first
+  // The same evaluation in the file's ids gives the same figures (ids are only labels).
+  to_category_ids(found, map);
+  CHECK(found[1].category == 18);
+  const CocoStats direct = evaluate_coco(d.annotations, found);
+  CHECK(direct.categories == stats.categories);
+  CHECK(direct.ap == doctest::Approx(stats.ap));
+  CHECK(direct.ap_per_category == stats.ap_per_category);
+
+  // A user's [classes] map gathers COCO categories by name; one it does not list is skipped.
+  const auto classes = temp_file("classes.toml");
+  std::ofstream(classes) << "[classes]\n\"animal\" = [\"dog\", \"cat\"]\n"
+                            "\"human\" = [\"Person\"]\n";
+  const ClassMap user = read_class_map(classes);
+  const DetectionDataset mapped = read_detection_dataset(path, &user);
+  REQUIRE(mapped.categories.size() == 2);
+  CHECK(mapped.categories[0].name == "animal");
+  REQUIRE(mapped.annotations.size() == 2);
+  CHECK(mapped.annotations[0].category == 1);  // dog -> animal
+  CHECK(mapped.annotations[1].category == 2);  // person -> human
+  REQUIRE(mapped.notes.size() == 1);
+  CHECK(mapped.notes[0].find("'car' (id 3)") != std::string::npos);
+  // Without "categories": the ids the annotations use, named by number.
+  const auto bare = temp_file("coco-bare.json");
+  std::ofstream(bare) << R"({"images": [{"id": 1, "file_name": "a.png"}], "annotations": [
+      {"image_id": 1, "category_id": 90, "bbox": [1, 1, 4, 4]},
+      {"image_id": 1, "category_id": 5, "bbox": [1, 1, 4, 4]}]})";
+  const CategoryMap bare_map = category_map(read_coco(bare));
+  REQUIRE(bare_map.class_count() == 2);
+  CHECK(bare_map.category_of(1) == 5);
+  CHECK(bare_map.category_of(2) == 90);
+  CHECK(bare_map.classes[1].name == "category 90");
+}
+
 TEST_CASE("dataset: BDD100K labels through the paper's six classes") {
   const auto path = temp_file("bdd.json");
   {
@@ -280,7 +359,7 @@ TEST_CASE("dataset: BDD100K labels through the paper's six classes") {
                {"category": "unicorn", "box2d": {"x1": 0, "y1": 0, "x2": 9, "y2": 9}}]},
              {"name": "y.jpg"}])";
   }
-  const DetectionDataset d = read_detection_dataset(path, paper_class_map());
+  const DetectionDataset d = read_detection_dataset(path);  // BDD100K: the paper's six classes
   CHECK(d.images.size() == 2);
   CHECK(d.categories.size() == 6);
   REQUIRE(d.annotations.size() == 3);

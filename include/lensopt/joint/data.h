@@ -21,8 +21,11 @@
 // floor(W / crop_px) x floor(H / crop_px) tiles, centred, at most eval_crops in all (evenly spread
 // over the tiles in raster order).
 //
-// Detection datasets (`annotations`: a COCO or BDD100K JSON, detection/dataset.h, BDD100K's
-// categories through the paper's six-class map): the scenes are the annotated images, read from
+// Detection datasets (`annotations`: a COCO or BDD100K JSON, detection/dataset.h; with `classes`
+// a user's [classes] map gathers the categories of either, else BDD100K's go through the paper's
+// six-class map and COCO's stay as written): the boxes' categories become the classes 1..K of
+// category_map() (in order of id; COCO's ids 1, 3, 18 are classes 1, 2, 3), which the detector
+// trains on; evaluations report the dataset's ids. The scenes are the annotated images, read from
 // `images_dir` (default: the folder `images` beside the JSON if it exists, else the JSON's own
 // folder) by their file names; an image that is missing, corrupt, smaller than a crop, or whose
 // size differs from the one the JSON states is reported and skipped, and so are bad annotations.
@@ -51,6 +54,7 @@ struct DataOptions {
   std::filesystem::path images_dir;   // empty: the built-in scenes (or, with annotations, the
                                       // folder beside the JSON)
   std::filesystem::path annotations;  // a COCO or BDD100K JSON: a detection dataset
+  std::filesystem::path classes;      // a TOML file with a [classes] map (empty: none)
   int batch_size = 4;
   int crop_px = 256;
   double holdout_fraction = 0.2;  // directory: share of images held out for evaluation
@@ -88,9 +92,11 @@ class JointData {
   const std::vector<int>& eval_scenes() const { return eval_; }
   // Notes for the log: skipped files, what the built-in scenes are.
   const std::vector<std::string>& notes() const { return notes_; }
-  // Whether the scenes carry boxes (a detection dataset), and its categories.
+  // Whether the scenes carry boxes (a detection dataset), and its classes: Scene::boxes hold
+  // class indices 1..K of this map, which also leads back to the dataset's category ids.
   bool detection() const { return !options_.annotations.empty(); }
-  const std::vector<DetectionCategory>& categories() const { return categories_; }
+  const std::vector<DetectionCategory>& categories() const { return category_map_.classes; }
+  const CategoryMap& category_map() const { return category_map_; }
 
   // The next training batch (advances the generator).
   std::vector<Sample> next_batch();
@@ -112,7 +118,7 @@ class JointData {
   std::vector<int> train_, eval_;
   std::vector<Sample> eval_samples_;
   std::vector<std::string> notes_;
-  std::vector<DetectionCategory> categories_;
+  CategoryMap category_map_;
   Rng rng_;
 
   void load_detection_dataset();

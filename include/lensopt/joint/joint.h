@@ -138,6 +138,14 @@ struct JointSettingResult {
   // Detection only (else NaN): AP at IoU 0.5 and 0.75, and the lens's mean PSNR (dB) and SSIM
   // on the held-out crops (NaN for perfect optics).
   double ap50 = NAN, ap75 = NAN, psnr_db = NAN, ssim = NAN;
+  // Detection only: AP (IoU 0.50:0.95) per category with ground truth in the held-out crops, by
+  // the dataset's own category id and name (not the detector's class index; -1: no ground truth).
+  struct CategoryAp {
+    int category_id = 0;
+    std::string name;
+    double ap = -1;
+  };
+  std::vector<CategoryAp> ap_per_category;
 };
 
 // Mean wall time per joint step, seconds (the imaging's split plus the task and l_lens).

@@ -22,10 +22,12 @@
 
 #include <atomic>
 #include <functional>
+#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
 
+#include "lensopt/core/error.h"
 #include "lensopt/lens/lens.h"
 #include "lensopt/optimize/design_loss.h"
 #include "lensopt/optimize/variables.h"
@@ -145,6 +147,50 @@ DesignLossOptions lens_derived_bounds(const Lens& lens, const DesignLossOptions&
 
 // The bounds `mode` selects for a lens (kAuto: the paper's for is_paper_lens, else derived).
 DesignLossOptions bounds_for(const Lens& lens, const DesignLossOptions& paper, BoundsMode mode);
+
+// "auto", "lens" or "paper" (`optimize --bounds`); throws Error at `where` otherwise.
+BoundsMode parse_bounds_mode(const std::string& name, const SourceLocation& where);
+// "none", "snap", "neighbours" (or "neighbors"); throws Error at `where` otherwise.
+GlassSearch parse_glass_search(const std::string& name, const SourceLocation& where);
+std::string glass_search_name(GlassSearch search);
+// "spot" or "wavefront" (DesignLossOptions::merit); throws Error at `where` otherwise.
+DesignMerit parse_merit(const std::string& name, const SourceLocation& where);
+
+// The catalog the optimizer takes glasses from: the lens's own; for a lens of model glasses, the
+// paper's ("ohara") for the paper's lenses, else the shipped catalog whose glasses lie nearest to
+// the lens's (nd, vd). The Python Parameterization and `--compare-adam` use it too.
+std::string glass_catalog_for(const Lens& lens);
+
+// What a caller sets on one optimization; every member left unset (nullopt) keeps the value
+// resolve_optimize_options derives. `lensopt optimize` and lensopt.optimize (Python) fill this
+// from their arguments and resolve it with the same function, so the two cannot differ.
+struct OptimizeOverrides {
+  BoundsMode bounds = BoundsMode::kAuto;
+  std::optional<bool> paper_penalties;  // --constraints paper (true) / strict (false)
+  std::optional<DesignMerit> merit;
+  std::optional<int> wavefront_pupil_samples;
+  std::optional<GlassSearch> glass_search;
+  std::vector<std::string> freeze;               // added to the [optimize] table's
+  std::optional<std::vector<std::string>> vary;  // replaces the [optimize] table's
+  std::optional<bool> soft_start;
+  std::optional<int> rings, fields, threads, max_iterations, max_rounds, glass_neighbours;
+  std::optional<double> weight_ray_path, weight_ray_angle, weight_glass;
+  std::optional<double> min_air_mm, min_glass_mm, max_glass_mm, min_image_clearance_mm,
+      max_ray_angle_deg;
+  std::optional<bool> verbose;
+};
+
+struct ResolvedOptimizeOptions {
+  OptimizeOptions options;    // validated
+  bool paper_bounds = false;  // the paper's bounds (else derived from the lens)
+};
+
+// The options of optimizing `lens`, in this order: OptimizeOptions' defaults; the bounds
+// `overrides.bounds` selects (bounds_for: the paper's for the paper's lenses, else derived from
+// the lens); the lens file's [optimize] table (its TOML source, else Lens::extra_toml; Error with
+// file:line:column for a bad key); then every override that is set. Validated.
+ResolvedOptimizeOptions resolve_optimize_options(const Lens& lens,
+                                                 const OptimizeOverrides& overrides);
 
 // A plain Adam loop on the paper's l_lens with the same variables, sampling and code path, for
 // the LM comparison. Stops after `max_steps` or when the mean spot (optimization sampling) is at

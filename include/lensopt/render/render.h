@@ -67,6 +67,10 @@
 namespace lensopt {
 
 // How to render (validated by validate()).
+// Pupil grid cells across the diameter of the diffraction PSFs a render uses (`render
+// --pupil-samples`, Renderer(pupil_samples=...)); analyze's wave optics default to 128.
+inline constexpr int kRenderPupilSamples = 64;
+
 struct RenderOptions {
   int res_factor = 1;                 // simulated resolution factor: 1 or 2
   bool distortion = true;             // apply the distortion warp

@@ -148,6 +148,12 @@ struct ToleranceOptions {
   void validate() const;
 };
 
+// The options of tolerancing `lens` before the caller's own: ToleranceOptions' defaults with the
+// lens's [tolerance] table applied (tolerances, distribution, compensator, max_spot_um, trials,
+// seed; tolerance_settings_of). `lensopt tolerance` and lensopt.tolerance (Python) both start
+// from it and set only what their arguments give, so the two cannot differ.
+ToleranceOptions tolerance_options_for(const Lens& lens);
+
 // One toleranced number of the lens.
 struct ToleranceParameter {
   enum class Kind { kCurvature, kThickness, kNd, kVd, kConic, kAsphere };
