@@ -64,7 +64,11 @@ bool ZmxParser::surface_line(const Line& line, const std::string& key) {
     if (upper(name) == "MIRROR")
       fail(line, 1,
            fmt::format("surface {} is a mirror; lensopt models refracting lenses only", s.number));
-    if (name == "___BLANK") {
+    // "GLAS ___BLANK 1 0 nd vd dPgF ...", or any name with solve type 1 ("GLAS name 1 0 nd vd
+    // ..."): OpticStudio's model glass (the third field is the glass solve: 0 fixed, 1 model).
+    const bool model_solve =
+        line.fields.size() > 5 && line.fields[2] == "1" && upper(name) != "AIR";
+    if (name == "___BLANK" || model_solve) {
       s.model_glass = true;
       s.model_nd = number(line, 4, "the model glass's nd (GLAS ___BLANK 1 0 nd vd)");
       s.model_vd = number(line, 5, "the model glass's vd (GLAS ___BLANK 1 0 nd vd)");
@@ -72,6 +76,8 @@ bool ZmxParser::surface_line(const Line& line, const std::string& key) {
         fail(line, 4, fmt::format("model glass nd = {} must be > 1", s.model_nd));
       if (!(s.model_vd > 0.0))
         fail(line, 5, fmt::format("model glass vd = {} must be > 0", s.model_vd));
+      if (line.fields.size() > 6)
+        s.model_dpgf = number(line, 6, "the model glass's dPgF (GLAS ___BLANK 1 0 nd vd dPgF)");
       s.glass = name;
     } else if (upper(name) != "AIR") {
       s.glass = name;

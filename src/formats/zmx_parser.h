@@ -40,6 +40,7 @@ struct RawSurface {
   bool model_glass = false;
   double model_nd = 0.0;
   double model_vd = 0.0;
+  double model_dpgf = 0.0;  // GLAS ... nd vd dPgF of a model glass
   int glas_line = 0;
   int glas_column = 0;
   bool is_stop = false;

@@ -189,8 +189,8 @@ std::string format_zmx(const Lens& lens) {
                          number_text(s.material.nd), number_text(s.material.vd)));
         break;
       case Material::Kind::kModel:
-        line(fmt::format("  GLAS ___BLANK 1 0 {} {} 0 0 0 0 0 0", number_text(s.material.nd),
-                         number_text(s.material.vd)));
+        line(fmt::format("  GLAS ___BLANK 1 0 {} {} {} 0 0 0 0 0", number_text(s.material.nd),
+                         number_text(s.material.vd), number_text(s.material.dpgf)));
         break;
     }
     if (s.is_stop) line("  STOP");

@@ -22,6 +22,13 @@ Material Material::model(double nd, double vd) {
   return m;
 }
 
+Material Material::zemax_model(double nd, double vd, double dpgf) {
+  Material m = model(nd, vd);
+  m.model_glass = ModelGlass::kZemax;
+  m.dpgf = dpgf;
+  return m;
+}
+
 Material Material::from_catalog(const Glass& glass) {
   Material m;
   m.kind = Kind::kCatalog;
@@ -281,7 +288,11 @@ std::vector<std::string> glass_range_warnings(const Lens& lens) {
     if (std::find(seen.begin(), seen.end(), m.glass->name) != seen.end()) continue;
     seen.push_back(m.glass->name);
     std::vector<std::string> outside;
-    for (double w : lens.specs.wavelengths_nm)
+    // Every traced wavelength: the system's and the primary one.
+    std::vector<double> traced = lens.specs.wavelengths_nm;
+    if (std::find(traced.begin(), traced.end(), lens.specs.primary_wavelength_nm) == traced.end())
+      traced.push_back(lens.specs.primary_wavelength_nm);
+    for (double w : traced)
       if (!glass_in_range(*m.glass, w)) outside.push_back(fmt::format("{:g}", w));
     if (outside.empty()) continue;
     std::vector<std::string> surfaces;
@@ -293,11 +304,12 @@ std::vector<std::string> glass_range_warnings(const Lens& lens) {
     std::string list, where;
     for (const std::string& w : outside) list += (list.empty() ? "" : ", ") + w;
     for (const std::string& s : surfaces) where += (where.empty() ? "" : ", ") + s;
+    const std::string file = lens.source_path.empty() ? lens.name : lens.source_path;
     out.push_back(fmt::format(
-        "glass {} (surface {}): {} nm outside its formula's range {:g}-{:g} nm (AGF LD line); "
-        "its index there is extrapolated",
-        m.glass->name, where, list, m.glass->min_wavelength_um * 1000.0,
-        m.glass->max_wavelength_um * 1000.0));
+        "{}{}glass {} (catalog {}, surface {}): {} nm outside its formula's range {:g}-{:g} nm "
+        "(AGF LD line); its index there is extrapolated",
+        file, file.empty() ? "" : ": ", m.glass->name, m.glass->catalog, where, list,
+        m.glass->min_wavelength_um * 1000.0, m.glass->max_wavelength_um * 1000.0));
   }
   return out;
 }
