@@ -167,7 +167,8 @@ def read_glass(root: pathlib.Path, rel: str):
             entry = (fid, coeffs, lo, hi)
             break
         if t in ("tabulated n", "tabulated nk"):
-            rows = [numbers(r) for r in str(d["data"]).strip().splitlines()]
+            # Sorted by wavelength: a few files list two rows out of order (LZOS CTK8, OF1).
+            rows = sorted(numbers(r) for r in str(d["data"]).strip().splitlines())
             coeffs = []
             for r in rows:
                 coeffs += [r[0], r[1]]
