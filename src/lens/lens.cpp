@@ -35,6 +35,18 @@ Material Material::from_catalog(const Glass& glass) {
   m.glass_name = glass.name;
   m.nd = glass.nd;
   m.vd = glass.vd;
+  if (!(glass.nd > 1.0) || !(glass.vd > 0.0)) {
+    // An infrared material: no d line in its range, so no nd or vd. The paper's model gets the
+    // index at the middle of the range (geometric mean of its ends) and the flattest dispersion
+    // lensopt accepts (vd = kMaxAbbe); the catalog model (a .zmx import's default) adds the
+    // correction to the formula's own index at every traced wavelength.
+    const double middle_um = std::sqrt(glass.min_wavelength_um * glass.max_wavelength_um);
+    const double n = glass.index(middle_um * 1000.0);
+    if (std::isfinite(n) && n > 1.0) {
+      m.nd = n;
+      m.vd = kMaxAbbe;
+    }
+  }
   m.glass = std::make_shared<Glass>(glass);
   return m;
 }

@@ -8,6 +8,7 @@
 #include <sstream>
 #include <string>
 
+#include "lensopt/core/error.h"
 #include "lensopt/formats/lens_file.h"
 #include "lensopt/formats/zmx.h"
 #include "lensopt/glass/dispersion.h"
