@@ -13,10 +13,10 @@
 #include <vector>
 
 #include "commands.h"
-#include "lensopt/glass/glass.h"
 #include "lensopt/core/error.h"
 #include "lensopt/core/text.h"
 #include "lensopt/glass/dispersion.h"
+#include "lensopt/glass/glass.h"
 #include "lensopt/glass/glass_range.h"
 #include "lensopt/plot/glass_map.h"
 
@@ -27,10 +27,10 @@ struct CatalogCommand {
   std::string catalog;  // path or catalog name; "all": every shipped catalog
   bool json = false;
   std::vector<double> wavelengths_nm{kHeliumD_nm};
-  std::string name_part;           // --name: glasses whose name contains it (case-insensitive)
-  std::vector<double> nd_window;   // --nd LO,HI
-  std::vector<double> vd_window;   // --vd LO,HI
-  std::string plot_path;           // --plot: the glass map of the listed glasses
+  std::string name_part;          // --name: glasses whose name contains it (case-insensitive)
+  std::vector<double> nd_window;  // --nd LO,HI
+  std::vector<double> vd_window;  // --vd LO,HI
+  std::string plot_path;          // --plot: the glass map of the listed glasses
 };
 
 // The glasses of a catalog that the filters select, as a catalog of their own.
@@ -171,7 +171,8 @@ void run_catalog(const CatalogCommand& cmd) {
     throw lensopt::Error("--json lists one catalog (one JSON array); name it instead of all");
   std::vector<std::shared_ptr<const Catalog>> catalogs;
   if (cmd.catalog == "all") {
-    for (const std::string& name : all_shipped_catalog_names()) catalogs.push_back(load_catalog(name));
+    for (const std::string& name : all_shipped_catalog_names())
+      catalogs.push_back(load_catalog(name));
   } else {
     catalogs.push_back(load_catalog(cmd.catalog));
   }

@@ -106,7 +106,8 @@ Material ZmxParser::resolve_glass(const RawSurface& raw, std::vector<CatalogEntr
          fmt::format("surface {}: glass '{}' is in none of the file's catalogs ({}); lensopt uses "
                      "{} from its shipped catalog {} ({}), where OpticStudio would refuse the file",
                      raw.number, raw.glass,
-                     requested.empty() ? std::string("none") : fmt::format("{}", fmt::join(requested, ", ")),
+                     requested.empty() ? std::string("none")
+                                       : fmt::format("{}", fmt::join(requested, ", ")),
                      glass->name, catalog->name, catalog->path));
     if (std::find(used_catalogs.begin(), used_catalogs.end(), catalog->name) == used_catalogs.end())
       used_catalogs.push_back(catalog->name);

@@ -3,11 +3,10 @@
 // An AGF file is a list of lines "KEY field field ...", fields separated by blanks:
 //   CC comment
 //   NM name formula MIL nd vd [exclude [status [melt_frequency]]]   starts a glass
-//   GC comment (kept: the glass's comment), ED thermal/chemical data, TD thermal dispersion, OD other
-//   data (not kept)
-//   CD c0 c1 ... c9                  dispersion coefficients of the glass's formula
-//   LD min_um max_um                 wavelength range of the formula
-//   IT wavelength_um transmission thickness_mm   one internal-transmission sample
+//   GC comment (kept: the glass's comment), ED thermal/chemical data, TD thermal dispersion, OD
+//   other data (not kept) CD c0 c1 ... c9                  dispersion coefficients of the glass's
+//   formula LD min_um max_um                 wavelength range of the formula IT wavelength_um
+//   transmission thickness_mm   one internal-transmission sample
 // Vendors write numbers as integers or floats ("2", "2.00000E+00", "1.06000E+000").
 #include <fmt/format.h>
 
@@ -236,9 +235,10 @@ class AgfReader {
     if (glass.formula == DispersionFormula::kTable) {
       // (l, n) pairs, l ascending and positive, n positive.
       if (coefficients.size() % 2 != 0)
-        fail(fmt::format("CD line: glass {} (table) needs (wavelength, index) pairs, the line has "
-                         "{} numbers",
-                         glass.name, coefficients.size()));
+        fail(
+            fmt::format("CD line: glass {} (table) needs (wavelength, index) pairs, the line has "
+                        "{} numbers",
+                        glass.name, coefficients.size()));
       for (std::size_t i = 0; i < coefficients.size(); i += 2) {
         if (!(coefficients[i] > 0.0) || !(coefficients[i + 1] > 0.0) ||
             (i > 0 && !(coefficients[i] > coefficients[i - 2])))

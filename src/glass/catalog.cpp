@@ -162,8 +162,8 @@ const std::vector<std::string>& shipped_catalog_names() {
 }
 
 const std::vector<std::string>& database_catalog_names() {
-  static const std::vector<std::string> names = {"HIKARI",    "SUMITA",  "LZOS", "LIGHTPATH",
-                                                 "CORNING",   "INFRARED", "MISC"};
+  static const std::vector<std::string> names = {"HIKARI",  "SUMITA",   "LZOS", "LIGHTPATH",
+                                                 "CORNING", "INFRARED", "MISC"};
   return names;
 }
 

@@ -311,13 +311,12 @@ std::string format_lens_toml(const Lens& lens) {
         break;
       case Material::Kind::kModel:
         if (surface.material.model_glass == ModelGlass::kZemax) {
-          line("material", fmt::format("{{ nd = {}, vd = {}, model = \"opticstudio\"{} }}",
-                                       number_text(surface.material.nd),
-                                       number_text(surface.material.vd),
-                                       surface.material.dpgf == 0.0
-                                           ? std::string()
-                                           : fmt::format(", dpgf = {}",
-                                                         number_text(surface.material.dpgf))));
+          line("material",
+               fmt::format("{{ nd = {}, vd = {}, model = \"opticstudio\"{} }}",
+                           number_text(surface.material.nd), number_text(surface.material.vd),
+                           surface.material.dpgf == 0.0
+                               ? std::string()
+                               : fmt::format(", dpgf = {}", number_text(surface.material.dpgf))));
         } else {
           line("material", fmt::format("{{ nd = {}, vd = {} }}", number_text(surface.material.nd),
                                        number_text(surface.material.vd)));

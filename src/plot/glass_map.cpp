@@ -71,7 +71,8 @@ int write_glass_map(const std::filesystem::path& path,
   for (double vd : nice_ticks(vd_lo - vd_pad, vd_hi + vd_pad, 8)) {
     const Point p = axes.to_px(-vd, axes.y_lo());
     canvas->line(p, {p.x, p.y + 5}, Style{kTextColour, 1.0});
-    canvas->text({p.x, p.y + 18}, format_tick(vd, step), TextStyle(11, Anchor::kMiddle, kTextColour));
+    canvas->text({p.x, p.y + 18}, format_tick(vd, step),
+                 TextStyle(11, Anchor::kMiddle, kTextColour));
   }
   draw_legend(*canvas, {frame.right() + 12, frame.y}, legend, 11);
   canvas->save(path);

@@ -25,8 +25,9 @@ constexpr double kD_nm = 587.5618;
 
 // A singlet at f/4 with the given GLAS line on surface 1, GCAT as given.
 std::string singlet_zmx(const std::string& gcat, const std::string& glas,
-                        const std::string& waves = "WAVM 1 0.4861327 1\nWAVM 2 0.5875618 1\n"
-                                                   "WAVM 3 0.6562725 1\nPWAV 2\n") {
+                        const std::string& waves =
+                            "WAVM 1 0.4861327 1\nWAVM 2 0.5875618 1\n"
+                            "WAVM 3 0.6562725 1\nPWAV 2\n") {
   return "VERS 190513 80 123457\nMODE SEQ\nNAME singlet\nUNIT MM X W X CM MR CPMM\nENPD 10\n" +
          (gcat.empty() ? std::string() : "GCAT " + gcat + "\n") +
          "FTYP 0 0 1 3 0 0 0\nXFLN 0\nYFLN 0\n" + waves +
@@ -55,10 +56,9 @@ bool any_warning_has(const std::vector<std::string>& warnings, const std::string
 TEST_CASE("zmx: a model glass's index at 587.5618 nm is its nd exactly (OpticStudio's model)") {
   // Fails on the old code: the paper's Abbe model, anchored at 587.6 nm, gave n(587.5618) =
   // nd + 4.4e-6 (nd - 1) / vd ... for these glasses 1e-7 to 1e-6 off nd.
-  for (const std::string& glas :
-       {std::string("GLAS ___BLANK 1 0 1.80518 25.36 0 0 0 0 0 0"),
-        std::string("GLAS SF6-LIKE 1 0 1.80518 25.36 0 0 0 0 0 0"),
-        std::string("GLAS ___BLANK 1 0 1.80518 25.36")}) {
+  for (const std::string& glas : {std::string("GLAS ___BLANK 1 0 1.80518 25.36 0 0 0 0 0 0"),
+                                  std::string("GLAS SF6-LIKE 1 0 1.80518 25.36 0 0 0 0 0 0"),
+                                  std::string("GLAS ___BLANK 1 0 1.80518 25.36")}) {
     CAPTURE(glas);
     const ZmxImport in = parse_zmx(singlet_zmx("SCHOTT", glas), "model.zmx");
     const int k = first_glass(in.lens);
@@ -94,7 +94,8 @@ TEST_CASE("zmx: a model glass's index at 587.5618 nm is its nd exactly (OpticStu
 TEST_CASE("zmx: the paper's lenses keep the paper's model glass") {
   const Lens lens = read_lens(test::source_dir() / "lenses" / "doublet.toml");
   for (const Surface& s : lens.surfaces)
-    if (s.material.kind == Material::Kind::kModel) CHECK(s.material.model_glass == ModelGlass::kPaper);
+    if (s.material.kind == Material::Kind::kModel)
+      CHECK(s.material.model_glass == ModelGlass::kPaper);
   const TraceLens<double> tl = make_trace_lens(lens);
   for (int k = 0; k < tl.surface_count(); ++k)
     if (tl.is_glass[k]) CHECK(tl.is_glass[k] == static_cast<char>(ModelGlass::kPaper));
@@ -138,7 +139,8 @@ TEST_CASE("zmx: a wavelength outside a glass's range is warned once, naming glas
 }
 
 TEST_CASE("zmx real: US 5831776 (ray-optics) with GCAT SCHOTT MISC: fused silica at 248 nm") {
-  const auto path = test::source_dir() / "tests" / "data" / "zmx-real" / "rayoptics_US05831776-1.zmx";
+  const auto path =
+      test::source_dir() / "tests" / "data" / "zmx-real" / "rayoptics_US05831776-1.zmx";
   const ZmxImport in = read_zmx(path);
   // SILICA is MISC's fused silica (Malitson).
   int glasses = 0;

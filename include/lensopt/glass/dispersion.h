@@ -34,8 +34,8 @@ enum class DispersionModel {
 
 // Which model a model glass (nd, vd) follows; TraceLens::is_glass holds it per medium (0 = air).
 enum class ModelGlass : char {
-  kPaper = 1,   // abbe_index, anchored at 587.6 nm (the paper's lenses, TOML and YAML)
-  kZemax = 2,   // zemax_model_index, nd exact at 587.5618 nm (model glasses of a .zmx file)
+  kPaper = 1,  // abbe_index, anchored at 587.6 nm (the paper's lenses, TOML and YAML)
+  kZemax = 2,  // zemax_model_index, nd exact at 587.5618 nm (model glasses of a .zmx file)
 };
 
 // Refractive index at `wavelength_nm` from nd and vd by the paper's model.

@@ -22,7 +22,8 @@
 //
 // 120 Table: tabulated n, c = (l_1, n_1, l_2, n_2, ...) with l ascending; n between two samples
 // by the cubic through the four nearest samples (Lagrange; the two nearest at the ends), so n at a
-// sample is the sample itself; outside the table the end cubic extrapolates (the range check warns).
+// sample is the sample itself; outside the table the end cubic extrapolates (the range check
+// warns).
 #pragma once
 
 #include <cmath>
@@ -75,10 +76,10 @@ T table_interpolate(const std::vector<double>& c, std::size_t lo, std::size_t co
 // or where the formula has no real value.
 template <typename T>
 T formula_index(DispersionFormula formula, const std::vector<double>& coefficients, const T& l_um) {
-  using std::pow;
-  using std::sqrt;
   using formula_detail::coefficient;
   using formula_detail::pair_sum;
+  using std::pow;
+  using std::sqrt;
   const T kNan = K<T>(std::numeric_limits<double>::quiet_NaN());
   const std::vector<double>& cv = coefficients;
   const auto c = [&](std::size_t i) { return coefficient(cv, i + 1); };  // c(0) = C1
@@ -154,9 +155,8 @@ T formula_index(DispersionFormula formula, const std::vector<double>& coefficien
       return K<T>(c(0)) +
              pair_sum<T>(cv, 2, [&](double b, double e) { return K<T>(b) * pow(l_um, e); });
     case DispersionFormula::kRiiGases:
-      return K<T>(1.0 + c(0)) + pair_sum<T>(cv, 2, [&](double b, double s) {
-               return K<T>(b) / (K<T>(s) - inv_l2);
-             });
+      return K<T>(1.0 + c(0)) +
+             pair_sum<T>(cv, 2, [&](double b, double s) { return K<T>(b) / (K<T>(s) - inv_l2); });
     case DispersionFormula::kRiiHerzberger: {
       const T big_l = K<T>(1.0) / (l2 - K<T>(formula_detail::kHerzbergerOffset_um2));
       return K<T>(c(0)) + K<T>(c(1)) * big_l + K<T>(c(2)) * big_l * big_l + K<T>(c(3)) * l2 +
