@@ -9,7 +9,8 @@ Catalogs (file, what, from):
   HIKARI.agf     Hikari (Nikon) J-, E-, Q- glasses, Nikon fused silica (NIFS) and CaF2 (NICF):
                  specs/hikari/{optical,SiO2,CaF}
   SUMITA.agf     Sumita K- glasses: specs/sumita/optical
-  LZOS.agf       LZOS glasses (tabulated indices): specs/lzos/optical
+  LZOS.agf       LZOS glasses (tabulated indices), named LZ_<name> as OpticStudio's LZOS catalog:
+                 specs/lzos/optical
   LIGHTPATH.agf  LightPath infrared glasses (tabulated): specs/lightpath/infrared
   CORNING.agf    C79-80 (Corning 7980 fused silica, Malitson), EAGLEXG (tabulated)
   INFRARED.agf   crystals and infrared glasses under OpticStudio's INFRARED names
@@ -84,16 +85,18 @@ CORNING = [
 ]
 
 
-def folder(sub: str):
-    """Every .yml of a database folder, named by file stem, in name order."""
-    return lambda root: [(p.stem, str(p.relative_to(root))) for p in sorted((root / sub).glob("*.yml"))]
+def folder(sub: str, prefix: str = ""):
+    """Every .yml of a database folder, named prefix + file stem, in name order."""
+    return lambda root: [(prefix + p.stem, str(p.relative_to(root)))
+                         for p in sorted((root / sub).glob("*.yml"))]
 
 
 CATALOGS = [
     ("HIKARI", "Hikari (Nikon) glasses", lambda r: folder("specs/hikari/optical")(r)
      + folder("specs/hikari/SiO2")(r) + folder("specs/hikari/CaF")(r)),
     ("SUMITA", "Sumita glasses", folder("specs/sumita/optical")),
-    ("LZOS", "LZOS glasses", folder("specs/lzos/optical")),
+    # OpticStudio's LZOS catalog names them LZ_<name> (real files: GCAT LZOS, GLAS LZ_K8).
+    ("LZOS", "LZOS glasses", folder("specs/lzos/optical", "LZ_")),
     ("LIGHTPATH", "LightPath infrared glasses", folder("specs/lightpath/infrared")),
     ("CORNING", "Corning glasses", lambda r: CORNING),
     ("INFRARED", "crystals and infrared materials", lambda r: CRYSTALS_INFRARED),

@@ -232,9 +232,9 @@ TEST_CASE("glass: Zemax catalog names find the shipped catalogs") {
   // Corning 7980 (C79-80) is fused silica: Malitson's formula, as MISC's F_SILICA.
   CHECK(load_catalog("CORNING")->at("C79-80").index(kD_nm) ==
         load_catalog("MISC")->at("F_SILICA").index(kD_nm));
-  // LZOS's tabulated glasses give their table at the d line (0.58756 um) within the table's
-  // interpolation to 587.5618 nm.
-  const Glass& k8 = load_catalog("LZOS")->at("K8");
+  // LZOS's tabulated glasses (named LZ_<name> as in OpticStudio) give their table at the d line
+  // (0.58756 um) within the table's interpolation to 587.5618 nm.
+  const Glass& k8 = load_catalog("LZOS")->at("LZ_K8");
   CHECK(std::abs(k8.index(kD_nm) - 1.516373) < 1e-6);
 }
 

@@ -12,6 +12,7 @@
 #include "lensopt/formats/lens_file.h"
 #include "lensopt/formats/zmx.h"
 #include "lensopt/glass/dispersion.h"
+#include "lensopt/glass/glass.h"
 #include "lensopt/lens/lens_io.h"
 #include "lensopt/lens/trace_lens.h"
 #include "lensopt/lens/validate.h"
@@ -138,36 +139,35 @@ TEST_CASE("zmx: a wavelength outside a glass's range is warned once, naming glas
   CHECK(warnings[0].find("11000 nm") != std::string::npos);
 }
 
-TEST_CASE("zmx real: US 5831776 (ray-optics) with GCAT SCHOTT MISC: fused silica at 248 nm") {
-  const auto path =
-      test::source_dir() / "tests" / "data" / "zmx-real" / "rayoptics_US05831776-1.zmx";
-  const ZmxImport in = read_zmx(path);
-  // SILICA is MISC's fused silica (Malitson).
-  int glasses = 0;
-  for (const Surface& s : in.lens.surfaces) {
-    if (s.material.is_air()) continue;
-    ++glasses;
-    REQUIRE(s.material.kind == Material::Kind::kCatalog);
-    CHECK(s.material.glass->catalog == "MISC");
-    CHECK(s.material.glass->name == "SILICA");
-  }
-  CHECK(glasses > 5);
-  // Independent: Malitson's fused-silica formula (refractiveindex.info main/SiO2/nk/Malitson.yml,
-  // formula 1: n^2 = 1 + sum B l^2 / (l^2 - C^2)) and a y-nu trace of the file's own CURV / DISZ /
-  // GLAS lines, read here without lensopt's reader.
-  const double l = 0.248, l2 = l * l;
-  const double b[3] = {0.6961663, 0.4079426, 0.8974794}, c[3] = {0.0684043, 0.1162414, 9.896161};
-  double n2 = 1.0;
-  for (int i = 0; i < 3; ++i) n2 += b[i] * l2 / (l2 - c[i] * c[i]);
-  const double n_silica = std::sqrt(n2);
+namespace {
+
+// The file's text as ASCII: UTF-16 LE (with a BOM) keeps every other byte.
+std::string ascii_text(const std::filesystem::path& path) {
   std::ifstream file(path, std::ios::binary);
-  std::string line;
+  std::ostringstream bytes;
+  bytes << file.rdbuf();
+  const std::string raw = bytes.str();
+  if (raw.size() < 2 || static_cast<unsigned char>(raw[0]) != 0xFF ||
+      static_cast<unsigned char>(raw[1]) != 0xFE)
+    return raw;
+  std::string out;
+  for (std::size_t i = 2; i < raw.size(); i += 2) out += raw[i];
+  return out;
+}
+
+// An independent paraxial EFL of a .zmx file: its own CURV / DISZ / GLAS lines (read here, not by
+// lensopt's reader), the index of each GLAS name from `index_of`, and a y-nu trace:
+//   w' = w - y c (n' - n),  y' = y + t w / n',  EFL = -1 / w at the image for y = 1, w = 0.
+template <typename IndexOf>
+double independent_efl(const std::filesystem::path& path, IndexOf index_of) {
+  std::istringstream text(ascii_text(path));
   struct Surf {
     double c = 0, t = 0;
-    bool glass = false;
+    std::string glass;
   };
   std::vector<Surf> surfaces;
-  while (std::getline(file, line)) {
+  std::string line;
+  while (std::getline(text, line)) {
     std::istringstream words(line);
     std::string key;
     words >> key;
@@ -179,21 +179,74 @@ TEST_CASE("zmx real: US 5831776 (ray-optics) with GCAT SCHOTT MISC: fused silica
       words >> t;
       surfaces.back().t = t == "INFINITY" ? 0.0 : std::stod(t);
     }
-    if (key == "GLAS") surfaces.back().glass = true;
+    if (key == "GLAS") words >> surfaces.back().glass;
   }
   REQUIRE(surfaces.size() > 3);
-  // y-nu: y' = y + t w / n, w' = w - y c (n' - n); EFL = -1 / w at the image for y = 1, w = 0.
   double y = 1.0, w = 0.0, n = 1.0;
   for (std::size_t k = 1; k + 1 < surfaces.size(); ++k) {
-    const double n_after = surfaces[k].glass ? n_silica : 1.0;
+    const double n_after = surfaces[k].glass.empty() ? 1.0 : index_of(surfaces[k].glass);
     w = w - y * surfaces[k].c * (n_after - n);
     n = n_after;
     if (k + 2 < surfaces.size()) y = y + surfaces[k].t * w / n;
   }
-  const double efl = -1.0 / w;
-  const TraceLens<double> tl = make_trace_lens(in.lens);
-  const double lensopt_efl = paraxial_data(tl, 248.0).efl_mm;
+  return -1.0 / w;
+}
+
+}  // namespace
+
+TEST_CASE("zmx real: US 5831776 (ray-optics) with GCAT SCHOTT MISC: fused silica at 248 nm") {
+  const auto path =
+      test::source_dir() / "tests" / "data" / "zmx-real" / "rayoptics_US05831776-1.zmx";
+  const ZmxImport in = read_zmx(path);
+  CHECK_FALSE(any_warning_has(in.warnings, "not found"));
+  // SILICA is MISC's fused silica (Malitson).
+  int glasses = 0;
+  for (const Surface& s : in.lens.surfaces) {
+    if (s.material.is_air()) continue;
+    ++glasses;
+    REQUIRE(s.material.kind == Material::Kind::kCatalog);
+    CHECK(s.material.glass->catalog == "MISC");
+    CHECK(s.material.glass->name == "SILICA");
+  }
+  CHECK(glasses > 5);
+  // Independent: Malitson's fused-silica formula as the data gives it (refractiveindex.info
+  // main/SiO2/nk/Malitson.yml, formula 1: n^2 = 1 + sum B l^2 / (l^2 - C^2)), written out here.
+  const double l = 0.248, l2 = l * l;
+  const double b[3] = {0.6961663, 0.4079426, 0.8974794}, c[3] = {0.0684043, 0.1162414, 9.896161};
+  double n2 = 1.0;
+  for (int i = 0; i < 3; ++i) n2 += b[i] * l2 / (l2 - c[i] * c[i]);
+  const double n_silica = std::sqrt(n2);
+  const double efl = independent_efl(path, [&](const std::string& glass) {
+    REQUIRE(glass == "SILICA");
+    return n_silica;
+  });
+  const double lensopt_efl = paraxial_data(make_trace_lens(in.lens), 248.0).efl_mm;
   MESSAGE("US 5831776: EFL ", lensopt_efl, " mm, independent ", efl, " mm");
+  CHECK(std::abs(lensopt_efl - efl) < 1e-12 * std::abs(efl));
+}
+
+TEST_CASE("zmx real: Edmund 55278 (ray-optics) with GCAT SCHOTT INFRARED MISC") {
+  const auto path = test::source_dir() / "tests" / "data" / "zmx-real" / "rayoptics_zmax_55278.zmx";
+  const ZmxImport in = read_zmx(path);
+  // INFRARED and MISC are found now (they were "not found" before); SF5 and BK7 come from
+  // SCHOTT, the first catalog, as in OpticStudio.
+  CHECK_FALSE(any_warning_has(in.warnings, "not found"));
+  for (const Surface& s : in.lens.surfaces)
+    if (!s.material.is_air()) CHECK(s.material.glass->catalog == "SCHOTT");
+  // Independent: the Sellmeier 1 formula written out here with SCHOTT's coefficients (the same
+  // formula data), at the primary wavelength 587.6 nm.
+  const auto schott = load_catalog("SCHOTT");
+  const double l = 0.5876, l2 = l * l;
+  const double efl = independent_efl(path, [&](const std::string& name) {
+    const Glass& g = schott->at(name);
+    REQUIRE(g.formula == DispersionFormula::kSellmeier1);
+    const std::vector<double>& k = g.coefficients;
+    return std::sqrt(1.0 + k[0] * l2 / (l2 - k[1]) + k[2] * l2 / (l2 - k[3]) +
+                     k[4] * l2 / (l2 - k[5]));
+  });
+  const TraceLens<double> tl = make_trace_lens(in.lens);
+  const double lensopt_efl = paraxial_data(tl, tl.reference_nm()).efl_mm;
+  MESSAGE("Edmund 55278: EFL ", lensopt_efl, " mm, independent ", efl, " mm");
   CHECK(std::abs(lensopt_efl - efl) < 1e-12 * std::abs(efl));
 }
 
