@@ -66,8 +66,12 @@ Material ZmxParser::resolve_glass(const RawSurface& raw, std::vector<CatalogEntr
                                   std::vector<std::string>& used_catalogs,
                                   DispersionModel dispersion) {
   if (raw.glass.empty()) return Material::air();
-  // OpticStudio's model glass: n(587.5618 nm) = nd exactly (glass/dispersion.h).
-  if (raw.model_glass) return Material::zemax_model(raw.model_nd, raw.model_vd, raw.model_dpgf);
+  // OpticStudio's model glass: n(587.5618 nm) = nd exactly (glass/dispersion.h); the paper's
+  // in a file lensopt wrote from a lens with the paper's model glasses (its note says so).
+  if (raw.model_glass)
+    return note_model_glass_paper_
+               ? Material::model(raw.model_nd, raw.model_vd)
+               : Material::zemax_model(raw.model_nd, raw.model_vd, raw.model_dpgf);
   for (const CatalogEntry& entry : catalogs) {
     if (!entry.catalog) continue;
     const Glass* glass = entry.catalog->find(raw.glass);

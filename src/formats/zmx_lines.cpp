@@ -196,6 +196,8 @@ void ZmxParser::note_line(const Line& line) {
     note_primary_nm_ = number(line, 4, "primary_wavelength_nm");
   } else if (key == "mode") {
     note_mode_paper_ = line.fields[4] == "paper";
+  } else if (key == "model_glass") {
+    note_model_glass_paper_ = line.fields[4] == "paper";
   } else if (key == "wavelengths_nm") {
     std::vector<double> values;
     for (std::size_t i = 4; i < line.fields.size(); ++i)

@@ -172,6 +172,7 @@ class ZmxParser {
   std::optional<std::vector<double>> note_wavelengths_nm_;
   std::optional<double> note_primary_nm_;
   bool note_mode_paper_ = false;
+  bool note_model_glass_paper_ = false;  // "lensopt model_glass paper": ___BLANK is the paper's
   std::string note_toml_;
   int note_line_ = 0;
 };

@@ -92,6 +92,27 @@ TEST_CASE("zmx: a model glass's index at 587.5618 nm is its nd exactly (OpticStu
         make_trace_lens(in.lens).index_at_nm(first_glass(in.lens), 435.8343));
 }
 
+TEST_CASE("zmx: a lens lensopt writes keeps its model glasses' model when read back") {
+  // The paper's model glass: the written file notes it, and lensopt reads it back so.
+  Lens paper = read_lens(test::source_dir() / "lenses" / "doublet.toml");
+  paper.surfaces[0].material = Material::model(1.7234567890123, 41.123456789);
+  const std::string zmx = format_zmx(paper);
+  CHECK(zmx.find("NOTE 0 lensopt model_glass paper") != std::string::npos);
+  const Lens back = parse_zmx(zmx, "paper.zmx").lens;
+  CHECK(back.surfaces[0].material.model_glass == ModelGlass::kPaper);
+  CHECK(make_trace_lens(back).index_at_nm(0, kD_nm) ==
+        make_trace_lens(paper).index_at_nm(0, kD_nm));
+  // OpticStudio's (a .zmx import): no note, dPgF on the GLAS line.
+  const ZmxImport in =
+      parse_zmx(singlet_zmx("", "GLAS ___BLANK 1 0 1.80518 25.36 0.0136 0 0 0 0 0"), "m.zmx");
+  const std::string again = format_zmx(in.lens);
+  CHECK(again.find("lensopt model_glass") == std::string::npos);
+  const Lens zemax = parse_zmx(again, "again.zmx").lens;
+  const Material& m = zemax.surfaces[first_glass(zemax)].material;
+  CHECK(m.model_glass == ModelGlass::kZemax);
+  CHECK(m.dpgf == 0.0136);
+}
+
 TEST_CASE("zmx: the paper's lenses keep the paper's model glass") {
   const Lens lens = read_lens(test::source_dir() / "lenses" / "doublet.toml");
   for (const Surface& s : lens.surfaces)
