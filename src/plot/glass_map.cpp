@@ -52,7 +52,11 @@ int write_glass_map(const std::filesystem::path& path,
   axes.draw_grid(*canvas, labels);
   std::vector<LegendEntry> legend;
   for (std::size_t c = 0; c < catalogs.size(); ++c) {
-    const std::string colour = field_colour(static_cast<int>(c), static_cast<int>(catalogs.size()));
+    // A categorical palette (12 distinct colours, then repeated).
+    static const char* const kPalette[] = {"#1f77b4", "#d62728", "#2ca02c", "#ff7f0e",
+                                           "#9467bd", "#8c564b", "#e377c2", "#17becf",
+                                           "#bcbd22", "#7f7f7f", "#393b79", "#637939"};
+    const std::string colour = kPalette[c % (sizeof(kPalette) / sizeof(kPalette[0]))];
     std::vector<Point> dots;
     for (const Glass& g : catalogs[c]->glasses) {
       if (!wanted(&g) || !(g.nd > 1.0) || !(g.vd > 0.0)) continue;
