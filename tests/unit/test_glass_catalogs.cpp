@@ -9,6 +9,7 @@
 #include <sstream>
 #include <string>
 
+#include "lensopt/core/error.h"
 #include "lensopt/glass/dispersion.h"
 #include "lensopt/glass/formulas.h"
 #include "lensopt/glass/glass.h"
@@ -215,6 +216,29 @@ TEST_CASE("glass: crystals against a second source at three wavelengths") {
   // Nikon's CaF2 (HIKARI NICF-V, its data sheet's nd) against Malitson's CaF2 at the d line.
   CHECK(std::abs(load_catalog("HIKARI")->at("NICF-V").nd - infrared->at("CAF2").index(kD_nm)) <
         3e-5);
+}
+
+TEST_CASE("agf: lensopt's formula ids, tables and GC comments") {
+  const Catalog c = parse_agf(
+      "NM T 120 0 1.5 60 0 0\nGC source: made up\nGC second line\n"
+      "CD 0.4 1.53 0.5 1.52 0.6 1.515 0.7 1.512\nLD 0.4 0.7\n"
+      "NM S 101 0 1.458464 67.8 0 0\n"
+      "CD 0 0.6961663 0.0684043 0.4079426 0.1162414 0.8974794 9.896161\nLD 0.21 6.7\n",
+      "made.agf");
+  REQUIRE(c.glasses.size() == 2);
+  CHECK(c.warnings.empty());
+  CHECK(c.glasses[0].formula == DispersionFormula::kTable);
+  CHECK(c.glasses[0].comment == "source: made up second line");
+  CHECK(c.glasses[0].coefficients.size() == 8);  // the table's own count, not padded to 10
+  CHECK(c.glasses[0].index(500.0) == 1.52);
+  CHECK(c.glasses[1].coefficients.size() == 7);
+  CHECK(std::abs(c.glasses[1].index(587.5618) - 1.458464) < 1e-6);
+  CHECK(formula_name(DispersionFormula::kRiiSellmeier) == "RII Sellmeier");
+  // A table out of wavelength order, or with an odd count, is an error naming file and line.
+  CHECK_THROWS_WITH_AS(parse_agf("NM T 120 0 1.5 60 0 0\nCD 0.5 1.52 0.4 1.53\n", "bad.agf"),
+                       doctest::Contains("bad.agf:2"), Error);
+  CHECK_THROWS_WITH_AS(parse_agf("NM T 120 0 1.5 60 0 0\nCD 0.4 1.53 0.5 1.52 0.6\n", "odd.agf"),
+                       doctest::Contains("(wavelength, index) pairs"), Error);
 }
 
 TEST_CASE("glass: Zemax catalog names find the shipped catalogs") {
