@@ -64,11 +64,9 @@ bool ZmxParser::surface_line(const Line& line, const std::string& key) {
     if (upper(name) == "MIRROR")
       fail(line, 1,
            fmt::format("surface {} is a mirror; lensopt models refracting lenses only", s.number));
-    // "GLAS ___BLANK 1 0 nd vd dPgF ...", or any name with solve type 1 ("GLAS name 1 0 nd vd
-    // ..."): OpticStudio's model glass (the third field is the glass solve: 0 fixed, 1 model).
-    const bool model_solve =
-        line.fields.size() > 5 && line.fields[2] == "1" && upper(name) != "AIR";
-    if (name == "___BLANK" || model_solve) {
+    // "GLAS ___BLANK 1 0 nd vd dPgF ...": OpticStudio's model glass. (A named glass with the
+    // same fields, "GLAS N-LAK9 1 0 nd vd", is a catalog glass: optiland's lens1.zmx.)
+    if (name == "___BLANK") {
       s.model_glass = true;
       s.model_nd = number(line, 4, "the model glass's nd (GLAS ___BLANK 1 0 nd vd)");
       s.model_vd = number(line, 5, "the model glass's vd (GLAS ___BLANK 1 0 nd vd)");

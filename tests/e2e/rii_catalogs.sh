@@ -17,5 +17,6 @@ for name in HIKARI SUMITA LZOS LIGHTPATH CORNING INFRARED MISC; do
   }
 done
 # The command lists them by their Zemax names.
-"$lensopt" catalog NIKON-HIKARI | grep -q "^J-LASF08A " || { echo "J-LASF08A not listed"; exit 1; }
+"$lensopt" catalog NIKON-HIKARI >"$tmp/hikari.txt"
+grep -q "^J-LASF08A " "$tmp/hikari.txt" || { echo "J-LASF08A not listed"; exit 1; }
 echo "ok"
