@@ -1,4 +1,6 @@
-// lensopt catalog FILE: list a glass catalog's glasses with their indices at chosen wavelengths.
+// lensopt catalog FILE: list a glass catalog's glasses with their indices at chosen wavelengths;
+// FILE "all" lists every shipped catalog. --name, --nd and --vd select glasses (a name part, nd and
+// vd windows); --plot FILE draws the selected glasses on the glass map (nd against vd).
 #include <fmt/core.h>
 #include <fmt/ranges.h>
 
@@ -11,19 +13,42 @@
 #include <vector>
 
 #include "commands.h"
+#include "lensopt/core/error.h"
+#include "lensopt/core/text.h"
+#include "lensopt/glass/dispersion.h"
 #include "lensopt/glass/glass.h"
 #include "lensopt/glass/glass_range.h"
+#include "lensopt/plot/glass_map.h"
 
 namespace lensopt::cli {
 namespace {
 
-constexpr double kHeliumD_nm = 587.5618;  // the d line nd refers to
-
 struct CatalogCommand {
-  std::string catalog;  // path or catalog name
+  std::string catalog;  // path or catalog name; "all": every shipped catalog
   bool json = false;
   std::vector<double> wavelengths_nm{kHeliumD_nm};
+  std::string name_part;          // --name: glasses whose name contains it (case-insensitive)
+  std::vector<double> nd_window;  // --nd LO,HI
+  std::vector<double> vd_window;  // --vd LO,HI
+  std::string plot_path;          // --plot: the glass map of the listed glasses
 };
+
+// The glasses of a catalog that the filters select, as a catalog of their own.
+Catalog selected(const Catalog& catalog, const CatalogCommand& cmd) {
+  Catalog out;
+  out.name = catalog.name;
+  out.path = catalog.path;
+  const std::string part = to_lower(cmd.name_part);
+  for (const Glass& g : catalog.glasses) {
+    if (!part.empty() && to_lower(g.name).find(part) == std::string::npos) continue;
+    if (cmd.nd_window.size() == 2 && !(g.nd >= cmd.nd_window[0] && g.nd <= cmd.nd_window[1]))
+      continue;
+    if (cmd.vd_window.size() == 2 && !(g.vd >= cmd.vd_window[0] && g.vd <= cmd.vd_window[1]))
+      continue;
+    out.glasses.push_back(g);
+  }
+  return out;
+}
 
 // The glass's indices at each wavelength; nullopt where the formula gives none (unsupported
 // formula, or n^2 < 0 outside its range).
@@ -139,15 +164,42 @@ void print_table(const Catalog& catalog, const std::vector<double>& wavelengths_
 }
 
 void run_catalog(const CatalogCommand& cmd) {
-  const auto catalog = load_catalog(cmd.catalog);
-  for (const auto& warning : catalog->warnings) {
-    fmt::print(stderr, "lensopt catalog: warning: {}\n", warning);
-  }
-  print_notes(*catalog, cmd.wavelengths_nm);
-  if (cmd.json) {
-    print_json(*catalog, cmd.wavelengths_nm);
+  for (const auto* window : {&cmd.nd_window, &cmd.vd_window})
+    if (!window->empty() && (window->size() != 2 || !((*window)[0] <= (*window)[1])))
+      throw lensopt::Error("--nd and --vd take a window LO,HI with LO <= HI");
+  if (cmd.json && cmd.catalog == "all")
+    throw lensopt::Error("--json lists one catalog (one JSON array); name it instead of all");
+  std::vector<std::shared_ptr<const Catalog>> catalogs;
+  if (cmd.catalog == "all") {
+    for (const std::string& name : all_shipped_catalog_names())
+      catalogs.push_back(load_catalog(name));
   } else {
-    print_table(*catalog, cmd.wavelengths_nm);
+    catalogs.push_back(load_catalog(cmd.catalog));
+  }
+  std::vector<std::shared_ptr<const Catalog>> shown;
+  for (const auto& catalog : catalogs) {
+    for (const auto& warning : catalog->warnings)
+      fmt::print(stderr, "lensopt catalog: warning: {}\n", warning);
+    shown.push_back(std::make_shared<const Catalog>(selected(*catalog, cmd)));
+  }
+  for (const auto& catalog : shown) {
+    print_notes(*catalog, cmd.wavelengths_nm);
+    if (cmd.json) {
+      print_json(*catalog, cmd.wavelengths_nm);
+    } else {
+      print_table(*catalog, cmd.wavelengths_nm);
+    }
+  }
+  if (!cmd.plot_path.empty()) {
+    plot::GlassMapOptions options;
+    options.title = cmd.catalog == "all" ? "Glass map: the shipped catalogs"
+                                         : fmt::format("Glass map: {}", catalogs.front()->name);
+    std::size_t total = 0;
+    for (const auto& catalog : shown) total += catalog->glasses.size();
+    options.label_glasses = total <= 40;
+    const int drawn = plot::write_glass_map(cmd.plot_path, shown, {}, options);
+    fmt::print(stderr, "lensopt catalog: glass map of {} glasses written to {}\n", drawn,
+               cmd.plot_path);
   }
 }
 
@@ -157,8 +209,15 @@ void setup_catalog(CLI::App& app) {
   auto cmd = std::make_shared<CatalogCommand>();
   CLI::App* sub = app.add_subcommand(
       "catalog", "List a glass catalog (AGF file or name such as 'ohara'): nd, vd, indices");
-  sub->add_option("FILE", cmd->catalog, "AGF file, or a catalog name (ohara, or X for X.agf)")
+  sub->add_option("FILE", cmd->catalog,
+                  "AGF file, a catalog name (ohara, X for X.agf, Zemax names such as NIKON-HIKARI, "
+                  "INFRARED, MISC), or all (every shipped catalog)")
       ->required();
+  sub->add_option("--name", cmd->name_part, "only glasses whose name contains this (any case)");
+  sub->add_option("--nd", cmd->nd_window, "only glasses with nd in LO,HI")->delimiter(',');
+  sub->add_option("--vd", cmd->vd_window, "only glasses with vd in LO,HI")->delimiter(',');
+  sub->add_option("--plot", cmd->plot_path,
+                  "also draw the listed glasses on the glass map (nd against vd), .svg or .png");
   sub->add_flag("--json", cmd->json, "one JSON array on stdout (warnings on stderr)");
   sub->add_option("--wavelengths-nm", cmd->wavelengths_nm,
                   "wavelengths in nm, comma-separated (default 587.5618)")

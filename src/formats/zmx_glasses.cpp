@@ -66,7 +66,12 @@ Material ZmxParser::resolve_glass(const RawSurface& raw, std::vector<CatalogEntr
                                   std::vector<std::string>& used_catalogs,
                                   DispersionModel dispersion) {
   if (raw.glass.empty()) return Material::air();
-  if (raw.model_glass) return Material::model(raw.model_nd, raw.model_vd);
+  // OpticStudio's model glass: n(587.5618 nm) = nd exactly (glass/dispersion.h); the paper's
+  // in a file lensopt wrote from a lens with the paper's model glasses (its note says so).
+  if (raw.model_glass)
+    return note_model_glass_paper_
+               ? Material::model(raw.model_nd, raw.model_vd)
+               : Material::zemax_model(raw.model_nd, raw.model_vd, raw.model_dpgf);
   for (const CatalogEntry& entry : catalogs) {
     if (!entry.catalog) continue;
     const Glass* glass = entry.catalog->find(raw.glass);
@@ -79,6 +84,37 @@ Material ZmxParser::resolve_glass(const RawSurface& raw, std::vector<CatalogEntr
     if (std::find(used_catalogs.begin(), used_catalogs.end(), entry.load_name) ==
         used_catalogs.end())
       used_catalogs.push_back(entry.load_name);
+    return Material::from_catalog(*glass);
+  }
+  // Not in the file's catalogs: a shipped catalog that holds the glass (vendors first, then the
+  // database's, shipped order). OpticStudio would refuse the file; lensopt uses the glass and says
+  // where it came from, so a file whose GCAT names a catalog lensopt does not ship still imports.
+  for (const std::string& name : all_shipped_catalog_names()) {
+    std::shared_ptr<const Catalog> catalog;
+    try {
+      catalog = load_catalog(name);
+    } catch (const Error&) {
+      continue;
+    }
+    const bool searched_already =
+        std::any_of(catalogs.begin(), catalogs.end(), [&](const CatalogEntry& entry) {
+          return entry.catalog && entry.catalog->path == catalog->path;
+        });
+    if (searched_already) continue;
+    const Glass* glass = catalog->find(raw.glass);
+    if (glass == nullptr) continue;
+    if (dispersion == DispersionModel::kCatalog && !glass->formula_supported) continue;
+    std::vector<std::string> requested;
+    for (const CatalogEntry& entry : catalogs) requested.push_back(entry.requested);
+    warn(raw.glas_line,
+         fmt::format("surface {}: glass '{}' is in none of the file's catalogs ({}); lensopt uses "
+                     "{} from its shipped catalog {} ({}), where OpticStudio would refuse the file",
+                     raw.number, raw.glass,
+                     requested.empty() ? std::string("none")
+                                       : fmt::format("{}", fmt::join(requested, ", ")),
+                     glass->name, catalog->name, catalog->path));
+    if (std::find(used_catalogs.begin(), used_catalogs.end(), catalog->name) == used_catalogs.end())
+      used_catalogs.push_back(catalog->name);
     return Material::from_catalog(*glass);
   }
   std::vector<std::string> searched;

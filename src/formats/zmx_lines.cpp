@@ -64,6 +64,8 @@ bool ZmxParser::surface_line(const Line& line, const std::string& key) {
     if (upper(name) == "MIRROR")
       fail(line, 1,
            fmt::format("surface {} is a mirror; lensopt models refracting lenses only", s.number));
+    // "GLAS ___BLANK 1 0 nd vd dPgF ...": OpticStudio's model glass. (A named glass with the
+    // same fields, "GLAS N-LAK9 1 0 nd vd", is a catalog glass: optiland's lens1.zmx.)
     if (name == "___BLANK") {
       s.model_glass = true;
       s.model_nd = number(line, 4, "the model glass's nd (GLAS ___BLANK 1 0 nd vd)");
@@ -72,6 +74,8 @@ bool ZmxParser::surface_line(const Line& line, const std::string& key) {
         fail(line, 4, fmt::format("model glass nd = {} must be > 1", s.model_nd));
       if (!(s.model_vd > 0.0))
         fail(line, 5, fmt::format("model glass vd = {} must be > 0", s.model_vd));
+      if (line.fields.size() > 6)
+        s.model_dpgf = number(line, 6, "the model glass's dPgF (GLAS ___BLANK 1 0 nd vd dPgF)");
       s.glass = name;
     } else if (upper(name) != "AIR") {
       s.glass = name;
@@ -190,6 +194,8 @@ void ZmxParser::note_line(const Line& line) {
     note_primary_nm_ = number(line, 4, "primary_wavelength_nm");
   } else if (key == "mode") {
     note_mode_paper_ = line.fields[4] == "paper";
+  } else if (key == "model_glass") {
+    note_model_glass_paper_ = line.fields[4] == "paper";
   } else if (key == "wavelengths_nm") {
     std::vector<double> values;
     for (std::size_t i = 4; i < line.fields.size(); ++i)

@@ -41,6 +41,7 @@ struct RawSurface {
   bool model_glass = false;
   double model_nd = 0.0;
   double model_vd = 0.0;
+  double model_dpgf = 0.0;  // GLAS ... nd vd dPgF of a model glass
   int glas_line = 0;
   int glas_column = 0;
   bool is_stop = false;
@@ -181,6 +182,7 @@ class ZmxParser {
   std::optional<std::vector<double>> note_wavelengths_nm_;
   std::optional<double> note_primary_nm_;
   bool note_mode_paper_ = false;
+  bool note_model_glass_paper_ = false;  // "lensopt model_glass paper": ___BLANK is the paper's
   std::string note_toml_;
   int note_line_ = 0;
 };

@@ -70,6 +70,16 @@ std::string format_zmx(const Lens& lens) {
     }
   }
   if (specs.mode == SpecMode::kPaper) line("NOTE 0 lensopt mode paper");
+  // The paper's model glasses: OpticStudio reads ___BLANK as its own model glass (nd exact at
+  // 587.5618 nm); lensopt reading this file back keeps the paper's (nd at 587.6 nm).
+  // (Only when every model glass is the paper's: a .zmx has no per-surface model.)
+  const auto is_model = [](const Surface& s) { return s.material.kind == Material::Kind::kModel; };
+  const bool paper_model_glass =
+      std::any_of(lens.surfaces.begin(), lens.surfaces.end(), is_model) &&
+      std::all_of(lens.surfaces.begin(), lens.surfaces.end(), [&](const Surface& s) {
+        return !is_model(s) || s.material.model_glass == ModelGlass::kPaper;
+      });
+  if (paper_model_glass) line("NOTE 0 lensopt model_glass paper");
   line("NOTE 0 lensopt primary_wavelength_nm " + number_text(specs.primary_wavelength_nm));
   line("UNIT MM X W X CM MR CPMM");
   const bool as_written = specs.mode == SpecMode::kAsWritten;
@@ -189,8 +199,8 @@ std::string format_zmx(const Lens& lens) {
                          number_text(s.material.nd), number_text(s.material.vd)));
         break;
       case Material::Kind::kModel:
-        line(fmt::format("  GLAS ___BLANK 1 0 {} {} 0 0 0 0 0 0", number_text(s.material.nd),
-                         number_text(s.material.vd)));
+        line(fmt::format("  GLAS ___BLANK 1 0 {} {} {} 0 0 0 0 0", number_text(s.material.nd),
+                         number_text(s.material.vd), number_text(s.material.dpgf)));
         break;
     }
     if (s.is_stop) line("  STOP");

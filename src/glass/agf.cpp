@@ -3,10 +3,10 @@
 // An AGF file is a list of lines "KEY field field ...", fields separated by blanks:
 //   CC comment
 //   NM name formula MIL nd vd [exclude [status [melt_frequency]]]   starts a glass
-//   GC comment, ED thermal/chemical data, TD thermal dispersion, OD other data (kept out)
-//   CD c0 c1 ... c9                  dispersion coefficients of the glass's formula
-//   LD min_um max_um                 wavelength range of the formula
-//   IT wavelength_um transmission thickness_mm   one internal-transmission sample
+//   GC comment (kept: the glass's comment), ED thermal/chemical data, TD thermal dispersion, OD
+//   other data (not kept) CD c0 c1 ... c9                  dispersion coefficients of the glass's
+//   formula LD min_um max_um                 wavelength range of the formula IT wavelength_um
+//   transmission thickness_mm   one internal-transmission sample
 // Vendors write numbers as integers or floats ("2", "2.00000E+00", "1.06000E+000").
 #include <fmt/format.h>
 
@@ -49,12 +49,33 @@ int coefficients_needed(DispersionFormula formula) {
       return 10;
     case DispersionFormula::kExtended3:
       return 9;
+    // The database's formulas take any count: at least C1 (and the pairs glass/formulas.h sums).
+    case DispersionFormula::kRiiSellmeier:
+    case DispersionFormula::kRiiSellmeier2:
+    case DispersionFormula::kRiiPolynomial:
+    case DispersionFormula::kRiiInfo:
+    case DispersionFormula::kRiiCauchy:
+    case DispersionFormula::kRiiGases:
+      return 1;
+    case DispersionFormula::kRiiHerzberger:
+      return 6;
+    case DispersionFormula::kRiiRetro:
+      return 4;
+    case DispersionFormula::kRiiExotic:
+      return 6;
+    case DispersionFormula::kTable:
+      return 4;  // two samples (l, n)
   }
   return 0;
 }
 
 bool is_known_formula(int id) {
-  return id >= 1 && id <= 13;
+  return (id >= 1 && id <= 13) || (id >= 101 && id <= 109) || id == 120;
+}
+
+// The formulas of the refractiveindex.info database and the table keep the CD line's own count.
+bool keeps_coefficient_count(DispersionFormula formula) {
+  return static_cast<int>(formula) > 100;
 }
 
 // Blank-separated fields of a line (spaces, tabs), and the 1-based column each starts at.
@@ -105,8 +126,16 @@ class AgfReader {
       read_range_line();
     } else if (key == "IT") {
       read_transmission_line();
+    } else if (key == "GC" && !catalog_.glasses.empty()) {
+      // The glass's comment (lensopt's catalogs: the data's source), lines joined by a blank.
+      std::string& comment = catalog_.glasses.back().comment;
+      const std::size_t start = line.find("GC") + 2;
+      std::string_view text = line.substr(std::min(start, line.size()));
+      while (!text.empty() && (text.front() == ' ' || text.front() == '\t')) text.remove_prefix(1);
+      while (!text.empty() && (text.back() == ' ' || text.back() == '\r')) text.remove_suffix(1);
+      if (!text.empty()) comment += (comment.empty() ? "" : " ") + std::string(text);
     }
-    // CC, GC, ED, TD, OD and keys this reader does not know carry nothing the catalog keeps.
+    // CC, ED, TD, OD and keys this reader does not know carry nothing the catalog keeps.
   }
 
   // Checks the last glass once the file is read.
@@ -203,7 +232,24 @@ class AgfReader {
                        formula_name(glass.formula), std::max<std::size_t>(needed, 1),
                        coefficients.size()));
     }
-    if (coefficients.size() < 10) coefficients.resize(10, 0.0);
+    if (glass.formula == DispersionFormula::kTable) {
+      // (l, n) pairs, l ascending and positive, n positive.
+      if (coefficients.size() % 2 != 0)
+        fail(
+            fmt::format("CD line: glass {} (table) needs (wavelength, index) pairs, the line has "
+                        "{} numbers",
+                        glass.name, coefficients.size()));
+      for (std::size_t i = 0; i < coefficients.size(); i += 2) {
+        if (!(coefficients[i] > 0.0) || !(coefficients[i + 1] > 0.0) ||
+            (i > 0 && !(coefficients[i] > coefficients[i - 2])))
+          fail(fmt::format("CD line: glass {} (table): sample {} ({} um, n {}) must have a "
+                           "positive wavelength above the one before and a positive index",
+                           glass.name, i / 2 + 1, coefficients[i], coefficients[i + 1]),
+               column_of_field_[i + 1]);
+      }
+    }
+    if (!keeps_coefficient_count(glass.formula) && coefficients.size() < 10)
+      coefficients.resize(10, 0.0);
     glass.coefficients = std::move(coefficients);
     has_coefficients_ = true;
   }

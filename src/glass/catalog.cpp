@@ -161,6 +161,36 @@ const std::vector<std::string>& shipped_catalog_names() {
   return names;
 }
 
+const std::vector<std::string>& database_catalog_names() {
+  static const std::vector<std::string> names = {"HIKARI",  "SUMITA",   "LZOS", "LIGHTPATH",
+                                                 "CORNING", "INFRARED", "MISC"};
+  return names;
+}
+
+std::vector<std::string> all_shipped_catalog_names() {
+  std::vector<std::string> names = shipped_catalog_names();
+  for (const std::string& name : database_catalog_names()) names.push_back(name);
+  return names;
+}
+
+std::string zemax_catalog_alias(std::string_view name) {
+  const std::string upper_name = [&] {
+    std::string out(name);
+    for (char& ch : out) ch = static_cast<char>(std::toupper(static_cast<unsigned char>(ch)));
+    return out;
+  }();
+  if (upper_name == "NIKON-HIKARI" || upper_name == "NIKON" || upper_name == "NIKON_HIKARI")
+    return "HIKARI";
+  const std::size_t underscore = upper_name.rfind('_');
+  if (underscore != std::string::npos && underscore > 0) {
+    const std::string suffix = upper_name.substr(underscore + 1);
+    if (std::any_of(suffix.begin(), suffix.end(),
+                    [](char ch) { return std::isdigit(static_cast<unsigned char>(ch)) != 0; }))
+      return zemax_catalog_alias(upper_name.substr(0, underscore));
+  }
+  return std::string(name);
+}
+
 std::vector<std::filesystem::path> catalog_search_path() {
   std::vector<std::filesystem::path> folders;
   const auto add = [&](const std::filesystem::path& folder) {
@@ -208,13 +238,20 @@ std::shared_ptr<const Catalog> load_catalog(std::string_view name_or_path) {
   for (const auto& folder : folders) {
     if (const auto found = find_in_dir(folder, stem)) return load_cached(*found);
   }
+  // A Zemax name for a shipped catalog ("NIKON-HIKARI" is HIKARI).
+  if (!is_ohara) {
+    const std::string alias = zemax_catalog_alias(stem);
+    if (!equals_ignoring_case(alias, stem))
+      for (const auto& folder : folders)
+        if (const auto found = find_in_dir(folder, alias)) return load_cached(*found);
+  }
   std::vector<std::string> searched;
   for (const auto& folder : folders) searched.push_back(folder.string());
   throw Error(
       fmt::format("glass catalog '{}' not found: looked for {}.agf (or {}_<date>.agf) in {} "
                   "(LENSOPT_CATALOG_PATH adds folders; shipped: ohara, {})",
                   name_or_path, stem, stem, fmt::join(searched, ", "),
-                  fmt::join(shipped_catalog_names(), ", ")));
+                  fmt::join(all_shipped_catalog_names(), ", ")));
 }
 
 }  // namespace lensopt

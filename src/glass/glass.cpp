@@ -17,7 +17,9 @@
 //   12 Extended 2:  n^2 = c0 + c1 l^2 + c2 l^-2 + c3 l^-4 + c4 l^-6 + c5 l^-8 + c6 l^4 + c7 l^6
 //   13 Extended 3:  n^2 = c0 + c1 l^2 + c2 l^4 + c3 l^-2 + c4 l^-4 + c5 l^-6 + c6 l^-8
 //                         + c7 l^-10 + c8 l^-12
-// (Zemax OpticStudio manual, "The Glass Dispersion Formulas".)
+// (Zemax OpticStudio manual, "The Glass Dispersion Formulas"). lensopt's catalogs made from the
+// refractiveindex.info database add its formulas (ids 101..109) and tabulated data (120); all are
+// evaluated by the one template formula_index (glass/formulas.h), double here.
 #include "lensopt/glass/glass.h"
 
 #include <fmt/format.h>
@@ -26,30 +28,13 @@
 #include <cmath>
 #include <limits>
 
+#include "lensopt/glass/formulas.h"
 #include "lensopt/glass/glass_range.h"
 
 namespace lensopt {
 namespace {
 
 constexpr double kNanometresPerMicrometre = 1000.0;
-// Herzberger's constant: L = 1/(l^2 - kHerzbergerOffset_um2), l in um.
-constexpr double kHerzbergerOffset_um2 = 0.028;
-
-// Sum of Sellmeier terms c(2k) l^2/(l^2 - c(2k+1)) for k = 0..terms-1.
-double sellmeier_terms(const double* c, int terms, double l2_um2) {
-  double sum = 0.0;
-  for (int k = 0; k < terms; ++k) sum += c[2 * k] * l2_um2 / (l2_um2 - c[2 * k + 1]);
-  return sum;
-}
-
-// sum_{k=0..count-1} a_k x^(k+1): a Horner evaluation of a polynomial in x with no constant
-// term (used for the series in l^-2).
-double series_without_constant(const double* a, int count, double x) {
-  double sum = 0.0;
-  for (int k = count - 1; k >= 0; --k) sum = (sum + a[k]) * x;
-  return sum;
-}
-
 }  // namespace
 
 std::string formula_name(DispersionFormula formula) {
@@ -80,6 +65,26 @@ std::string formula_name(DispersionFormula formula) {
       return "Extended 2";
     case DispersionFormula::kExtended3:
       return "Extended 3";
+    case DispersionFormula::kRiiSellmeier:
+      return "RII Sellmeier";
+    case DispersionFormula::kRiiSellmeier2:
+      return "RII Sellmeier-2";
+    case DispersionFormula::kRiiPolynomial:
+      return "RII polynomial";
+    case DispersionFormula::kRiiInfo:
+      return "RII RefractiveIndex.INFO";
+    case DispersionFormula::kRiiCauchy:
+      return "RII Cauchy";
+    case DispersionFormula::kRiiGases:
+      return "RII gases";
+    case DispersionFormula::kRiiHerzberger:
+      return "RII Herzberger";
+    case DispersionFormula::kRiiRetro:
+      return "RII retro";
+    case DispersionFormula::kRiiExotic:
+      return "RII exotic";
+    case DispersionFormula::kTable:
+      return "table";
   }
   return fmt::format("unknown ({})", static_cast<int>(formula));
 }
@@ -125,52 +130,8 @@ std::string missing_index_reason(const Glass& glass, double wavelength_nm) {
 }
 
 double Glass::index(double wavelength_nm) const {
-  constexpr double kNan = std::numeric_limits<double>::quiet_NaN();
-  if (!formula_supported) return kNan;
-  // c0..c9, missing ones 0.
-  double c[10] = {};
-  std::copy_n(coefficients.begin(), std::min<std::size_t>(coefficients.size(), 10), c);
-  const double l_um = wavelength_nm / kNanometresPerMicrometre;
-  const double l2 = l_um * l_um;
-  const double inv_l2 = 1.0 / l2;
-  switch (formula) {
-    case DispersionFormula::kSchott:
-      // n^2 = c0 + c1 l^2 + sum_{k=1..4} c(k+1) l^-2k
-      return std::sqrt(c[0] + c[1] * l2 + series_without_constant(c + 2, 4, inv_l2));
-    case DispersionFormula::kSellmeier1:
-      return std::sqrt(1.0 + sellmeier_terms(c, 3, l2));
-    case DispersionFormula::kHerzberger: {
-      const double big_l = 1.0 / (l2 - kHerzbergerOffset_um2);
-      // n = c0 + c1 L + c2 L^2 + l^2 (c3 + l^2 (c4 + l^2 c5))
-      return c[0] + big_l * (c[1] + big_l * c[2]) + l2 * (c[3] + l2 * (c[4] + l2 * c[5]));
-    }
-    case DispersionFormula::kSellmeier2:
-      return std::sqrt(1.0 + c[0] + c[1] * l2 / (l2 - c[2] * c[2]) + c[3] / (l2 - c[4] * c[4]));
-    case DispersionFormula::kConrady:
-      return c[0] + c[1] / l_um + c[2] / std::pow(l_um, 3.5);
-    case DispersionFormula::kSellmeier3:
-      return std::sqrt(1.0 + sellmeier_terms(c, 4, l2));
-    case DispersionFormula::kHandbook1:
-      return std::sqrt(c[0] + c[1] / (l2 - c[2]) - c[3] * l2);
-    case DispersionFormula::kHandbook2:
-      return std::sqrt(c[0] + c[1] * l2 / (l2 - c[2]) - c[3] * l2);
-    case DispersionFormula::kSellmeier4:
-      // c0 + Sellmeier terms with (c1, c2) and (c3, c4)
-      return std::sqrt(c[0] + sellmeier_terms(c + 1, 2, l2));
-    case DispersionFormula::kExtended1:
-      // n^2 = c0 + c1 l^2 + sum_{k=1..6} c(k+1) l^-2k
-      return std::sqrt(c[0] + c[1] * l2 + series_without_constant(c + 2, 6, inv_l2));
-    case DispersionFormula::kSellmeier5:
-      return std::sqrt(1.0 + sellmeier_terms(c, 5, l2));
-    case DispersionFormula::kExtended2:
-      // n^2 = c0 + l^2 (c1 + l^2 (c6 + l^2 c7)) + sum_{k=1..4} c(k+1) l^-2k
-      return std::sqrt(c[0] + l2 * (c[1] + l2 * (c[6] + l2 * c[7])) +
-                       series_without_constant(c + 2, 4, inv_l2));
-    case DispersionFormula::kExtended3:
-      // n^2 = c0 + l^2 (c1 + l^2 c2) + sum_{k=1..6} c(k+2) l^-2k
-      return std::sqrt(c[0] + l2 * (c[1] + l2 * c[2]) + series_without_constant(c + 3, 6, inv_l2));
-  }
-  return kNan;
+  if (!formula_supported) return std::numeric_limits<double>::quiet_NaN();
+  return formula_index(formula, coefficients, wavelength_nm / kNanometresPerMicrometre);
 }
 
 bool Glass::transmits(double wavelength_nm) const {

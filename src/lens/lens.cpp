@@ -23,12 +23,31 @@ Material Material::model(double nd, double vd) {
   return m;
 }
 
+Material Material::zemax_model(double nd, double vd, double dpgf) {
+  Material m = model(nd, vd);
+  m.model_glass = ModelGlass::kZemax;
+  m.dpgf = dpgf;
+  return m;
+}
+
 Material Material::from_catalog(const Glass& glass) {
   Material m;
   m.kind = Kind::kCatalog;
   m.glass_name = glass.name;
   m.nd = glass.nd;
   m.vd = glass.vd;
+  if (!(glass.nd > 1.0) || !(glass.vd > 0.0)) {
+    // An infrared material: no d line in its range, so no nd or vd. The paper's model gets the
+    // index at the middle of the range (geometric mean of its ends) and the flattest dispersion
+    // lensopt accepts (vd = kMaxAbbe); the catalog model (a .zmx import's default) adds the
+    // correction to the formula's own index at every traced wavelength.
+    const double middle_um = std::sqrt(glass.min_wavelength_um * glass.max_wavelength_um);
+    const double n = glass.index(middle_um * 1000.0);
+    if (std::isfinite(n) && n > 1.0) {
+      m.nd = n;
+      m.vd = kMaxAbbe;
+    }
+  }
   m.glass = std::make_shared<Glass>(glass);
   return m;
 }
@@ -297,7 +316,11 @@ std::vector<std::string> glass_range_warnings(const Lens& lens) {
     if (std::find(seen.begin(), seen.end(), m.glass->name) != seen.end()) continue;
     seen.push_back(m.glass->name);
     std::vector<std::string> outside;
-    for (double w : lens.specs.wavelengths_nm)
+    // Every traced wavelength: the system's and the primary one.
+    std::vector<double> traced = lens.specs.wavelengths_nm;
+    if (std::find(traced.begin(), traced.end(), lens.specs.primary_wavelength_nm) == traced.end())
+      traced.push_back(lens.specs.primary_wavelength_nm);
+    for (double w : traced)
       if (!glass_in_range(*m.glass, w)) outside.push_back(fmt::format("{:g}", w));
     if (outside.empty()) continue;
     std::vector<std::string> surfaces;
@@ -309,11 +332,12 @@ std::vector<std::string> glass_range_warnings(const Lens& lens) {
     std::string list, where;
     for (const std::string& w : outside) list += (list.empty() ? "" : ", ") + w;
     for (const std::string& s : surfaces) where += (where.empty() ? "" : ", ") + s;
+    const std::string file = lens.source_path.empty() ? lens.name : lens.source_path;
     out.push_back(fmt::format(
-        "glass {} (surface {}): {} nm outside its formula's range {:g}-{:g} nm (AGF LD line); "
-        "its index there is extrapolated",
-        m.glass->name, where, list, m.glass->min_wavelength_um * 1000.0,
-        m.glass->max_wavelength_um * 1000.0));
+        "{}{}glass {} (catalog {}, surface {}): {} nm outside its formula's range {:g}-{:g} nm "
+        "(AGF LD line); its index there is extrapolated",
+        file, file.empty() ? "" : ": ", m.glass->name, m.glass->catalog, where, list,
+        m.glass->min_wavelength_um * 1000.0, m.glass->max_wavelength_um * 1000.0));
   }
   return out;
 }

@@ -86,7 +86,7 @@ constexpr std::array<std::string_view, 6> kSpecsKeys = {
 constexpr std::array<std::string_view, 9> kSurfaceKeys = {
     "radius_mm", "curvature_per_mm", "thickness_mm", "material", "stop", "semi_diameter_mm",
     "conic",     "asphere",          "asphere_r2"};
-constexpr std::array<std::string_view, 2> kModelGlassKeys = {"nd", "vd"};
+constexpr std::array<std::string_view, 4> kModelGlassKeys = {"nd", "vd", "model", "dpgf"};
 
 std::string_view type_phrase(const toml::node& node) {
   switch (node.type()) {
@@ -454,6 +454,23 @@ Material read_material(const TomlReader& reader, const toml::node& node, int sur
     if (!(vd_value > 0.0))
       reader.fail(*vd.node,
                   fmt::format("surface {}: vd = {} must be > 0", surface_number, vd_value));
+    // model = "paper" (default: the paper's A + B / l^2 at 587.6 nm) or "opticstudio"
+    // (OpticStudio's model glass, nd exact at 587.5618 nm, with dpgf; a .zmx import).
+    std::string model = "paper";
+    if (const Entry m = entry(*t, "model")) model = reader.string(*m.node, "model");
+    const Entry dpgf = entry(*t, "dpgf");
+    if (model == "opticstudio")
+      return Material::zemax_model(nd_value, vd_value,
+                                   dpgf ? reader.finite_number(*dpgf.node, "dpgf") : 0.0);
+    if (model != "paper")
+      reader.fail(*entry(*t, "model").node,
+                  fmt::format("surface {}: model glass model = \"{}\" must be \"paper\" or "
+                              "\"opticstudio\"",
+                              surface_number, model));
+    if (dpgf)
+      reader.fail(*dpgf.node, fmt::format("surface {}: dpgf needs model = \"opticstudio\" (the "
+                                          "paper's model glass has no partial dispersion term)",
+                                          surface_number));
     return Material::model(nd_value, vd_value);
   }
   reader.fail(node, fmt::format("surface {}: material must be a glass name, \"air\" or "

@@ -310,8 +310,17 @@ std::string format_lens_toml(const Lens& lens) {
         line("material", toml_string(surface.material.glass_name));
         break;
       case Material::Kind::kModel:
-        line("material", fmt::format("{{ nd = {}, vd = {} }}", number_text(surface.material.nd),
-                                     number_text(surface.material.vd)));
+        if (surface.material.model_glass == ModelGlass::kZemax) {
+          line("material",
+               fmt::format("{{ nd = {}, vd = {}, model = \"opticstudio\"{} }}",
+                           number_text(surface.material.nd), number_text(surface.material.vd),
+                           surface.material.dpgf == 0.0
+                               ? std::string()
+                               : fmt::format(", dpgf = {}", number_text(surface.material.dpgf))));
+        } else {
+          line("material", fmt::format("{{ nd = {}, vd = {} }}", number_text(surface.material.nd),
+                                       number_text(surface.material.vd)));
+        }
         break;
     }
     if (surface.is_stop) line("stop", "true");

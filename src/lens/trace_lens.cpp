@@ -148,9 +148,16 @@ TraceLens<double> make_trace_lens(const Lens& lens) {
     out.curvature_per_mm.push_back(s.curvature_per_mm);
     out.thickness_mm.push_back(s.thickness_mm);
     const bool glass = !s.material.is_air();
-    out.is_glass.push_back(glass ? 1 : 0);
+    out.is_glass.push_back(glass ? trace_glass_kind(s.material) : 0);
     out.nd.push_back(glass ? s.material.nd : 1.0);
     out.vd.push_back(glass ? s.material.vd : 0.0);
+  }
+  for (std::size_t k = 0; k < lens.surfaces.size(); ++k) {
+    const Material& m = lens.surfaces[k].material;
+    if (m.kind != Material::Kind::kModel || m.model_glass != ModelGlass::kZemax || m.dpgf == 0.0)
+      continue;
+    if (out.model_dpgf.empty()) out.model_dpgf.assign(lens.surfaces.size(), 0.0);
+    out.model_dpgf[k] = m.dpgf;
   }
   bool clips = false;
   for (const Surface& s : lens.surfaces) clips = clips || s.semi_diameter_mm > 0.0;

@@ -285,7 +285,12 @@ Lens LensParameterization::to_lens(const double* x, GlassMode mode,
     }
     if (s.material.is_air()) continue;
     if (mode == GlassMode::kContinuous) {
-      s.material = Material::model(tl.nd[k], tl.vd[k]);
+      // The structure's model glass keeps its model (a .zmx model glass stays OpticStudio's).
+      const bool zemax =
+          s.material.kind == Material::Kind::kModel && s.material.model_glass == ModelGlass::kZemax;
+      const double dpgf = s.material.dpgf;
+      s.material = zemax ? Material::zemax_model(tl.nd[k], tl.vd[k], dpgf)
+                         : Material::model(tl.nd[k], tl.vd[k]);
     } else {
       const int j =
           mode == GlassMode::kFixed ? fixed_glasses.at(glass_number) : nearest[glass_number];

@@ -88,7 +88,26 @@ else
   grep -q "catalogs" "$tmp/missing.err" || fail "missing-catalog error names no folder"
 fi
 
-# 5. The vendor files (need ../shared).
+# 5. Every shipped catalog searched by name part and nd / vd window; Zemax names; the glass map.
+"$lensopt" catalog all --nd 1.882,1.884 --vd 40.6,40.8 >"$tmp/all.txt" 2>"$tmp/all.err" ||
+  fail "catalog all --nd --vd exited with an error: $(cat "$tmp/all.err")"
+grep -q "^J-LASF08A " "$tmp/all.txt" || fail "catalog all --nd --vd lacks Hikari J-LASF08A"
+if grep -q "^N-BK7 " "$tmp/all.txt"; then fail "catalog all --nd --vd lists N-BK7 (nd 1.5168)"; fi
+"$lensopt" catalog NIKON-HIKARI --name lasf08 | grep -q "^J-LASF08A " ||
+  fail "catalog NIKON-HIKARI --name lasf08 lacks J-LASF08A"
+for glass in GERMANIUM ZNSE SILICON CAF2; do
+  "$lensopt" catalog INFRARED --wavelengths-nm 10000 | grep -q "^$glass " || fail "INFRARED lacks $glass"
+done
+"$lensopt" catalog all --vd 90,100 --plot "$tmp/map.svg" >/dev/null 2>"$tmp/map.err" ||
+  fail "catalog --plot exited with an error: $(cat "$tmp/map.err")"
+grep -q "<svg" "$tmp/map.svg" || fail "catalog --plot wrote no SVG"
+grep -q "NICF-V" "$tmp/map.svg" || fail "the glass map of a few glasses lacks the label NICF-V"
+if "$lensopt" catalog all --nd 2,1 >/dev/null 2>"$tmp/bad.err"; then
+  fail "catalog --nd 2,1 (an empty window) exited 0"
+fi
+grep -q "LO <= HI" "$tmp/bad.err" || fail "catalog --nd 2,1: no clear message: $(cat "$tmp/bad.err")"
+
+# 6. The vendor files (need ../shared).
 skipped=0
 if [ -d "$shared/data/agf" ]; then
   for file in SCHOTT_202002.AGF OHARA_20200623.AGF; do

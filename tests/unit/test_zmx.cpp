@@ -251,15 +251,31 @@ TEST_CASE(
     CHECK(cm.surfaces[1].sag_mm(30.0) == doctest::Approx(10.0 * mm.surfaces[1].sag_mm(3.0)));
   }
   {
+    // A glass in no shipped catalog: an error naming the glass, the catalogs searched and the
+    // closest names.
     const std::string text =
-        small_zmx("GCAT OHARA\n", "  TYPE STANDARD\n  CURV 0.02\n  DISZ 3\n  GLAS N-BK7 0 0\n");
+        small_zmx("GCAT OHARA\n", "  TYPE STANDARD\n  CURV 0.02\n  DISZ 3\n  GLAS N-BK77 0 0\n");
     const Error e = error_of(text);
     const std::string message = e.what();
-    CHECK(e.where().line == line_of(text, "GLAS N-BK7"));
+    CHECK(e.where().line == line_of(text, "GLAS N-BK77"));
     CHECK(e.where().column == 8);
-    CHECK(message.find("N-BK7") != std::string::npos);
+    CHECK(message.find("N-BK77") != std::string::npos);
     CHECK(message.find("OHARA") != std::string::npos);
     CHECK(message.find("closest") != std::string::npos);
+  }
+  {
+    // A glass outside the file's catalogs but in a shipped one (issue 30): used, with a warning
+    // naming the catalog it came from.
+    const std::string text =
+        small_zmx("GCAT OHARA\n", "  TYPE STANDARD\n  CURV 0.02\n  DISZ 3\n  GLAS N-BK7 0 0\n");
+    const ZmxImport imported = parse_zmx(text, "outside.zmx");
+    CHECK(imported.lens.surfaces[1].material.glass->catalog == "SCHOTT");
+    bool warned = false;
+    for (const std::string& w : imported.warnings)
+      warned = warned ||
+               (w.find("'N-BK7' is in none of the file's catalogs (OHARA)") != std::string::npos &&
+                w.find("SCHOTT") != std::string::npos);
+    CHECK(warned);
   }
   {
     // A catalog that does not exist is named too.
@@ -293,10 +309,12 @@ TEST_CASE("zmx: a file without GCAT takes its glasses from SCHOTT, OpticStudio's
   for (const std::string& w : imported.warnings)
     warned = warned || w.find("no GCAT line: its glasses come from SCHOTT") != std::string::npos;
   CHECK(warned);
-  // A glass SCHOTT does not have is an error naming the catalog searched.
+  // A glass in no shipped catalog is an error naming the catalog searched (S-BSL7, Ohara's, is
+  // used with a warning: test_zmx_glasses.cpp).
   const std::string message =
-      error_of(small_zmx("", "  TYPE STANDARD\n  CURV 0.02\n  DISZ 3\n  GLAS S-BSL7 0 0\n")).what();
-  CHECK(message.find("unknown glass 'S-BSL7'") != std::string::npos);
+      error_of(small_zmx("", "  TYPE STANDARD\n  CURV 0.02\n  DISZ 3\n  GLAS S-BSL77 0 0\n"))
+          .what();
+  CHECK(message.find("unknown glass 'S-BSL77'") != std::string::npos);
   CHECK(message.find("SCHOTT (") != std::string::npos);
 }
 

@@ -55,6 +55,8 @@ const std::vector<RealFile>& real_files() {
       {"rayoptics_US00583336-2-scaled.zmx", Expect::kImports, "", 0},
       {"optiland_lens_floa.zmx", Expect::kImports, "", 0},
       {"optiland_thorlabs_AL1815-C_iso_8859_1.zmx", Expect::kImports, "", 0},
+      {"rayoptics_US05831776-1.zmx", Expect::kImports, "", 0},
+      {"rayoptics_zmax_55278.zmx", Expect::kImports, "", 0},
       {"rayoptics_HoO-V2C18Ex03.zmx", Expect::kUnsupported, "mirror", 86},
       {"rayoptics_zmax_37992.zmx", Expect::kUnsupported, "COORDBRK", 86},
   };
@@ -107,10 +109,12 @@ TEST_CASE("zmx-real: spherical refractive files import with the shipped catalogs
     REQUIRE_NOTHROW(result = read_zmx(path));
     ++imported;
     const Lens& lens = result.lens;
-    // Every glass of these files is a vendor catalog glass, resolved from the shipped catalogs:
-    // Schott's, but the Thorlabs asphere's Ohara S-LAH64.
-    const std::string vendor =
-        std::string(f.file).find("AL1815") != std::string::npos ? "OHARA" : "SCHOTT";
+    // Every glass of these files is a catalog glass, resolved from the shipped catalogs:
+    // Schott's, but the Thorlabs asphere's Ohara S-LAH64 and US 5831776's fused silica (MISC).
+    const std::string name = f.file;
+    const std::string vendor = name.find("AL1815") != std::string::npos       ? "OHARA"
+                               : name.find("US05831776") != std::string::npos ? "MISC"
+                                                                              : "SCHOTT";
     for (const Surface& s : lens.surfaces) {
       if (s.material.is_air()) continue;
       CHECK(s.material.kind == Material::Kind::kCatalog);
@@ -134,7 +138,7 @@ TEST_CASE("zmx-real: spherical refractive files import with the shipped catalogs
       ++compared;
     }
   }
-  CHECK(imported == 6);
+  CHECK(imported == 8);
   CHECK(compared == 2);
 }
 

@@ -76,6 +76,7 @@ TraceSystem<double> system_values(const TraceSystem<J>& in) {
   out.lens.nd = v(in.lens.nd);
   out.lens.vd = v(in.lens.vd);
   out.lens.is_glass = in.lens.is_glass;
+  out.lens.model_dpgf = in.lens.model_dpgf;
   out.lens.catalog_offset = in.lens.catalog_offset;
   out.lens.wavelengths_nm = in.lens.wavelengths_nm;
   out.lens.stop = in.lens.stop;

@@ -36,6 +36,18 @@ enum class DispersionFormula : int {
   kSellmeier5 = 11,
   kExtended2 = 12,
   kExtended3 = 13,
+  // lensopt's extension, for catalogs made from the refractiveindex.info database
+  // (tools/make-rii-catalogs.py; glass/formulas.h states each): its formulas 1..9, and a table.
+  kRiiSellmeier = 101,
+  kRiiSellmeier2 = 102,
+  kRiiPolynomial = 103,
+  kRiiInfo = 104,
+  kRiiCauchy = 105,
+  kRiiGases = 106,
+  kRiiHerzberger = 107,
+  kRiiRetro = 108,
+  kRiiExotic = 109,
+  kTable = 120,  // tabulated n: CD l1 n1 l2 n2 ... (um), interpolated
 };
 
 // Human-readable formula name ("Sellmeier 1"); "unknown (N)" for an id not listed above.
@@ -66,12 +78,14 @@ struct Glass {
   bool formula_supported = true;     // false: index() must not be trusted (reported by the reader)
   double nd = 1.0;                   // d-line index as the file states it
   double vd = 0.0;                   // Abbe number as the file states it
-  std::vector<double> coefficients;  // CD line, c0..c9 (missing ones are 0)
+  std::vector<double> coefficients;  // CD line, c0..c9 (missing ones are 0; the database
+                                     // formulas 101.. and the table keep the line's count)
   double min_wavelength_um = 0.0;    // LD line: valid range of the formula
   double max_wavelength_um = 0.0;
   GlassStatus status = GlassStatus::kStandard;
   std::vector<TransmissionPoint> transmission;  // IT lines, in file order
   int source_line = 0;                          // line of the NM entry in the file
+  std::string comment;                          // GC line(s): where the data comes from
 
   // Refractive index at a wavelength (nm, in air) from the glass's own formula.
   double index(double wavelength_nm) const;
@@ -113,6 +127,18 @@ std::string catalog_family_name(std::string_view stem);
 // tools/make-catalogs.py), in the order a search without a catalog name tries them.
 const std::vector<std::string>& shipped_catalog_names();
 
+// The catalogs lensopt makes from the refractiveindex.info database (catalogs/, from
+// tools/make-rii-catalogs.py): HIKARI, SUMITA, LZOS, LIGHTPATH, CORNING, INFRARED, MISC.
+const std::vector<std::string>& database_catalog_names();
+
+// Every catalog that ships in catalogs/: the vendors' then the database's.
+std::vector<std::string> all_shipped_catalog_names();
+
+// The shipped catalog a Zemax GCAT name stands for, as OpticStudio users expect: NIKON-HIKARI
+// and NIKON are HIKARI; a dated or versioned name (SUMITA_AUG2011, SCHOTT_2017) is its family
+// (the stem before the last '_' when what follows holds a digit); other names as they are.
+std::string zemax_catalog_alias(std::string_view name);
+
 // Parses AGF text. `bytes` may be ASCII/UTF-8 or UTF-16 LE with a BOM, CRLF or LF line ends.
 // Throws Error with file:line for malformed lines.
 Catalog parse_agf(std::string_view bytes, const std::string& source_name);
@@ -127,7 +153,8 @@ Catalog read_agf(const std::filesystem::path& path);
 //    variable, colon-separated, then the project's catalogs/), the stem compared
 //    case-insensitively; failing that, a vendor file of that family, X_<date>.agf (the newest
 //    date). So "SCHOTT", "OHARA", "HOYA" and "CDGM" are the vendors' complete catalogs that ship in
-//    catalogs/, unless a folder of LENSOPT_CATALOG_PATH holds the vendor's own file.
+//    catalogs/, unless a folder of LENSOPT_CATALOG_PATH holds the vendor's own file;
+//  - failing both, the shipped catalog zemax_catalog_alias names ("NIKON-HIKARI" is HIKARI).
 // Results are cached per resolved path. Throws Error naming what was searched.
 std::shared_ptr<const Catalog> load_catalog(std::string_view name_or_path);
 

@@ -34,10 +34,16 @@ struct Material {
   double vd = 0.0;         // Abbe number (catalog's figure for kCatalog); 0 for air
   std::shared_ptr<const Glass>
       glass;  // the catalog entry (kCatalog), for DispersionModel::kCatalog
+  // kModel: which model glass (glass/dispersion.h): the paper's, or OpticStudio's with its
+  // partial-dispersion deviation dPgF (a .zmx model glass).
+  ModelGlass model_glass = ModelGlass::kPaper;
+  double dpgf = 0.0;
 
   bool is_air() const { return kind == Kind::kAir; }
   static Material air() { return {}; }
   static Material model(double nd, double vd);
+  // OpticStudio's model glass (n(587.5618 nm) = nd exactly).
+  static Material zemax_model(double nd, double vd, double dpgf = 0.0);
   static Material from_catalog(const Glass& glass);
   // "air", the glass name, or "model(nd, vd)".
   std::string label() const;

@@ -6,6 +6,8 @@
 // t_{K-1} is the distance to the image plane), medium after surface k with (nd_k, vd_k) (air: 1,
 // 0). Refractive index of medium k at wavelength l:
 //   abbe model:     n_k(l) = A_k + B_k / l^2 (glass/dispersion.h)
+//   a .zmx model glass (is_glass[k] == ModelGlass::kZemax): OpticStudio's model glass,
+//                   n_k = zemax_model_index(nd_k, vd_k, dPgF_k, l), nd_k exact at 587.5618 nm
 //   catalog model:  n_k(l) = abbe(nd_k, vd_k, l) + [n_cat(l) - abbe(nd_k0, vd_k0, l)]
 // The bracket is a constant per (surface, wavelength), so the catalog model equals the catalog's
 // formula at the nominal glass and still carries derivatives with respect to nd and vd.
@@ -66,7 +68,8 @@ struct TraceLens {
   std::vector<T> thickness_mm;      // K
   std::vector<T> nd;                // K, medium after each surface (1 for air)
   std::vector<T> vd;                // K (0 for air)
-  std::vector<char> is_glass;       // K
+  std::vector<char> is_glass;       // K: 0 air, else the ModelGlass of the medium (dispersion.h)
+  std::vector<double> model_dpgf;   // K: dPgF of OpticStudio model glasses; empty = all 0
   // Surface profiles (trace/profile.h); all three empty when every surface is a sphere.
   std::vector<std::uint8_t> profile;  // K: kProfileSphere, kProfileConic or kProfileAsphere
   std::vector<T> conic;               // K: conic constant k
@@ -117,9 +120,16 @@ struct TraceLens {
   // Index of medium k at wavelength number w (k = -1 is object space: 1).
   T index(int k, int w) const {
     if (k < 0 || !is_glass[k]) return K<T>(1.0);
-    T n = abbe_index(nd[k], vd[k], wavelengths_nm[w]);
+    T n = model_index(k, wavelengths_nm[w]);
     if (!catalog_offset.empty()) n = n + K<T>(catalog_offset[k][w]);
     return n;
+  }
+  // The model-glass index of medium k (no catalog correction): the paper's or OpticStudio's.
+  T model_index(int k, double wavelength_nm) const {
+    if (is_glass[k] == static_cast<char>(ModelGlass::kZemax))
+      return zemax_model_index(nd[k], vd[k], K<T>(model_dpgf.empty() ? 0.0 : model_dpgf[k]),
+                               wavelength_nm);
+    return abbe_index(nd[k], vd[k], wavelength_nm);
   }
   // Same at a wavelength given in nm: the traced index (with the catalog correction) when it is
   // one of wavelengths_nm; elsewhere the abbe model's A + B / l^2, which is the lens's own index
@@ -133,11 +143,21 @@ struct TraceLens {
     if (!catalog_offset.empty())
       throw std::logic_error("TraceLens::index_at_nm: " + std::to_string(wavelength_nm) +
                              " nm is not one of the lens's wavelengths (catalog dispersion)");
-    return abbe_index(nd[k], vd[k], wavelength_nm);
+    return model_index(k, wavelength_nm);
   }
   // The primary (reference) wavelength: the last one.
   double reference_nm() const { return wavelengths_nm.back(); }
 };
+
+// TraceLens::is_glass of a material: 0 air; ModelGlass::kZemax for an OpticStudio model glass;
+// ModelGlass::kPaper otherwise (the paper's model glass, and catalog glasses, whose catalog
+// correction is relative to the paper's model).
+inline char trace_glass_kind(const Material& m) {
+  if (m.is_air()) return 0;
+  if (m.kind == Material::Kind::kModel && m.model_glass == ModelGlass::kZemax)
+    return static_cast<char>(ModelGlass::kZemax);
+  return static_cast<char>(ModelGlass::kPaper);
+}
 
 // The wavelengths a lens is traced at: the specs' wavelengths, then the primary one.
 std::vector<double> trace_wavelengths_nm(const Specs& specs);
@@ -172,6 +192,7 @@ TraceLens<U> convert_trace_lens(const TraceLens<T>& in,
   out.nd = cvt(in.nd);
   out.vd = cvt(in.vd);
   out.is_glass = in.is_glass;
+  out.model_dpgf = in.model_dpgf;
   out.profile = in.profile;
   out.conic = cvt(in.conic);
   out.asphere = cvt(in.asphere);

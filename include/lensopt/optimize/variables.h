@@ -143,7 +143,14 @@ class LensParameterization {
     lens.vd.assign(k_count, K<T>(0.0));
     lens.is_glass.assign(k_count, 0);
     for (int k = 0; k < k_count; ++k)
-      lens.is_glass[k] = structure_.surfaces[k].material.is_air() ? 0 : 1;
+      lens.is_glass[k] = trace_glass_kind(structure_.surfaces[k].material);
+    for (int k = 0; k < k_count; ++k) {
+      const Material& m = structure_.surfaces[k].material;
+      if (m.kind != Material::Kind::kModel || m.model_glass != ModelGlass::kZemax || m.dpgf == 0.0)
+        continue;
+      if (lens.model_dpgf.empty()) lens.model_dpgf.assign(k_count, 0.0);
+      lens.model_dpgf[k] = m.dpgf;
+    }
     int glass_number = 0;
     for (int i = 0; i < size(); ++i) {
       const LensVariable& v = variables_[i];
