@@ -47,7 +47,11 @@ class OptimizeMatchesCli(unittest.TestCase):
         result = lensopt.optimize(load(path))
         self.assertEqual(expected["bounds"]["mode"], "lens")
         self.assertFalse(expected["kept_start"])
-        self.assertLess(expected["final_mean_rms_spot_um"], 0.9 * expected["start_mean_rms_spot_um"])
+        # The defect was Python keeping the start (373 um soft phase, -4.24 mm glass) where the
+        # CLI improves it: the CLI must improve the design, and Python must equal it. (With the
+        # .zmx's model glasses on OpticStudio's model, issue 30, the start is 7.92 um and the
+        # design, on catalog glasses, 7.70 um; on the paper's model it was 8.54 -> 6.67 um.)
+        self.assertLess(expected["final_mean_rms_spot_um"], expected["start_mean_rms_spot_um"])
         self.assertEqual(result.kept_start, expected["kept_start"])
         self.assertEqual(result.iterations, expected["iterations"])
         self.assertEqual(result.loss_evaluations, expected["loss_evaluations"])
