@@ -128,9 +128,9 @@ TEST_CASE("diffraction orientation: the PSF's centroid and coma flare match the 
 TEST_CASE("diffraction orientation: render kernels and point sources land on the same pixels") {
   // The paper's Cooke at 800 x 600 pixels (20 um pitch on its 16 mm diagonal): per patch and
   // channel the pixel kernels' centroids, and the blurred images of point sources at the centre
-  // and in the corners, agree within 0.15 px between the geometric and diffraction PSFs (the
-  // PSFs' centroids agree to 0.25 um, 0.0125 px; the kernels resample them to the pixels, which
-  // moves both alike). The mirrored PSFs moved the corner spots by ~2.5 px.
+  // and in the corners, agree within 0.15 px (3 um) between the geometric and diffraction PSFs:
+  // the PSFs' centroids agree to 0.5 um (0.025 px, the test above), and the kernels resample
+  // both alike to the pixels; measured 0.026 px. The mirrored PSFs were up to 5 px off.
   const Lens lens = read_lens(test::source_dir() / "lenses" / "cooke.toml");
   const ImagingModel geometric = build_imaging_model(lens, trace_for(3));
   ImagingModel diffraction = geometric;
