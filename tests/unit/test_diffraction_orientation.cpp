@@ -88,8 +88,8 @@ TEST_CASE("diffraction orientation: the PSF's centroid and coma flare match the 
   //     du_y fitted over the pupil), so a ray's transverse aberration enters the diffraction
   //     centroid scaled by its local du over the fitted one; then the different pupil samplings
   //     (polar rings against square cells) and the light outside the 260 um grid. Measured: up
-  //     to 0.49 um in the paper's Cooke's red channel (RMS spot 27 um), <= 0.1 um elsewhere.
-  //     The mirrored PSF sat 2 |ybar_k - C| from the geometric centroid: up to ~40 um here.
+  //     to 0.49 um in the paper's Cooke's blue channel (RMS spread 27 um along y), <= 0.1 um
+  //     elsewhere. The mirrored PSF was 6-91 um off here.
   //   * where the geometric PSF is clearly skewed (|skewness| > 0.3 along y), the diffraction
   //     PSF's third central moment along y has its sign and a skewness above 0.3 too (the
   //     diffraction blur's symmetric part adds no third cumulant; the mirror negated it).
@@ -122,6 +122,30 @@ TEST_CASE("diffraction orientation: the PSF's centroid and coma flare match the 
       CHECK(std::abs(skew_dif) > 0.3);
     }
     CHECK(skewed >= 2);  // the premise: a comatic field
+
+    // The polychromatic PSF of `plot --kind psf-diffraction` (about C, row 0 = +y) flares the
+    // way the geometric PSFs (`--kind psf`) do: the third moment of the channels' sum.
+    WaveOptions keep = wave;
+    keep.keep_psf = true;
+    keep.geometric = false;
+    const TraceSystem<double> sys =
+        prepare_system(make_trace_lens(lens), lens_setup(lens, model.trace), model.trace);
+    const WaveReport r = analyze_wave(sys, keep, {}, {h});
+    PsfOptions tile;
+    tile.grid_size = 97;
+    tile.bin_um = 2.5;
+    const std::vector<float> poly = polychromatic_psf(r.fields[0], tile.grid_size, tile.bin_um);
+    std::vector<double> geo_sum(model.psfs.fields[h].psf[0].size(), 0.0);
+    for (int k = 0; k < kColourChannels; ++k)
+      for (std::size_t i = 0; i < geo_sum.size(); ++i) geo_sum[i] += model.psfs.fields[h].psf[k][i];
+    const Moments geo = grid_moments(geo_sum, model.psfs.options);
+    const Moments dif = grid_moments(std::vector<double>(poly.begin(), poly.end()), tile);
+    const double skew_geo = geo.third_v / std::pow(geo.var_v, 1.5);
+    const double skew_dif = dif.third_v / std::pow(dif.var_v, 1.5);
+    INFO("plot PSF skewness along y: geometric ", skew_geo, ", diffraction ", skew_dif);
+    CHECK(std::abs(skew_geo) > 0.3);  // measured -1.29 (paper's Cooke), -0.58
+    CHECK(skew_geo * skew_dif > 0);
+    CHECK(std::abs(skew_dif) > 0.15);  // measured -0.95, -0.37
   }
 }
 
