@@ -15,7 +15,6 @@
 #include "core/fft.h"
 #include "lensopt/core/error.h"
 #include "lensopt/core/threads.h"
-#include "lensopt/paraxial/paraxial.h"
 
 namespace lensopt {
 namespace {
@@ -406,14 +405,7 @@ WaveReport analyze_wave(const TraceSystem<double>& sys, const WaveOptions& optio
   if (sys.object_at_infinity()) {
     report.cutoff_cyc_mm = sys.epd_mm / sys.efl_mm / (lambda_min * 1e-6);
   } else {
-    // The working F-number of a finite object: the paraxial marginal ray from the axial object
-    // point through the entrance pupil's rim, NA' = |w| after the last surface (w = n u).
-    const double depth = sys.object_distance_mm + sys.entrance_pupil_z_mm;
-    const double u0 = 0.5 * sys.epd_mm / depth;
-    const ParaxialRay<double> marginal =
-        paraxial_trace(sys.lens, ParaxialRay<double>{u0 * sys.object_distance_mm, u0},
-                       sys.lens.surface_count(), sys.lens.reference_nm());
-    report.image_na = std::abs(marginal.w);
+    report.image_na = finite_object_image_na(sys);  // the working F-number 1 / (2 NA')
     report.cutoff_cyc_mm = 2.0 * report.image_na / (lambda_min * 1e-6);
   }
   report.reference_wavelength_nm = sys.lens.wavelengths_nm.back();

@@ -312,3 +312,37 @@ TEST_CASE("wave finite: RMS wavefront derivatives of a finite object match finit
     CHECK(std::abs(value.v[j] - fd) <= 1e-5 * std::max(std::abs(fd), 1e-2));
   }
 }
+
+TEST_CASE("wave finite: wavefront_mm_per_wave uses the working F-number of a finite object") {
+  // The relay defocused by dz: the RMS radius of its rays about the chief ray's point over its
+  // RMS wavefront is 4 sqrt(6) N' lambda, N' = (R + dz) / (2 r_p) the cone's f-number from the
+  // exit pupil (R before the image) to the shifted plane (test_wave.cpp's singlet at infinity):
+  // wavefront_mm_per_wave (R + dz) / R, with N = 1 / (2 NA') ~ 10.7, not EFL / EPD = 5.34.
+  const Lens relay = read_lens(relay_path());
+  const TraceSystem<double> sys = prepare_lens_system(relay, quick_trace());
+  const double unit = wavefront_mm_per_wave(sys);
+  const double na = finite_object_image_na(sys);
+  CHECK(na == doctest::Approx(0.0468).epsilon(0.01));
+  CHECK(unit > 1.9 * 4 * std::sqrt(6.0) * (sys.efl_mm / sys.epd_mm) * 587.5618e-6);
+  const double radius = -exit_pupil_from_image_mm(sys.lens, sys.lens.reference_nm());
+  const PupilGrid q = make_pupil_quadrature(8, 16, false);
+  RayBundle<double> rays;
+  RayRecord<double> record;
+  for (double dz : {1.0, 3.0}) {  // W020 ~ dz / (8 N^2 lambda): 1.9 and 5.6 waves
+    const ReferenceSphere<double> sphere = reference_sphere(sys, 0, dz);
+    const Wavefront<double> wf =
+        compute_wavefront(sys, 0, sys.wavelength_count, q, sphere, dz, rays, record);
+    double sum = 0, weight = 0;
+    for (std::size_t i = 0; i < q.size(); ++i) {
+      REQUIRE(wf.ok[i]);
+      sum +=
+          q.weight[i] * (wf.image_x_mm[i] * wf.image_x_mm[i] + wf.image_y_mm[i] * wf.image_y_mm[i]);
+      weight += q.weight[i];
+    }
+    const double spot_mm = std::sqrt(sum / weight);
+    CAPTURE(dz);
+    CAPTURE(wf.rms_waves);
+    CHECK(spot_mm / wf.rms_waves ==
+          doctest::Approx(unit * (radius + dz) / radius).epsilon(2e-2).scale(0));
+  }
+}

@@ -52,6 +52,7 @@
 
 #include "lensopt/core/error.h"
 #include "lensopt/core/scalar.h"
+#include "lensopt/paraxial/paraxial.h"
 #include "lensopt/trace/system.h"
 
 namespace lensopt {
@@ -104,14 +105,29 @@ T exit_pupil_from_image_mm(const TraceLens<T>& lens, double wavelength_nm) {
   return -y / u - lens.thickness_mm[k_count - 1];
 }
 
+// The paraxial image-space NA of a finite object, NA' = |w| after the last surface (w = n u) of
+// the marginal ray from the axial object point through the entrance pupil's rim, at the reference
+// wavelength: the working F-number is 1 / (2 NA') (a 1:1 relay works at about twice EFL / EPD).
+// 0 for an object at infinity (there the working F-number is N = EFL / EPD).
+inline double finite_object_image_na(const TraceSystem<double>& sys) {
+  if (sys.object_at_infinity()) return 0.0;
+  const double u0 = 0.5 * sys.epd_mm / (sys.object_distance_mm + sys.entrance_pupil_z_mm);
+  const ParaxialRay<double> marginal =
+      paraxial_trace(sys.lens, ParaxialRay<double>{u0 * sys.object_distance_mm, u0},
+                     sys.lens.surface_count(), sys.lens.reference_nm());
+  return std::abs(marginal.w);
+}
+
 // The RMS spot radius (mm) per wave of RMS wavefront of a pure defocus W = W020 rho^2 in a
-// system of f-number N = EFL / EPD at wavelength lambda (the reference one): the transverse ray
+// system of working f-number N (EFL / EPD for an object at infinity, else 1 / (2 NA'),
+// finite_object_image_na) at wavelength lambda (the reference one): the transverse ray
 // aberration is -2 N lambda dW/drho = -4 N lambda W020 rho, of RMS 2 sqrt(2) N lambda W020 over
 // the pupil, and the RMS of W020 rho^2 without piston is W020 / (2 sqrt(3)), so
 //   mm per wave = 4 sqrt(6) N lambda   (Cooke, f/2 at 587.6 nm: 0.0115 mm per wave).
 inline double wavefront_mm_per_wave(const TraceSystem<double>& sys) {
   const double lambda_mm = sys.lens.wavelengths_nm[sys.wavelength_count] * 1e-6;
-  return 4.0 * std::sqrt(6.0) * (sys.efl_mm / sys.epd_mm) * lambda_mm;
+  if (sys.object_at_infinity()) return 4.0 * std::sqrt(6.0) * (sys.efl_mm / sys.epd_mm) * lambda_mm;
+  return 4.0 * std::sqrt(6.0) * lambda_mm / (2.0 * finite_object_image_na(sys));
 }
 
 // The reference sphere of one field: centre on the (focus-shifted) image plane, signed radius.
