@@ -72,7 +72,8 @@ AnalysisReport analyze_lens(const Lens& lens_in, const AnalyzeOptions& options) 
   const std::vector<double> y_ref = reference_heights(sys);
   const double y_ref_last = y_ref.back();
   std::vector<char> ri_known;
-  const std::vector<double> ri = relative_illuminations(sys, &ri_known);
+  std::vector<std::string> ri_why;
+  const std::vector<double> ri = relative_illuminations(sys, &ri_known, &ri_why);
 
   double spot_sum = 0, weight_sum = 0;
   bool all_fields_traced = true;
@@ -96,7 +97,10 @@ AnalysisReport analyze_lens(const Lens& lens_in, const AnalyzeOptions& options) 
     f.reference_y_mm = y_ref[h];
     f.distortion_percent =
         f.traced_rays > 0 ? 100.0 * field_distortion(f.centroid_y_mm, y_ref[h], y_ref_last) : 0.0;
-    if (ri_known[h]) f.relative_illumination = ri[h];
+    if (ri_known[h])
+      f.relative_illumination = ri[h];
+    else
+      f.relative_illumination_unknown = ri_why[h];
     // Ray-aiming error over all wavelengths (and the reference one).
     double worst = 0;
     for (int w = 0; w <= sys.wavelength_count; ++w) {
@@ -229,6 +233,10 @@ std::string format_report_text(const AnalysisReport& r) {
                              r.vignetted_by_surface[k]);
     line(fmt::format("  vignetted rays (clear apertures): {} ({})", r.vignetted_rays, where));
   }
+  for (const FieldReport& f : r.fields)
+    if (!f.relative_illumination && !f.relative_illumination_unknown.empty())
+      line(fmt::format("  relative illumination n/a at field {:.4g} {}: {}", f.field_value,
+                       r.field_unit, f.relative_illumination_unknown));
   line(fmt::format("  largest ray-aiming error: {:.4f} % of the stop radius",
                    100.0 * r.max_aiming_error));
   if (r.wave) out += format_wave_text(*r.wave);
