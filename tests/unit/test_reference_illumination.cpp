@@ -1,8 +1,9 @@
-// Relative illumination (issue 29): the projected solid angle of the pupil from the image of its
-// rim (analysis/field_maps.h) against an independent dense integration over the pupil, never
-// negative, and unknown (with a reason) where the pupil's image folds.
+// Relative illumination (issue 29): Rimmer's ellipse and the image of the pupil's rim
+// (analysis/field_maps.h) against an independent dense integration over the pupil; never
+// negative, and unknown (with a reason) where the pupil's image folds or is no ellipse.
 #include <doctest/doctest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <string>
@@ -75,21 +76,21 @@ Lens open_fast_lens(const std::vector<double>& fields_deg) {
 
 }  // namespace
 
-TEST_CASE("illumination: the rim polygon agrees with a dense integration over the pupil") {
+TEST_CASE("illumination: Rimmer's ellipse and the rim polygon against a dense pupil integration") {
   struct Case {
     Lens lens;
-    double tolerance;
+    double tolerance;  // of the ellipse (the rim polygon's is 2e-4)
   };
   std::vector<Case> cases;
-  cases.push_back({read_lens(test::source_dir() / "lenses/cooke.toml"), 2e-4});
-  cases.push_back({read_lens(test::source_dir() / "lenses/tessar.toml"), 2e-4});
+  cases.push_back({read_lens(test::source_dir() / "lenses/cooke.toml"), 3e-3});
+  cases.push_back({read_lens(test::source_dir() / "lenses/tessar.toml"), 1e-2});
   cases.push_back(
-      {read_lens(test::source_dir() / "tests/data/independent/optiland_edmund_49_847.toml"), 2e-4});
-  // An f/1.2 Gauss with an asphere: strong pupil aberration towards 23 deg (where the old
-  // three-ray ellipse was 1.2 % low: 1.0963 against 1.1090). Beyond, at 24 deg, 0.2 % of the
-  // pupil's image folds inside its rim, which the rim does not see: there the polygon (the
-  // signed integral) is 0.4 % below the dense |det| integral.
-  cases.push_back({open_fast_lens({0.0, 10.0, 16.0, 20.0, 22.0, 23.0}), 5e-4});
+      {read_lens(test::source_dir() / "tests/data/independent/optiland_edmund_49_847.toml"), 1e-2});
+  // An f/1.2 Gauss with an asphere: strong pupil aberration towards 23 deg, where the ellipse is
+  // 1.2 % low (1.0963 against 1.1090). (At 24 deg, 0.2 % of the pupil's image folds inside its
+  // rim, which the rim does not see: there the polygon, the signed integral, is 0.4 % below the
+  // dense |det| integral.)
+  cases.push_back({open_fast_lens({0.0, 10.0, 16.0, 20.0, 22.0, 23.0}), 1.5e-2});
   for (const Case& c : cases) {
     CAPTURE(c.lens.name);
     TraceOptions options;
@@ -98,15 +99,23 @@ TEST_CASE("illumination: the rim polygon agrees with a dense integration over th
     std::vector<char> known;
     const std::vector<double> ri = relative_illuminations(sys, &known);
     const double axis = dense_projected_solid_angle(sys, 0, 48, 256);
+    double rim_axis = 0;
+    REQUIRE(pupil_rim_area(sys, 0, rim_axis));
+    double worst = 0;
     for (int h = 0; h < static_cast<int>(ri.size()); ++h) {
       CAPTURE(sys.fields_deg[h]);
       REQUIRE(known[h]);
       const double dense = dense_projected_solid_angle(sys, h, 48, 256) / axis;
+      double rim = 0;
+      REQUIRE(pupil_rim_area(sys, h, rim));
+      CHECK(rim / rim_axis == doctest::Approx(dense).epsilon(2e-4));
       CHECK(ri[h] >= 0.0);
       CHECK(ri[h] < 1.5);
       CHECK(ri[h] == doctest::Approx(dense).epsilon(c.tolerance));
+      worst = std::max(worst, std::abs(ri[h] / dense - 1.0));
     }
-    MESSAGE(c.lens.name, ": R at ", sys.fields_deg.back(), " deg = ", ri.back());
+    MESSAGE(c.lens.name, ": R at ", sys.fields_deg.back(), " deg = ", ri.back(),
+            ", largest |R / dense - 1| = ", worst);
   }
 }
 
@@ -131,23 +140,31 @@ TEST_CASE("illumination: a flipped aimed pupil is the same pupil (no negative il
   CHECK(ri_flipped[2] == doctest::Approx(ri[2]).epsilon(1e-12));
 }
 
-TEST_CASE("illumination: where the fast lens's pupil image folds, it is unknown, not a number") {
-  const Lens lens = open_fast_lens({0.0, 20.0, 25.3});
+TEST_CASE("illumination: where the fast lens's pupil image is no ellipse, it is unknown") {
+  const Lens lens = open_fast_lens({0.0, 20.0, 25.0, 25.3});
   const TraceSystem<double> sys = prepare_lens_system(lens, TraceOptions{});
   double folded = 0;
-  dense_projected_solid_angle(sys, 2, 48, 256, &folded);
-  MESSAGE("25.3 deg: ", 100 * folded, " % of the pupil's image is turned over");
+  const double axis = dense_projected_solid_angle(sys, 0, 48, 256);
+  const double at_25 = dense_projected_solid_angle(sys, 2, 48, 256) / axis;
+  dense_projected_solid_angle(sys, 3, 48, 256, &folded);
+  MESSAGE("25 deg: dense R ", at_25, "; 25.3 deg: ", 100 * folded,
+          " % of the pupil's image is turned over");
   CHECK(folded > 0.05);
   std::vector<char> known;
   std::vector<std::string> why;
   const std::vector<double> ri = relative_illuminations(sys, &known, &why);
   CHECK(known[1]);
-  CHECK_FALSE(known[2]);  // was 0.643 (the ellipse), against 1.57 by the dense |det| integral
+  // 25 deg: the ellipse said 1.050 where the pupil integrates to 1.364.
+  CHECK_FALSE(known[2]);
   CHECK(ri[2] == 0.0);
-  CHECK(why[2].find("folds") != std::string::npos);
+  CHECK(why[2].find("not the ellipse") != std::string::npos);
+  // 25.3 deg: the rim folds (the ellipse said 0.643 against 1.57 by the dense |det| integral).
+  CHECK_FALSE(known[3]);
+  CHECK(ri[3] == 0.0);
+  CHECK(why[3].find("folds") != std::string::npos);
   // analyze prints n/a with the reason.
   const AnalysisReport report = analyze_lens(lens, AnalyzeOptions{});
-  CHECK_FALSE(report.fields[2].relative_illumination);
+  CHECK_FALSE(report.fields[3].relative_illumination);
   const std::string text = format_report_text(report);
   CHECK(text.find("relative illumination n/a at field 25.3 deg: its pupil's image") !=
         std::string::npos);
