@@ -95,6 +95,8 @@ AnalysisReport analyze_lens(const Lens& lens_in, const AnalyzeOptions& options) 
     f.distortion_percent = 100.0 * measured.distortion[h];
     if (measured.relative_illumination_known[h])
       f.relative_illumination = measured.relative_illumination[h];
+    else
+      f.relative_illumination_unknown = measured.relative_illumination_unknown[h];
     // Ray-aiming error over all wavelengths (and the reference one).
     double worst = 0;
     for (int w = 0; w <= sys.wavelength_count; ++w) {
@@ -227,6 +229,10 @@ std::string format_report_text(const AnalysisReport& r) {
                              r.vignetted_by_surface[k]);
     line(fmt::format("  vignetted rays (clear apertures): {} ({})", r.vignetted_rays, where));
   }
+  for (const FieldReport& f : r.fields)
+    if (!f.relative_illumination && !f.relative_illumination_unknown.empty())
+      line(fmt::format("  relative illumination n/a at field {:.4g} {}: {}", f.field_value,
+                       r.field_unit, f.relative_illumination_unknown));
   line(fmt::format("  largest ray-aiming error: {:.4f} % of the stop radius",
                    100.0 * r.max_aiming_error));
   if (r.wave) out += format_wave_text(*r.wave);

@@ -111,8 +111,10 @@ MonoWave mono_wave(const TraceSystem<double>& sys, int h, int w, const PupilGrid
   out.geo_s = out.otf_t;
   if (!out.ok) return out;
   const double cell = 2.0 / n;
-  out.psf_dx_um = 1e3 * lambda_mm / (m * wf.du_x * cell);
-  out.psf_dy_um = 1e3 * lambda_mm / (m * wf.du_y * cell);
+  // Sample (ky, kx) of the FFT lies at (x0 + kx dx, y0 + ky dy) (wave.h): dy = -lambda / (m du_y
+  // cell), positive for a positive lens (du_y < 0).
+  out.psf_dx_um = -1e3 * lambda_mm / (m * wf.du_x * cell);
+  out.psf_dy_um = -1e3 * lambda_mm / (m * wf.du_y * cell);
   out.cutoff_t_cyc_mm = 2.0 * std::abs(wf.du_y) / lambda_mm;
   out.cutoff_s_cyc_mm = 2.0 * std::abs(wf.du_x) / lambda_mm;
 
@@ -169,21 +171,26 @@ MonoWave mono_wave(const TraceSystem<double>& sys, int h, int w, const PupilGrid
   fftw_execute_dft_r2c(fft_plans(m, m).forward, intensity, scratch.spectrum->data);
   const fftw_complex* spectrum = scratch.spectrum->data;
   const double c0 = spectrum[0][0];
-  // The tilt's image shift (mm): x0 = tilt_x lambda / du_x, y0 = tilt_y lambda / du_y.
-  const double x0 = wf.tilt_x_waves * lambda_mm / wf.du_x;
-  const double y0 = wf.tilt_y_waves * lambda_mm / wf.du_y;
+  // The tilt's image shift (mm; wave.h): x0 = -tilt_x lambda / du_x, y0 = -tilt_y lambda / du_y.
+  const double x0 = -wf.tilt_x_waves * lambda_mm / wf.du_x;
+  const double y0 = -wf.tilt_y_waves * lambda_mm / wf.du_y;
   out.psf_shift_x_um = 1e3 * x0;
   out.psf_shift_y_um = 1e3 * y0;
   for (std::size_t f = 0; f < freqs.size(); ++f) {
+    // OTF(nu) = sum_k I_k exp(-i 2 pi nu (y0 + k dy)) = C(nu m dy) exp(-i 2 pi nu y0), C the
+    // spectrum of the samples; I is real, so C(s) = conj(C(-s)), read at -s = nu lambda / (du
+    // cell).
     const double nu = freqs[f];
     const double s_y = nu * lambda_mm / (wf.du_y * cell);
     const double s_x = nu * lambda_mm / (wf.du_x * cell);
-    const Complex shift_t = std::polar(1.0, -2.0 * kPi * nu * y0);
-    const Complex shift_s = std::polar(1.0, -2.0 * kPi * nu * x0);
-    out.otf_t[f] =
-        std::abs(s_y) >= n ? Complex(0, 0) : spectrum_along_y(spectrum, m, s_y) / c0 * shift_t;
-    out.otf_s[f] =
-        std::abs(s_x) >= n ? Complex(0, 0) : spectrum_along_x(spectrum, m, s_x) / c0 * shift_s;
+    const Complex shift_t = std::polar(1.0, 2.0 * kPi * nu * y0);  // conj(exp(-i 2 pi nu y0))
+    const Complex shift_s = std::polar(1.0, 2.0 * kPi * nu * x0);
+    out.otf_t[f] = std::abs(s_y) >= n
+                       ? Complex(0, 0)
+                       : std::conj(spectrum_along_y(spectrum, m, s_y) / c0 * shift_t);
+    out.otf_s[f] = std::abs(s_x) >= n
+                       ? Complex(0, 0)
+                       : std::conj(spectrum_along_x(spectrum, m, s_x) / c0 * shift_s);
   }
   if (options.geometric) {
     double sum = 0;
@@ -380,7 +387,12 @@ WaveReport analyze_wave(const TraceSystem<double>& sys, const WaveOptions& optio
     report.wavelengths_nm.push_back(sys.lens.wavelengths_nm[w]);
     lambda_min = std::min(lambda_min, sys.lens.wavelengths_nm[w]);
   }
-  report.cutoff_cyc_mm = sys.epd_mm / sys.efl_mm / (lambda_min * 1e-6);
+  if (sys.object_at_infinity()) {
+    report.cutoff_cyc_mm = sys.epd_mm / sys.efl_mm / (lambda_min * 1e-6);
+  } else {
+    report.image_na = finite_object_image_na(sys);  // the working F-number 1 / (2 NA')
+    report.cutoff_cyc_mm = 2.0 * report.image_na / (lambda_min * 1e-6);
+  }
   report.reference_wavelength_nm = sys.lens.wavelengths_nm.back();
   report.fields.resize(fields.size());
 
@@ -567,11 +579,15 @@ std::string format_wave_text(const WaveReport& r) {
       "  wave optics (OPD to the exit-pupil reference sphere about the {:g} nm chief ray's image "
       "point; piston and tilt removed)",
       r.reference_wavelength_nm));
+  const std::string cutoff =
+      r.image_na > 0 ? fmt::format("2 NA'/lambda_min = {:.1f} cycles/mm (paraxial NA' {:.4f})",
+                                   r.cutoff_cyc_mm, r.image_na)
+                     : fmt::format("1/(lambda_min N) = {:.1f} cycles/mm", r.cutoff_cyc_mm);
   line(
       fmt::format("  sampling: {} x {} pupil grid, FFT {} x {} (padding {}), wavelengths {} nm "
-                  "(weights {}), cutoff 1/(lambda_min N) = {:.1f} cycles/mm",
+                  "(weights {}), cutoff {}",
                   r.pupil_samples, r.pupil_samples, r.fft_n, r.fft_n, r.padding,
-                  join(r.wavelengths_nm, "{:.1f}"), join(r.weights, "{:g}"), r.cutoff_cyc_mm));
+                  join(r.wavelengths_nm, "{:.1f}"), join(r.weights, "{:g}"), cutoff));
   if (!r.fields.empty() && !r.fields[0].mono.empty()) {
     std::string spacing;
     for (const MonoWave& m : r.fields[0].mono)
@@ -638,6 +654,7 @@ std::string format_wave_json(const WaveReport& r) {
   j["wavelengths_nm"] = arr(r.wavelengths_nm);
   j["weights"] = arr(r.weights);
   j["cutoff_cyc_mm"] = num(r.cutoff_cyc_mm);
+  if (r.image_na > 0) j["image_na"] = num(r.image_na);
   j["frequencies_cyc_mm"] = arr(r.frequencies_cyc_mm);
   j["mean_rms_wavefront_waves"] = num(r.mean_rms_waves);
   j["mean_strehl"] = num(r.mean_strehl);

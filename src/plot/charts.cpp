@@ -96,17 +96,18 @@ void draw_spots(Canvas& canvas, Rect area, const std::vector<const SpotData*>& r
     const double ry = area.y + top_band + r * row_h;
     TextStyle title{font_px, Anchor::kStart, kTextColour};
     title.bold = true;
-    canvas.text({x0, ry + font_px * 1.1},
-                fmt::format("{}   mean RMS spot {:.1f} {} (21 fields)", spots.lens_name,
-                            spots.mean_rms_um, kMicro),
-                title);
+    canvas.text(
+        {x0, ry + font_px * 1.1},
+        fmt::format("{}   mean RMS spot {:.1f} {} ({} field{})", spots.lens_name, spots.mean_rms_um,
+                    kMicro, spots.analyzed_fields, spots.analyzed_fields == 1 ? "" : "s"),
+        title);
     for (int j = 0; j < static_cast<int>(spots.fields.size()) && j < nf; ++j) {
       const SpotField& f = spots.fields[j];
       const double bx = x0 + j * (side + gap);
       const double by = ry + row_title + field_label;
       const Point c{bx + side / 2, by + side / 2};
       canvas.text({c.x, by - font_px * 0.45},
-                  fmt::format("{:.1f}\u00b0  (y {:.2f} mm)", f.field_deg,
+                  fmt::format("{}  (y {:.2f} mm)", f.label,
                               std::abs(f.centroid_y_mm) < 0.005 ? 0.0 : f.centroid_y_mm),
                   TextStyle{font_px * 0.9, Anchor::kMiddle, "#333333"});
       canvas.rect({bx, by}, side, side, Style{"#b5b5b5", 1.0, "#ffffff"});
@@ -184,8 +185,8 @@ void draw_fans(Canvas& canvas, Rect area, const FanData& fans, const FanData* cm
                        ph};
       const Axes ax(frame, -1.0, 1.0, -y_lim, y_lim);
       AxesLabels labels;
-      labels.title = fmt::format("{:.1f}\u00b0 {}", fans.fields[j].field_deg,
-                                 row == 0 ? "tangential" : "sagittal");
+      labels.title =
+          fmt::format("{} {}", fans.fields[j].label, row == 0 ? "tangential" : "sagittal");
       labels.x_ticks = 2;
       labels.y_ticks = 4;
       labels.zero_x = labels.zero_y = true;

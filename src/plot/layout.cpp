@@ -299,6 +299,7 @@ void add_ray_bundles(LayoutGeometry& g, const PlotContext& ctx, const LayoutOpti
   for (std::size_t j = 0; j < fields.size(); ++j) {
     const int h = fields[j];
     g.field_deg.push_back(sys.fields_deg[h]);
+    g.field_labels.push_back(field_label(sys, h));
     const PupilMap<double>& map = sys.pupil_map(h, ref);
     const double theta = sys.fields_deg[h] * kPi / 180.0;
     start.resize(n);
@@ -454,7 +455,7 @@ void draw_layout(Canvas& canvas, Rect area, const LayoutGeometry& g, const Layou
   std::vector<LegendEntry> entries;
   const int nf = static_cast<int>(g.field_deg.size());
   for (int j = 0; j < nf; ++j)
-    entries.push_back({fmt::format("field {:.1f}\u00b0", g.field_deg[j]), field_colour(j, nf)});
+    entries.push_back({"field " + g.field_labels[j], field_colour(j, nf)});
   if (cmp) {
     entries.push_back({g.lens_name + " (solid)", kLensStroke});
     entries.push_back({cmp->lens_name + " (dashed)", kCompareStroke, "6 4"});

@@ -45,13 +45,14 @@ std::string kind_title(PlotKind kind) {
   return "";
 }
 
-// "f 17.16 mm  f/2.00  hfov 25.0 deg  ..." from analyze's report.
+// "f 17.16 mm  f/2.00  hfov 25.0 deg  ..." from analyze's report; the half field is the largest
+// field's chief-ray angle (a lens with height fields has no written angle).
 std::string first_order_line(const PlotContext& ctx) {
   const AnalysisReport& r = ctx.report;
   std::string s = fmt::format(
       "EFL {:.2f} mm   f/{:.2f}   half field {:.1f}\u00b0   BFL {:.2f} mm   total track "
       "{:.2f} mm   EPD {:.2f} mm",
-      r.efl_mm, r.f_number, ctx.lens.specs.half_field_deg, r.bfl_mm, r.total_track_mm, r.epd_mm);
+      r.efl_mm, r.f_number, ctx.sys.fields_deg.back(), r.bfl_mm, r.total_track_mm, r.epd_mm);
   if (std::abs(r.scale - 1.0) > 5e-4) s += fmt::format("   (scaled \u00d7{:.4f})", r.scale);
   return s;
 }
@@ -111,6 +112,9 @@ double default_width(PlotKind kind) {
   return 1200;
 }
 
+// The fields of the wave-optics charts: fractions of the half field.
+const std::vector<double> kMtfFractions{0.0, 0.7, 1.0};
+
 // The polychromatic diffraction MTF of fields 0, 0.7 and 1 of the lens (61 frequencies from 0
 // to the cutoff of the shortest wavelength), with its wavelength weights: the MTF page's and the
 // report's chart.
@@ -127,7 +131,7 @@ WaveReport compute_mtf_curves(const PlotContext& ctx, const PlotOptions& options
   const double cutoff = 1.0 / (lambda_min * 1e-6 * (sys.efl_mm / sys.epd_mm));
   std::vector<double> freqs;
   for (int k = 0; k <= 60; ++k) freqs.push_back(cutoff * k / 60.0);
-  return analyze_wave(sys, wave, freqs, field_indices(ctx, {0.0, 0.7, 1.0}));
+  return analyze_wave(sys, wave, freqs, field_indices(ctx, kMtfFractions));
 }
 
 std::string mtf_title(const WaveReport& r) {
@@ -139,7 +143,7 @@ std::string mtf_title(const WaveReport& r) {
 void draw_wave_page(Canvas& c, Rect area, const PlotContext& ctx, const PlotOptions& options,
                     double font_px) {
   const TraceSystem<double>& sys = ctx.sys;
-  const std::vector<int> fields = field_indices(ctx, {0.0, 0.7, 1.0});
+  const std::vector<int> fields = field_indices(ctx, kMtfFractions);
   WaveOptions wave;
   wave.pupil_samples = options.pupil_samples;
   wave.threads = options.trace.threads;
@@ -149,7 +153,7 @@ void draw_wave_page(Canvas& c, Rect area, const PlotContext& ctx, const PlotOpti
   switch (options.kind) {
     case PlotKind::kMtf: {
       const WaveReport r = compute_mtf_curves(ctx, options);
-      draw_mtf_curves(c, area, r, mtf_title(r), font_px);
+      draw_mtf_curves(c, area, r, mtf_title(r), font_px, field_labels(sys, fields));
       break;
     }
     case PlotKind::kThroughFocus: {
@@ -158,7 +162,7 @@ void draw_wave_page(Canvas& c, Rect area, const PlotContext& ctx, const PlotOpti
       for (int k = -15; k <= 15; ++k) shifts.push_back(range * k / 15.0);
       const ThroughFocus tf =
           through_focus_mtf(sys, wave, options.mtf_frequency_cyc_mm, shifts, fields);
-      draw_through_focus(c, area, tf, font_px);
+      draw_through_focus(c, area, tf, font_px, field_labels(sys, fields));
       break;
     }
     case PlotKind::kWavefront: {
@@ -171,7 +175,7 @@ void draw_wave_page(Canvas& c, Rect area, const PlotContext& ctx, const PlotOpti
         const ReferenceSphere<double> sphere = reference_sphere(sys, h);
         const Wavefront<double> wf = compute_wavefront(sys, h, w, grid, sphere, 0.0, rays, record);
         WavefrontPanel p;
-        p.label = fmt::format("{:.1f}°, {:.1f} nm", sys.fields_deg[h], wf.wavelength_nm);
+        p.label = fmt::format("{}, {:.1f} nm", field_label(sys, h), wf.wavelength_nm);
         p.n = grid.n;
         p.opd_waves.assign(static_cast<std::size_t>(grid.n) * grid.n,
                            std::numeric_limits<double>::quiet_NaN());
@@ -198,9 +202,10 @@ void draw_wave_page(Canvas& c, Rect area, const PlotContext& ctx, const PlotOpti
       if (!(window_um < 1e9)) window_um = 100;
       const double spacing = window_um / pixels;
       std::vector<PsfPanel> panels;
-      for (const WaveField& f : r.fields) {
+      for (std::size_t j = 0; j < r.fields.size(); ++j) {
+        const WaveField& f = r.fields[j];
         PsfPanel p;
-        p.label = fmt::format("{:.1f}°  Strehl {:.3f}", f.field_deg, f.strehl);
+        p.label = fmt::format("{}  Strehl {:.3f}", field_label(sys, fields[j]), f.strehl);
         p.pixels = pixels;
         p.psf = polychromatic_psf(f, pixels, spacing);
         panels.push_back(std::move(p));
@@ -265,7 +270,8 @@ struct PageData {
   std::optional<FanData> fans, fans_cmp;
   std::optional<FieldCurveData> field, field_cmp;
   std::optional<PsfStrip> psf, psf_cmp;
-  std::optional<WaveReport> mtf, mtf_cmp;  // the report's MTF chart
+  std::optional<WaveReport> mtf, mtf_cmp;               // the report's MTF chart
+  std::vector<std::string> mtf_labels, mtf_cmp_labels;  // its fields
   std::vector<const SpotData*> spot_rows;
   std::vector<const PsfStrip*> psf_rows;
   double box_um = 0.0;  // the spot diagrams' box
@@ -303,7 +309,11 @@ PageData compute_page_data(const PlotContext& ctx, const PlotContext* cmp,
   }
   if (report) {
     d.mtf = compute_mtf_curves(ctx, options);
-    if (cmp) d.mtf_cmp = compute_mtf_curves(*cmp, options);
+    d.mtf_labels = field_labels(ctx.sys, field_indices(ctx, kMtfFractions));
+    if (cmp) {
+      d.mtf_cmp = compute_mtf_curves(*cmp, options);
+      d.mtf_cmp_labels = field_labels(cmp->sys, field_indices(*cmp, kMtfFractions));
+    }
   }
   if (d.spots) d.spot_rows.push_back(&*d.spots);
   if (d.spots_cmp) d.spot_rows.push_back(&*d.spots_cmp);
@@ -399,10 +409,10 @@ void draw_report(Canvas& c, double top, double width, double font_px, const Page
   // One chart, or the lens and the comparison lens side by side.
   const double chart_w = d.mtf_cmp ? width / 2 : width;
   draw_mtf_curves(c, Rect{0, s0, chart_w, p.mtf_h - (s0 - y)}.inset(10, 0, 14, 0), *d.mtf,
-                  mtf_title(*d.mtf), font_px);
+                  mtf_title(*d.mtf), font_px, d.mtf_labels);
   if (d.mtf_cmp)
     draw_mtf_curves(c, Rect{chart_w, s0, chart_w, p.mtf_h - (s0 - y)}.inset(10, 0, 14, 0),
-                    *d.mtf_cmp, mtf_title(*d.mtf_cmp), font_px);
+                    *d.mtf_cmp, mtf_title(*d.mtf_cmp), font_px, d.mtf_cmp_labels);
 }
 
 // The page's body below the header.

@@ -84,6 +84,29 @@ std::vector<int> field_indices(const PlotContext& ctx, const std::vector<double>
       if (std::abs(fields[h] - f * hfov) < std::abs(fields[best] - f * hfov)) best = h;
     out.push_back(best);
   }
+  std::sort(out.begin(), out.end());
+  out.erase(std::unique(out.begin(), out.end()), out.end());
+  return out;
+}
+
+std::string field_label(const TraceSystem<double>& sys, int h) {
+  const bool written = h < static_cast<int>(sys.field_values.size());
+  switch (written ? sys.field_type : FieldType::kAngle) {
+    case FieldType::kAngle:
+      break;
+    case FieldType::kObjectHeight:
+      return fmt::format("object {:.2f} mm", sys.field_values[h]);
+    case FieldType::kParaxialImageHeight:
+    case FieldType::kRealImageHeight:
+      return fmt::format("image {:.2f} mm", sys.field_values[h]);
+  }
+  return fmt::format("{:.1f}\u00b0", sys.fields_deg[h]);
+}
+
+std::vector<std::string> field_labels(const TraceSystem<double>& sys,
+                                      const std::vector<int>& fields) {
+  std::vector<std::string> out;
+  for (int h : fields) out.push_back(field_label(sys, h));
   return out;
 }
 
@@ -102,6 +125,7 @@ SpotData compute_spots(const PlotContext& ctx, const SpotOptions& options) {
                             base.lens.wavelengths_nm.begin() + base.wavelength_count);
   out.wavelength_channel = ctx.wavelength_channel;
   out.mean_rms_um = ctx.report.mean_rms_spot_um.value_or(0.0);
+  out.analyzed_fields = static_cast<int>(ctx.report.fields.size());
   TraceSystem<double> sys = base;  // same aiming, fewer drawn rays
   sys.pupil = sys.samples_for(paper_pupil_samples(options.draw_rings));
   RayBundle<double> rays;
@@ -110,6 +134,7 @@ SpotData compute_spots(const PlotContext& ctx, const SpotOptions& options) {
     SpotField f;
     f.field = h;
     f.field_deg = sys.fields_deg[h];
+    f.label = field_label(sys, h);
     f.centroid_y_mm = report.centroid_y_mm;
     f.centroid_x_mm = report.centroid_x_mm;
     f.rms_um = report.rms_spot_um.value_or(0.0);
@@ -154,6 +179,7 @@ FanData compute_fans(const PlotContext& ctx, const FanOptions& options) {
     FanField field;
     field.field = h;
     field.field_deg = sys.fields_deg[h];
+    field.label = field_label(sys, h);
     // Chief ray of the reference wavelength.
     const int ref = sys.wavelength_count;
     rays.resize(1);

@@ -36,6 +36,7 @@ PsfStrip compute_psf_strip(const PlotContext& ctx, const PsfStripOptions& option
     PsfTile tile;
     tile.field = h;
     tile.field_deg = ctx.sys.fields_deg[h];
+    tile.label = field_label(ctx.sys, h);
     tile.energy_share = 1.0;
     for (int k = 0; k < kColourChannels; ++k) {
       for (double v : psf.psf[k]) tile.peak = std::max(tile.peak, v);
@@ -85,7 +86,7 @@ void draw_psf_strips(Canvas& canvas, Rect area, const std::vector<const PsfStrip
       const PsfTile& t = strip.tiles[j];
       const double bx = x0 + j * (side + gap);
       const double by = ry + title_h + label_h;
-      canvas.text({bx + side / 2, by - font_px * 0.45}, fmt::format("{:.1f}\u00b0", t.field_deg),
+      canvas.text({bx + side / 2, by - font_px * 0.45}, t.label,
                   TextStyle{font_px * 0.9, Anchor::kMiddle, "#333333"});
       canvas.image({bx, by}, side, side, t.image, true);
       canvas.rect({bx, by}, side, side, Style{"#777777", 1.0});

@@ -25,8 +25,17 @@ void diverging(double v, float rgb[3]) {
 
 }  // namespace
 
+namespace {
+
+// The legend name of field j: its label, else its angle.
+std::string field_name(const std::vector<std::string>& labels, std::size_t j, double field_deg) {
+  return j < labels.size() ? labels[j] : fmt::format("{:.1f}\u00b0", field_deg);
+}
+
+}  // namespace
+
 void draw_mtf_curves(Canvas& canvas, Rect area, const WaveReport& mtf, const std::string& title,
-                     double font_px) {
+                     double font_px, const std::vector<std::string>& field_labels) {
   const double cutoff = mtf.frequencies_cyc_mm.empty() ? 1.0 : mtf.frequencies_cyc_mm.back();
   const Rect frame = area.inset(font_px * 4.5, font_px * 2.2, font_px * 12, font_px * 3.2);
   const Axes ax(frame, 0.0, cutoff, 0.0, 1.0);
@@ -55,15 +64,17 @@ void draw_mtf_curves(Canvas& canvas, Rect area, const WaveReport& mtf, const std
     }
     canvas.polyline(t, Style{colour, 1.6});
     canvas.polyline(s, Style{colour, 1.6, "none", 1.0, "6 4"});
-    legend.push_back({fmt::format("{:.1f}\u00b0 T", f.field_deg), colour});
-    legend.push_back({fmt::format("{:.1f}\u00b0 S", f.field_deg), colour, "6 4"});
+    const std::string name = field_name(field_labels, j, f.field_deg);
+    legend.push_back({name + " T", colour});
+    legend.push_back({name + " S", colour, "6 4"});
   }
   canvas.clear_clip();
   ax.draw_frame(canvas, labels);
   draw_legend(canvas, {frame.right() + font_px, frame.y}, legend, font_px * 0.9);
 }
 
-void draw_through_focus(Canvas& canvas, Rect area, const ThroughFocus& data, double font_px) {
+void draw_through_focus(Canvas& canvas, Rect area, const ThroughFocus& data, double font_px,
+                        const std::vector<std::string>& field_labels) {
   const double lo = data.focus_shift_mm.front() * 1e3, hi = data.focus_shift_mm.back() * 1e3;
   const Rect frame = area.inset(font_px * 4.5, font_px * 2.2, font_px * 12, font_px * 3.2);
   const Axes ax(frame, lo, hi, 0.0, 1.0);
@@ -85,8 +96,9 @@ void draw_through_focus(Canvas& canvas, Rect area, const ThroughFocus& data, dou
     }
     canvas.polyline(t, Style{colour, 1.6});
     canvas.polyline(s, Style{colour, 1.6, "none", 1.0, "6 4"});
-    legend.push_back({fmt::format("{:.1f}\u00b0 T", data.field_deg[j]), colour});
-    legend.push_back({fmt::format("{:.1f}\u00b0 S", data.field_deg[j]), colour, "6 4"});
+    const std::string name = field_name(field_labels, j, data.field_deg[j]);
+    legend.push_back({name + " T", colour});
+    legend.push_back({name + " S", colour, "6 4"});
   }
   ax.draw_frame(canvas, labels);
   draw_legend(canvas, {frame.right() + font_px, frame.y}, legend, font_px * 0.9);

@@ -89,14 +89,23 @@ ImagingModel build_imaging_model(const Lens& lens, const TraceOptions& trace,
     if (!measured.relative_illumination_known[h] && model.unknown_relative_illumination.empty())
       model.unknown_relative_illumination =
           Error(SourceLocation{where},
-                fmt::format("the relative illumination of field {:.2f} deg is unknown (an edge "
-                            "ray of its pupil or of the axis fails): render with "
-                            "--no-relative-illumination",
-                            measured.fields_deg[h]))
+                fmt::format("the relative illumination of field {:.2f} deg is unknown ({}): "
+                            "render with --no-relative-illumination",
+                            measured.fields_deg[h], measured.relative_illumination_unknown[h]))
               .what();
     model.relative_illumination.push_back(
         measured.relative_illumination_known[h] ? measured.relative_illumination[h] : 0.0);
   }
+  // A lens with one field (fields are distinct radial heights, lens_setup), usually on axis
+  // only: its PSF for the whole image, no distortion (the warp is the identity,
+  // render/distortion_warp.h) and R = 1. Rendered, as one would judge an on-axis design, but
+  // saying what is not known.
+  if (model.fields_deg.size() == 1)
+    model.warnings.push_back(fmt::format(
+        "{}: the lens has one field ({:.2f} deg): the render uses its PSF everywhere, without "
+        "distortion or relative illumination; the blur, distortion and illumination elsewhere "
+        "in the field are unknown (add fields to the lens to render them)",
+        where, model.fields_deg[0]));
   for (std::size_t h = 1; h < model.reference_y_mm.size(); ++h) {
     if (!(model.reference_y_mm[h] > model.reference_y_mm[h - 1])) {
       throw Error(SourceLocation{where},
@@ -141,6 +150,7 @@ double distortion_at(const ImagingModel& model, double radius_mm) {
 
 double undistorted_radius_mm(const ImagingModel& model, double distorted_radius_mm) {
   const std::vector<double>& ybar = model.centroid_y_mm;
+  if (ybar.size() < 2) return distorted_radius_mm;  // on axis only: no distortion known
   for (std::size_t h = 1; h < ybar.size(); ++h) {
     if (!(ybar[h] > ybar[h - 1])) {
       throw Error(

@@ -147,7 +147,12 @@ SystemSetup lens_setup(const Lens& lens, const TraceOptions& options) {
 
 TraceSystem<double> prepare_lens_system(const Lens& lens, const TraceOptions& options) {
   options.validate();
-  return prepare_system(make_trace_lens(lens), lens_setup(lens, options), options);
+  TraceSystem<double> sys =
+      prepare_system(make_trace_lens(lens), lens_setup(lens, options), options);
+  if (!sys.field_solve_failure.empty())
+    throw Error(SourceLocation{lens.source_path.empty() ? lens.name : lens.source_path},
+                sys.field_solve_failure);
+  return sys;
 }
 
 double lens_spec_scale(const Lens& lens) {

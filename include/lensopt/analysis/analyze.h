@@ -41,7 +41,8 @@ struct FieldReport {
   double centroid_x_mm = 0;   // 0 unless the system traces full pupils (VDX or VAN)
   double reference_y_mm = 0;  // paraxial chief-ray height
   double distortion_percent = 0;
-  std::optional<double> relative_illumination;  // none if an edge ray of it or the axis fails
+  std::optional<double> relative_illumination;  // none if unknown (field_maps.h): then
+  std::string relative_illumination_unknown;    // why: a rim ray fails, or its pupil image folds
   int traced_rays = 0;
   int failed_rays = 0;
   double aiming_error = 0;  // largest |stop coord - target| / R_stop over wavelengths

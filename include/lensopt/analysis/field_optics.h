@@ -18,6 +18,7 @@
 // warp and spot never disagree about where a field's image is.
 #pragma once
 
+#include <string>
 #include <vector>
 
 #include "lensopt/analysis/field_maps.h"
@@ -43,6 +44,7 @@ struct FieldOptics {
   std::vector<T> distortion;             // D_h, a fraction (0 for a field no ray reaches)
   std::vector<T> relative_illumination;  // R_h (0 where unknown)
   std::vector<char> relative_illumination_known;
+  std::vector<std::string> relative_illumination_unknown;  // why, where it is unknown
   std::size_t size() const { return fields_deg.size(); }
 };
 
@@ -58,7 +60,8 @@ FieldOptics<T> measure_fields(const TraceSystem<T>& sys, const FieldOpticsOption
   if (!options.maps) return out;
   const std::size_t field_count = sys.fields_deg.size();
   out.reference_y_mm = reference_heights(sys);
-  out.relative_illumination = relative_illuminations(sys, &out.relative_illumination_known);
+  out.relative_illumination = relative_illuminations(sys, &out.relative_illumination_known,
+                                                     &out.relative_illumination_unknown);
   out.distortion.assign(field_count, K<T>(0.0));
   const T y_ref_last = out.reference_y_mm.empty() ? K<T>(0.0) : out.reference_y_mm.back();
   for (std::size_t h = 0; h < field_count; ++h)

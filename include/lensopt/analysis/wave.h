@@ -5,10 +5,17 @@
 // a_p = 1 for a cell whose centre lies in the unit circle and whose ray arrived, else 0 (the
 // area-fraction weights of the grid serve the RMS; as amplitudes they would soften the edge and
 // raise the MTF by ~5e-3 at n = 128), W in waves. Near the reference point C the
-// image field is U(x) ~ sum_p P(p) exp(-i 2 pi u(p).x / lambda), u(p) the ray's image-space
-// direction cosines, fitted as u = u0 + (du_x x_p, du_y y_p) (Wavefront::du_x/du_y). With the
-// grid spacing 2/n, one DFT of size M >= Q n (Q = padding) gives the PSF I = |FFT(P)|^2 on
-//   dx = lambda / (M du_x (2/n)),  dy = lambda / (M du_y (2/n))    (~ lambda N / Q on axis)
+// image field is U(x) ~ sum_p P(p) exp(+i 2 pi u(p).x / lambda), u(p) the ray's image-space
+// direction cosines, fitted as u = u0 + (du_x x_p, du_y y_p) (Wavefront::du_x/du_y): the wave
+// that leaves the sphere point of p with the phase 2 pi W(p) reaches x after |C - p| + u.(x - C),
+// so a path longer by W and a step x along u both delay the phase (the same sign). Hence a tilt
+// W = c y_p moves the image by y0 = -c lambda / du_y (the rays of a wavefront converging on
+// C + y0 have W = -du_y y0 y_p), and a ray's transverse aberration is -(lambda / du_y) dW/dy_p,
+// so the PSF's centroid is the rays' mean image point (to first order in the aberration) and
+// its coma flare lies on the side of the ray spot's. With the grid spacing 2/n, one DFT of size
+// M >= Q n (Q = padding), F(k) = sum_j P_j exp(-i 2 pi j k / M), gives the PSF I = |F|^2 at
+//   x = x0 + kx dx, y = y0 + ky dy,  dx = -lambda / (M du_x (2/n)),  dy = -lambda / (M du_y (2/n))
+// (~ lambda N / Q on axis; positive for a positive lens, du < 0; (x0, y0) the tilt's shift),
 // i.e. the sampling follows from the wavelength and the working f-number (du ~ 1/(2N)); Q = 2 is
 // Nyquist for the incoherent cutoff 1/(lambda N). The PSF is normalized so that the
 // aberration-free PSF of the same pupil amplitude peaks at 1: I / (sum_p a_p)^2.
@@ -60,8 +67,8 @@ struct MonoWave {
   double pv_waves = 0;
   double strehl = 0;
   double du_x = 0, du_y = 0;  // direction cosine per unit pupil coordinate
-  double psf_dx_um = 0;       // PSF sample spacing (signed: negative when the axis is flipped)
-  double psf_dy_um = 0;
+  double psf_dx_um = 0;       // PSF sample spacing (signed: negative when the axis is flipped,
+  double psf_dy_um = 0;       // for a negative lens: du > 0)
   double psf_shift_x_um = 0;  // the removed tilt's image shift (where the PSF really lies)
   double psf_shift_y_um = 0;
   double cutoff_t_cyc_mm = 0;     // 2 |du_y| / lambda
@@ -98,7 +105,11 @@ struct WaveReport {
   std::vector<double> frequencies_cyc_mm;
   std::vector<double> wavelengths_nm;
   std::vector<double> weights;
-  double cutoff_cyc_mm = 0;  // 1 / (lambda_min N), lambda_min the shortest spec wavelength
+  // 1 / (lambda_min N), lambda_min the shortest spec wavelength; for a finite object
+  // 2 NA' / lambda_min, NA' = image_na, the paraxial image-space NA of the axial object point
+  // (N = EFL / EPD is not the working F-number there: a 1:1 relay works at about 2 N).
+  double cutoff_cyc_mm = 0;
+  double image_na = 0;                 // finite object only (else 0)
   double reference_wavelength_nm = 0;  // the primary: its chief ray centres the reference sphere
   std::vector<WaveField> fields;
   double mean_rms_waves = 0;

@@ -1,11 +1,20 @@
 // The wavefront error (optical path difference, OPD) of one field and wavelength, templated on the
 // scalar so the RMS wavefront has exact derivatives (a merit for `optimize --merit wavefront`).
 //
-// Convention (OpticStudio's, for an object at infinity):
-//   * The incoming wavefront of field theta is the plane through the entrance-pupil centre
-//     (0, 0, z_EP) normal to d0 = (0, sin theta, cos theta). A ray starting on the entrance-pupil
-//     plane at (x, y, z_EP) has already travelled OPL_0 = x l0 + y m0 = y sin theta from it.
-//   * The kernel adds n s over every segment up to the image plane (trace/kernel.h, RayRecord).
+// Convention (OpticStudio's):
+//   * The incoming reference wavefront passes through the entrance-pupil centre E = (0, 0, z_EP)
+//     (pupil_start_optical_path). For an object at infinity it is the plane normal to field
+//     theta's direction d0 = (0, sin theta, cos theta): a ray starting on the entrance-pupil plane
+//     at P = (x, y, z_EP) has already travelled OPL_0 = x l0 + y m0 = y sin theta from it. For an
+//     object at a finite distance d it is the sphere about the field's object point
+//     O = (0, y_O, -d) through E (the wave leaves O as a sphere): a ray from O through P has
+//     travelled OPL_0 = n_obj (|P - O| - |E - O|) beyond it, n_obj the object-space index, so the
+//     OPD is that of the whole path from the object point, as OpticStudio's for finite conjugates.
+//     With D = z_EP + d: |P - O|^2 - |E - O|^2 = x^2 + y^2 - 2 y y_O, taken as
+//       OPL_0 = n_obj (x^2 + y^2 - 2 y y_O) / (|P - O| + |E - O|)
+//     (no cancellation of two ~d paths; -> y sin theta as d -> infinity, y_O = -D tan theta).
+//   * The kernel adds n s over every segment up to the image plane (trace/kernel.h, RayRecord),
+//     the first one from P to surface 1 included (signed: negative when E lies behind it).
 //   * The reference sphere is centred on the image point C of the chief ray of the reference
 //     wavelength (587.6 nm; pupil (0, 0) of the aimed pupil, i.e. the stop centre) and passes
 //     through the point where that chief ray crosses the paraxial exit-pupil plane (the stop
@@ -43,6 +52,7 @@
 
 #include "lensopt/core/error.h"
 #include "lensopt/core/scalar.h"
+#include "lensopt/paraxial/paraxial.h"
 #include "lensopt/trace/system.h"
 
 namespace lensopt {
@@ -95,14 +105,29 @@ T exit_pupil_from_image_mm(const TraceLens<T>& lens, double wavelength_nm) {
   return -y / u - lens.thickness_mm[k_count - 1];
 }
 
+// The paraxial image-space NA of a finite object, NA' = |w| after the last surface (w = n u) of
+// the marginal ray from the axial object point through the entrance pupil's rim, at the reference
+// wavelength: the working F-number is 1 / (2 NA') (a 1:1 relay works at about twice EFL / EPD).
+// 0 for an object at infinity (there the working F-number is N = EFL / EPD).
+inline double finite_object_image_na(const TraceSystem<double>& sys) {
+  if (sys.object_at_infinity()) return 0.0;
+  const double u0 = 0.5 * sys.epd_mm / (sys.object_distance_mm + sys.entrance_pupil_z_mm);
+  const ParaxialRay<double> marginal =
+      paraxial_trace(sys.lens, ParaxialRay<double>{u0 * sys.object_distance_mm, u0},
+                     sys.lens.surface_count(), sys.lens.reference_nm());
+  return std::abs(marginal.w);
+}
+
 // The RMS spot radius (mm) per wave of RMS wavefront of a pure defocus W = W020 rho^2 in a
-// system of f-number N = EFL / EPD at wavelength lambda (the reference one): the transverse ray
+// system of working f-number N (EFL / EPD for an object at infinity, else 1 / (2 NA'),
+// finite_object_image_na) at wavelength lambda (the reference one): the transverse ray
 // aberration is -2 N lambda dW/drho = -4 N lambda W020 rho, of RMS 2 sqrt(2) N lambda W020 over
 // the pupil, and the RMS of W020 rho^2 without piston is W020 / (2 sqrt(3)), so
 //   mm per wave = 4 sqrt(6) N lambda   (Cooke, f/2 at 587.6 nm: 0.0115 mm per wave).
 inline double wavefront_mm_per_wave(const TraceSystem<double>& sys) {
   const double lambda_mm = sys.lens.wavelengths_nm[sys.wavelength_count] * 1e-6;
-  return 4.0 * std::sqrt(6.0) * (sys.efl_mm / sys.epd_mm) * lambda_mm;
+  if (sys.object_at_infinity()) return 4.0 * std::sqrt(6.0) * (sys.efl_mm / sys.epd_mm) * lambda_mm;
+  return 4.0 * std::sqrt(6.0) * lambda_mm / (2.0 * finite_object_image_na(sys));
 }
 
 // The reference sphere of one field: centre on the (focus-shifted) image plane, signed radius.
@@ -130,6 +155,25 @@ void shift_focus(RayBundle<T>& rays, std::vector<T>* opl, const T& n_image, doub
 }
 
 }  // namespace detail
+
+// The optical path (mm) from field h's incoming reference wavefront to ray i of `rays`, started
+// on the entrance-pupil plane by start_rays (field h, wavelength w): OPL_0 of the header, the
+// plane wave's x l + y m for an object at infinity, else the path from the sphere about the object
+// point through the entrance-pupil centre. The one place a wavefront's optical path starts.
+template <typename T>
+T pupil_start_optical_path(const TraceSystem<T>& sys, int h, int w, const RayBundle<T>& rays,
+                           std::size_t i) {
+  using std::sqrt;
+  if (sys.object_at_infinity()) return rays.x[i] * rays.l[i] + rays.y[i] * rays.m[i];
+  const double y_o = sys.field_object_y_mm.empty() ? 0.0 : sys.field_object_y_mm[h];
+  const T depth = sys.entrance_pupil_z_mm + K<T>(sys.object_distance_mm);  // D = z_EP + d
+  const T x = rays.x[i], y = rays.y[i];
+  const T dy = y - K<T>(y_o);
+  const T to_p = sqrt(x * x + dy * dy + depth * depth);      // |P - O|
+  const T to_e = sqrt(K<T>(y_o * y_o) + depth * depth);      // |E - O|
+  const T difference = x * x + y * y - K<T>(2.0 * y_o) * y;  // |P-O|^2 - |E-O|^2
+  return sys.lens.index(-1, w) * difference / (to_p + to_e);
+}
 
 // The reference sphere of field h (see the header), at the reference wavelength.
 template <typename T>
@@ -199,7 +243,7 @@ Wavefront<T> compute_wavefront(const TraceSystem<T>& sys, int h, int w, const Pu
   start_rays(sys, h, w, rays, &samples);
   record.resize(k_count, count + 1, true);
   for (std::size_t i = 0; i <= count; ++i)
-    record.optical_path_mm[i] = rays.x[i] * rays.l[i] + rays.y[i] * rays.m[i];
+    record.optical_path_mm[i] = pupil_start_optical_path(sys, h, w, rays, i);
   trace_bundle(sys.lens, w, k_count, true, rays, &record);
   const T n_image = sys.lens.index(k_count - 1, w);
   detail::shift_focus<T>(rays, &record.optical_path_mm, n_image, focus_shift_mm);

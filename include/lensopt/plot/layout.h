@@ -95,7 +95,8 @@ struct LayoutGeometry {
   double stop_outer_mm = 0;
   double image_z_mm = 0;  // total track
   double image_half_height_mm = 0;
-  std::vector<double> field_deg;  // drawn fields
+  std::vector<double> field_deg;          // drawn fields
+  std::vector<std::string> field_labels;  // their field_label
   std::vector<RayDrawing> rays;
   double start_z_mm = 0;           // rays start here
   std::vector<double> min_gap_mm;  // per space k (surfaces k, k+1): smallest drawn gap

@@ -68,8 +68,16 @@ inline void set_pupil_ray(const TraceSystem<double>& sys, int h, double x_norm, 
 // Traces the lens at `trace` (analysis defaults) and analyzes it.
 PlotContext make_plot_context(const Lens& lens, const TraceOptions& trace = {});
 
-// The field numbers (into sys.fields_deg) nearest to fractions of the half field.
+// The field numbers (into sys.fields_deg) nearest to fractions of the half field, each field
+// once, in increasing order: a lens's own fields (as written) are never repeated, so a lens with
+// 3 fields plots those 3 whatever the number of fractions.
 std::vector<int> field_indices(const PlotContext& ctx, const std::vector<double>& fractions);
+
+// Field h of `sys` labelled in the lens's own field type, with its written value: "14.0°"
+// (angle), "object 12.00 mm" (object height), "image 21.60 mm" (paraxial or real image height).
+std::string field_label(const TraceSystem<double>& sys, int h);
+std::vector<std::string> field_labels(const TraceSystem<double>& sys,
+                                      const std::vector<int>& fields);
 
 // A short label of a lens's glass for annotations: the catalog name or "nd/vd".
 std::string glass_label(const Material& material);
@@ -79,6 +87,7 @@ std::string glass_label(const Material& material);
 struct SpotField {
   int field = 0;  // into sys.fields_deg
   double field_deg = 0;
+  std::string label;         // field_label
   double centroid_y_mm = 0;  // polychromatic centroid (full sampling)
   double centroid_x_mm = 0;  // its x (0 but on a full pupil: VDX or VAN)
   double rms_um = 0;         // analyze's RMS spot radius
@@ -94,7 +103,8 @@ struct SpotData {
   std::vector<double> wavelengths_nm;
   std::vector<int> wavelength_channel;  // 0 R, 1 G, 2 B per wavelength
   std::vector<SpotField> fields;
-  double mean_rms_um = 0;  // over analyze's 21 fields
+  double mean_rms_um = 0;   // over analyze's fields
+  int analyzed_fields = 0;  // how many: the lens's own, or the paper's 21
 };
 
 struct SpotOptions {
@@ -118,6 +128,7 @@ struct FanCurve {
 struct FanField {
   int field = 0;
   double field_deg = 0;
+  std::string label;  // field_label
   std::vector<FanCurve> tangential;
   std::vector<FanCurve> sagittal;
 };

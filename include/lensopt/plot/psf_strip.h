@@ -17,6 +17,7 @@ namespace lensopt::plot {
 struct PsfTile {
   int field = 0;
   double field_deg = 0;
+  std::string label;        // field_label
   RgbImage image;           // grid_size x grid_size, row 0 = sensor +y
   double peak = 0;          // largest bin value (fraction of a channel's energy)
   double energy_share = 0;  // smallest channel's share of energy inside the grid

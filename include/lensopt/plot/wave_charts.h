@@ -11,12 +11,14 @@
 namespace lensopt::plot {
 
 // Diffraction MTF of each field of `mtf` (frequencies 0..cutoff): tangential solid, sagittal
-// dashed, coloured by field, with the aberration-free curve in black.
+// dashed, coloured by field, with the aberration-free curve in black. `field_labels` (one per
+// field, plot_data.h field_label) name the fields in the legend; empty: their angles.
 void draw_mtf_curves(Canvas& canvas, Rect area, const WaveReport& mtf, const std::string& title,
-                     double font_px = 12);
+                     double font_px = 12, const std::vector<std::string>& field_labels = {});
 
 // MTF at one frequency against the focus shift, per field (T solid, S dashed).
-void draw_through_focus(Canvas& canvas, Rect area, const ThroughFocus& data, double font_px = 12);
+void draw_through_focus(Canvas& canvas, Rect area, const ThroughFocus& data, double font_px = 12,
+                        const std::vector<std::string>& field_labels = {});
 
 // One false-colour OPD map (waves, piston and tilt kept as traced) per entry, side by side.
 struct WavefrontPanel {

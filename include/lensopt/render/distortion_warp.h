@@ -6,7 +6,9 @@
 //   s = a + (c - a) rho(r') / r',   rho = interp((ybar_h, y_ref,h), r') (extended with the end
 // pieces), the inverse of r' = r + D(r) y_ref,last; on the axis (r' < 1e-12 mm) the scale
 // rho / r' is the first piece's slope (y_ref,1 - y_ref,0) / (ybar_1 - ybar_0). A sample outside
-// [0, W] x [0, H] is black (the scene there was not captured).
+// [0, W] x [0, H] is black (the scene there was not captured). With a single node (a lens whose
+// only field is on axis) the distortion is unknown and the map is the identity (rho = r'): one
+// node would otherwise send every pixel to the axis and render a constant image.
 #pragma once
 
 #include <cmath>
@@ -34,8 +36,9 @@ class InverseDistortion {
   bool source(const SensorGeometry& geo, int i, int j, double& sx, double& sy) const {
     const double dx = i + 0.5 - geo.axis_x, dy = j + 0.5 - geo.axis_y;
     const double r_out = geo.pitch_mm * std::sqrt(dx * dx + dy * dy);
-    const double scale =
-        r_out > 1e-12 ? interpolate_linear(ybar_, yref_, r_out, true) / r_out : axis_scale_;
+    const double scale = ybar_.size() < 2 ? 1.0
+                         : r_out > 1e-12  ? interpolate_linear(ybar_, yref_, r_out, true) / r_out
+                                          : axis_scale_;
     sx = geo.axis_x + dx * scale;
     sy = geo.axis_y + dy * scale;
     return sx >= 0.0 && sx <= geo.width && sy >= 0.0 && sy <= geo.height;

@@ -22,11 +22,14 @@
 #pragma once
 
 #include <ceres/jet.h>
+#include <fmt/format.h>
 
+#include <algorithm>
 #include <array>
 #include <atomic>
 #include <cmath>
 #include <limits>
+#include <string>
 #include <vector>
 
 #include "lensopt/core/constants.h"
@@ -100,6 +103,10 @@ struct TraceSystem {
   double object_distance_mm = std::numeric_limits<double>::infinity();
   std::vector<double> field_object_y_mm;
   bool object_at_infinity() const { return !std::isfinite(object_distance_mm); }
+  // Empty, or why a field given by real image height has no chief-ray angle (the real chief ray
+  // cannot reach that height: see prepare_system). prepare_lens_system throws it naming the file;
+  // the system keeps the angle of the closest height reached.
+  std::string field_solve_failure;
   // Aimed pupils, [field * (W + 1) + w]; w = W is the reference wavelength (587.6 nm).
   std::vector<PupilMap<T>> pupil_maps;
   int wavelength_count = 0;  // W: the spec wavelengths (the reference one is extra)
@@ -212,6 +219,72 @@ std::array<T, 3> aimed_stop_coordinates(const TraceSystem<T>& sys, int h, int w)
   return {coord[0], coord[1], coord[2]};
 }
 
+namespace detail {
+
+// The chief-ray slope t = tan(theta) whose real image height height(t) equals v (v != 0), from
+// the paraxial estimate t_guess. height(0) = 0 and height is taken increasing in |t| up to where
+// the ray fails (height returns NaN there). Secant steps, kept inside the bracket [lo, hi] of a
+// sign change once one is known (a step outside it bisects), and, before one is known, extended
+// outwards (doubling, halving back towards lo where the ray fails). Converged when
+// |height(t) - v| <= 1e-13 |v| or when the bracket has shrunk to a few ulps. Returns false if no
+// slope reaches v before the ray fails or 89 deg; `t` is then the slope of the closest height
+// reached and `best_height` that height.
+template <typename Height>
+bool solve_real_image_height(const Height& height, double v, double t_guess, double& t,
+                             double& best_height) {
+  const double s = v < 0.0 ? -1.0 : 1.0;  // work with g(u) = s (height(s u) - v), u >= 0
+  const double target = std::abs(v);
+  const double tol = 1e-13 * target;
+  const double u_max = std::tan(89.0 * kPi / 180.0);
+  double lo = 0.0;    // g(lo) < 0 (g(0) = -|v|)
+  double hi = u_max;  // g(hi) > 0 when have_hi
+  bool have_hi = false;
+  double fail_u = std::numeric_limits<double>::infinity();  // smallest slope seen to fail
+  double u = std::abs(t_guess) > 0.0 ? std::abs(t_guess) : 1e-3;
+  double u_prev = 0.0, g_prev = -target;  // last finite point (secant)
+  double best_u = 0.0, best_g = -target;
+  for (int it = 0; it < 200; ++it) {
+    const double y = height(s * u);
+    if (!std::isfinite(y)) {
+      fail_u = std::min(fail_u, u);
+      hi = std::min(hi, u);
+      u = 0.5 * (lo + u);  // back towards the last slope below the target
+      continue;
+    }
+    const double g = s * y - target;
+    if (std::abs(g) < std::abs(best_g)) {
+      best_u = u;
+      best_g = g;
+    }
+    if (std::abs(g) <= tol) break;
+    if (g < 0.0) {
+      lo = u;
+    } else {
+      hi = u;
+      have_hi = true;
+    }
+    if (have_hi && hi - lo <= 4.0 * std::numeric_limits<double>::epsilon() * hi) break;
+    double next = g != g_prev ? u - g * (u - u_prev) / (g - g_prev) : -1.0;
+    u_prev = u;
+    g_prev = g;
+    if (have_hi) {
+      if (!(next > lo && next < hi)) next = 0.5 * (lo + hi);  // bisect the bracket
+    } else if (!(next > lo) || !(next < fail_u) || !std::isfinite(next)) {
+      next = std::isfinite(fail_u) ? 0.5 * (lo + fail_u) : 2.0 * lo;
+    }
+    if (!(next < u_max)) next = 0.5 * (lo + u_max);
+    if (next == u) break;  // no representable progress
+    u = next;
+  }
+  t = s * best_u;
+  best_height = s * (best_g + target);
+  return std::abs(best_g) <= tol ||
+         (have_hi && hi - lo <= 4.0 * std::numeric_limits<double>::epsilon() * hi &&
+          std::abs(best_g) <= 1e-9 * std::max(target, 1.0));
+}
+
+}  // namespace detail
+
 // What prepare_system sets up: the paper's mode (scale to a focal length, EPD = EFL / N,
 // fields 0..hfov) or a lens's own system data (SpecMode::kAsWritten, see lens.h).
 struct SystemSetup {
@@ -295,7 +368,8 @@ TraceSystem<T> prepare_system(const TraceLens<T>& lens_in, const SystemSetup& se
 
   // Fields: every written value as the chief-ray angle in object space (and, for a finite
   // object, the object point). Heights on the image are solved for: paraxially (linear in
-  // tan(theta)), or on the real chief ray through the pupil centre (secant iterations).
+  // tan(theta)), or on the real chief ray through the pupil centre, traced without clear
+  // apertures (detail::solve_real_image_height: safeguarded secant to 1e-13 relative).
   const int field_count = static_cast<int>(setup.field_values.size());
   sys.field_values = setup.field_values;
   sys.field_type = setup.field_type;
@@ -309,7 +383,14 @@ TraceSystem<T> prepare_system(const TraceLens<T>& lens_in, const SystemSetup& se
   const bool finite = std::isfinite(d_obj);
   const double paraxial_per_tan =
       value_of(paraxial_image_height(sys.lens, par.entrance_pupil_z_mm, K<T>(1.0), reference_nm));
-  // Real chief-ray image height at tan(theta) (finite or not), reference wavelength.
+  // Real chief-ray image height at tan(theta) (finite or not), reference wavelength, traced
+  // without clear apertures: the chief ray through the pupil's centre defines the field whatever
+  // vignetting does to it (a semi-diameter that clips it must not stop the solve).
+  TraceLens<T> open_lens;
+  if (setup.field_type == FieldType::kRealImageHeight) {
+    open_lens = sys.lens;
+    open_lens.semi_diameter_mm.clear();
+  }
   auto real_height = [&](double tan_theta) {
     RayBundle<T> chief;
     chief.resize(1);
@@ -317,9 +398,10 @@ TraceSystem<T> prepare_system(const TraceLens<T>& lens_in, const SystemSetup& se
     // Collimated at theta whatever the object distance: the field's direction is being solved.
     start_pupil_ray(chief, 0, K<T>(0.0), K<T>(0.0), par.entrance_pupil_z_mm,
                     std::numeric_limits<double>::infinity(), std::sin(theta), std::cos(theta), 0.0);
-    trace_bundle(sys.lens, reference_w, sys.lens.surface_count(), true, chief,
+    trace_bundle(open_lens, reference_w, open_lens.surface_count(), true, chief,
                  static_cast<RayRecord<T>*>(nullptr));
-    return chief.status[0] == kRayOk ? value_of(chief.y[0]) : std::nan("");
+    const double y = value_of(chief.y[0]);
+    return chief.status[0] == kRayOk && std::isfinite(y) ? y : std::nan("");
   };
   sys.fields_deg.assign(field_count, 0.0);
   sys.field_object_y_mm.assign(field_count, 0.0);
@@ -339,16 +421,13 @@ TraceSystem<T> prepare_system(const TraceLens<T>& lens_in, const SystemSetup& se
       case FieldType::kRealImageHeight: {
         tan_theta = paraxial_per_tan != 0.0 ? v / paraxial_per_tan : 0.0;
         if (v == 0.0) break;
-        double t0 = 0.0, y0 = 0.0, t1 = tan_theta, y1 = real_height(t1);
-        for (int it = 0; it < 40 && std::isfinite(y1) && std::abs(y1 - v) > 1e-13 * std::abs(v);
-             ++it) {
-          const double t2 = t1 + (v - y1) * (t1 - t0) / (y1 - y0);
-          t0 = t1;
-          y0 = y1;
-          t1 = t2;
-          y1 = real_height(t1);
-        }
-        tan_theta = t1;
+        double reached = 0.0;
+        if (!detail::solve_real_image_height(real_height, v, tan_theta, tan_theta, reached) &&
+            sys.field_solve_failure.empty())
+          sys.field_solve_failure = fmt::format(
+              "field {} (real image height {:g} mm): no chief ray reaches that height; the "
+              "closest is {:.6g} mm at {:.4f} deg (the chief ray fails or turns back beyond it)",
+              h + 1, v, reached, std::atan(tan_theta) * 180.0 / kPi);
         break;
       }
     }
@@ -464,7 +543,9 @@ TraceSystem<T> prepare_system(const TraceLens<T>& lens, const Specs& specs,
   return prepare_system(lens, specs_setup(specs, options), options);
 }
 
-// The one way from a Lens to a traced system: make_trace_lens and its spec mode.
+// The one way from a Lens to a traced system: make_trace_lens and its spec mode. Throws Error
+// naming the lens's file when a field by real image height cannot be reached
+// (TraceSystem::field_solve_failure).
 TraceSystem<double> prepare_lens_system(const Lens& lens, const TraceOptions& options);
 
 // The scale prepare_lens_system applies to a lens (TraceSystem::scale): f_spec / EFL at the
