@@ -13,6 +13,7 @@
 #include <string>
 #include <vector>
 
+#include "error_checks.h"
 #include "lens_checks.h"
 #include "lensopt/core/atomic_file.h"
 #include "lensopt/core/error.h"
@@ -26,28 +27,15 @@ using lensopt::test::bits;
 
 namespace {
 
+using lensopt::test::check_contains;
+using lensopt::test::error_of;
+
 // format -> parse gives the same lens, and format(parse(format(l))) == format(l).
 void check_round_trip(const Lens& lens, const std::string& source_name) {
   const std::string text = format_lens_toml(lens);
   const Lens again = parse_lens_toml(text, source_name);
   test::check_identical_lenses(lens, again);
   CHECK(format_lens_toml(again) == text);
-}
-
-// The what() of the Error that `f` throws ("" and a failed check if it throws none).
-template <typename F>
-std::string error_of(F&& f) {
-  try {
-    f();
-  } catch (const Error& e) {
-    return e.what();
-  }
-  FAIL_CHECK("no lensopt::Error was thrown");
-  return "";
-}
-
-void check_contains(const std::string& text, const std::string& part) {
-  CHECK_MESSAGE(text.find(part) != std::string::npos, "'", part, "' not in: ", text);
 }
 
 std::string toml_error(const std::string& text) {

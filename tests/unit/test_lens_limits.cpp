@@ -6,6 +6,7 @@
 #include <chrono>
 #include <string>
 
+#include "error_checks.h"
 #include "lensopt/core/atomic_file.h"
 #include "lensopt/core/error.h"
 #include "lensopt/lens/input_limits.h"
@@ -16,20 +17,8 @@ using namespace lensopt;
 
 namespace {
 
-template <typename F>
-std::string error_of(F&& f) {
-  try {
-    f();
-  } catch (const Error& e) {
-    return e.what();
-  }
-  FAIL_CHECK("no lensopt::Error was thrown");
-  return "";
-}
-
-void check_contains(const std::string& text, const std::string& part) {
-  CHECK_MESSAGE(text.find(part) != std::string::npos, "'", part, "' not in: ", text);
-}
+using lensopt::test::check_contains;
+using lensopt::test::error_of;
 
 std::string toml_error(const std::string& text) {
   return error_of([&] { parse_lens_toml(text, "bad.toml"); });

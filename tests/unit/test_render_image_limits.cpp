@@ -11,6 +11,7 @@
 
 #include "core/image_plugin.h"
 #include "core/png_io.h"
+#include "error_checks.h"
 #include "lensopt/core/atomic_file.h"
 #include "lensopt/core/error.h"
 #include "lensopt/core/image_limits.h"
@@ -53,18 +54,10 @@ fs::path lying_png(const fs::path& dir, std::uint32_t width, std::uint32_t heigh
 }
 
 std::string error_of(const fs::path& path) {
-  try {
-    read_image(path);
-  } catch (const Error& e) {
-    return e.what();
-  }
-  FAIL_CHECK("no lensopt::Error was thrown");
-  return "";
+  return lensopt::test::error_of([&] { read_image(path); });
 }
 
-void check_contains(const std::string& text, const std::string& part) {
-  CHECK_MESSAGE(text.find(part) != std::string::npos, "'", part, "' not in: ", text);
-}
+using lensopt::test::check_contains;
 
 }  // namespace
 

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <string>
 
+#include "error_checks.h"
 #include "lensopt/core/error.h"
 #include "lensopt/formats/lens_file.h"
 #include "lensopt/formats/zmx.h"
@@ -14,18 +15,10 @@ using namespace lensopt;
 
 namespace {
 
-std::string zmx_error(const std::string& text) {
-  try {
-    parse_zmx(text, "bad.zmx");
-  } catch (const Error& e) {
-    return e.what();
-  }
-  FAIL_CHECK("no lensopt::Error was thrown");
-  return "";
-}
+using lensopt::test::check_contains;
 
-void check_contains(const std::string& text, const std::string& part) {
-  CHECK_MESSAGE(text.find(part) != std::string::npos, "'", part, "' not in: ", text);
+std::string zmx_error(const std::string& text) {
+  return lensopt::test::error_of([&] { parse_zmx(text, "bad.zmx"); });
 }
 
 // The doublet as .zmx (CRLF), with the line that starts with `key` replaced by `line`.
