@@ -10,6 +10,8 @@
 # runtime is initialised, and their instrumented entry crashes the process (and clang does not
 # multiversion templates). `-Dtarget_clones(...)=unused` turns each such attribute into
 # __attribute__((unused)), so the baseline build of every kernel is what runs under TSan.
+# The run-time modules (liblensopt_oiio.so) are linked without --no-undefined here
+# (CMakeLists.txt): TSan's runtime symbols are resolved by the executable.
 # Usage: tools/tsan.sh [doctest filter, default 'render*,joint*']; JOBS=N for the build.
 set -euo pipefail
 cd "$(dirname "$0")/.."
