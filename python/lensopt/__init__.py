@@ -31,7 +31,30 @@ import os as _os
 # OpenMP threads that wait passively (sleep) between parallel regions instead of spinning:
 # libgomp reads this once, when it is loaded, so it only takes effect if nothing loaded it
 # before (torch does); the user's own setting wins (include/lensopt/core/passive_threads.h).
+_user_wait_policy = "OMP_WAIT_POLICY" in _os.environ
 _os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
+
+def _gomp_already_loaded():
+    """Whether libgomp is mapped in this process already (torch, numpy's BLAS, ... loaded it)."""
+    try:
+        with open("/proc/self/maps", encoding="ascii", errors="replace") as maps:
+            return any("libgomp" in line for line in maps)
+    except OSError:
+        return False
+
+
+if not _user_wait_policy and _gomp_already_loaded():
+    import warnings as _warnings
+
+    _warnings.warn(
+        "lensopt: OpenMP (libgomp) was loaded before lensopt (usually by `import torch`), so "
+        "its threads spin between parallel regions and burn the other cores (3.8-12.7x the CPU "
+        "of a joint step with 2 threads): set OMP_WAIT_POLICY=PASSIVE in the environment, or "
+        "import lensopt before torch",
+        RuntimeWarning,
+        stacklevel=2,
+    )
 
 from ._lensopt import (  # noqa: F401,E402
     AnalysisReport,

@@ -324,3 +324,26 @@ class PassiveOpenMpThreads(unittest.TestCase):
                              text=True, check=True)
         self.assertEqual(run.stdout.strip(), "active")
         self.assertNotIn("GOMP_SPINCOUNT = '0'", run.stderr)
+
+    def test_warns_when_openmp_was_loaded_first(self):
+        # torch (or anything linking libgomp) imported first: libgomp has read its settings, the
+        # package cannot make its threads wait passively, and says so (unless the user set
+        # OMP_WAIT_POLICY). ctypes loads libgomp without torch, which may be absent.
+        code = ("import ctypes, ctypes.util, sys, warnings; sys.path[:0] = sys.argv[1:]; "
+                "ctypes.CDLL(ctypes.util.find_library('gomp') or 'libgomp.so.1'); "
+                "warnings.simplefilter('always'); import lensopt")
+        paths = [str(Path(lensopt.__file__).resolve().parents[1])]
+        env = {k: v for k, v in os.environ.items() if k != "OMP_WAIT_POLICY"}
+        run = subprocess.run([sys.executable, "-c", code, *paths], env=env, capture_output=True,
+                             text=True, check=True)
+        self.assertIn("OpenMP (libgomp) was loaded before lensopt", run.stderr)
+        env["OMP_WAIT_POLICY"] = "PASSIVE"
+        run = subprocess.run([sys.executable, "-c", code, *paths], env=env, capture_output=True,
+                             text=True, check=True)
+        self.assertNotIn("was loaded before lensopt", run.stderr)
+        # Imported first, as the package recommends: no warning.
+        code_first = "import sys, warnings; sys.path[:0] = sys.argv[1:]; import lensopt"
+        env.pop("OMP_WAIT_POLICY")
+        run = subprocess.run([sys.executable, "-W", "always", "-c", code_first, *paths], env=env,
+                             capture_output=True, text=True, check=True)
+        self.assertNotIn("was loaded before lensopt", run.stderr)
