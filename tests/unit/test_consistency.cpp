@@ -361,3 +361,24 @@ TEST_CASE("consistency: a render prepares the traced system once") {
     CHECK(prepared_system_count.load() - before == 1);
   }
 }
+
+TEST_CASE("consistency: relative illumination needs an on-axis field to normalize to") {
+  // A lens whose fields are all off axis: R_h = A_h / A_0 was taken against the first field,
+  // so the 5 deg field read 1 (a plausible, false number).
+  Lens lens = read_lens(lensopt::test::source_dir() / "lenses" / "zmx" / "cooke_triplet_50.zmx");
+  lens.specs.fields = {{5.0, 1.0, {}}, {10.0, 1.0, {}}, {20.0, 1.0, {}}};
+  AnalyzeOptions options;
+  options.trace = coarse();
+  const AnalysisReport report = analyze_lens(lens, options);
+  REQUIRE(report.fields.size() == 3);
+  for (const FieldReport& f : report.fields) {
+    CHECK_FALSE(f.relative_illumination.has_value());
+    CHECK(f.relative_illumination_unknown.find("no on-axis field") != std::string::npos);
+  }
+  // With the axis added, the same fields are known and below 1 off axis.
+  lens.specs.fields.insert(lens.specs.fields.begin(), {0.0, 1.0, {}});
+  const AnalysisReport with_axis = analyze_lens(lens, options);
+  REQUIRE(with_axis.fields.size() == 4);
+  CHECK(*with_axis.fields[0].relative_illumination == 1.0);
+  CHECK(*with_axis.fields[1].relative_illumination < 1.0);
+}

@@ -219,6 +219,16 @@ std::vector<T> relative_illuminations(const TraceSystem<T>& sys, std::vector<cha
   if (why) why->assign(field_count, std::string());
   T axis_area = K<T>(0.0), area = K<T>(0.0);
   std::string reason;
+  // R is relative to the axis: field 0 (the fields increase from it) must be on axis, or there
+  // is nothing to normalize to (a lens whose fields are 5 and 10 deg only would read R = 1 at
+  // 5 deg).
+  if (field_count == 0) return ri;
+  const double object_y0 = sys.field_object_y_mm.empty() ? 0.0 : sys.field_object_y_mm[0];
+  if (sys.fields_deg[0] != 0.0 || object_y0 != 0.0) {
+    if (why)
+      why->assign(field_count, "the lens has no on-axis field to normalize to (add a field at 0)");
+    return ri;
+  }
   if (!projected_pupil_area(sys, 0, axis_area, &reason) || !(value_of(axis_area) > 0.0)) {
     if (why) why->assign(field_count, "on axis, " + (reason.empty() ? "no pupil" : reason));
     return ri;
