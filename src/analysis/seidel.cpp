@@ -43,10 +43,6 @@ void trace_both(const TraceLens<double>& lens, double wavelength_nm, ParaxialRay
   chief = paraxial_trace(lens, chief, k_count, wavelength_nm);
 }
 
-bool finite(double v) {
-  return std::isfinite(v);
-}
-
 }  // namespace
 
 SeidelReport seidel_report(const TraceSystem<double>& sys) {
@@ -157,7 +153,7 @@ SeidelReport seidel_report(const TraceSystem<double>& sys) {
   const double checks[] = {fo.efl_mm,   fo.image_distance_mm, out.marginal_final_w,
                            out.sums.s1, out.sums.s5,          fo.paraxial_image_height_mm};
   for (double v : checks)
-    if (!finite(v) || m.w == 0.0)
+    if (!std::isfinite(v) || m.w == 0.0)
       throw Error(
           "the paraxial marginal or chief ray is not finite (an afocal lens or a pupil at "
           "infinity): no first-order data or Seidel sums");
