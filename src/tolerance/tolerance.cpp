@@ -12,6 +12,7 @@
 #include <limits>
 #include <mutex>
 
+#include "lensopt/analysis/field_maps.h"
 #include "lensopt/analysis/spot.h"
 #include "lensopt/core/error.h"
 #include "lensopt/core/random.h"
@@ -459,18 +460,16 @@ TrialResult ToleranceModel::evaluate(const std::vector<double>& perturbations) c
   const SpotWeights spot_w = spot_weights(sys);
   std::vector<ThroughFocusSpot> moments(field_count);
   for (ThroughFocusSpot& m : moments) m.spot.full_pupil = sys.full_pupil;
-  RayBundle<double> rays;
+  // One trace of every field and wavelength (analysis/spot.h trace_fields, the trace of
+  // measure_fields); its rays also feed the through-focus moments, weighted by omega_w.
   std::vector<double> slopes;
-  const int k_count = sys.lens.surface_count();
+  const SpotResult<double> traced =
+      trace_fields(sys, 1, [&](int h, int w, const RayBundle<double>& rays) {
+        moments[h].add(rays, slopes, spot_w.wavelength[w]);
+      });
+  r.ray_failures += traced.total_failed;
   for (int h = 0; h < field_count; ++h) {
-    for (int w = 0; w < sys.wavelength_count; ++w) {
-      start_rays(sys, h, w, rays);
-      trace_bundle(sys.lens, w, k_count, true, rays, static_cast<RayRecord<double>*>(nullptr));
-      int failures = 0;  // a local count (the status bytes may alias the result's fields)
-      for (std::size_t i = 0; i < rays.size(); ++i) failures += rays.status[i] != kRayOk;
-      r.ray_failures += failures;
-      moments[h].add(rays, slopes, spot_w.wavelength[w]);
-    }
+    r.ray_failures += traced.vignetted_rays[h];
     if (moments[h].count() == 0) r.valid = false;
   }
 
@@ -491,19 +490,16 @@ TrialResult ToleranceModel::evaluate(const std::vector<double>& perturbations) c
   }
 
   double sum = 0.0;
-  std::vector<double> y_ref(field_count);
   for (int h = 0; h < field_count; ++h) {
     r.rms_spot_um[h] = moments[h].rms(tau) * 1000.0;
     sum += spot_w.field[h] == 1.0 ? r.rms_spot_um[h] : spot_w.field[h] * r.rms_spot_um[h];
-    y_ref[h] =
-        paraxial_image_height(sys.lens, sys.entrance_pupil_z_mm,
-                              std::tan(sys.fields_deg[h] * kPi / 180.0), sys.lens.reference_nm());
   }
   r.mean_spot_um = sum / spot_w.field_sum;
-  const double y_ref_last = y_ref.back();
+  // Distortion as analyze measures it (analysis/field_maps.h), on the refocused image plane.
+  const std::vector<double> y_ref = reference_heights(sys);
   for (int h = 0; h < field_count; ++h) {
-    if (moments[h].count() == 0 || y_ref_last == 0.0) continue;
-    const double d = 100.0 * (moments[h].centroid(tau) - y_ref[h]) / y_ref_last;
+    if (moments[h].count() == 0) continue;
+    const double d = 100.0 * field_distortion(moments[h].centroid(tau), y_ref[h], y_ref.back());
     r.max_abs_distortion_pct = std::max(r.max_abs_distortion_pct, std::abs(d));
   }
   if (!(std::isfinite(r.mean_spot_um) && std::isfinite(r.max_abs_distortion_pct) &&
