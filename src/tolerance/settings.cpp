@@ -121,7 +121,10 @@ ToleranceSettings parse_tolerance_table(std::string_view toml_text,
   const toml::table* table = node->as_table();
   if (table == nullptr) throw Error(location(node->source()), "[tolerance] must be a table");
 
-  for (auto&& [key, value] : *table) {
+  for (auto&& [key, node_value] : *table) {
+    // A reference of its own: lambdas may not capture a structured binding before C++20's
+    // P1091 (clang 14, used by tools/tsan-python.sh, refuses it).
+    const toml::node& value = node_value;
     const std::string name(key.str());
     const SourceLocation where =
         location(key.source().begin.line > 0 ? key.source() : value.source());
