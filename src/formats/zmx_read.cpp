@@ -185,10 +185,7 @@ LensSourceLines ZmxParser::build_surfaces(Lens& lens) {
                                                    *note_catalog_) != used_catalogs.end()
                             ? *note_catalog_
                             : used_catalogs.front();
-    if (used_catalogs.size() > 1)
-      warn(0, fmt::format("glasses come from {} catalogs ({}); a lensopt TOML lens names one "
-                          "(catalog = \"{}\"), so written as TOML the others would not resolve",
-                          used_catalogs.size(), fmt::join(used_catalogs, ", "), lens.catalog_name));
+    // Glasses of the other catalogs keep theirs (a TOML material { glass, catalog }).
   } else if (note_catalog_) {
     lens.catalog_name = *note_catalog_;
   }
