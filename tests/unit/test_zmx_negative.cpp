@@ -2,6 +2,7 @@
 // (tests/data/zmx-real, sources in its README) import, and their paraxial data match a y-nu trace
 // written here from the files' own lines; analyze measures the spot on the virtual image.
 #include <doctest/doctest.h>
+#include <fmt/format.h>
 
 #include <cmath>
 #include <fstream>
@@ -132,6 +133,35 @@ TEST_CASE("zmx negative: three Thorlabs diverging lenses import and analyse; EFL
     const std::string text = format_report_text(r);
     CHECK(text.find("virtual") != std::string::npos);
   }
+}
+
+TEST_CASE("zmx negative: an afocal lens is refused at import, saying it is afocal") {
+  // Two plano-convex model-glass elements (nd exact at the primary 587.5618 nm) spaced so that
+  // the ray (y, w) = (1, 0) leaves parallel: after surface 1 w = -c (n - 1); surface 4 (-c)
+  // gives w' = w - y4 c (n - 1) = 0 for y4 = -1, and y4 = 1 + 2 t w / n + d w, so
+  // d = (-2 - 2 t w / n) / w.
+  const double n = 1.5168, c = 0.02, t = 5.0;
+  const double w = -c * (n - 1.0);
+  const double d = (-2.0 - 2.0 * t * w / n) / w;
+  const std::string text = fmt::format(
+      "MODE SEQ\nUNIT MM X W X CM MR CPMM\nENPD 10\nFTYP 0 0 1 1 0 0 0\nXFLN 0\nYFLN 0\n"
+      "WAVM 1 0.5875618 1\nPWAV 1\n"
+      "SURF 0\n  CURV 0\n  DISZ INFINITY\n"
+      "SURF 1\n  STOP\n  CURV {c:.17g}\n  DISZ {t:.17g}\n  GLAS ___BLANK 1 0 {n:.17g} 64.17\n"
+      "SURF 2\n  CURV 0\n  DISZ {d:.17g}\n"
+      "SURF 3\n  CURV 0\n  DISZ {t:.17g}\n  GLAS ___BLANK 1 0 {n:.17g} 64.17\n"
+      "SURF 4\n  CURV {mc:.17g}\n  DISZ 50\n"
+      "SURF 5\n  CURV 0\n  DISZ 0\n",
+      fmt::arg("c", c), fmt::arg("t", t), fmt::arg("n", n), fmt::arg("d", d), fmt::arg("mc", -c));
+  std::string what;
+  try {
+    parse_zmx(text, "telescope.zmx");
+  } catch (const Error& error) {
+    what = error.what();
+  }
+  CAPTURE(what);
+  CHECK(what.find("telescope.zmx:3") != std::string::npos);  // the aperture line
+  CHECK(what.find("afocal") != std::string::npos);
 }
 
 TEST_CASE("zmx negative: off-axis fields of a diverging lens; render refuses with the reason") {
