@@ -143,7 +143,8 @@ void check_forms_image(const AnalysisReport& r) {
   // none at a finite distance: its image space is in angle.
   if (!std::isfinite(r.efl_mm) || std::abs(r.efl_mm) > kMaxFocalLengthMm)
     problems.push_back(fmt::format(
-        "it is afocal (paraxial EFL {:g} mm, angular magnification {:.6g}): its image is at "
+        "it is afocal (no finite focal length: paraxial EFL {:g} mm, angular magnification "
+        "{:.6g}): its image is at "
         "infinity, and lensopt measures spots on an image plane, not in angle",
         r.efl_mm, r.angular_magnification));
   else
