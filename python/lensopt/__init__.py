@@ -58,6 +58,7 @@ if not _user_wait_policy and _gomp_already_loaded():
 
 from ._lensopt import (  # noqa: F401,E402
     AnalysisReport,
+    FieldPoint,
     FieldReport,
     Imaging,
     Lens,

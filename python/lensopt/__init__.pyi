@@ -14,6 +14,7 @@ from ._lensopt import (
     Parameterization as Parameterization,
     Renderer as Renderer,
     Specs as Specs,
+    FieldPoint as FieldPoint,
     Surface as Surface,
     SurfaceList as SurfaceList,
     ToleranceReport as ToleranceReport,

@@ -1,6 +1,7 @@
 """Type stubs of lensopt's C++ extension module (python/src)."""
 
-from typing import Any, Dict, List, Optional, Sequence, Tuple, overload
+import os
+from typing import Any, Dict, List, Optional, Sequence, Tuple, Union, overload
 
 import numpy as np
 import numpy.typing as npt
@@ -51,12 +52,25 @@ class SurfaceList:
     def insert(self, i: int, s: Surface) -> None: ...
     def pop(self, i: int = -1) -> Surface: ...
 
+class FieldPoint:
+    value: float
+    weight: float
+    def __init__(self, value: float, weight: float = 1.0) -> None: ...
+
 class Specs:
+    mode: str
     f_number: float
     half_field_deg: float
     sensor_diagonal_mm: float
     wavelengths_nm: List[float]
     wavelength_channels: List[int]
+    wavelength_weights: List[float]
+    primary_wavelength_nm: float
+    aperture: str
+    aperture_value: float
+    field_type: str
+    fields: List[FieldPoint]
+    object_distance_mm: float
     dispersion: str
     def __init__(self) -> None: ...
     def focal_length_mm(self) -> float: ...
@@ -79,9 +93,9 @@ class Lens:
     def to_zmx(self) -> str: ...
     def copy(self) -> Lens: ...
 
-def load_lens(path: str) -> Lens: ...
+def load_lens(path: Union[str, os.PathLike]) -> Lens: ...
 def parse_lens(text: str, format: str = "toml", source_name: str = "<string>") -> Lens: ...
-def save_lens(lens: Lens, path: str) -> None: ...
+def save_lens(lens: Lens, path: Union[str, os.PathLike]) -> None: ...
 def catalog_glasses(catalog: str = "ohara") -> List[Tuple[str, float, float]]: ...
 def glass_index(glass: str, wavelength_nm: float, catalog: str = "ohara") -> float: ...
 
@@ -117,6 +131,11 @@ class AnalysisReport:
     ray_failures: int
     failures_by_surface: List[int]
     max_aiming_error: float
+    image_distance_mm: float
+    virtual_image: bool
+    angular_magnification: float
+    object_distance_mm: float
+    primary_wavelength_nm: float
     wave: Optional[Dict[str, Any]]  # analyze(wave=True): `analyze --wave --json`'s wave section
     zernike_waves: Optional[np.ndarray]  # zernike_terms > 0: [field, wavelength, term], waves
     def to_json(self) -> str: ...
@@ -162,8 +181,8 @@ class Renderer:
     # warnings
     psf: Dict[str, Any]
 
-def read_image(path: str) -> np.ndarray: ...
-def write_image(path: str, image: npt.ArrayLike) -> None: ...
+def read_image(path: Union[str, os.PathLike]) -> np.ndarray: ...
+def write_image(path: Union[str, os.PathLike], image: npt.ArrayLike) -> None: ...
 
 class Parameterization:
     def __init__(self, lens: Lens, *, catalog: str = "", paraxial_image_solve: bool = True) -> None: ...
@@ -239,7 +258,7 @@ def tolerance(lens: Lens, *, trials: Optional[int] = None, seed: Optional[int] =
               rings: Optional[int] = None, fields: Optional[int] = None,
               distribution: Optional[str] = None, compensator: Optional[str] = None,
               sensitivity: bool = True, max_spot_um: Optional[float] = None,
-              jobs: int = 0) -> ToleranceReport: ...
+              threads: Optional[int] = None, jobs: Optional[int] = None) -> ToleranceReport: ...
 
 class Imaging:
     def __init__(self, param: Parameterization, *, glass_mode: str = "quantized",

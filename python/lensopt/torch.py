@@ -361,6 +361,13 @@ class ImageFormation(nn.Module):
         super().__init__()
         if fields < 2:
             raise ValueError(f"fields = {fields}: the image formation needs at least 2 fields")
+        # What it was made from, for copy.deepcopy and pickle (__getstate__).
+        self._lens = lens.copy()
+        self._init_kwargs = dict(
+            catalog=catalog, glass_mode=glass_mode, rings=rings, fields=fields,
+            grid_size=grid_size, bin_um=bin_um, sigma_bins=sigma_bins, support_bins=support_bins,
+            relative_illumination=relative_illumination, distortion=distortion,
+            paraxial_image_solve=paraxial_image_solve, freeze=tuple(freeze), threads=threads)
         self.param = _lensopt.Parameterization(lens, catalog=catalog,
                                                paraxial_image_solve=paraxial_image_solve)
         self.glass_mode = glass_mode
@@ -386,6 +393,23 @@ class ImageFormation(nn.Module):
     def names(self):
         """The variables' names ("c1", "s2", "defocus", "g1.0", ...)."""
         return self.param.names
+
+    def __getstate__(self):
+        """copy.deepcopy and pickle: the lens and options the module was made with, the
+        variables' values (device, requires_grad) and the training flag. The C++ optics and the
+        caches are rebuilt from them (__setstate__), so a copy renders the same images."""
+        return {"lens": self._lens, "options": dict(self._init_kwargs),
+                "x": self.x.detach().cpu().clone(), "device": str(self.x.device),
+                "requires_grad": self.x.requires_grad, "training": self.training}
+
+    def __setstate__(self, state):
+        self.__init__(state["lens"], **state["options"])
+        with torch.no_grad():
+            self.x.copy_(state["x"])
+        self.x.requires_grad_(state["requires_grad"])
+        self.train(state["training"])
+        if state["device"] != "cpu":
+            self.to(state["device"])
 
     def _prepare(self, x: torch.Tensor, derivatives: bool):
         v = _numpy_x(x)

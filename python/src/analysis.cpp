@@ -105,6 +105,14 @@ void bind_analysis(py::module_& m) {
       .def_readonly("ray_failures", &AnalysisReport::ray_failures)
       .def_readonly("failures_by_surface", &AnalysisReport::failures_by_surface)
       .def_readonly("max_aiming_error", &AnalysisReport::max_aiming_error)
+      .def_readonly("image_distance_mm", &AnalysisReport::image_distance_mm,
+                    "last vertex to the image plane (negative: a virtual image plane)")
+      .def_readonly("virtual_image", &AnalysisReport::virtual_image,
+                    "the paraxial image lies before the last vertex (BFL < 0)")
+      .def_readonly("angular_magnification", &AnalysisReport::angular_magnification,
+                    "paraxial chief-ray angle in image space over that in object space")
+      .def_readonly("object_distance_mm", &AnalysisReport::object_distance_mm, "0: at infinity")
+      .def_readonly("primary_wavelength_nm", &AnalysisReport::primary_wavelength_nm)
       .def_property_readonly(
           "wave",
           [](const AnalysisReport& r) -> py::object {

@@ -13,8 +13,10 @@
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
+#include <pybind11/stl/filesystem.h>
 
 #include <atomic>
+#include <filesystem>
 #include <vector>
 
 #include "lensopt/core/interrupt.h"
@@ -38,6 +40,10 @@ py::array_t<T> to_numpy(std::vector<T>&& values, std::vector<py::ssize_t> shape)
   py::capsule owner(heap, [](void* p) { delete static_cast<std::vector<T>*>(p); });
   return py::array_t<T>(shape, heap->data(), owner);
 }
+
+// Raises FileNotFoundError (errno ENOENT, the path as its filename) when `path` does not exist:
+// every function that reads a file calls it first, as Python's open() would fail.
+void require_file(const std::filesystem::path& path);
 
 // TraceOptions from the common keyword arguments.
 TraceOptions trace_options(int rings, int fields, bool ray_aiming, bool scale_to_spec, int threads);

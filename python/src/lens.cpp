@@ -2,6 +2,7 @@
 // format the core knows (.toml, the paper's .yml, Zemax .zmx), glass catalogs.
 #include <pybind11/stl_bind.h>
 
+#include <array>
 #include <cmath>
 #include <limits>
 
@@ -34,6 +35,30 @@ DispersionModel parse_dispersion(const std::string& s) {
   if (s == "abbe") return DispersionModel::kAbbe;
   if (s == "catalog") return DispersionModel::kCatalog;
   throw Error("dispersion must be 'abbe' or 'catalog', not '" + s + "'");
+}
+
+constexpr std::array<const char*, 4> kApertures = {"f-number", "epd", "object-na", "float-by-stop"};
+constexpr std::array<const char*, 4> kFieldTypes = {"angle", "object-height",
+                                                    "paraxial-image-height", "real-image-height"};
+
+template <std::size_t N>
+int name_index(const std::string& value, const std::array<const char*, N>& names,
+               const char* what) {
+  std::string all;
+  for (std::size_t i = 0; i < N; ++i) {
+    if (value == names[i]) return static_cast<int>(i);
+    all += (i ? ", '" : "'") + std::string(names[i]) + "'";
+  }
+  throw Error(std::string(what) + " must be one of " + all + ", not '" + value + "'");
+}
+
+// System data of the as-written mode: refused on the paper's mode, which would not trace it.
+void require_as_written(const Specs& s, const char* what) {
+  if (s.mode != SpecMode::kAsWritten)
+    throw Error(std::string(what) +
+                " is system data of a lens traced as written; this lens is in the paper's spec "
+                "mode (f_number, half_field_deg, sensor_diagonal_mm): set specs.mode = "
+                "'as-written' first");
 }
 
 std::string lower_extension(const std::string& path) {
@@ -108,14 +133,139 @@ void bind_lens(py::module_& m) {
   py::bind_vector<std::vector<Surface>>(m, "SurfaceList",
                                         "The lens's surfaces, edited in place (a list).");
 
-  py::class_<Specs>(m, "Specs", "First-order specifications and wavelength sampling.")
+  py::class_<FieldPoint>(m, "FieldPoint", "One field as written: value (deg or mm) and weight.")
+      .def(py::init([](double value, double weight) {
+             FieldPoint f;
+             f.value = value;
+             f.weight = weight;
+             return f;
+           }),
+           py::arg("value"), py::arg("weight") = 1.0)
+      .def_readwrite("value", &FieldPoint::value, "deg or mm, as Specs.field_type says")
+      .def_readwrite("weight", &FieldPoint::weight)
+      .def("__repr__", [](const FieldPoint& f) {
+        return "<FieldPoint " + std::to_string(f.value) + " weight " + std::to_string(f.weight) +
+               ">";
+      });
+
+  // System data: what traces a lens is its mode's (trace/system.h specs_setup). A value that
+  // the lens's mode would not use raises instead of being kept silently.
+  py::class_<Specs>(
+      m, "Specs",
+      "First-order specifications and system data. mode 'paper' (the paper's: f_number, "
+      "half_field_deg, sensor_diagonal_mm; the prescription is scaled to the spec focal length) "
+      "or 'as-written' (a .zmx or a TOML [system]: aperture, fields, object distance as "
+      "written). Setting a value the lens's mode does not use raises LensoptError.")
       .def(py::init<>(), "The paper's defaults: f/2, 25 deg, 16 mm, 15 wavelengths.")
-      .def_readwrite("f_number", &Specs::f_number)
-      .def_readwrite("half_field_deg", &Specs::half_field_deg)
+      .def_property(
+          "mode",
+          [](const Specs& s) { return s.mode == SpecMode::kPaper ? "paper" : "as-written"; },
+          [](Specs& s, const std::string& v) {
+            if (v == "paper")
+              s.mode = SpecMode::kPaper;
+            else if (v == "as-written")
+              s.mode = SpecMode::kAsWritten;
+            else
+              throw Error("mode must be 'paper' or 'as-written', not '" + v + "'");
+          },
+          "'paper' or 'as-written'")
+      .def_property(
+          "f_number", [](const Specs& s) { return s.f_number; },
+          [](Specs& s, double v) {
+            s.f_number = v;
+            // A lens traced as written takes it as its aperture (image-space F/#), as
+            // OpticStudio's aperture type "Image Space F/#".
+            if (s.mode == SpecMode::kAsWritten) {
+              s.aperture_type = ApertureType::kFNumber;
+              s.aperture_value = 0.0;
+            }
+          },
+          "Image-space F-number EFL / EPD. Setting it on a lens traced as written makes it the "
+          "aperture (aperture = 'f-number').")
+      .def_property(
+          "half_field_deg", [](const Specs& s) { return s.half_field_deg; },
+          [](Specs& s, double v) {
+            if (s.mode == SpecMode::kAsWritten && !s.fields.empty())
+              throw Error(
+                  "half_field_deg is not traced on a lens whose fields are written (a .zmx or a "
+                  "TOML [system] fields): set specs.fields (a list of FieldPoint or numbers)");
+            s.half_field_deg = v;
+          },
+          "The paper's half field of view (deg); a lens as written with fields uses those.")
       .def_readwrite("sensor_diagonal_mm", &Specs::sensor_diagonal_mm)
-      .def_readwrite("wavelengths_nm", &Specs::wavelengths_nm)
+      .def_property(
+          "wavelengths_nm", [](const Specs& s) { return s.wavelengths_nm; },
+          [](Specs& s, const std::vector<double>& v) {
+            // New wavelengths keep their channels and weights only when the count is the same.
+            if (v.size() != s.wavelengths_nm.size()) {
+              s.wavelength_channels = default_wavelength_channels(v);
+              s.wavelength_weights.clear();
+            }
+            s.wavelengths_nm = v;
+          },
+          "Wavelengths (nm). A list of another length resets the channels (by band) and the "
+          "weights (equal).")
       .def_readwrite("wavelength_channels", &Specs::wavelength_channels,
                      "0 = R, 1 = G, 2 = B, one per wavelength")
+      .def_readwrite("wavelength_weights", &Specs::wavelength_weights,
+                     "one per wavelength, or empty: equal")
+      .def_readwrite("primary_wavelength_nm", &Specs::primary_wavelength_nm,
+                     "the paraxial reference wavelength (nm)")
+      .def_property(
+          "aperture",
+          [](const Specs& s) { return std::string(kApertures[static_cast<int>(s.aperture_type)]); },
+          [](Specs& s, const std::string& v) {
+            require_as_written(s, "aperture");
+            s.aperture_type = static_cast<ApertureType>(name_index(v, kApertures, "aperture"));
+          },
+          "'f-number' (f_number), 'epd' or 'object-na' (aperture_value), 'float-by-stop' (the "
+          "stop's semi-diameter); a lens traced as written only")
+      .def_property(
+          "aperture_value", [](const Specs& s) { return s.aperture_value; },
+          [](Specs& s, double v) {
+            require_as_written(s, "aperture_value");
+            if (!(v > 0.0) || !std::isfinite(v))
+              throw Error("aperture_value = " + std::to_string(v) + " must be > 0");
+            s.aperture_value = v;
+          },
+          "EPD (mm) or object-space NA, as aperture says")
+      .def_property(
+          "field_type",
+          [](const Specs& s) { return std::string(kFieldTypes[static_cast<int>(s.field_type)]); },
+          [](Specs& s, const std::string& v) {
+            require_as_written(s, "field_type");
+            s.field_type = static_cast<FieldType>(name_index(v, kFieldTypes, "field_type"));
+          },
+          "'angle' (deg), 'object-height', 'paraxial-image-height' or 'real-image-height' (mm)")
+      .def_property(
+          "fields", [](const Specs& s) { return s.fields; },
+          [](Specs& s, const py::iterable& values) {
+            require_as_written(s, "fields");
+            std::vector<FieldPoint> fields;
+            for (const py::handle v : values) {
+              if (py::isinstance<FieldPoint>(v)) {
+                fields.push_back(v.cast<FieldPoint>());
+              } else {
+                FieldPoint f;
+                f.value = v.cast<double>();
+                fields.push_back(f);
+              }
+            }
+            s.fields = std::move(fields);
+            if (!s.fields.empty()) s.half_field_deg = s.max_field_value();
+          },
+          "The fields as written (a list of FieldPoint; assign a new list of FieldPoint or "
+          "numbers to change them: the getter returns a copy).")
+      .def_property(
+          "object_distance_mm", [](const Specs& s) { return s.object_distance_mm; },
+          [](Specs& s, double v) {
+            require_as_written(s, "object_distance_mm");
+            if (!(v > 0.0))
+              throw Error("object_distance_mm = " + std::to_string(v) +
+                          " must be > 0 (math.inf: at infinity)");
+            s.object_distance_mm = v;
+          },
+          "Object to the first surface (mm); math.inf: at infinity")
       .def_property(
           "dispersion",
           [](const Specs& s) {
@@ -146,16 +296,26 @@ void bind_lens(py::module_& m) {
       .def("copy", [](const Lens& l) { return Lens(l); })
       .def("__copy__", [](const Lens& l) { return Lens(l); })
       .def("__deepcopy__", [](const Lens& l, py::dict) { return Lens(l); })
+      .def(py::pickle(
+          // The native TOML text is lossless (lens_io.h); the file it came from rides along.
+          [](const Lens& l) { return py::make_tuple(format_lens_toml(l), l.source_path); },
+          [](const py::tuple& t) {
+            if (t.size() != 2) throw Error("a pickled Lens is (toml text, source path)");
+            Lens l = parse_lens_toml(t[0].cast<std::string>(), "<pickled lens>");
+            l.source_path = t[1].cast<std::string>();
+            return l;
+          }))
       .def("__repr__", [](const Lens& l) {
         return "<Lens '" + l.name + "', " + std::to_string(l.surfaces.size()) + " surfaces>";
       });
 
   m.def(
       "load_lens",
-      [](const std::string& path) {
+      [](const std::filesystem::path& path) {
+        require_file(path);
         std::vector<std::string> warnings;
         Lens lens;
-        if (lower_extension(path) == ".zmx") {
+        if (lower_extension(path.string()) == ".zmx") {
           ZmxImport imported = read_zmx(path);
           warnings = std::move(imported.warnings);
           lens = std::move(imported.lens);
@@ -170,9 +330,9 @@ void bind_lens(py::module_& m) {
         return lens;
       },
       py::arg("path"),
-      "Reads a lens: .toml, the paper's .yml/.yaml or Zemax .zmx (its ignored lines and a "
-      "paraxial F-number below 0.5 become Python warnings). Raises LensoptError with "
-      "file:line:column.");
+      "Reads a lens (path: str or os.PathLike): .toml, the paper's .yml/.yaml or Zemax .zmx (its "
+      "ignored lines and a paraxial F-number below 0.5 become Python warnings). Raises "
+      "FileNotFoundError for a missing file, LensoptError with file:line:column for bad input.");
   m.def(
       "parse_lens",
       [](const std::string& text, const std::string& format, const std::string& source_name) {
@@ -184,9 +344,10 @@ void bind_lens(py::module_& m) {
       py::arg("text"), py::arg("format") = "toml", py::arg("source_name") = "<string>",
       "Parses lens text of a format ('toml', 'yml', 'zmx').");
   m.def(
-      "save_lens", [](const Lens& lens, const std::string& path) { write_lens(lens, path); },
+      "save_lens",
+      [](const Lens& lens, const std::filesystem::path& path) { write_lens(lens, path); },
       py::arg("lens"), py::arg("path"),
-      "Writes a lens atomically, by extension: .toml or Zemax .zmx.");
+      "Writes a lens atomically (path: str or os.PathLike), by extension: .toml or Zemax .zmx.");
   m.def(
       "catalog_glasses",
       [](const std::string& name) {

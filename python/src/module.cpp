@@ -1,8 +1,23 @@
 // lensopt._lensopt: registers each area's bindings and translates lensopt::Error.
+#include <cerrno>
+#include <cstring>
+#include <system_error>
+
 #include "bindings.h"
 #include "lensopt/core/error.h"
 
 namespace lensopt::python {
+
+void require_file(const std::filesystem::path& path) {
+  std::error_code ec;
+  if (std::filesystem::exists(path, ec)) return;
+  // FileNotFoundError(errno, strerror, filename), as open() raises it.
+  py::object type = py::module_::import("builtins").attr("FileNotFoundError");
+  py::object instance = type(ENOENT, std::strerror(ENOENT), path.string());
+  PyErr_SetObject(type.ptr(), instance.ptr());
+  throw py::error_already_set();
+}
+
 TraceOptions trace_options(int rings, int fields, bool ray_aiming, bool scale_to_spec,
                            int threads) {
   TraceOptions o;

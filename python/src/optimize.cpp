@@ -301,7 +301,8 @@ void bind_optimize(py::module_& m) {
       [](const Lens& lens, std::optional<int> trials, std::optional<std::uint64_t> seed,
          std::optional<int> rings, std::optional<int> fields,
          std::optional<std::string> distribution, std::optional<std::string> compensator,
-         bool sensitivity, std::optional<double> max_spot_um, int jobs) {
+         bool sensitivity, std::optional<double> max_spot_um, std::optional<int> threads,
+         std::optional<int> jobs) {
         // The CLI's start (tolerance.h): the defaults and the lens's [tolerance] table, then the
         // arguments given (None: not given).
         ToleranceOptions o = tolerance_options_for(lens);
@@ -313,7 +314,11 @@ void bind_optimize(py::module_& m) {
         if (compensator) o.compensator = parse_focus_compensator(*compensator);
         o.sensitivity = sensitivity;
         if (max_spot_um) o.max_spot_um = *max_spot_um;
-        o.jobs = jobs;
+        // threads= as the CLI's --threads (jobs=: its old name, as --jobs).
+        if (threads && jobs && *threads != *jobs)
+          throw Error("tolerance: threads = " + std::to_string(*threads) + " and jobs = " +
+                      std::to_string(*jobs) + " differ; give threads (jobs is its old name)");
+        o.jobs = threads ? *threads : jobs ? *jobs : 0;
         o.validate();
         py::gil_scoped_release release;
         return run_tolerance(lens, o);
@@ -321,11 +326,13 @@ void bind_optimize(py::module_& m) {
       py::arg("lens"), py::kw_only(), py::arg("trials") = py::none(), py::arg("seed") = py::none(),
       py::arg("rings") = py::none(), py::arg("fields") = py::none(),
       py::arg("distribution") = py::none(), py::arg("compensator") = py::none(),
-      py::arg("sensitivity") = true, py::arg("max_spot_um") = py::none(), py::arg("jobs") = 0,
+      py::arg("sensitivity") = true, py::arg("max_spot_um") = py::none(),
+      py::arg("threads") = py::none(), py::arg("jobs") = py::none(),
       "`lensopt tolerance`: Monte-Carlo trials of manufacturing errors, with the sensitivity "
       "table. The options start where the CLI's do (tolerance_options_for: the defaults, 10000 "
       "trials, seed 1, 16 rings, 11 fields, with the lens's [tolerance] table applied); an "
-      "argument given (not None) overrides them.");
+      "argument given (not None) overrides them. threads: threads over trials (0: all cores), as "
+      "the CLI's --threads (jobs: its old name).");
 }
 
 }  // namespace lensopt::python

@@ -178,11 +178,16 @@ void bind_render(py::module_& m) {
 
   m.def(
       "read_image",
-      [](const std::string& path) { return numpy_of(std::move(read_image(path).image)); },
-      py::arg("path"), "Reads a PNG, JPEG, TIFF or EXR image as H x W x C float32 (0..1).");
+      [](const std::filesystem::path& path) {
+        require_file(path);
+        return numpy_of(std::move(read_image(path).image));
+      },
+      py::arg("path"),
+      "Reads a PNG, JPEG, TIFF or EXR image (path: str or os.PathLike) as H x W x C float32 "
+      "(0..1); FileNotFoundError for a missing file.");
   m.def(
       "write_image",
-      [](const std::string& path, const FloatArray& image) {
+      [](const std::filesystem::path& path, const FloatArray& image) {
         const FloatImage img = image_of(image);
         const std::string ext = std::filesystem::path(path).extension().string();
         if (ext == ".exr" || ext == ".EXR")

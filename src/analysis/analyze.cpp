@@ -10,6 +10,7 @@
 #include "lensopt/analysis/field_optics.h"
 #include "lensopt/analysis/forms_image.h"
 #include "lensopt/core/error.h"
+#include "lensopt/lens/validate.h"
 #include "lensopt/paraxial/paraxial.h"
 
 namespace lensopt {
@@ -39,6 +40,16 @@ AnalysisReport analyze_lens(const Lens& lens_in, const AnalyzeOptions& options) 
   r.bfl_mm = sys.bfl_mm;
   r.epd_mm = sys.epd_mm;
   r.f_number = sys.efl_mm / sys.epd_mm;
+  r.image_distance_mm = sys.lens.thickness_mm.back();
+  r.virtual_image = sys.object_at_infinity() && sys.bfl_mm < 0;
+  {
+    // The paraxial chief ray through the entrance-pupil centre at unit slope: y_0 = -z_EP,
+    // w_0 = 1; in image space (air) its slope is the angular magnification.
+    const ParaxialRay<double> chief =
+        paraxial_trace(sys.lens, ParaxialRay<double>{-sys.entrance_pupil_z_mm, 1.0},
+                       sys.lens.surface_count(), sys.lens.reference_nm());
+    r.angular_magnification = chief.w;
+  }
   r.entrance_pupil_z_mm = sys.entrance_pupil_z_mm;
   r.stop_radius_mm = sys.stop_radius_mm;
   r.total_track_mm = 0;
@@ -128,7 +139,16 @@ void check_forms_image(const AnalysisReport& r) {
       problems.push_back(fmt::format("{} is {}", what, v));
   };
   if (r.fields.empty()) problems.push_back("it has no field");
-  need(r.efl_mm, "the focal length (mm)", false);
+  // Any sign of power forms an image (a diverging lens a virtual one); an afocal lens forms
+  // none at a finite distance: its image space is in angle.
+  if (!std::isfinite(r.efl_mm) || std::abs(r.efl_mm) > kMaxFocalLengthMm)
+    problems.push_back(fmt::format(
+        "it is afocal (no finite focal length: paraxial EFL {:g} mm, angular magnification "
+        "{:.6g}): its image is at "
+        "infinity, and lensopt measures spots on an image plane, not in angle",
+        r.efl_mm, r.angular_magnification));
+  else
+    need(r.efl_mm, "the focal length (mm)", false);
   if (std::isfinite(r.efl_mm) && r.efl_mm == 0) problems.push_back("the focal length is 0");
   need(r.bfl_mm, "the back focal length (mm)", false);
   need(r.epd_mm, "the entrance pupil diameter (mm)", true);
@@ -170,6 +190,13 @@ std::string format_report_text(const AnalysisReport& r) {
   line(fmt::format("  effective focal length   {:10.4f} mm   (prescription scaled by {:.6f})",
                    r.efl_mm, r.scale));
   line(fmt::format("  back focal length        {:10.4f} mm", r.bfl_mm));
+  if (r.virtual_image)
+    line(
+        fmt::format("  image                    virtual: the paraxial image lies {:.4f} mm "
+                    "before the last vertex; image plane at {:.4f} mm{}",
+                    -r.bfl_mm, r.image_distance_mm,
+                    r.image_distance_mm < 0 ? " (rays traced back to it)" : ""));
+  line(fmt::format("  angular magnification    {:10.6f}", r.angular_magnification));
   line(fmt::format("  f-number                 {:10.4f}", r.f_number));
   line(fmt::format("  entrance pupil diameter  {:10.4f} mm   at {:.4f} mm from the first vertex",
                    r.epd_mm, r.entrance_pupil_z_mm));
@@ -248,6 +275,9 @@ std::string format_report_json(const AnalysisReport& r) {
   j["efl_mm"] = finite_or_null(r.efl_mm);
   j["bfl_mm"] = finite_or_null(r.bfl_mm);
   j["f_number"] = finite_or_null(r.f_number);
+  j["image_distance_mm"] = finite_or_null(r.image_distance_mm);
+  j["virtual_image"] = r.virtual_image;
+  j["angular_magnification"] = finite_or_null(r.angular_magnification);
   j["epd_mm"] = finite_or_null(r.epd_mm);
   j["entrance_pupil_z_mm"] = finite_or_null(r.entrance_pupil_z_mm);
   j["stop_radius_mm"] = finite_or_null(r.stop_radius_mm);

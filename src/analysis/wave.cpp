@@ -388,7 +388,8 @@ WaveReport analyze_wave(const TraceSystem<double>& sys, const WaveOptions& optio
     lambda_min = std::min(lambda_min, sys.lens.wavelengths_nm[w]);
   }
   if (sys.object_at_infinity()) {
-    report.cutoff_cyc_mm = sys.epd_mm / sys.efl_mm / (lambda_min * 1e-6);
+    // |EFL|: a diverging lens has the same cutoff on its virtual image.
+    report.cutoff_cyc_mm = sys.epd_mm / std::abs(sys.efl_mm) / (lambda_min * 1e-6);
   } else {
     report.image_na = finite_object_image_na(sys);  // the working F-number 1 / (2 NA')
     report.cutoff_cyc_mm = 2.0 * report.image_na / (lambda_min * 1e-6);

@@ -1,4 +1,5 @@
-// lensopt optimize LENS -o OUT.toml: baseline spot-size optimization (Ceres Levenberg-Marquardt).
+// lensopt optimize LENS -o OUT.toml (or OUT.zmx): baseline spot-size optimization (Ceres
+// Levenberg-Marquardt).
 #include <fmt/core.h>
 #include <unistd.h>
 
@@ -13,6 +14,7 @@
 #include "lensopt/core/error.h"
 #include "lensopt/core/interrupt.h"
 #include "lensopt/core/output_checks.h"
+#include "lensopt/core/text.h"
 #include "lensopt/formats/lens_file.h"
 #include "lensopt/lens/lens_io.h"
 #include "lensopt/optimize/optimizer.h"
@@ -67,18 +69,21 @@ nlohmann::json constraints_json(const ConstraintReport& c) {
   return {{"rows", rows}, {"ray_failures", c.ray_failures}, {"all_pass", c.all_pass()}};
 }
 
-// The output path, checked before any work: given, .toml, not the input (unless --in-place), in
-// a folder that exists and is writable.
+// The output path, checked before any work: given, .toml or .zmx, not the input (unless
+// --in-place), in a folder that exists and is writable.
 std::filesystem::path checked_output_path(const OptimizeCommand& cmd) {
   std::filesystem::path out_path = cmd.output_path;
   if (cmd.in_place) out_path = cmd.lens_path;
-  if (out_path.empty()) throw Error("give -o OUT.toml (or --in-place to overwrite the input)");
+  if (out_path.empty())
+    throw Error("give -o OUT.toml or OUT.zmx (or --in-place to overwrite the input)");
   if (!cmd.in_place && std::filesystem::exists(out_path) &&
       std::filesystem::equivalent(out_path, cmd.lens_path))
     throw Error(SourceLocation{out_path.string()},
                 "refusing to overwrite the input lens; use --in-place to do that");
-  if (out_path.extension() != ".toml")
-    throw Error(SourceLocation{out_path.string()}, "the optimized lens is written as .toml");
+  const std::string extension = lower_extension(out_path);
+  if (extension != ".toml" && extension != ".zmx")
+    throw Error(SourceLocation{out_path.string()},
+                "the optimized lens is written as .toml or Zemax .zmx");
   check_output_file(out_path);  // the output layer's check: folder exists and is writable
   return out_path;
 }
@@ -255,7 +260,8 @@ void setup_optimize(CLI::App& app) {
       "optimize", "Optimize a lens for spot size or wavefront (Ceres Levenberg-Marquardt)");
   sub->add_option("LENS", cmd->lens_path, "starting lens (.toml, the paper's .yml or Zemax .zmx)")
       ->required();
-  sub->add_option("-o,--output", cmd->output_path, "optimized lens (.toml), written atomically");
+  sub->add_option("-o,--output", cmd->output_path,
+                  "optimized lens (.toml or Zemax .zmx), written atomically");
   sub->add_flag("--in-place", cmd->in_place, "overwrite the input lens (TOML)");
   sub->add_flag("--json", cmd->json, "report as one JSON object on stdout");
   sub->add_flag("-q,--quiet", cmd->quiet, "no per-iteration progress on stderr");

@@ -185,10 +185,7 @@ LensSourceLines ZmxParser::build_surfaces(Lens& lens) {
                                                    *note_catalog_) != used_catalogs.end()
                             ? *note_catalog_
                             : used_catalogs.front();
-    if (used_catalogs.size() > 1)
-      warn(0, fmt::format("glasses come from {} catalogs ({}); a lensopt TOML lens names one "
-                          "(catalog = \"{}\"), so written as TOML the others would not resolve",
-                          used_catalogs.size(), fmt::join(used_catalogs, ", "), lens.catalog_name));
+    // Glasses of the other catalogs keep theirs (a TOML material { glass, catalog }).
   } else if (note_catalog_) {
     lens.catalog_name = *note_catalog_;
   }
@@ -393,15 +390,21 @@ void ZmxParser::set_summary_specs(Lens& lens) {
     fail_at(yfln_line_ > 0 ? yfln_line_ : last_line_, 1,
             fmt::format("the largest field is {} deg; lensopt needs less than 89", half_field_deg));
   lens.specs.half_field_deg = half_field_deg;
-  if (!(efl_mm > 0.0) || !std::isfinite(efl_mm))
-    fail_at(
-        aperture_line_, 1,
-        fmt::format("the paraxial EFL is {} mm; lensopt needs a positive focal length", efl_mm));
-  if (!fnum_) lens.specs.f_number = efl_mm / sys.epd_mm;
+  // Any sign of power: a diverging lens (EFL < 0, a virtual image) is as valid as a converging
+  // one; the summary F-number and sensor use |EFL|. An afocal lens (no finite focal length, or
+  // |EFL| beyond kMaxFocalLengthMm) has neither: it is refused here with what it would need.
+  if (!std::isfinite(efl_mm) || !(std::abs(efl_mm) <= kMaxFocalLengthMm))
+    fail_at(aperture_line_, 1,
+            fmt::format("the lens is afocal (paraxial EFL {} mm, beyond {:g} mm): lensopt "
+                        "analyses lenses with a finite focal length, converging or diverging; "
+                        "an afocal system (image space in angle) cannot be imported yet",
+                        efl_mm, kMaxFocalLengthMm));
+  const double abs_efl_mm = std::abs(efl_mm);
+  if (!fnum_) lens.specs.f_number = abs_efl_mm / sys.epd_mm;
   if (note_sensor_mm_) {
     lens.specs.sensor_diagonal_mm = *note_sensor_mm_;
   } else if (half_field_deg > 0.0) {
-    lens.specs.sensor_diagonal_mm = 2.0 * efl_mm * std::tan(half_field_deg * kPi / 180.0);
+    lens.specs.sensor_diagonal_mm = 2.0 * abs_efl_mm * std::tan(half_field_deg * kPi / 180.0);
   }
 }
 

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <memory>
 #include <set>
 
 #include "lensopt/analysis/apertures.h"
@@ -25,6 +26,74 @@ std::string zemax_catalog_name(std::string_view catalog_name) {
   const std::filesystem::path path{std::string(catalog_name)};
   if (path.has_parent_path() || path.has_extension()) return path.stem().string();
   return std::string(catalog_name);
+}
+
+std::vector<std::string> zmx_gcat_names(const Lens& lens) {
+  std::vector<std::string> gcat;
+  auto add_catalog = [&gcat](const std::string& zemax_name) {
+    if (!zemax_name.empty() && std::find(gcat.begin(), gcat.end(), zemax_name) == gcat.end())
+      gcat.push_back(zemax_name);
+  };
+  std::vector<const Surface*> glasses;
+  for (const Surface& s : lens.surfaces)
+    if (s.material.kind == Material::Kind::kCatalog) glasses.push_back(&s);
+  if (glasses.empty()) return gcat;
+  // The catalogs a reader searches, in order: the lens's own (the lensopt note names it, so
+  // lensopt loads it under that name, "ohara" being the paper's 65 glasses), then the GCAT list.
+  std::vector<std::shared_ptr<const Catalog>> searched;
+  auto load = [](const std::string& name) -> std::shared_ptr<const Catalog> {
+    try {
+      return load_catalog(name);
+    } catch (const Error&) {
+      return nullptr;
+    }
+  };
+  if (!lens.catalog_name.empty()) {
+    add_catalog(zemax_catalog_name(lens.catalog_name));
+    searched.push_back(load(lens.catalog_name));
+    searched.push_back(load(gcat.back()));
+  }
+  for (const Surface* s : glasses) {
+    const Glass* glass = s->material.glass.get();
+    if (glass == nullptr) continue;
+    // The glass's own catalog, unless one searched already holds this very glass.
+    const bool found = std::any_of(searched.begin(), searched.end(), [&](const auto& catalog) {
+      return catalog && catalog->name == glass->catalog && catalog->find(glass->name) != nullptr;
+    });
+    if (found) continue;
+    const std::size_t before = gcat.size();
+    add_catalog(zemax_catalog_name(glass->catalog));
+    if (gcat.size() > before) searched.push_back(load(gcat.back()));
+  }
+  // Each glass must read back as itself: the first catalog searched that has its name is its own
+  // (same catalog, same figures). A name that an earlier catalog also holds cannot be written.
+  int number = 0;
+  for (const Surface& s : lens.surfaces) {
+    ++number;
+    if (s.material.kind != Material::Kind::kCatalog || !s.material.glass) continue;
+    const Glass& glass = *s.material.glass;
+    const bool readable = std::any_of(searched.begin(), searched.end(), [&](const auto& catalog) {
+      return catalog && catalog->find(glass.name) != nullptr;
+    });
+    if (!readable)
+      throw Error(
+          fmt::format("lens '{}': surface {}: glass {} of catalog {}: no catalog of GCAT "
+                      "{} holds it, so the .zmx would not read back",
+                      lens.name, number, glass.name, glass.catalog, fmt::join(gcat, " ")));
+    for (const auto& catalog : searched) {
+      if (!catalog) continue;
+      const Glass* first = catalog->find(glass.name);
+      if (first == nullptr) continue;
+      if (catalog->name != glass.catalog || first->nd != glass.nd || first->vd != glass.vd ||
+          first->coefficients != glass.coefficients)
+        throw Error(fmt::format(
+            "lens '{}': surface {}: glass {} of catalog {} would read back from catalog {} "
+            "(GCAT {}), which has a glass of that name: a .zmx names glasses by name only",
+            lens.name, number, glass.name, glass.catalog, catalog->name, fmt::join(gcat, " ")));
+      break;
+    }
+  }
+  return gcat;
 }
 
 std::string format_zmx(const Lens& lens) {
@@ -98,23 +167,9 @@ std::string format_zmx(const Lens& lens) {
       break;
   }
 
-  // Catalogs: the lens's, then any other its glasses come from.
-  std::vector<std::string> gcat;
-  auto add_catalog = [&gcat](const std::string& zemax_name) {
-    if (!zemax_name.empty() && std::find(gcat.begin(), gcat.end(), zemax_name) == gcat.end())
-      gcat.push_back(zemax_name);
-  };
-  bool has_catalog_glass = false;
-  for (const Surface& s : lens.surfaces)
-    has_catalog_glass = has_catalog_glass || s.material.kind == Material::Kind::kCatalog;
-  if (has_catalog_glass) {
-    if (!lens.catalog_name.empty()) add_catalog(zemax_catalog_name(lens.catalog_name));
-    for (const Surface& s : lens.surfaces)
-      if (s.material.kind == Material::Kind::kCatalog && s.material.glass &&
-          lens.catalog_name.empty())
-        add_catalog(zemax_catalog_name(s.material.glass->catalog));
-    if (!gcat.empty()) line(fmt::format("GCAT {}", fmt::join(gcat, " ")));
-  }
+  // Catalogs: the lens's, then every other one its glasses come from (zmx_gcat_names).
+  const std::vector<std::string> gcat = zmx_gcat_names(lens);
+  if (!gcat.empty()) line(fmt::format("GCAT {}", fmt::join(gcat, " ")));
 
   // Fields: the written ones, else 0, 0.7 and 1 of the half field (one on axis when it is 0).
   std::vector<FieldPoint> fields;

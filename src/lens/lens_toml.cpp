@@ -87,6 +87,7 @@ constexpr std::array<std::string_view, 9> kSurfaceKeys = {
     "radius_mm", "curvature_per_mm", "thickness_mm", "material", "stop", "semi_diameter_mm",
     "conic",     "asphere",          "asphere_r2"};
 constexpr std::array<std::string_view, 4> kModelGlassKeys = {"nd", "vd", "model", "dpgf"};
+constexpr std::array<std::string_view, 2> kCatalogGlassKeys = {"glass", "catalog"};
 
 std::string_view type_phrase(const toml::node& node) {
   switch (node.type()) {
@@ -435,6 +436,42 @@ Material read_material(const TomlReader& reader, const toml::node& node, int sur
       reader.fail(node, fmt::format("surface {}: glass '{}' uses dispersion formula {}, which "
                                     "lensopt cannot evaluate; use dispersion = \"abbe\"",
                                     surface_number, glass->name, formula_name(glass->formula)));
+    return Material::from_catalog(*glass);
+  }
+  if (const auto* t = node.as_table(); t != nullptr && t->contains("glass")) {
+    // A glass of another catalog: { glass = "S-TIH6", catalog = "OHARA" } (catalog: the lens's
+    // when absent).
+    reader.check_keys(*t, kCatalogGlassKeys,
+                      fmt::format("the material of surface {}", surface_number));
+    const Entry g = entry(*t, "glass");
+    const std::string name = reader.string(*g.node, "glass");
+    std::shared_ptr<const Catalog> own;
+    const Catalog* from = catalog;
+    std::string from_name = lens.catalog_name;
+    if (const Entry c = entry(*t, "catalog")) {
+      from_name = reader.string(*c.node, "catalog");
+      try {
+        own = load_catalog(from_name);
+      } catch (const Error& error) {
+        reader.fail(*c.node, fmt::format("surface {}: cannot load catalog '{}': {}", surface_number,
+                                         from_name, error.message()));
+      }
+      from = own.get();
+    }
+    if (from == nullptr)
+      reader.fail(node, fmt::format("surface {}: glass \"{}\" needs a catalog: add catalog = "
+                                    "\"...\" to the material or to [lens]",
+                                    surface_number, name));
+    const Glass* glass = from->find(name);
+    if (glass == nullptr)
+      reader.fail(
+          *g.node,
+          fmt::format("surface {}: unknown glass '{}' in catalog '{}'; closest: {}", surface_number,
+                      name, from_name, fmt::join(from->closest_names(name, 3), ", ")));
+    if (lens.specs.dispersion == DispersionModel::kCatalog && !glass->formula_supported)
+      reader.fail(*g.node, fmt::format("surface {}: glass '{}' uses dispersion formula {}, which "
+                                       "lensopt cannot evaluate; use dispersion = \"abbe\"",
+                                       surface_number, glass->name, formula_name(glass->formula)));
     return Material::from_catalog(*glass);
   }
   if (const auto* t = node.as_table()) {

@@ -293,6 +293,20 @@ std::string format_lens_toml(const Lens& lens) {
     }
   }
 
+  // Whether a glass is the one the lens's catalog gives for its name (the same figures).
+  std::shared_ptr<const Catalog> lens_catalog;
+  if (!lens.catalog_name.empty()) {
+    try {
+      lens_catalog = load_catalog(lens.catalog_name);
+    } catch (const Error&) {
+      lens_catalog = nullptr;
+    }
+  }
+  auto in_lens_catalog = [&](const Glass& glass) {
+    const Glass* found = lens_catalog ? lens_catalog->find(glass.name) : nullptr;
+    return found != nullptr && found->catalog == glass.catalog && found->nd == glass.nd &&
+           found->vd == glass.vd && found->coefficients == glass.coefficients;
+  };
   for (const Surface& surface : lens.surfaces) {
     out += "\n[[surfaces]]\n";
     const std::optional<double> radius_mm =
@@ -307,7 +321,14 @@ std::string format_lens_toml(const Lens& lens) {
       case Material::Kind::kAir:
         break;
       case Material::Kind::kCatalog:
-        line("material", toml_string(surface.material.glass_name));
+        // A glass of another catalog than the lens's names its catalog.
+        if (surface.material.glass && !in_lens_catalog(*surface.material.glass)) {
+          line("material", fmt::format("{{ glass = {}, catalog = {} }}",
+                                       toml_string(surface.material.glass_name),
+                                       toml_string(surface.material.glass->catalog)));
+        } else {
+          line("material", toml_string(surface.material.glass_name));
+        }
         break;
       case Material::Kind::kModel:
         if (surface.material.model_glass == ModelGlass::kZemax) {

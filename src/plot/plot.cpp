@@ -128,7 +128,7 @@ WaveReport compute_mtf_curves(const PlotContext& ctx, const PlotOptions& options
   double lambda_min = 1e9;
   for (int w = 0; w < sys.wavelength_count; ++w)
     lambda_min = std::min(lambda_min, sys.lens.wavelengths_nm[w]);
-  const double cutoff = 1.0 / (lambda_min * 1e-6 * (sys.efl_mm / sys.epd_mm));
+  const double cutoff = 1.0 / (lambda_min * 1e-6 * (std::abs(sys.efl_mm) / sys.epd_mm));
   std::vector<double> freqs;
   for (int k = 0; k <= 60; ++k) freqs.push_back(cutoff * k / 60.0);
   return analyze_wave(sys, wave, freqs, field_indices(ctx, kMtfFractions));
@@ -148,7 +148,7 @@ void draw_wave_page(Canvas& c, Rect area, const PlotContext& ctx, const PlotOpti
   wave.pupil_samples = options.pupil_samples;
   wave.threads = options.trace.threads;
   wave.wavelength_weights = lens_wavelength_weights(ctx.lens, sys.wavelength_count);
-  const double f_number = sys.efl_mm / sys.epd_mm;
+  const double f_number = std::abs(sys.efl_mm) / sys.epd_mm;
   const double lambda_ref_mm = ctx.lens.specs.primary_wavelength_nm * 1e-6;
   switch (options.kind) {
     case PlotKind::kMtf: {

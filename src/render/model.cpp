@@ -106,6 +106,15 @@ ImagingModel build_imaging_model(const Lens& lens, const TraceOptions& trace,
         "distortion or relative illumination; the blur, distortion and illumination elsewhere "
         "in the field are unknown (add fields to the lens to render them)",
         where, model.fields_deg[0]));
+  // A diverging lens's image is virtual and upright: its paraxial image heights go negative
+  // with the field. The renderer maps a scene onto the image of a converging lens only.
+  if (model.reference_y_mm.size() > 1 && model.reference_y_mm.back() < 0.0)
+    throw Error(SourceLocation{where},
+                fmt::format("cannot render: the lens diverges (EFL {:.6g} mm): its image is "
+                            "virtual and upright (paraxial image height {:.6g} mm at {:.2f} "
+                            "deg), and lensopt renders the real image of a converging lens; "
+                            "analyze and plot measure it",
+                            sys.efl_mm, model.reference_y_mm.back(), model.fields_deg.back()));
   for (std::size_t h = 1; h < model.reference_y_mm.size(); ++h) {
     if (!(model.reference_y_mm[h] > model.reference_y_mm[h - 1])) {
       throw Error(SourceLocation{where},

@@ -17,6 +17,7 @@
 #include "lensopt/analysis/analyze.h"
 #include "lensopt/core/atomic_file.h"
 #include "lensopt/core/error.h"
+#include "lensopt/formats/zmx.h"
 #include "lensopt/lens/lens_io.h"
 #include "lensopt/search/search.h"
 #include "optimize/summary_json.h"
@@ -95,15 +96,21 @@ void write_outputs(const fs::path& dir, const std::vector<CandidateResult>& rank
   for (const CandidateResult& r : ranked) {
     if (written >= top_k) break;
     if (!r.ok || r.lens_toml.empty()) continue;
-    const std::string name = fmt::format("rank{:02d}_{}.toml", r.rank, file_safe_id(r.id));
-    write_file_atomic(best / name, r.lens_toml);
-    keep.insert(name);
+    const std::string stem = fmt::format("rank{:02d}_{}", r.rank, file_safe_id(r.id));
+    write_file_atomic(best / (stem + ".toml"), r.lens_toml);
+    // The same lens for OpticStudio (every GCAT its glasses need; formats/zmx.h).
+    write_file_atomic(best / (stem + ".zmx"),
+                      format_zmx(parse_lens_toml(r.lens_toml, (best / (stem + ".toml")).string())));
+    keep.insert(stem + ".toml");
+    keep.insert(stem + ".zmx");
     ++written;
   }
   // Lenses of an earlier leaderboard that are no longer among the best K.
   for (const auto& entry : fs::directory_iterator(best)) {
     const std::string name = entry.path().filename().string();
-    if (name.rfind("rank", 0) == 0 && entry.path().extension() == ".toml" && !keep.count(name))
+    const fs::path extension = entry.path().extension();
+    if (name.rfind("rank", 0) == 0 && (extension == ".toml" || extension == ".zmx") &&
+        !keep.count(name))
       fs::remove(entry.path());
   }
 }

@@ -83,7 +83,14 @@ assert j["complete"] and j["candidates"] == 6 and len(j["leaderboard"]) == 6
 PY
 ls "$tmp/one/best/"rank01_*.toml > /dev/null || fail "no best lens written"
 for f in "$tmp/one/best/"*.toml; do
-  "$lensopt" analyze "$f" --json --rings 4 --fields 3 > /dev/null || fail "best lens $f does not read back"
+  "$lensopt" analyze "$f" --json --rings 4 --fields 3 > "$tmp/best_toml.json" ||
+    fail "best lens $f does not read back"
+  # Its Zemax twin (issue 31): the same lens.
+  [ -f "${f%.toml}.zmx" ] || fail "best lens $f has no .zmx"
+  "$lensopt" analyze "${f%.toml}.zmx" --json --rings 4 --fields 3 > "$tmp/best_zmx.json" ||
+    fail "best lens ${f%.toml}.zmx does not read back"
+  python3 -c 'import json, sys; a, b = (json.load(open(p)) for p in sys.argv[1:]); assert a["mean_rms_spot_um"] == b["mean_rms_spot_um"], (a["mean_rms_spot_um"], b["mean_rms_spot_um"])' \
+    "$tmp/best_toml.json" "$tmp/best_zmx.json" || fail "best lens $f: .zmx and .toml differ"
 done
 find "$tmp/one" -name '*.tmp*' | grep -q . && fail "a temporary file was left behind"
 

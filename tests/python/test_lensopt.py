@@ -125,7 +125,8 @@ class Lenses(unittest.TestCase):
         with self.assertRaises(lensopt.LensoptError) as caught:
             lensopt.Material.catalog("S-LAL1Z")
         self.assertIn("S-LAL12", str(caught.exception))  # the closest names
-        with self.assertRaises(lensopt.LensoptError):
+        # A missing file is Python's FileNotFoundError, as open() raises it (issue 31).
+        with self.assertRaises(FileNotFoundError):
             lensopt.load_lens(str(LENSES / "missing.toml"))
 
 

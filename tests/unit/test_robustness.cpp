@@ -239,6 +239,7 @@ TEST_CASE("analysis: a report without an image is an error") {
   CHECK(e.find("does not form an image") != std::string::npos);
   CHECK(e.find("no field") != std::string::npos);
   CHECK(e.find("focal length") != std::string::npos);
+  CHECK(e.find("afocal") != std::string::npos);  // an infinite EFL: afocal, said so (issue 31)
 }
 
 TEST_CASE("render: a PSF wider than the supported kernel is an error naming the sizes") {

@@ -57,6 +57,10 @@ const std::vector<RealFile>& real_files() {
       {"optiland_thorlabs_AL1815-C_iso_8859_1.zmx", Expect::kImports, "", 0},
       {"rayoptics_US05831776-1.zmx", Expect::kImports, "", 0},
       {"rayoptics_zmax_55278.zmx", Expect::kImports, "", 0},
+      // Negative lenses (issue 31): refused before ("needs a positive focal length").
+      {"thorlabs_LC1715-A.zmx", Expect::kImports, "", 0},
+      {"thorlabs_LD1464-A.zmx", Expect::kImports, "", 0},
+      {"thorlabs_ACN254-100-A.zmx", Expect::kImports, "", 0},
       {"rayoptics_HoO-V2C18Ex03.zmx", Expect::kUnsupported, "mirror", 86},
       {"rayoptics_zmax_37992.zmx", Expect::kUnsupported, "COORDBRK", 86},
   };
@@ -138,7 +142,7 @@ TEST_CASE("zmx-real: spherical refractive files import with the shipped catalogs
       ++compared;
     }
   }
-  CHECK(imported == 8);
+  CHECK(imported == 11);
   CHECK(compared == 2);
 }
 

@@ -52,9 +52,18 @@ struct AnalysisReport {
   std::string lens_name;
   std::string source_path;
   double scale = 1;
-  double efl_mm = 0;
-  double bfl_mm = 0;
-  double f_number = 0;
+  double efl_mm = 0;    // negative for a diverging lens (its image is virtual)
+  double bfl_mm = 0;    // last vertex to the paraxial image (negative: before the last vertex)
+  double f_number = 0;  // EFL / EPD, signed as the EFL (OpticStudio's image-space F/#)
+  // Last vertex to the image plane as written (mm); negative: a virtual image plane, reached by
+  // tracing the rays backwards (a diverging lens's image, as OpticStudio traces it).
+  double image_distance_mm = 0;
+  // The paraxial image of an object at infinity lies before the last vertex (BFL < 0): rays
+  // leave the lens diverging, as from a diverging lens.
+  bool virtual_image = false;
+  // Paraxial chief-ray angle in image space over that in object space (tan u' / tan u through
+  // the entrance-pupil centre): OpticStudio's angular magnification.
+  double angular_magnification = 0;
   double epd_mm = 0;
   double entrance_pupil_z_mm = 0;
   double stop_radius_mm = 0;

@@ -126,7 +126,8 @@ inline double finite_object_image_na(const TraceSystem<double>& sys) {
 //   mm per wave = 4 sqrt(6) N lambda   (Cooke, f/2 at 587.6 nm: 0.0115 mm per wave).
 inline double wavefront_mm_per_wave(const TraceSystem<double>& sys) {
   const double lambda_mm = sys.lens.wavelengths_nm[sys.wavelength_count] * 1e-6;
-  if (sys.object_at_infinity()) return 4.0 * std::sqrt(6.0) * (sys.efl_mm / sys.epd_mm) * lambda_mm;
+  if (sys.object_at_infinity())
+    return 4.0 * std::sqrt(6.0) * (std::abs(sys.efl_mm) / sys.epd_mm) * lambda_mm;
   return 4.0 * std::sqrt(6.0) * lambda_mm / (2.0 * finite_object_image_na(sys));
 }
 

@@ -66,6 +66,13 @@ std::string format_zmx(const Lens& lens);
 // Writes format_zmx(lens) atomically.
 void write_zmx(const Lens& lens, const std::filesystem::path& path);
 
+// The GCAT catalogs of a lens's .zmx: its own catalog (zemax_catalog_name), then every other
+// catalog its glasses come from, so that each glass reads back from its own catalog (a reader
+// takes a glass name from the first catalog, in this order, that has it). Empty without catalog
+// glasses. Throws Error naming the surface when a glass would read back as another catalog's
+// glass of the same name, or from no catalog.
+std::vector<std::string> zmx_gcat_names(const Lens& lens);
+
 // The Zemax catalog name (GCAT) for a lensopt catalog name: "ohara" -> "OHARA", a path -> its
 // stem, otherwise the name as is.
 std::string zemax_catalog_name(std::string_view catalog_name);

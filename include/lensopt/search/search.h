@@ -40,7 +40,8 @@
 // Results directory. search.json (the search's fingerprint: a hash of every candidate's id and
 // start prescription and of the optimizer settings), results/<id>.json (one per finished
 // candidate, written atomically the moment it finishes: a killed search resumes with the
-// unfinished ones), leaderboard.csv, leaderboard.json and best/rankNN_<id>.toml (the best K).
+// unfinished ones), leaderboard.csv, leaderboard.json and best/rankNN_<id>.toml with its Zemax
+// twin best/rankNN_<id>.zmx (the best K).
 // Shards: candidate i belongs to shard I of N (1-based) when i mod N = I - 1. Merging directories
 // of one search unions their results and ranks them again: the leaderboard of one run.
 #pragma once
@@ -152,7 +153,7 @@ struct SearchOptions {
   // (they reach the basins of the paper's own designs, which cross the bounds slightly), then
   // strict bounds from that result (which walks it into the feasible set).
   bool paper_then_strict = false;
-  int top_k = 5;              // best lenses written as TOML
+  int top_k = 5;              // best lenses written as TOML and .zmx
   int jobs = 0;               // candidates in parallel (0: every core)
   int optimizer_threads = 1;  // threads of each optimization (0: every core)
   int shard_index = 1;        // this run's shard I of N (1-based)
