@@ -3,7 +3,9 @@
 # lensopt._lensopt and every library below it built with clang's -fsanitize=thread and LLVM's
 # OpenMP runtime with its TSan tool Archer, as tools/tsan.sh builds the C++ tests. The Python
 # interpreter, numpy and torch are not instrumented: the TSan runtime is preloaded into python3
-# (the extension is linked against the shared runtime, -shared-libsan) and reports from modules
+# (GCC's libtsan.so.2, the same runtime interface: clang 14's shared runtime crashes even
+# /bin/true on Debian 12's glibc; the extension leaves the __tsan_* symbols to it) and reports
+# from modules
 # without instrumentation are ignored (ignore_noninstrumented_modules), so what is checked is
 # lensopt's own code as Python drives it: field_data, spots, psfs, render, optimize, tolerance.
 # The kernels' target_clones are off for the reason tools/tsan.sh gives.
@@ -12,16 +14,15 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 pattern="${1:-test_*.py}"
 archer=/usr/lib/llvm-14/lib/libarcher.so
-runtime=$(clang++ -print-file-name=libclang_rt.tsan-x86_64.so)
+runtime=/usr/lib/x86_64-linux-gnu/libtsan.so.2
 [ -f "$archer" ] || { echo "tsan-python: $archer missing (apt-get install libomp-14-dev clang)" >&2; exit 2; }
-[ -f "$runtime" ] || { echo "tsan-python: clang's shared TSan runtime missing" >&2; exit 2; }
+[ -f "$runtime" ] || { echo "tsan-python: $runtime missing (apt-get install libtsan2)" >&2; exit 2; }
 cmake -S . -B build-tsan-python -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
   -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -gline-tables-only -DNDEBUG" \
   -DCMAKE_C_COMPILER=clang -DCMAKE_CXX_COMPILER=clang++ \
   -DCMAKE_CXX_FLAGS="-fsanitize=thread '-Dtarget_clones(...)=unused'" \
   -DCMAKE_EXE_LINKER_FLAGS="-fsanitize=thread" \
-  -DCMAKE_SHARED_LINKER_FLAGS="-fsanitize=thread -shared-libsan" \
-  -DCMAKE_MODULE_LINKER_FLAGS="-fsanitize=thread -shared-libsan" \
+  -DCMAKE_SHARED_LINKER_FLAGS="" -DCMAKE_MODULE_LINKER_FLAGS="" \
   -DLENSOPT_WITH_PYTHON=ON -DLENSOPT_WITH_TORCH=OFF >/dev/null
 cmake --build build-tsan-python -j "${JOBS:-2}" --target lensopt lensopt_python
 export OMP_TOOL_LIBRARIES="$archer"
@@ -29,9 +30,14 @@ export TSAN_OPTIONS="halt_on_error=0 second_deadlock_stack=1 ignore_noninstrumen
 export OMP_NUM_THREADS="${OMP_NUM_THREADS:-2}"
 log=build-tsan-python/tsan.log
 set +e
-# The CLI the tests compare with (LENSOPT_EXECUTABLE) is the instrumented one too.
-LD_PRELOAD="$runtime" PYTHONPATH=build-tsan-python/python \
-  LENSOPT_EXECUTABLE=build-tsan-python/lensopt LENSOPT_SHARED_DIR="$PWD/../shared" \
+# The CLI the tests compare with (LENSOPT_EXECUTABLE) is the instrumented one too; it carries
+# clang's runtime linked in and must not inherit the preload (a second runtime aborts it, and
+# /bin/sh crashes under it): a sitecustomize drops LD_PRELOAD from python3's environment once
+# the interpreter has started, so its subprocesses run without it.
+mkdir -p build-tsan-python/site
+printf 'import os\nos.environ.pop("LD_PRELOAD", None)\n' > build-tsan-python/site/sitecustomize.py
+LD_PRELOAD="$runtime" PYTHONPATH="build-tsan-python/site:build-tsan-python/python" \
+  LENSOPT_EXECUTABLE="$PWD/build-tsan-python/lensopt" LENSOPT_SHARED_DIR="$PWD/../shared" \
   /usr/bin/python3 -m unittest discover -s tests/python -p "$pattern" 2>&1 | tee "$log"
 status=${PIPESTATUS[0]}
 set -e
