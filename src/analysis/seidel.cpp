@@ -131,7 +131,16 @@ SeidelReport seidel_report(const TraceSystem<double>& sys) {
   const double last_t = lens.thickness_mm[k_count - 1];
   // The exit pupil: where the chief ray crosses the axis in image space; its rim the marginal
   // ray's height there.
-  const double z_xp = -c.y * n_image / c.w;  // from the last vertex
+  // The pupil's place does not depend on the field (the trace is linear): a lens whose fields
+  // are all on axis has a chief ray of zero height and slope, so a chief ray of slope 0.01
+  // through the entrance pupil's centre locates it instead.
+  ParaxialRay<double> chief = c;
+  if (chief.w == 0.0 && chief.y == 0.0) {
+    const double u = 0.01;
+    chief = paraxial_trace(lens, ParaxialRay<double>{-sys.entrance_pupil_z_mm * u, u}, k_count,
+                           lambda);
+  }
+  const double z_xp = -chief.y * n_image / chief.w;  // from the last vertex
   fo.exit_pupil_z_mm = z_xp - last_t;
   fo.exit_pupil_diameter_mm = 2.0 * std::abs(m.y + z_xp * m.w / n_image);
   fo.image_f_number = par.efl_mm / sys.epd_mm;

@@ -133,6 +133,24 @@ TEST_CASE("seidel: the sums are the small-aperture, small-field limits of real-r
   CHECK(r.first_order.magnification < 0.0);  // a real, inverted image
 }
 
+TEST_CASE("seidel: a lens whose fields are all on axis still has an exit pupil") {
+  // The chief ray of a 0 deg field has zero height and slope; the pupil's place does not depend
+  // on the field, so it must be the one of the same lens with an off-axis field (it was 0/0).
+  const auto src = lensopt::test::source_dir();
+  Lens lens = read_lens(src / "lenses" / "zmx" / "cooke_triplet_50.zmx");
+  TraceOptions t;
+  t.rings = 2;
+  const SeidelReport with_field = seidel_report(prepare_lens_system(lens, t));
+  lens.specs.fields = {{0.0, 1.0, {}}};
+  const SeidelReport on_axis = seidel_report(prepare_lens_system(lens, t));
+  REQUIRE(std::isfinite(on_axis.first_order.exit_pupil_z_mm));
+  REQUIRE(std::isfinite(on_axis.first_order.exit_pupil_diameter_mm));
+  CHECK(on_axis.first_order.exit_pupil_z_mm ==
+        doctest::Approx(with_field.first_order.exit_pupil_z_mm).epsilon(1e-12));
+  CHECK(on_axis.first_order.exit_pupil_diameter_mm ==
+        doctest::Approx(with_field.first_order.exit_pupil_diameter_mm).epsilon(1e-12));
+}
+
 TEST_CASE("seidel: a thin singlet at its stop against the closed forms") {
   // Welford's thin lens at the stop, object at infinity (shape B = (c1 + c2) / (c1 - c2),
   // conjugate C = -1 in these signs):
