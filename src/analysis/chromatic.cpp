@@ -56,12 +56,12 @@ ChromaticFocalShift chromatic_focal_shift(const Lens& lens, const TraceSystem<do
   std::vector<double> wavelengths;
   if (out.band) {
     if (!(lo_nm > 0 && hi_nm > lo_nm && std::isfinite(hi_nm)))
-      throw Error(
-          fmt::format("chromatic focal shift: the band {} to {} nm must have 0 < lo < hi", lo_nm,
-                      hi_nm));
+      throw Error(fmt::format("chromatic focal shift: the band {} to {} nm must have 0 < lo < hi",
+                              lo_nm, hi_nm));
     if (samples < 2 || samples > 10000)
       throw Error(fmt::format("chromatic focal shift: {} samples must be in 2..10000", samples));
-    for (int i = 0; i < samples; ++i) wavelengths.push_back(lo_nm + (hi_nm - lo_nm) * i / (samples - 1));
+    for (int i = 0; i < samples; ++i)
+      wavelengths.push_back(lo_nm + (hi_nm - lo_nm) * i / (samples - 1));
   } else {
     wavelengths.assign(traced.wavelengths_nm.begin(),
                        traced.wavelengths_nm.begin() + sys.wavelength_count);
@@ -173,13 +173,15 @@ std::string format_chromatic_text(const ChromaticFocalShift& s, const LateralCol
   for (std::size_t i = 0; i < s.wavelengths_nm.size(); ++i)
     if (i % step == 0 || i + 1 == s.wavelengths_nm.size())
       line(fmt::format("  {:15.4f}   {:10.3f}", s.wavelengths_nm[i], s.shift_mm[i] * 1e3));
-  line(fmt::format("  maximum focal shift range {:.3f} um; diffraction-limited depth 4 lambda "
-                   "N_w^2 = {:.3f} um (N_w {:.4f})",
-                   s.max_range_mm * 1e3, s.diffraction_depth_mm * 1e3, s.working_f_number));
+  line(
+      fmt::format("  maximum focal shift range {:.3f} um; diffraction-limited depth 4 lambda "
+                  "N_w^2 = {:.3f} um (N_w {:.4f})",
+                  s.max_range_mm * 1e3, s.diffraction_depth_mm * 1e3, s.working_f_number));
   line("");
-  line(fmt::format("Lateral colour (real chief rays on the image plane, {:.1f} less {:.1f} nm; "
-                   "Airy radius {:.3f} um):",
-                   lc.short_nm, lc.long_nm, lc.airy_radius_um));
+  line(
+      fmt::format("Lateral colour (real chief rays on the image plane, {:.1f} less {:.1f} nm; "
+                  "Airy radius {:.3f} um):",
+                  lc.short_nm, lc.long_nm, lc.airy_radius_um));
   line(fmt::format("  {:>11}  angle (deg)  lateral colour (um)", "field (" + field_unit + ")"));
   for (std::size_t h = 0; h < lc.field_deg.size(); ++h)
     line(fmt::format("  {:11.3f}  {:11.3f}  {:>19}", lc.field_values[h], lc.field_deg[h],

@@ -47,9 +47,10 @@ void EncircledEnergyOptions::validate() const {
   if (radii < 2 || radii > 100000)
     throw Error(fmt::format("encircled energy: {} radii must be in 2..100000", radii));
   if (!(max_radius_um >= 0) || !std::isfinite(max_radius_um))
-    throw Error(fmt::format("encircled energy: the largest radius {} um must be >= 0 (0: "
-                            "automatic)",
-                            max_radius_um));
+    throw Error(
+        fmt::format("encircled energy: the largest radius {} um must be >= 0 (0: "
+                    "automatic)",
+                    max_radius_um));
 }
 
 std::vector<double> psf_encircled_energy(const MonoWave& mono, const std::vector<double>& radii_um,
@@ -170,9 +171,9 @@ EncircledEnergy encircled_energy(const TraceSystem<double>& sys,
     for (const WaveField& f : wave.fields)
       for (const MonoWave& mono : f.mono)
         if (mono.ok)
-          out.diffraction_window_um =
-              std::min(out.diffraction_window_um,
-                       0.5 * mono.fft_n * std::min(std::abs(mono.psf_dx_um), std::abs(mono.psf_dy_um)));
+          out.diffraction_window_um = std::min(
+              out.diffraction_window_um,
+              0.5 * mono.fft_n * std::min(std::abs(mono.psf_dx_um), std::abs(mono.psf_dy_um)));
     if (!(out.diffraction_window_um < 1e300)) out.diffraction_window_um = 0;
   } else {
     out.airy_radius_um =
@@ -188,8 +189,7 @@ EncircledEnergy encircled_energy(const TraceSystem<double>& sys,
         extent = std::max(extent, std::hypot(p.x - measured.spots.centroid_x_mm[h],
                                              p.y - measured.spots.centroid_y_mm[h]) *
                                       1e3);
-    r_max = options.diffraction ? std::max(1.05 * extent, 3.0 * out.airy_radius_um)
-                                : 1.05 * extent;
+    r_max = options.diffraction ? std::max(1.05 * extent, 3.0 * out.airy_radius_um) : 1.05 * extent;
     if (options.diffraction && out.diffraction_window_um > 0 && r_max > out.diffraction_window_um) {
       if (extent > out.diffraction_window_um)
         out.warnings.push_back(fmt::format(
@@ -267,10 +267,10 @@ std::string format_encircled_energy_text(const EncircledEnergy& ee,
     return v ? fmt::format("{:.3f}", *v) : std::string("n/a");
   };
   const bool diffraction = !ee.fields.empty() && !ee.fields[0].diffraction.empty();
-  line(fmt::format("Encircled energy about the polychromatic centroid (radii in um holding 50/80/90 "
-                   "%; {} radii to {:.2f} um; Airy radius {:.3f} um):",
-                   ee.radius_um.size(), ee.radius_um.empty() ? 0.0 : ee.radius_um.back(),
-                   ee.airy_radius_um));
+  line(fmt::format(
+      "Encircled energy about the polychromatic centroid (radii in um holding 50/80/90 "
+      "%; {} radii to {:.2f} um; Airy radius {:.3f} um):",
+      ee.radius_um.size(), ee.radius_um.empty() ? 0.0 : ee.radius_um.back(), ee.airy_radius_um));
   line(fmt::format("  {:>11}  angle (deg)  {:>26}{}", "field (" + field_unit + ")",
                    "geometric r50 / r80 / r90",
                    diffraction ? fmt::format("  {:>28}", "diffraction r50 / r80 / r90") : ""));

@@ -1,4 +1,5 @@
-// lensopt plot LENS --kind layout|spot|fan|field|psf|report|mtf|...|encircled-energy -o FILE.svg|.png
+// lensopt plot LENS --kind layout|spot|fan|field|psf|report|mtf|...|encircled-energy -o
+// FILE.svg|.png
 #include <fmt/core.h>
 
 #include <memory>
@@ -83,8 +84,7 @@ void setup_plot(CLI::App& app) {
   sub->add_option_function<std::vector<double>>(
          "--colour-band",
          [cmd](const std::vector<double>& band) {
-           if (band.size() != 2)
-             throw CLI::ValidationError("--colour-band", "give LO,HI in nm");
+           if (band.size() != 2) throw CLI::ValidationError("--colour-band", "give LO,HI in nm");
            cmd->options.band_lo_nm = band[0];
            cmd->options.band_hi_nm = band[1];
          },

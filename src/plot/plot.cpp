@@ -282,9 +282,19 @@ double layout_height(const LayoutGeometry& g, const LayoutGeometry* cmp, double 
 }  // namespace
 
 const std::vector<std::string>& plot_kind_names() {
-  static const std::vector<std::string> names = {
-      "layout", "spot",      "fan",       "field",    "psf", "report", "mtf", "through-focus",
-      "wavefront", "psf-diffraction", "mtf-field", "chromatic", "encircled-energy"};
+  static const std::vector<std::string> names = {"layout",
+                                                 "spot",
+                                                 "fan",
+                                                 "field",
+                                                 "psf",
+                                                 "report",
+                                                 "mtf",
+                                                 "through-focus",
+                                                 "wavefront",
+                                                 "psf-diffraction",
+                                                 "mtf-field",
+                                                 "chromatic",
+                                                 "encircled-energy"};
   return names;
 }
 
@@ -314,11 +324,11 @@ void PlotOptions::validate() const {
   if (!(mtf_frequency_cyc_mm > 0) || !std::isfinite(mtf_frequency_cyc_mm))
     throw Error(fmt::format("MTF frequency {} cycles/mm must be > 0", mtf_frequency_cyc_mm));
   if (!(max_frequency_cyc_mm >= 0) || !std::isfinite(max_frequency_cyc_mm))
-    throw Error(fmt::format("--max-freq {} cycles/mm must be > 0 (0: the cutoff)",
-                            max_frequency_cyc_mm));
+    throw Error(
+        fmt::format("--max-freq {} cycles/mm must be > 0 (0: the cutoff)", max_frequency_cyc_mm));
   if (!(focus_range_mm >= 0) || !std::isfinite(focus_range_mm) || focus_range_mm > 1e3)
-    throw Error(fmt::format("--focus-range {} mm must be in (0, 1000] (0: 8 lambda N^2)",
-                            focus_range_mm));
+    throw Error(
+        fmt::format("--focus-range {} mm must be in (0, 1000] (0: 8 lambda N^2)", focus_range_mm));
   if (mtf_frequencies_cyc_mm.empty() || mtf_frequencies_cyc_mm.size() > 12)
     throw Error("--mtf-freqs: give 1 to 12 frequencies");
   for (double f : mtf_frequencies_cyc_mm)
@@ -328,8 +338,8 @@ void PlotOptions::validate() const {
     throw Error(fmt::format("--sweep-fields {} must be in 2..201", sweep_fields));
   if (!(band_lo_nm == 0 && band_hi_nm == 0) &&
       !(band_lo_nm > 0 && band_hi_nm > band_lo_nm && std::isfinite(band_hi_nm)))
-    throw Error(fmt::format("--colour-band {},{} nm must have 0 < lo < hi", band_lo_nm,
-                            band_hi_nm));
+    throw Error(
+        fmt::format("--colour-band {},{} nm must have 0 < lo < hi", band_lo_nm, band_hi_nm));
 }
 
 namespace {

@@ -151,8 +151,8 @@ void draw_chromatic(Canvas& canvas, Rect area, const ChromaticFocalShift& shift,
   value_range(values, lo, hi, 1e-3);
   const Axes a2(f2, lo, hi, 0.0, hfov);
   AxesLabels l2;
-  l2.title = fmt::format("lateral colour ({:.1f} less {:.1f} nm)", lateral.short_nm,
-                         lateral.long_nm);
+  l2.title =
+      fmt::format("lateral colour ({:.1f} less {:.1f} nm)", lateral.short_nm, lateral.long_nm);
   l2.x_label = "lateral colour (\u00b5m)";
   l2.y_label = "field angle (\u00b0)";
   l2.zero_x = true;
@@ -160,9 +160,9 @@ void draw_chromatic(Canvas& canvas, Rect area, const ChromaticFocalShift& shift,
   l2.font_px = font_px * 0.9;
   a2.draw_grid(canvas, l2);
   for (double s : {-1.0, 1.0})
-    canvas.polyline({a2.to_px(s * lateral.airy_radius_um, 0.0),
-                     a2.to_px(s * lateral.airy_radius_um, hfov)},
-                    Style{"#777777", 1.2, "none", 1.0, "6 4"});
+    canvas.polyline(
+        {a2.to_px(s * lateral.airy_radius_um, 0.0), a2.to_px(s * lateral.airy_radius_um, hfov)},
+        Style{"#777777", 1.2, "none", 1.0, "6 4"});
   std::vector<std::vector<Point>> runs(1);
   for (std::size_t h = 0; h < lateral.field_deg.size(); ++h) {
     if (!lateral.valid[h]) {
@@ -175,9 +175,8 @@ void draw_chromatic(Canvas& canvas, Rect area, const ChromaticFocalShift& shift,
   a2.draw_frame(canvas, l2);
 }
 
-void draw_encircled_energy(Canvas& canvas, Rect area, const EncircledEnergy& ee,
-                           double primary_nm, const std::vector<std::string>& field_labels,
-                           double font_px) {
+void draw_encircled_energy(Canvas& canvas, Rect area, const EncircledEnergy& ee, double primary_nm,
+                           const std::vector<std::string>& field_labels, double font_px) {
   const double r_max = ee.radius_um.empty() ? 1.0 : std::max(1e-9, ee.radius_um.back());
   const Rect frame = area.inset(font_px * 4.5, font_px * 2.2, font_px * 14, font_px * 3.2);
   const Axes ax(frame, 0.0, r_max, 0.0, 1.0);

@@ -78,9 +78,8 @@ TEST_CASE("plot reports: field curves of a thin singlet at its stop are the Seid
       worst_s = std::max(worst_s, std::abs(c.sagittal_mm[h] / dz_s - 1.0));
       worst_t = std::max(worst_t, std::abs(c.tangential_mm[h] / dz_t - 1.0));
     }
-    MESSAGE("largest relative error against the closed forms up to 3 deg: sagittal " << worst_s
-                                                                                     << ", tangential "
-                                                                                     << worst_t);
+    MESSAGE("largest relative error against the closed forms up to 3 deg: sagittal "
+            << worst_s << ", tangential " << worst_t);
     // Fifth order: relative O(tan^2 theta) ~ 3e-3 at 3 deg.
     CHECK(worst_s < 1e-2);
     CHECK(worst_t < 1e-2);

@@ -85,7 +85,8 @@ Lens thin_singlet(double stop_mm, double c1, double c2, double vd, double field_
 
 }  // namespace
 
-TEST_CASE("reports: diffraction encircled energy of an aberration-free lens is the Airy pattern's") {
+TEST_CASE(
+    "reports: diffraction encircled energy of an aberration-free lens is the Airy pattern's") {
   const Lens lens = slow_singlet();
   const TraceSystem<double> sys = prepare(lens);
   EncircledEnergyOptions options;
@@ -124,8 +125,8 @@ TEST_CASE("reports: diffraction encircled energy of an aberration-free lens is t
         return analyze_wave(sys, wo, {}, {0}).fields[0].mono[0];
       }(),
       {r_ring_um}, 0.0, 0.0);
-  CHECK(at_ring[0] == doctest::Approx(1.0 - std::pow(std::cyl_bessel_j(0.0, v_ring), 2))
-                          .epsilon(2e-3));
+  CHECK(at_ring[0] ==
+        doctest::Approx(1.0 - std::pow(std::cyl_bessel_j(0.0, v_ring), 2)).epsilon(2e-3));
 }
 
 TEST_CASE("reports: geometric encircled energy of a defocused perfect lens is (r / R)^2") {
@@ -164,8 +165,8 @@ TEST_CASE("reports: geometric encircled energy of a defocused perfect lens is (r
 
 TEST_CASE("reports: chromatic focal shift of a thin singlet is the thin-lens hand computation") {
   // f(lambda) = 1 / ((n(lambda) - 1) (c1 - c2)) for a thin lens, so
-  // f(F) - f(C) = (1 / (nF - 1) - 1 / (nC - 1)) / (c1 - c2) = -f (nF - nC) / ((nF - 1)(nC - 1)) / (c1 - c2) ...
-  // and to first order in the dispersion -f / V, V = (nd - 1) / (nF - nC).
+  // f(F) - f(C) = (1 / (nF - 1) - 1 / (nC - 1)) / (c1 - c2) = -f (nF - nC) / ((nF - 1)(nC - 1)) /
+  // (c1 - c2) ... and to first order in the dispersion -f / V, V = (nd - 1) / (nF - nC).
   for (double vd : {64.17, 36.37}) {
     CAPTURE(vd);
     const double c1 = 0.01, c2 = -0.0093;

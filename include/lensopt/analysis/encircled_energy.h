@@ -58,10 +58,10 @@ struct FieldEncircledEnergy {
 struct EncircledEnergy {
   std::vector<double> radius_um;
   std::vector<FieldEncircledEnergy> fields;
-  double airy_radius_um = 0;                // 1.22 lambda_primary N (the wave report's N)
-  double diffraction_window_um = 0;         // half the smallest PSF window (largest exact r)
-  std::vector<std::string> warnings;        // radii beyond the PSF window, undersampling
-  std::vector<std::string> wave_warnings;   // the wave report's
+  double airy_radius_um = 0;               // 1.22 lambda_primary N (the wave report's N)
+  double diffraction_window_um = 0;        // half the smallest PSF window (largest exact r)
+  std::vector<std::string> warnings;       // radii beyond the PSF window, undersampling
+  std::vector<std::string> wave_warnings;  // the wave report's
 };
 
 EncircledEnergy encircled_energy(const TraceSystem<double>& sys,

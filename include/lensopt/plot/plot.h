@@ -22,12 +22,12 @@ enum class PlotKind {
   kField,
   kPsf,
   kReport,
-  kMtf,             // diffraction MTF against frequency (wave optics, analysis/wave.h)
-  kThroughFocus,    // MTF at one frequency against focus
-  kWavefront,       // OPD maps
-  kPsfDiffraction,  // polychromatic diffraction PSFs
-  kMtfField,        // MTF at chosen frequencies and RMS spot against field (field_sweep.h)
-  kChromatic,       // chromatic focal shift and lateral colour (analysis/chromatic.h)
+  kMtf,              // diffraction MTF against frequency (wave optics, analysis/wave.h)
+  kThroughFocus,     // MTF at one frequency against focus
+  kWavefront,        // OPD maps
+  kPsfDiffraction,   // polychromatic diffraction PSFs
+  kMtfField,         // MTF at chosen frequencies and RMS spot against field (field_sweep.h)
+  kChromatic,        // chromatic focal shift and lateral colour (analysis/chromatic.h)
   kEncircledEnergy,  // diffraction and geometric encircled energy (encircled_energy.h)
 };
 

@@ -26,9 +26,8 @@ void draw_chromatic(Canvas& canvas, Rect area, const ChromaticFocalShift& shift,
 
 // Encircled energy against radius per field (diffraction solid, geometric dashed, coloured by
 // field), with the aberration-free circular pupil's 1 - J0^2 - J1^2 at the primary wavelength.
-void draw_encircled_energy(Canvas& canvas, Rect area, const EncircledEnergy& ee,
-                           double primary_nm, const std::vector<std::string>& field_labels,
-                           double font_px = 12);
+void draw_encircled_energy(Canvas& canvas, Rect area, const EncircledEnergy& ee, double primary_nm,
+                           const std::vector<std::string>& field_labels, double font_px = 12);
 
 // 1 - J0(v)^2 - J1(v)^2, v = pi r / (lambda N) = 1.2197 pi r / r_Airy: the encircled energy of
 // the aberration-free circular pupil (Rayleigh) at radius r (um) for an Airy radius (um).
