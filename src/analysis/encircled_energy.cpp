@@ -179,8 +179,8 @@ EncircledEnergy encircled_energy(const TraceSystem<double>& sys,
     out.airy_radius_um =
         1.22 * sys.lens.reference_nm() * 1e-3 * (sys.efl_mm / sys.epd_mm);  // image-space N
   }
-  // The radii: to the largest ray distance of the chosen fields (x 1.05) and at least 3 Airy
-  // radii, within the PSF window.
+  // The radii: to the largest ray distance of the chosen fields (x 1.05), with the diffraction
+  // curve at least 3 Airy radii. The diffraction curve stops at half the PSF window.
   double r_max = options.max_radius_um;
   if (r_max == 0) {
     double extent = 0;
@@ -190,20 +190,13 @@ EncircledEnergy encircled_energy(const TraceSystem<double>& sys,
                                              p.y - measured.spots.centroid_y_mm[h]) *
                                       1e3);
     r_max = options.diffraction ? std::max(1.05 * extent, 3.0 * out.airy_radius_um) : 1.05 * extent;
-    if (options.diffraction && out.diffraction_window_um > 0 && r_max > out.diffraction_window_um) {
-      if (extent > out.diffraction_window_um)
-        out.warnings.push_back(fmt::format(
-            "the rays spread to {:.1f} um, beyond the PSF window's {:.1f} um: the curves stop "
-            "there (raise --pupil-samples for a larger window)",
-            extent, out.diffraction_window_um));
-      r_max = out.diffraction_window_um;
-    }
-  } else if (options.diffraction && r_max > out.diffraction_window_um) {
-    out.warnings.push_back(
-        fmt::format("radii beyond {:.1f} um (half the PSF window) see the PSF's periodic "
-                    "copies: the diffraction curve is not exact there",
-                    out.diffraction_window_um));
   }
+  if (options.diffraction && r_max > out.diffraction_window_um)
+    out.warnings.push_back(fmt::format(
+        "the diffraction curves stop at {:.1f} um, half the PSF window (beyond it the sampled "
+        "PSF repeats); more --pupil-samples widen the window",
+        out.diffraction_window_um));
+  for (const std::string& w : out.wave_warnings) out.warnings.push_back(w);
   if (!(r_max > 0)) r_max = 1.0;
   for (int i = 0; i < options.radii; ++i) out.radius_um.push_back(r_max * i / (options.radii - 1));
 
@@ -239,11 +232,15 @@ EncircledEnergy encircled_energy(const TraceSystem<double>& sys,
       const WaveField& wf = wave.fields[j];
       const double cx_um = (f.centroid_x_mm - wf.reference_x_mm) * 1e3;
       const double cy_um = (f.centroid_y_mm - wf.reference_y_mm) * 1e3;
-      f.diffraction.assign(out.radius_um.size(), 0.0);
+      // The radii within half the PSF window.
+      std::vector<double> radii;
+      for (double r : out.radius_um)
+        if (r <= out.diffraction_window_um) radii.push_back(r);
+      f.diffraction.assign(radii.size(), 0.0);
       double weight = 0;
       for (const MonoWave& mono : wf.mono) {
         if (!mono.ok) continue;
-        const std::vector<double> ee = psf_encircled_energy(mono, out.radius_um, cx_um, cy_um);
+        const std::vector<double> ee = psf_encircled_energy(mono, radii, cx_um, cy_um);
         for (std::size_t i = 0; i < ee.size(); ++i) f.diffraction[i] += mono.weight * ee[i];
         weight += mono.weight;
       }

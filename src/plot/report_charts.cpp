@@ -203,7 +203,7 @@ void draw_encircled_energy(Canvas& canvas, Rect area, const EncircledEnergy& ee,
     std::vector<Point> g, d;
     for (std::size_t i = 0; i < ee.radius_um.size(); ++i) {
       g.push_back(ax.to_px(ee.radius_um[i], f.geometric[i]));
-      if (!f.diffraction.empty()) d.push_back(ax.to_px(ee.radius_um[i], f.diffraction[i]));
+      if (i < f.diffraction.size()) d.push_back(ax.to_px(ee.radius_um[i], f.diffraction[i]));
     }
     const std::string name = j < static_cast<int>(field_labels.size())
                                  ? field_labels[j]
@@ -214,6 +214,15 @@ void draw_encircled_energy(Canvas& canvas, Rect area, const EncircledEnergy& ee,
     }
     canvas.polyline(g, Style{colour, 1.6, "none", 1.0, "6 4"});
     legend.push_back({name + " geometric", colour, "6 4"});
+  }
+  // Where the diffraction curves stop (half the PSF window), when it lies on the chart.
+  const bool stops =
+      !ee.fields.empty() && !ee.fields[0].diffraction.empty() && ee.diffraction_window_um < r_max;
+  if (stops) {
+    canvas.polyline(
+        {ax.to_px(ee.diffraction_window_um, 0.0), ax.to_px(ee.diffraction_window_um, 1.0)},
+        Style{"#777777", 1.0, "none", 1.0, "2 3"});
+    legend.push_back({"PSF window (diffraction ends)", "#777777", "2 3"});
   }
   ax.draw_frame(canvas, labels);
   draw_legend(canvas, {frame.right() + font_px, frame.y}, legend, font_px * 0.9);

@@ -48,7 +48,9 @@ struct FieldEncircledEnergy {
   double field_deg = 0;
   double centroid_x_mm = 0, centroid_y_mm = 0;  // the centre (image plane)
   std::vector<double> geometric;                // per radius
-  std::vector<double> diffraction;              // per radius (empty without diffraction)
+  // Per radius up to half the PSF window (EncircledEnergy::diffraction_window_um): it may hold
+  // fewer values than radius_um; empty without diffraction.
+  std::vector<double> diffraction;
   // Radii (um) holding 50, 80, 90 % (none if the curve does not reach it within the radii).
   std::optional<double> geometric_r50_um, geometric_r80_um, geometric_r90_um;
   std::optional<double> diffraction_r50_um, diffraction_r80_um, diffraction_r90_um;
