@@ -22,7 +22,7 @@ class BesselJ1Table {
   explicit BesselJ1Table(double x_max) {
     const int count = static_cast<int>(std::ceil(x_max / kStep)) + 4;
     values_.resize(count);
-    for (int i = 0; i < count; ++i) values_[i] = std::cyl_bessel_j(1.0, (i - 1) * kStep);
+    for (int i = 1; i < count; ++i) values_[i] = std::cyl_bessel_j(1.0, (i - 1) * kStep);
     values_[0] = -values_[2];  // J1 is odd: J1(-h) = -J1(h)
   }
   double operator()(double x) const {
