@@ -70,8 +70,10 @@ TEST_CASE("plot reports: field curves of a thin singlet at its stop are the Seid
     const double n = ctx.sys.lens.index_at_nm(1, 587.5618);
     const double f = ctx.sys.efl_mm;
     CHECK(f == doctest::Approx(100.0).epsilon(1e-4));
-    CHECK(std::abs(c.tangential_mm[0]) < 1e-6);  // on axis: the paraxial focus
-    CHECK(std::abs(c.sagittal_mm[0]) < 1e-6);
+    // On axis: the paraxial focus, up to the close rays' (pupil 1e-3) spherical aberration,
+    // 1.6e-6 mm at the strongest bending.
+    CHECK(std::abs(c.tangential_mm[0]) < 1e-5);
+    CHECK(std::abs(c.sagittal_mm[0]) < 1e-5);
     double worst_t = 0, worst_s = 0;
     for (std::size_t h = 1; h < d.field_deg.size(); ++h) {
       REQUIRE(c.valid[h]);
