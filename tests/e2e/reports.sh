@@ -74,7 +74,7 @@ for kind in mtf-field chromatic encircled-energy; do
     "$lensopt" plot "$lens" --kind "$kind" --pupil-samples 32 --sweep-fields 5 -o "$out" \
       2>"$tmp/err" || fail "plot --kind $kind -o $kind.$ext exited non-zero: $(cat "$tmp/err")"
     [ -s "$out" ] || fail "$kind.$ext is empty or missing"
-    grep -q "warning" "$tmp/err" && fail "$kind.$ext: unexpected warning: $(cat "$tmp/err")"
+    grep -q "lensopt plot: warning" "$tmp/err" && fail "$kind.$ext: unexpected warning: $(cat "$tmp/err")"
   done
   grep -qi "nan" "$tmp/$kind.svg" && fail "$kind.svg has a NaN"
 done
