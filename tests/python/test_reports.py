@@ -28,7 +28,7 @@ thickness_mm = 0.0
 stop = true
 [[surfaces]]
 radius_mm = 100.0
-thickness_mm = 0.001
+thickness_mm = 0.02
 material = { nd = 1.5168, vd = 64.17 }
 [[surfaces]]
 radius_mm = -107.5268817204301
