@@ -106,7 +106,7 @@ void draw_chromatic(Canvas& canvas, Rect area, const ChromaticFocalShift& shift,
   std::vector<LegendEntry> legend{{"focal shift", "#222222"},
                                   {"diffraction-limited depth", "#9ecae1"},
                                   {"lateral colour", "#b03a2e"},
-                                  {"\u00b1 Airy radius", "#777777", "6 4"}};
+                                  {"+/- Airy radius", "#777777", "6 4"}};
   const double legend_h = draw_legend(canvas, {area.x + font_px * 4.5, area.y + 2}, legend,
                                       font_px * 0.9, true, area.width - font_px * 4.5)
                               .y;
@@ -222,7 +222,7 @@ void draw_encircled_energy(Canvas& canvas, Rect area, const EncircledEnergy& ee,
     canvas.polyline(
         {ax.to_px(ee.diffraction_window_um, 0.0), ax.to_px(ee.diffraction_window_um, 1.0)},
         Style{"#777777", 1.0, "none", 1.0, "2 3"});
-    legend.push_back({"PSF window (diffraction ends)", "#777777", "2 3"});
+    legend.push_back({"PSF window", "#777777", "2 3"});
   }
   ax.draw_frame(canvas, labels);
   draw_legend(canvas, {frame.right() + font_px, frame.y}, legend, font_px * 0.9);
