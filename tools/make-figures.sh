@@ -5,6 +5,7 @@
 #   OUTDIR/<lens>_report.svg, OUTDIR/<lens>_layout.svg   the same as SVG
 #   OUTDIR/compare_layout.png  Tessar (solid) over Doublet (dashed), image planes aligned
 #   OUTDIR/compare_spot.png    Tessar and Doublet spot diagrams on one scale
+#   OUTDIR/tessar_<kind>.png   kind = mtf-field, chromatic, encircled-energy
 # Spot diagrams and reports share one box size (SPOT_BOX_UM, default 600 um) so the baselines
 # can be compared page against page.
 # Usage: tools/make-figures.sh LENSOPT_EXE OUTDIR
@@ -27,6 +28,10 @@ for lens in doublet cooke tessar; do
   done
   plot "$file" --kind report --spot-box-um "$box" -o "$outdir/${lens}_report.svg"
   plot "$file" --kind layout -o "$outdir/${lens}_layout.svg"
+done
+# The designer's charts of the Tessar (docs/plots.md shows them).
+for kind in mtf-field chromatic encircled-energy; do
+  plot "$root/lenses/tessar.toml" --kind "$kind" -o "$outdir/tessar_${kind}.png"
 done
 plot "$root/lenses/tessar.toml" --kind layout --compare "$root/lenses/doublet.toml" \
   -o "$outdir/compare_layout.png"

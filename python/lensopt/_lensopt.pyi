@@ -165,6 +165,23 @@ def psfs(lens: Lens, *, rings: int = 32, fields: int = 21, grid_size: int = 65,
 def field_data(lens: Lens, *, rings: int = 32, fields: int = 21, ray_aiming: bool = True,
                threads: int = 0) -> Dict[str, List[float]]: ...
 
+def prescription(lens: Lens, *, mode: str = "", dispersion: str = "") -> Dict[str, Any]: ...
+
+def chromatic_focal_shift(lens: Lens, *, band: Optional[Sequence[float]] = None,
+                          samples: int = 41, mode: str = "",
+                          dispersion: str = "") -> Dict[str, Any]: ...
+
+def lateral_colour(lens: Lens, *, mode: str = "", dispersion: str = "") -> Dict[str, Any]: ...
+
+def encircled_energy(lens: Lens, *, fields: Sequence[int] = ..., radii: int = 101,
+                     max_radius_um: float = 0.0, diffraction: bool = True,
+                     pupil_samples: int = 128, mode: str = "", dispersion: str = "",
+                     threads: Optional[int] = None) -> Dict[str, Any]: ...
+
+def field_sweep(lens: Lens, *, fields: int = 11, frequencies: Sequence[float] = ...,
+                mtf: bool = True, pupil_samples: int = 128, mode: str = "",
+                dispersion: str = "", threads: Optional[int] = None) -> Dict[str, Any]: ...
+
 class Renderer:
     def __init__(self, lens: Lens, *, rings: Optional[int] = None,
                  fields: Optional[int] = None, res_factor: int = 1,

@@ -6,7 +6,11 @@
 
 #include "bindings.h"
 #include "lensopt/analysis/analyze.h"
+#include "lensopt/analysis/chromatic.h"
+#include "lensopt/analysis/encircled_energy.h"
 #include "lensopt/analysis/field_optics.h"
+#include "lensopt/analysis/field_sweep.h"
+#include "lensopt/analysis/seidel.h"
 #include "lensopt/analysis/spot.h"
 #include "lensopt/analysis/zernike.h"
 #include "lensopt/core/error.h"
@@ -63,6 +67,25 @@ py::dict traced_arrays(RayBundle<double>& rays) {
   d["status"] = to_numpy(std::move(status), {rows});
   d["failed_surface"] = to_numpy(std::move(surface), {rows});
   return d;
+}
+
+// A lens as `lensopt analyze` would trace it with --mode and --dispersion.
+Lens report_lens(const Lens& lens_in, const std::string& mode, const std::string& dispersion) {
+  Lens lens = lens_in;
+  if (mode == "paper")
+    lens.specs.mode = SpecMode::kPaper;
+  else if (mode == "as-written")
+    lens.specs.mode = SpecMode::kAsWritten;
+  else if (!mode.empty())
+    throw Error("mode must be 'paper' or 'as-written', not '" + mode + "'");
+  if (dispersion == "abbe")
+    lens.specs.dispersion = DispersionModel::kAbbe;
+  else if (dispersion == "catalog")
+    lens.specs.dispersion = DispersionModel::kCatalog;
+  else if (!dispersion.empty())
+    throw Error("dispersion must be 'abbe' or 'catalog', not '" + dispersion + "'");
+  lens.validate();
+  return lens;
 }
 
 }  // namespace
@@ -409,6 +432,122 @@ void bind_analysis(py::module_& m) {
       py::arg("ray_aiming") = true, py::arg("threads") = 0,
       "Per field: paraxial chief-ray height y_ref, polychromatic centroid ybar, distortion "
       "D = (ybar - y_ref) / y_ref,last (a fraction) and relative illumination (a dict).");
+
+  // The designer's reports (analysis/seidel.h, chromatic.h, encircled_energy.h, field_sweep.h):
+  // each returns the JSON object `lensopt analyze` writes for it, as a dict.
+  auto json_loads = [](const std::string& text) {
+    return py::module_::import("json").attr("loads")(text);
+  };
+  m.def(
+      "prescription",
+      [json_loads](const Lens& lens_in, const std::string& mode, const std::string& dispersion) {
+        const Lens lens = report_lens(lens_in, mode, dispersion);
+        std::string text;
+        {
+          py::gil_scoped_release release;
+          const TraceSystem<double> sys = prepare_lens_system(lens, TraceOptions{});
+          text = format_prescription_json(lens, sys, seidel_report(sys));
+        }
+        return json_loads(text);
+      },
+      py::arg("lens"), py::kw_only(), py::arg("mode") = "", py::arg("dispersion") = "",
+      "`lensopt analyze --prescription`'s \"prescription\": the surface table, first-order data "
+      "and Seidel sums per surface with primary colour (dict).");
+  m.def(
+      "chromatic_focal_shift",
+      [json_loads](const Lens& lens_in, std::optional<std::vector<double>> band, int samples,
+                   const std::string& mode, const std::string& dispersion) {
+        const Lens lens = report_lens(lens_in, mode, dispersion);
+        if (band && band->size() != 2) throw Error("band must be (lo_nm, hi_nm)");
+        std::string text;
+        {
+          py::gil_scoped_release release;
+          const TraceSystem<double> sys = prepare_lens_system(lens, TraceOptions{});
+          text = format_focal_shift_json(
+              band ? chromatic_focal_shift(lens, sys, (*band)[0], (*band)[1], samples)
+                   : chromatic_focal_shift(lens, sys));
+        }
+        return json_loads(text);
+      },
+      py::arg("lens"), py::kw_only(), py::arg("band") = py::none(), py::arg("samples") = 41,
+      py::arg("mode") = "", py::arg("dispersion") = "",
+      "Paraxial focus at each wavelength less the primary's (um, `shift_um`), at the spec "
+      "wavelengths or `samples` wavelengths across band=(lo_nm, hi_nm), with the maximum range "
+      "and the diffraction-limited depth 4 lambda N_w^2 (dict; analyze --prescription's "
+      "\"chromatic_focal_shift\").");
+  m.def(
+      "lateral_colour",
+      [json_loads](const Lens& lens_in, const std::string& mode, const std::string& dispersion) {
+        const Lens lens = report_lens(lens_in, mode, dispersion);
+        std::string text;
+        {
+          py::gil_scoped_release release;
+          text = format_lateral_colour_json(lateral_colour(prepare_lens_system(lens, {})));
+        }
+        return json_loads(text);
+      },
+      py::arg("lens"), py::kw_only(), py::arg("mode") = "", py::arg("dispersion") = "",
+      "Real chief-ray image height per field and spec wavelength less the primary's, and short "
+      "less long wavelength (um) (dict; analyze --prescription's \"lateral_colour\").");
+  m.def(
+      "encircled_energy",
+      [json_loads](const Lens& lens_in, std::vector<int> fields, int radii, double max_radius_um,
+                   bool diffraction, int pupil_samples, const std::string& mode,
+                   const std::string& dispersion, std::optional<int> threads) {
+        const Lens lens = report_lens(lens_in, mode, dispersion);
+        EncircledEnergyOptions o;
+        o.field_indices = std::move(fields);
+        o.radii = radii;
+        o.max_radius_um = max_radius_um;
+        o.diffraction = diffraction;
+        o.wave.pupil_samples = pupil_samples;
+        TraceOptions t;
+        if (threads) t.threads = o.wave.threads = *threads;
+        o.validate();
+        std::string text;
+        {
+          py::gil_scoped_release release;
+          const TraceSystem<double> sys = prepare_lens_system(lens, t);
+          o.wave.wavelength_weights = lens_wavelength_weights(lens, sys.wavelength_count);
+          text = format_encircled_energy_json(encircled_energy(sys, o));
+        }
+        return json_loads(text);
+      },
+      py::arg("lens"), py::kw_only(), py::arg("fields") = std::vector<int>{},
+      py::arg("radii") = 101, py::arg("max_radius_um") = 0.0, py::arg("diffraction") = true,
+      py::arg("pupil_samples") = 128, py::arg("mode") = "", py::arg("dispersion") = "",
+      py::arg("threads") = py::none(),
+      "Encircled energy about each field's centroid (fields: indices into analyze's fields; "
+      "empty: all): `radius_um` and per field the `geometric` and `diffraction` curves with the "
+      "radii holding 50/80/90 % (dict; analyze --encircled-energy's \"encircled_energy\").");
+  m.def(
+      "field_sweep",
+      [json_loads](const Lens& lens_in, int fields, std::vector<double> frequencies, bool mtf,
+                   int pupil_samples, const std::string& mode, const std::string& dispersion,
+                   std::optional<int> threads) {
+        const Lens lens = report_lens(lens_in, mode, dispersion);
+        TraceOptions t;
+        WaveOptions wave;
+        wave.pupil_samples = pupil_samples;
+        if (threads) t.threads = wave.threads = *threads;
+        std::string text;
+        {
+          py::gil_scoped_release release;
+          const TraceSystem<double> sys = prepare_lens_system(lens, t);
+          wave.wavelength_weights = lens_wavelength_weights(lens, sys.wavelength_count);
+          const TraceSystem<double> swept =
+              fields > 0 ? field_sweep_system(lens, sys, t, fields) : sys;
+          text = format_field_sweep_json(field_sweep(swept, wave, frequencies, mtf));
+        }
+        return json_loads(text);
+      },
+      py::arg("lens"), py::kw_only(), py::arg("fields") = 11,
+      py::arg("frequencies") = std::vector<double>{10, 30, 50}, py::arg("mtf") = true,
+      py::arg("pupil_samples") = 128, py::arg("mode") = "", py::arg("dispersion") = "",
+      py::arg("threads") = py::none(),
+      "RMS spot, distortion and the diffraction MTF (mtf_t, mtf_s: [frequency][field]) against "
+      "field at `fields` angles from the axis to the largest field (the mtf-field plot's data; "
+      "fields=0: analyze's own fields) (dict).");
 }
 
 }  // namespace lensopt::python

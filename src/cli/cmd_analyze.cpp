@@ -8,6 +8,8 @@
 #include "commands.h"
 #include "lens_checks.h"
 #include "lensopt/analysis/analyze.h"
+#include "lensopt/analysis/chromatic.h"
+#include "lensopt/analysis/encircled_energy.h"
 #include "lensopt/analysis/forms_image.h"
 #include "lensopt/analysis/seidel.h"
 #include "lensopt/core/error.h"
@@ -27,6 +29,8 @@ struct AnalyzeCommand {
   std::string dispersion;     // "" = the lens's own
   std::string mode;           // "" = the lens's own spec mode
   std::string zernike_order = "fringe";
+  std::vector<double> colour_band;  // the chromatic focal shift's band LO, HI (nm)
+  bool encircled_energy = false;    // geometric and diffraction encircled energy per field
   AnalyzeOptions options;
 };
 
@@ -45,24 +49,43 @@ void run_analyze(const AnalyzeCommand& cmd) {
   check_lens_warnings(lens, "analyze", cmd.strict);
   const AnalysisReport report = analyze_lens(lens, options);
   check_forms_image(report);  // a lens without an image is an error (exit 1), not nulls
-  std::string prescription_text, prescription_json;
-  if (cmd.prescription) {
+  // The designer's sections, each from the system analyze traced (the same preparation).
+  std::string extra_text;
+  nlohmann::json extra = nlohmann::json::object();
+  if (cmd.prescription || cmd.encircled_energy) {
     Lens traced = lens;
     if (options.dispersion) traced.specs.dispersion = *options.dispersion;
     const TraceSystem<double> sys = prepare_lens_system(traced, options.trace);
-    const SeidelReport seidel = seidel_report(sys);
-    prescription_text = format_prescription_text(traced, sys, seidel);
-    prescription_json = format_prescription_json(traced, sys, seidel);
+    if (cmd.prescription) {
+      const SeidelReport seidel = seidel_report(sys);
+      extra_text += "\n" + format_prescription_text(traced, sys, seidel);
+      extra["prescription"] = nlohmann::json::parse(format_prescription_json(traced, sys, seidel));
+      const ChromaticFocalShift shift =
+          cmd.colour_band.empty()
+              ? chromatic_focal_shift(traced, sys)
+              : chromatic_focal_shift(traced, sys, cmd.colour_band[0], cmd.colour_band[1], 11);
+      const LateralColour lateral = lateral_colour(sys);
+      extra_text += "\n" + format_chromatic_text(shift, lateral, report.field_unit);
+      extra["chromatic_focal_shift"] = nlohmann::json::parse(format_focal_shift_json(shift));
+      extra["lateral_colour"] = nlohmann::json::parse(format_lateral_colour_json(lateral));
+    }
+    if (cmd.encircled_energy) {
+      EncircledEnergyOptions eo;
+      eo.wave = options.wave_options;
+      if (eo.wave.wavelength_weights.empty())
+        eo.wave.wavelength_weights = lens_wavelength_weights(traced, sys.wavelength_count);
+      eo.wave.zernike_terms = 0;
+      const EncircledEnergy ee = encircled_energy(sys, eo);
+      extra_text += "\n" + format_encircled_energy_text(ee, sys.field_values, report.field_unit);
+      extra["encircled_energy"] = nlohmann::json::parse(format_encircled_energy_json(ee));
+    }
   }
-  if (cmd.json && cmd.prescription) {
+  if (cmd.json) {
     nlohmann::json j = nlohmann::json::parse(format_report_json(report));
-    j["prescription"] = nlohmann::json::parse(prescription_json);
+    for (auto it = extra.begin(); it != extra.end(); ++it) j[it.key()] = it.value();
     fmt::print("{}\n", j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace));
-  } else if (cmd.json) {
-    fmt::print("{}\n", format_report_json(report));
   } else {
-    fmt::print("{}", format_report_text(report));
-    if (cmd.prescription) fmt::print("\n{}", prescription_text);
+    fmt::print("{}{}", format_report_text(report), extra_text);
   }
   // A failed analysis (no finite first-order data, or no ray reaches the image) never exits 0.
   int traced = 0;
@@ -127,7 +150,17 @@ void setup_analyze(CLI::App& app) {
       ->check(CLI::IsMember({"fringe", "standard"}));
   sub->add_flag("--prescription", cmd->prescription,
                 "add the surface table, first-order data (EFL, BFL, pupils, working F/#, "
-                "magnification) and the Seidel sums per surface with primary colour");
+                "magnification), the Seidel sums per surface with primary colour, the "
+                "chromatic focal shift and the lateral colour per field");
+  sub->add_option("--colour-band", cmd->colour_band,
+                  "with --prescription: the chromatic focal shift at 11 wavelengths from LO to HI "
+                  "nm (default: at the spec wavelengths)")
+      ->delimiter(',')
+      ->expected(2);
+  sub->add_flag("--encircled-energy", cmd->encircled_energy,
+                "encircled energy per field about the centroid: geometric from the rays and "
+                "diffraction from the wave-optics PSF (radii holding 50/80/90 %; the curves in "
+                "--json)");
   sub->add_flag("--strict", cmd->strict,
                 "exit with status 3 if any ray fails; refuse a wavelength outside a glass's range");
   sub->footer(

@@ -1,4 +1,5 @@
-// lensopt plot LENS --kind layout|spot|fan|field|psf|report -o FILE.svg|FILE.png [--compare B]
+// lensopt plot LENS --kind layout|spot|fan|field|psf|report|mtf|...|encircled-energy -o
+// FILE.svg|.png
 #include <fmt/core.h>
 
 #include <memory>
@@ -52,8 +53,9 @@ void setup_plot(CLI::App& app) {
       ->required();
   sub->add_option(
       "--kind,-k", cmd->kind,
-      "layout, spot, fan, field, psf, report (default), mtf, through-focus, wavefront or "
-      "psf-diffraction (the wave-optics kinds draw one lens)");
+      "layout, spot, fan, field, psf, report (default), mtf, through-focus, wavefront, "
+      "psf-diffraction, mtf-field, chromatic or encircled-energy (the wave-optics kinds and the "
+      "last three draw one lens)");
   sub->add_option("-o,--output", cmd->output, "output file: .svg or .png")->required();
   sub->add_option(
       "--compare", cmd->compare_path,
@@ -67,6 +69,28 @@ void setup_plot(CLI::App& app) {
       ->check(CLI::Range(8, 1024));
   sub->add_option("--mtf-freq", cmd->options.mtf_frequency_cyc_mm,
                   "through-focus: the frequency in cycles/mm (default 30)");
+  sub->add_option("--max-freq", cmd->options.max_frequency_cyc_mm,
+                  "mtf: the frequency axis's end in cycles/mm (default: the cutoff "
+                  "1 / (lambda_min N))");
+  sub->add_option("--focus-range", cmd->options.focus_range_mm,
+                  "through-focus: shift the image plane over +-this many mm (default 8 lambda "
+                  "N^2)");
+  sub->add_option("--mtf-freqs", cmd->options.mtf_frequencies_cyc_mm,
+                  "mtf-field: the frequencies in cycles/mm (default 10,30,50)")
+      ->delimiter(',');
+  sub->add_option("--sweep-fields", cmd->options.sweep_fields,
+                  "mtf-field and chromatic: field angles from 0 to the largest field (default "
+                  "11)");
+  sub->add_option_function<std::vector<double>>(
+         "--colour-band",
+         [cmd](const std::vector<double>& band) {
+           if (band.size() != 2) throw CLI::ValidationError("--colour-band", "give LO,HI in nm");
+           cmd->options.band_lo_nm = band[0];
+           cmd->options.band_hi_nm = band[1];
+         },
+         "chromatic: the focal shift's band LO,HI in nm (default: the lens's shortest to "
+         "longest wavelength)")
+      ->delimiter(',');
   sub->add_option("--threads", cmd->options.trace.threads, "threads (0: all cores)")
       ->check(CLI::Range(0, 1024));
   sub->callback([cmd] { run_plot(*cmd); });

@@ -222,6 +222,7 @@ void draw_field_curves(Canvas& canvas, Rect area, const FieldCurveData& data,
         if (c.valid[i])
           max_dz = std::max({max_dz, std::abs(c.tangential_mm[i]), std::abs(c.sagittal_mm[i])});
     for (double v : d.distortion_percent) max_d = std::max(max_d, std::abs(v));
+    for (double v : d.sweep_distortion_percent) max_d = std::max(max_d, std::abs(v));
   };
   scan(data);
   if (cmp) scan(*cmp);
@@ -282,10 +283,20 @@ void draw_field_curves(Canvas& canvas, Rect area, const FieldCurveData& data,
   l2.x_ticks = 4;
   l2.font_px = font_px * 0.9;
   a2.draw_grid(canvas, l2);
+  // The curve over the focus curves' field grid; analyze's own fields as dots on it.
   auto draw_distortion = [&](const FieldCurveData& d, const Style& s) {
-    const std::vector<char> valid(d.distortion_field_deg.size(), 1);
-    for (const auto& run : valid_runs(a2, d.distortion_percent, d.distortion_field_deg, valid))
-      canvas.polyline(run, s);
+    if (d.sweep_distortion_percent.size() == d.field_deg.size() && !d.field_deg.empty()) {
+      const std::vector<char> valid(d.field_deg.size(), 1);
+      for (const auto& run : valid_runs(a2, d.sweep_distortion_percent, d.field_deg, valid))
+        canvas.polyline(run, s);
+    } else {
+      const std::vector<char> valid(d.distortion_field_deg.size(), 1);
+      for (const auto& run : valid_runs(a2, d.distortion_percent, d.distortion_field_deg, valid))
+        canvas.polyline(run, s);
+    }
+    for (std::size_t i = 0; i < d.distortion_percent.size(); ++i)
+      canvas.circle(a2.to_px(d.distortion_percent[i], d.distortion_field_deg[i]), 2.5,
+                    Style{s.stroke, 1.0, s.stroke, s.opacity});
   };
   if (cmp) draw_distortion(*cmp, Style{"#aaaaaa", 1.4});
   draw_distortion(data, Style{"#222222", 1.8});

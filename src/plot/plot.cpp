@@ -11,6 +11,7 @@
 #include "lensopt/plot/charts.h"
 #include "lensopt/plot/layout.h"
 #include "lensopt/plot/psf_strip.h"
+#include "lensopt/plot/report_charts.h"
 #include "lensopt/plot/style.h"
 #include "lensopt/plot/wave_charts.h"
 
@@ -41,6 +42,12 @@ std::string kind_title(PlotKind kind) {
       return "wavefront error";
     case PlotKind::kPsfDiffraction:
       return "diffraction PSFs";
+    case PlotKind::kMtfField:
+      return "MTF and RMS spot vs field";
+    case PlotKind::kChromatic:
+      return "chromatic focal shift and lateral colour";
+    case PlotKind::kEncircledEnergy:
+      return "encircled energy";
   }
   return "";
 }
@@ -108,6 +115,11 @@ double default_width(PlotKind kind) {
     case PlotKind::kWavefront:
     case PlotKind::kPsfDiffraction:
       return 1150;
+    case PlotKind::kMtfField:
+    case PlotKind::kChromatic:
+      return 1100;
+    case PlotKind::kEncircledEnergy:
+      return 1100;
   }
   return 1200;
 }
@@ -128,7 +140,9 @@ WaveReport compute_mtf_curves(const PlotContext& ctx, const PlotOptions& options
   double lambda_min = 1e9;
   for (int w = 0; w < sys.wavelength_count; ++w)
     lambda_min = std::min(lambda_min, sys.lens.wavelengths_nm[w]);
-  const double cutoff = 1.0 / (lambda_min * 1e-6 * (std::abs(sys.efl_mm) / sys.epd_mm));
+  const double cutoff = options.max_frequency_cyc_mm > 0
+                            ? options.max_frequency_cyc_mm
+                            : 1.0 / (lambda_min * 1e-6 * (std::abs(sys.efl_mm) / sys.epd_mm));
   std::vector<double> freqs;
   for (int k = 0; k <= 60; ++k) freqs.push_back(cutoff * k / 60.0);
   return analyze_wave(sys, wave, freqs, field_indices(ctx, kMtfFractions));
@@ -137,6 +151,18 @@ WaveReport compute_mtf_curves(const PlotContext& ctx, const PlotOptions& options
 std::string mtf_title(const WaveReport& r) {
   return fmt::format("polychromatic diffraction MTF ({} x {} pupil, FFT {})", r.pupil_samples,
                      r.pupil_samples, r.fft_n);
+}
+
+// The chromatic focal shift across the lens's spec band (41 wavelengths from its shortest to its
+// longest), or at its one wavelength.
+ChromaticFocalShift chromatic_band_of_lens(const Lens& lens, const TraceSystem<double>& sys) {
+  double lo = 1e9, hi = 0;
+  for (int w = 0; w < sys.wavelength_count; ++w) {
+    lo = std::min(lo, sys.lens.wavelengths_nm[w]);
+    hi = std::max(hi, sys.lens.wavelengths_nm[w]);
+  }
+  if (!(hi > lo)) return chromatic_focal_shift(lens, sys);
+  return chromatic_focal_shift(lens, sys, lo, hi, 41);
 }
 
 // The wave-optics page of one lens, drawn into `area` (no compare lens: one lens per page).
@@ -157,7 +183,8 @@ void draw_wave_page(Canvas& c, Rect area, const PlotContext& ctx, const PlotOpti
       break;
     }
     case PlotKind::kThroughFocus: {
-      const double range = 8.0 * lambda_ref_mm * f_number * f_number;
+      const double range = options.focus_range_mm > 0 ? options.focus_range_mm
+                                                      : 8.0 * lambda_ref_mm * f_number * f_number;
       std::vector<double> shifts;
       for (int k = -15; k <= 15; ++k) shifts.push_back(range * k / 15.0);
       const ThroughFocus tf =
@@ -213,6 +240,32 @@ void draw_wave_page(Canvas& c, Rect area, const PlotContext& ctx, const PlotOpti
       draw_diffraction_psfs(c, area, panels, spacing, font_px);
       break;
     }
+    case PlotKind::kMtfField: {
+      const TraceSystem<double> fine =
+          field_sweep_system(ctx.lens, sys, ctx.trace, options.sweep_fields);
+      const FieldSweep sweep = field_sweep(fine, wave, options.mtf_frequencies_cyc_mm);
+      draw_mtf_vs_field(c, area, sweep, font_px);
+      break;
+    }
+    case PlotKind::kChromatic: {
+      const ChromaticFocalShift shift =
+          options.band_lo_nm > 0
+              ? chromatic_focal_shift(ctx.lens, sys, options.band_lo_nm, options.band_hi_nm, 41)
+              : chromatic_band_of_lens(ctx.lens, sys);
+      const TraceSystem<double> fine =
+          field_sweep_system(ctx.lens, sys, ctx.trace, options.sweep_fields);
+      draw_chromatic(c, area, shift, lateral_colour(fine), font_px);
+      break;
+    }
+    case PlotKind::kEncircledEnergy: {
+      EncircledEnergyOptions eo;
+      eo.field_indices = fields;
+      eo.wave = wave;
+      const EncircledEnergy ee = encircled_energy(sys, eo);
+      draw_encircled_energy(c, area, ee, sys.lens.reference_nm(), field_labels(sys, fields),
+                            font_px);
+      break;
+    }
     default:
       break;
   }
@@ -229,9 +282,19 @@ double layout_height(const LayoutGeometry& g, const LayoutGeometry* cmp, double 
 }  // namespace
 
 const std::vector<std::string>& plot_kind_names() {
-  static const std::vector<std::string> names = {
-      "layout", "spot", "fan",           "field",     "psf",
-      "report", "mtf",  "through-focus", "wavefront", "psf-diffraction"};
+  static const std::vector<std::string> names = {"layout",
+                                                 "spot",
+                                                 "fan",
+                                                 "field",
+                                                 "psf",
+                                                 "report",
+                                                 "mtf",
+                                                 "through-focus",
+                                                 "wavefront",
+                                                 "psf-diffraction",
+                                                 "mtf-field",
+                                                 "chromatic",
+                                                 "encircled-energy"};
   return names;
 }
 
@@ -241,7 +304,8 @@ PlotKind parse_plot_kind(const std::string& name) {
     if (names[i] == name) return static_cast<PlotKind>(i);
   throw Error(
       fmt::format("unknown plot kind '{}': use one of layout, spot, fan, field, psf, report, mtf, "
-                  "through-focus, wavefront, psf-diffraction",
+                  "through-focus, wavefront, psf-diffraction, mtf-field, chromatic, "
+                  "encircled-energy",
                   name));
 }
 
@@ -259,6 +323,23 @@ void PlotOptions::validate() const {
     throw Error(fmt::format("pupil samples {} must be in [8, 1024]", pupil_samples));
   if (!(mtf_frequency_cyc_mm > 0) || !std::isfinite(mtf_frequency_cyc_mm))
     throw Error(fmt::format("MTF frequency {} cycles/mm must be > 0", mtf_frequency_cyc_mm));
+  if (!(max_frequency_cyc_mm >= 0) || !std::isfinite(max_frequency_cyc_mm))
+    throw Error(
+        fmt::format("--max-freq {} cycles/mm must be > 0 (0: the cutoff)", max_frequency_cyc_mm));
+  if (!(focus_range_mm >= 0) || !std::isfinite(focus_range_mm) || focus_range_mm > 1e3)
+    throw Error(
+        fmt::format("--focus-range {} mm must be in (0, 1000] (0: 8 lambda N^2)", focus_range_mm));
+  if (mtf_frequencies_cyc_mm.empty() || mtf_frequencies_cyc_mm.size() > 12)
+    throw Error("--mtf-freqs: give 1 to 12 frequencies");
+  for (double f : mtf_frequencies_cyc_mm)
+    if (!(f >= 0) || !std::isfinite(f))
+      throw Error(fmt::format("MTF frequency {} cycles/mm must be >= 0", f));
+  if (sweep_fields < 2 || sweep_fields > 201)
+    throw Error(fmt::format("--sweep-fields {} must be in 2..201", sweep_fields));
+  if (!(band_lo_nm == 0 && band_hi_nm == 0) &&
+      !(band_lo_nm > 0 && band_hi_nm > band_lo_nm && std::isfinite(band_hi_nm)))
+    throw Error(
+        fmt::format("--colour-band {},{} nm must have 0 < lo < hi", band_lo_nm, band_hi_nm));
 }
 
 namespace {
@@ -372,6 +453,13 @@ PageSize page_size(PlotKind kind, const PageData& d, int rows, double width, dou
     case PlotKind::kPsfDiffraction:
       p.height = header_h + (width - 60) / 3.0 + font_px * 6;
       break;
+    case PlotKind::kMtfField:
+    case PlotKind::kChromatic:
+      p.height = header_h + 0.45 * width;
+      break;
+    case PlotKind::kEncircledEnergy:
+      p.height = header_h + 0.55 * width;
+      break;
   }
   return p;
 }
@@ -442,6 +530,9 @@ void draw_body(Canvas& c, double top, double width, double font_px, const PlotCo
     case PlotKind::kThroughFocus:
     case PlotKind::kWavefront:
     case PlotKind::kPsfDiffraction:
+    case PlotKind::kMtfField:
+    case PlotKind::kChromatic:
+    case PlotKind::kEncircledEnergy:
       draw_wave_page(c, body.inset(10, 4, 10, 4), ctx, options, font_px);
       break;
   }

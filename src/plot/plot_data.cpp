@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "lensopt/analysis/field_sweep.h"
 #include "lensopt/core/error.h"
 #include "lensopt/render/psf.h"
 #include "lensopt/trace/kernel.h"
@@ -223,26 +224,8 @@ FanData compute_fans(const PlotContext& ctx, const FanOptions& options) {
 FieldCurveData compute_field_curves(const PlotContext& ctx, double delta, int fields) {
   if (!(delta > 0 && delta < 0.5)) throw Error("field curves: delta must be in (0, 0.5)");
   if (fields < 2 || fields > 1001) throw Error("field curves: fields must be in 2..1001");
-  // The same (already scaled) lens, aimed at a finer field grid.
-  TraceOptions fine = ctx.trace;
-  fine.fields = fields;
-  fine.rings = 1;
-  fine.scale_to_spec = false;
-  // The lens's own setup (aperture, object distance), sampled at `fields` angles up to its
-  // largest chief-ray angle.
-  SystemSetup setup = specs_setup(ctx.lens.specs, fine);
-  setup.scale = false;
-  if (ctx.lens.specs.mode == SpecMode::kPaper) {
-    setup.aperture_type = ApertureType::kFNumber;
-    setup.f_number = ctx.lens.specs.f_number;
-  }
-  if (setup.aperture_type == ApertureType::kFloatByStop)
-    setup.stop_semi_diameter_mm = value_of(ctx.sys.stop_radius_mm);
-  setup.field_type = FieldType::kAngle;
-  setup.field_values = field_angles_deg(ctx.sys.fields_deg.back(), fields);
-  setup.field_weights.clear();
-  setup.vignetting.clear();
-  const TraceSystem<double> sys = prepare_system(ctx.sys.lens, setup, fine);
+  // The same (already scaled) lens, aimed at a finer field grid (analysis/field_sweep.h).
+  const TraceSystem<double> sys = field_sweep_system(ctx.lens, ctx.sys, ctx.trace, fields);
   FieldCurveData out;
   out.lens_name = ctx.lens.name;
   out.field_deg = sys.fields_deg;
@@ -250,6 +233,10 @@ FieldCurveData compute_field_curves(const PlotContext& ctx, double delta, int fi
     out.distortion_field_deg.push_back(f.field_deg);
     out.distortion_percent.push_back(f.distortion_percent);
   }
+  // The distortion curve: analyze's D_h (measure_fields) at every field of the grid.
+  WaveOptions wave;
+  wave.threads = ctx.trace.threads;
+  out.sweep_distortion_percent = field_sweep(sys, wave, {}, false).distortion_percent;
   RayBundle<double> rays;
   for (int c = 0; c < 3; ++c) {
     const int w = ctx.channel_wavelength[c];

@@ -22,14 +22,17 @@ enum class PlotKind {
   kField,
   kPsf,
   kReport,
-  kMtf,             // diffraction MTF against frequency (wave optics, analysis/wave.h)
-  kThroughFocus,    // MTF at one frequency against focus
-  kWavefront,       // OPD maps
-  kPsfDiffraction,  // polychromatic diffraction PSFs
+  kMtf,              // diffraction MTF against frequency (wave optics, analysis/wave.h)
+  kThroughFocus,     // MTF at one frequency against focus
+  kWavefront,        // OPD maps
+  kPsfDiffraction,   // polychromatic diffraction PSFs
+  kMtfField,         // MTF at chosen frequencies and RMS spot against field (field_sweep.h)
+  kChromatic,        // chromatic focal shift and lateral colour (analysis/chromatic.h)
+  kEncircledEnergy,  // diffraction and geometric encircled energy (encircled_energy.h)
 };
 
 // "layout", "spot", "fan", "field", "psf", "report", "mtf", "through-focus", "wavefront",
-// "psf-diffraction".
+// "psf-diffraction", "mtf-field", "chromatic", "encircled-energy".
 const std::vector<std::string>& plot_kind_names();
 // Throws Error naming the valid kinds for anything else.
 PlotKind parse_plot_kind(const std::string& name);
@@ -42,6 +45,11 @@ struct PlotOptions {
   TraceOptions trace;       // analysis sampling (defaults: 21 fields, 32 rings, ray aiming)
   int pupil_samples = 128;  // wave-optics kinds: pupil grid across the diameter
   double mtf_frequency_cyc_mm = 30;  // through-focus: the frequency
+  double max_frequency_cyc_mm = 0;   // mtf: the axis's end (0: the cutoff 1 / (lambda_min N))
+  double focus_range_mm = 0;         // through-focus: shifts in [-range, range] (0: 8 lambda N^2)
+  std::vector<double> mtf_frequencies_cyc_mm{10, 30, 50};  // mtf-field: the frequencies
+  int sweep_fields = 11;  // mtf-field and chromatic: field angles from 0 to the largest field
+  double band_lo_nm = 0, band_hi_nm = 0;  // chromatic: the band (0, 0: the spec wavelengths')
 
   // Throws Error for out-of-range values.
   void validate() const;

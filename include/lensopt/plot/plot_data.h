@@ -18,7 +18,9 @@
 //   tangential focus  dz_T = -(y_+ - y_-) / (m_+/n_+ - m_-/n_-)    (meridional pair +-delta)
 //   sagittal focus    dz_S = -x_s / (l_s / n_s)                     (sagittal ray, x_p = delta)
 // both in mm along z from the image plane (positive: behind it).
-// Distortion is analyze's D_h = (ybar_h - y_ref,h) / y_ref,last in percent.
+// Distortion is analyze's D_h = (ybar_h - y_ref,h) / y_ref,last in percent, at analyze's fields
+// and on the focus curves' field grid (the same measure_fields on a finer system,
+// analysis/field_sweep.h).
 #pragma once
 
 #include <array>
@@ -163,6 +165,8 @@ struct FieldCurveData {
   std::vector<FocusCurve> focus;             // per channel
   std::vector<double> distortion_field_deg;  // analyze's fields
   std::vector<double> distortion_percent;    // analyze's, per field
+  // Analyze's distortion (measure_fields, analysis/field_sweep.h) at every field of field_deg.
+  std::vector<double> sweep_distortion_percent;
 };
 
 // `delta` is the close rays' offset in normalized pupil coordinates; the focus curves are traced
