@@ -1151,6 +1151,18 @@ class LensOptimization {
     const bool start_not_behind =
         (start_ok && !final_ok) || (start_ok == final_ok && !(final_merit < start_merit));
     if (start_not_behind || !std::isfinite(final_merit)) {
+      // Say why: the result's merit and what it fails.
+      std::string failing =
+          final_ok ? std::string() : failing_constraints(result_.final_constraints);
+      for (const TargetRow& r : result_.final_targets.rows)
+        if (!r.pass)
+          failing += fmt::format("{}target {} is {:.6g}", failing.empty() ? "" : "; ",
+                                 target_text(r.target), r.value);
+      result_.log.push_back(
+          fmt::format("the start is kept: the result (merit {:.6g}{}) is not "
+                      "ahead of it (merit {:.6g}{})",
+                      final_merit, failing.empty() ? "" : "; fails: " + failing, start_merit,
+                      start_ok ? "" : ", fails its own checks"));
       result_.lens = start_;
       result_.final_spot_um = result_.start_spot_um;
       result_.final_field_spot_um = result_.start_field_spot_um;
