@@ -154,8 +154,9 @@ struct EdgeFunctor {
     const TraceLens<T> tl = param->to_trace_lens(parameters[0], mode, fixed_glasses);
     const T root = K<T>(std::sqrt(lambda));
     for (std::size_t i = 0; i < bound->spaces.size(); ++i) {
-      const T short_of =
-          K<T>(bound->min_edge_mm) - glass_edge_mm(tl, bound->spaces[i], bound->heights_mm[i]);
+      // The design margin (as with_margin's glass bound): 1 um above the bound.
+      const T short_of = K<T>(bound->min_edge_mm + 1e-3) -
+                         glass_edge_mm(tl, bound->spaces[i], bound->heights_mm[i]);
       residuals[i] = short_of > K<T>(0.0) ? root * short_of : K<T>(0.0);
     }
     return true;
@@ -168,7 +169,9 @@ struct TargetTerms {
   EdgeBound edges;                    // the glass edge-thickness bound
   std::vector<DesignTarget> targets;  // the residual targets (solved ones excluded)
   TargetSampling sampling;
-  double lambda = 100.0;
+  // Starts at 1 (a target far from the start at 100 pulled the Cooke-sized merit of a double
+  // Gauss into a 200 um basin before the merit had a say) and rises tenfold per unmet round.
+  double lambda = 1.0;
   double wave_unit_mm = 0.0;
 };
 
@@ -474,7 +477,7 @@ DesignLoss<double> run_phase(const LensParameterization& param, std::vector<doub
       for (std::size_t i = 0; i < targets.edges.spaces.size(); ++i)
         short_edge =
             short_edge || glass_edge_mm(tl, targets.edges.spaces[i], targets.edges.heights_mm[i]) <
-                              targets.edges.min_edge_mm + 1e-4;
+                              targets.edges.min_edge_mm + 1e-3;
       if (short_edge) {
         targets.edges.lambda *= 10;
         violated = true;
@@ -939,8 +942,13 @@ class LensOptimization {
     }
     if (!defocus_free) return;
     DesignLossOptions focus_loss = basin_loss();
-    const DesignLoss<double> f = phase(x_, GlassMode::kFixed, fixed_, all_but_defocus, focus_loss,
-                                       "focus", 1, options_.max_iterations);
+    // The merit alone (no target): a target that moves the image plane (total track, BFL) would
+    // otherwise defocus the start before any other variable can meet it; a --focus-only run
+    // holds its targets in the phases after this one.
+    TargetTerms no_targets;
+    const DesignLoss<double> f =
+        run_phase(param_, x_, GlassMode::kFixed, fixed_, all_but_defocus, options_, focus_loss,
+                  "focus", 1, options_.max_iterations, counters_, no_targets);
     result_.log.push_back(fmt::format("focus: {} (optimization sampling)", merit_text(f)));
   }
 
@@ -1064,6 +1072,15 @@ class LensOptimization {
   // The lens of variables x with the phase's glasses, named and cataloged as the start.
   Lens result_lens(const std::vector<double>& x) const {
     Lens lens = param_.to_lens(x.data(), GlassMode::kFixed, fixed_);
+    if (options_.focus_only) {
+      // Refocused only: the start itself (at its spec scale) with the new image distance, its
+      // glasses as they are (not replaced by their catalog neighbours).
+      const double image_mm = lens.surfaces.back().thickness_mm;
+      const double scale = lens_spec_scale(start_);
+      lens = std::isfinite(scale) && scale > 0.0 && scale != 1.0 ? scaled(start_, scale) : start_;
+      lens.surfaces.back().thickness_mm = image_mm;
+      return lens;
+    }
     lens.name = start_.name;
     lens.source_path = start_.source_path;
     // The glasses are the glass space's catalog glasses: name that catalog, so the lens reads
