@@ -35,7 +35,8 @@
 // optimization sampling stays met at full sampling. u_q puts each quantity in millimetres like
 // the spot merit (mm): 1 for lengths, 1e-3 for um, f / 100 per percent of distortion, f per unit
 // of illumination, the wavefront unit (mm per wave, analysis/wavefront.h) for waves; lambda_T
-// starts at 100 (as lambda_RP) and is raised tenfold per round while a target is violated.
+// starts at 1 and is raised tenfold per round while a target is violated (optimizer.cpp; the
+// first phase, the focus alone, runs without targets).
 // Derivatives are exact: forward-mode Jets through the same templated code (trace, paraxial,
 // field maps), as the design loss's.
 // Pass/fail (report): an equality within 1e-4 max(|t|, 1) (1e-9 relative for the solved ones),
