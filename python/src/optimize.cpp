@@ -1,5 +1,6 @@
 // Optimization in Python: the paper's lens variables (Parameterization), the design loss with
 // its exact gradient, Levenberg-Marquardt optimization and Monte-Carlo tolerancing.
+#include <cmath>
 #include <optional>
 
 #include "bindings.h"
@@ -194,9 +195,42 @@ void bind_optimize(py::module_& m) {
       .def_readonly("interrupted", &OptimizeResult::interrupted)
       .def_readonly("kept_start", &OptimizeResult::kept_start)
       .def_readonly("log", &OptimizeResult::log)
-      .def_property_readonly("constraints_pass", [](const OptimizeResult& r) {
-        return r.final_constraints.all_pass();
-      });
+      .def_property_readonly("constraints_pass",
+                             [](const OptimizeResult& r) { return r.final_constraints.all_pass(); })
+      .def_property_readonly(
+          "targets",
+          [](const OptimizeResult& r) {
+            // One dict per target: what `lensopt optimize --json` reports under "targets".
+            py::list out;
+            for (std::size_t i = 0; i < r.final_targets.rows.size(); ++i) {
+              const TargetRow& row = r.final_targets.rows[i];
+              const DesignTarget& t = row.target;
+              py::dict d;
+              d["target"] = target_text(t);
+              d["quantity"] = target_quantity_name(t.quantity);
+              d["relation"] = t.relation == TargetRelation::kEqual    ? "="
+                              : t.relation == TargetRelation::kAtMost ? "<="
+                                                                      : ">=";
+              d["bound"] = t.value;
+              d["weight"] = t.weight;
+              d["field"] = t.field > 0 ? py::object(py::int_(t.field)) : py::object(py::none());
+              d["default"] = t.is_default;
+              const bool has_start = i < r.start_targets.rows.size();
+              d["start"] = has_start && std::isfinite(r.start_targets.rows[i].value)
+                               ? py::object(py::float_(r.start_targets.rows[i].value))
+                               : py::object(py::none());
+              d["start_pass"] = has_start && r.start_targets.rows[i].pass;
+              d["final"] = std::isfinite(row.value) ? py::object(py::float_(row.value))
+                                                    : py::object(py::none());
+              d["pass"] = row.pass;
+              out.append(d);
+            }
+            return out;
+          },
+          "Every target (with an as-written lens's default efl_mm) as a dict: target, quantity, "
+          "relation, bound, weight, field, start, start_pass, final, pass.")
+      .def_property_readonly("targets_pass",
+                             [](const OptimizeResult& r) { return r.final_targets.all_pass(); });
 
   m.def(
       "optimize",
@@ -209,7 +243,8 @@ void bind_optimize(py::module_& m) {
          std::optional<double> weight_ray_path, std::optional<double> weight_ray_angle,
          std::optional<double> weight_glass, std::optional<double> min_air_mm,
          std::optional<double> min_glass_mm, std::optional<double> max_glass_mm,
-         std::optional<double> min_image_clearance_mm, std::optional<double> max_ray_angle_deg) {
+         std::optional<double> min_image_clearance_mm, std::optional<double> max_ray_angle_deg,
+         const std::vector<std::string>& targets, std::optional<bool> focus_only) {
         // The CLI's resolution (optimizer.h): defaults, bounds for the lens, its [optimize]
         // table, then the arguments given (None: not given).
         OptimizeOverrides v;
@@ -237,6 +272,9 @@ void bind_optimize(py::module_& m) {
         v.min_image_clearance_mm = min_image_clearance_mm;
         v.max_ray_angle_deg = max_ray_angle_deg;
         v.verbose = verbose;
+        for (const std::string& t : targets)
+          v.targets.push_back(parse_target(t, SourceLocation{"targets"}));
+        v.focus_only = focus_only;
         OptimizeResult r;
         {
           InterruptScope interrupt(InterruptScope::Signals::kInterruptOnly);
@@ -265,6 +303,7 @@ void bind_optimize(py::module_& m) {
       py::arg("weight_glass") = py::none(), py::arg("min_air_mm") = py::none(),
       py::arg("min_glass_mm") = py::none(), py::arg("max_glass_mm") = py::none(),
       py::arg("min_image_clearance_mm") = py::none(), py::arg("max_ray_angle_deg") = py::none(),
+      py::arg("targets") = std::vector<std::string>{}, py::arg("focus_only") = py::none(),
       "`lensopt optimize`: Levenberg-Marquardt on the paper's design loss, with the options "
       "resolved as the CLI resolves them (one function, optimize/optimizer.h "
       "resolve_optimize_options): the defaults, the bounds `bounds` selects ('auto': the "
@@ -272,8 +311,11 @@ void bind_optimize(py::module_& m) {
       "[optimize] table, then every argument given (None: not given). The same lens gives the "
       "same result as `lensopt optimize`. paper_penalties=True is `--constraints paper`, "
       "soft_start=False `--no-soft-start`, merit='wavefront' `--merit wavefront` (the mean RMS "
-      "wavefront error, piston and tilt removed, on a wavefront_pupil_samples grid). Ctrl-C "
-      "stops it (KeyboardInterrupt).");
+      "wavefront error, piston and tilt removed, on a wavefront_pupil_samples grid). targets: "
+      "design targets as `--target` writes them ('efl_mm=100', 'distortion_percent<=1', "
+      "'rms_spot_um<=5,field=2,weight=3'), replacing the lens's [[optimize.targets]] entry of "
+      "the same quantity and field; focus_only=True is `--focus-only`. Ctrl-C stops it "
+      "(KeyboardInterrupt).");
 
   py::class_<ToleranceReport>(m, "ToleranceReport", "The result of tolerance().")
       .def_readonly("lens_name", &ToleranceReport::lens_name)

@@ -3,6 +3,7 @@
 #include <fmt/core.h>
 #include <unistd.h>
 
+#include <cmath>
 #include <filesystem>
 #include <memory>
 #include <nlohmann/json.hpp>
@@ -40,6 +41,8 @@ struct OptimizeCommand {
   int wavefront_pupil_samples = -1;
   std::vector<std::string> freeze;
   std::vector<std::string> vary;
+  std::vector<std::string> targets;  // --target, as written
+  bool focus_only = false;
   // Command-line overrides (NaN / -1: not given).
   int rings = -1, fields = -1, max_iterations = -1, neighbours = -1, threads = -1;
   double weight_ray_path = NAN, weight_ray_angle = NAN, weight_glass = NAN;
@@ -56,6 +59,50 @@ std::string format_constraints(const ConstraintReport& c) {
   out += fmt::format("    {:<34} {:10d}  == {:8d}  {}\n", "ray failures", c.ray_failures, 0,
                      c.ray_failures == 0 ? "pass" : "FAIL");
   return out;
+}
+
+// The targets before and after: "    efl_mm = 100        100.0000 -> 100.0000  pass".
+std::string format_targets(const TargetReport& start, const TargetReport& final) {
+  std::string out;
+  for (std::size_t i = 0; i < final.rows.size(); ++i) {
+    const TargetRow& r = final.rows[i];
+    const double before = i < start.rows.size() ? start.rows[i].value : NAN;
+    const bool before_pass = i < start.rows.size() && start.rows[i].pass;
+    out += fmt::format("    {:<44} {:>12} {:<4} -> {:>12}  {}\n", target_text(r.target),
+                       std::isfinite(before) ? fmt::format("{:.6g}", before) : "n/a",
+                       before_pass ? "pass" : "FAIL",
+                       std::isfinite(r.value) ? fmt::format("{:.6g}", r.value) : "n/a",
+                       r.pass ? "pass" : "FAIL");
+  }
+  return out;
+}
+
+nlohmann::json targets_json(const TargetReport& start, const TargetReport& final) {
+  nlohmann::json rows = nlohmann::json::array();
+  for (std::size_t i = 0; i < final.rows.size(); ++i) {
+    const TargetRow& r = final.rows[i];
+    const DesignTarget& t = r.target;
+    const char* relation = t.relation == TargetRelation::kEqual    ? "="
+                           : t.relation == TargetRelation::kAtMost ? "<="
+                                                                   : ">=";
+    nlohmann::json row = {{"target", target_text(t)},
+                          {"quantity", target_quantity_name(t.quantity)},
+                          {"relation", relation},
+                          {"bound", t.value},
+                          {"weight", t.weight},
+                          {"field", t.field > 0 ? nlohmann::json(t.field) : nlohmann::json()},
+                          {"default", t.is_default},
+                          {"start", nullptr},
+                          {"start_pass", false},
+                          {"final", std::isfinite(r.value) ? nlohmann::json(r.value) : nullptr},
+                          {"pass", r.pass}};
+    if (i < start.rows.size()) {
+      if (std::isfinite(start.rows[i].value)) row["start"] = start.rows[i].value;
+      row["start_pass"] = start.rows[i].pass;
+    }
+    rows.push_back(row);
+  }
+  return rows;
 }
 
 nlohmann::json constraints_json(const ConstraintReport& c) {
@@ -104,6 +151,9 @@ void run_optimize(const OptimizeCommand& cmd) {
     overrides.glass_search = parse_glass_search(cmd.glass_search, SourceLocation{"--glass-search"});
   overrides.freeze = cmd.freeze;
   if (!cmd.vary.empty()) overrides.vary = cmd.vary;
+  for (const std::string& t : cmd.targets)
+    overrides.targets.push_back(parse_target(t, SourceLocation{"--target"}));
+  if (cmd.focus_only) overrides.focus_only = true;
   if (cmd.no_soft_start) overrides.soft_start = false;
   if (cmd.rings > 0) overrides.rings = cmd.rings;
   if (cmd.fields > 0) overrides.fields = cmd.fields;
@@ -158,6 +208,8 @@ void run_optimize(const OptimizeCommand& cmd) {
       j["wavefront_pupil_samples"] = options.loss.wavefront_pupil_samples;
     }
     j["final_rms_spot_um"] = result.final_field_spot_um;
+    j["targets"] = targets_json(result.start_targets, result.final_targets);
+    j["targets_met"] = result.final_targets.all_pass();
     j["start_constraints"] = constraints_json(result.start_constraints);
     j["final_constraints"] = constraints_json(result.final_constraints);
     j["jacobian_evaluations"] = result.jacobian_evaluations;
@@ -187,6 +239,9 @@ void run_optimize(const OptimizeCommand& cmd) {
       fmt::print("  {:17d}   {:11.3f}   {:10.3f}\n", h,
                  h < result.start_field_spot_um.size() ? result.start_field_spot_um[h] : 0.0,
                  result.final_field_spot_um[h]);
+    if (!result.final_targets.rows.empty())
+      fmt::print("  targets (full sampling)                         before          after\n{}",
+                 format_targets(result.start_targets, result.final_targets));
     fmt::print("  constraints after (full sampling):\n{}",
                format_constraints(result.final_constraints));
     std::string glasses;
@@ -198,6 +253,15 @@ void run_optimize(const OptimizeCommand& cmd) {
     for (const std::string& l : result.log) fmt::print("  {}\n", l);
   }
 
+  if (!result.final_targets.all_pass()) {
+    std::string failing;
+    for (const TargetRow& r : result.final_targets.rows)
+      if (!r.pass)
+        failing += fmt::format("{}{} (is {:.6g})", failing.empty() ? "" : "; ",
+                               target_text(r.target), r.value);
+    fmt::print(stderr, "lensopt optimize: warning: the result does not meet its targets: {}\n",
+               failing);
+  }
   if (!result.final_constraints.all_pass()) {
     std::string failing;
     for (const ConstraintReport::Row& r : result.final_constraints.rows)
@@ -293,6 +357,15 @@ void setup_optimize(CLI::App& app) {
                   "surface-profile variables to add: k3 (conic of surface 3), a4_3 (its r^4 "
                   "term), a2_3 .. a16_3; replaces [optimize] vary")
       ->delimiter(',');
+  sub->add_option("--target", cmd->targets,
+                  "a design target, repeatable: NAME=V, NAME<=V or NAME>=V with ,weight=W and "
+                  ",field=N optional (efl_mm, f_number, total_track_mm, bfl_mm, "
+                  "distortion_percent, relative_illumination, rms_spot_um, rms_wavefront_waves); "
+                  "replaces the [[optimize.targets]] entry of the same quantity and field")
+      ->allow_extra_args(false)
+      ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
+  sub->add_flag("--focus-only", cmd->focus_only,
+                "refocus only: every variable but the defocus (the last thickness) held");
   sub->add_flag("--no-soft-start", cmd->no_soft_start,
                 "strict constraints: skip the first phase on the paper's soft penalties");
   sub->add_option("--rings", cmd->rings, "pupil rings during optimization (default 8)")

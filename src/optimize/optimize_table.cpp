@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <fstream>
+#include <optional>
 #include <sstream>
 
 namespace lensopt {
@@ -46,8 +47,84 @@ const char* optimize_table_keys() {
   return "glass_search, constraints, rings, fields, max_iterations, max_rounds, glass_neighbours, "
          "weight_ray_path, weight_ray_angle, weight_glass, min_air_mm, min_glass_mm, "
          "max_glass_mm, min_image_clearance_mm, max_ray_angle_deg, max_surface_slope_deg, "
-         "weight_profile, soft_start, freeze, vary, merit, wavefront_pupil_samples";
+         "weight_profile, soft_start, freeze, vary, merit, wavefront_pupil_samples, focus_only, "
+         "targets ([[optimize.targets]])";
 }
+
+namespace {
+
+SourceLocation location_of(const toml::node& node, const SourceLocation& fallback) {
+  const auto& src = node.source();
+  if (src.begin.line == 0) return fallback;
+  return SourceLocation{fallback.file, static_cast<int>(src.begin.line),
+                        static_cast<int>(src.begin.column)};
+}
+
+// One [[optimize.targets]] entry (optimize/targets.h): a quantity key with a number (equality)
+// or a string with the relation ("<= 1", ">= 0.6", "= 100"), or target = "NAME <= V"; weight and
+// field optional.
+DesignTarget parse_target_table(const toml::table& table, const SourceLocation& where) {
+  std::optional<DesignTarget> target;
+  double weight = 1.0;
+  int field = 0;
+  auto once = [&](const SourceLocation& at) {
+    if (target)
+      throw Error(at,
+                  "[[optimize.targets]]: one quantity per entry (start another "
+                  "[[optimize.targets]] for the next)");
+  };
+  for (const auto& [key, node] : table) {
+    const std::string k(key.str());
+    const SourceLocation at = location_of(node, where);
+    if (k == "weight") {
+      const auto v = node.value<double>();
+      if (!v) throw Error(at, "[[optimize.targets]] weight must be a number");
+      weight = *v;
+    } else if (k == "field") {
+      const auto v = node.value<int64_t>();
+      if (!v || *v < 1) throw Error(at, "[[optimize.targets]] field must be an integer >= 1");
+      field = static_cast<int>(*v);
+    } else if (k == "target") {
+      const auto v = node.value<std::string>();
+      if (!v) throw Error(at, "[[optimize.targets]] target must be a string (\"efl_mm = 100\")");
+      once(at);
+      target = parse_target(*v, at);
+    } else {
+      once(at);
+      const TargetQuantity q = parse_target_quantity(k, at);
+      if (const auto number = node.value<double>()) {
+        DesignTarget t;
+        t.quantity = q;
+        t.value = *number;
+        target = t;
+      } else if (const auto text = node.value<std::string>()) {
+        // "<= 1": the relation and value of this quantity.
+        const std::string trimmed = *text;
+        const std::size_t first = trimmed.find_first_not_of(" \t");
+        const bool relation =
+            first != std::string::npos &&
+            (trimmed[first] == '<' || trimmed[first] == '>' || trimmed[first] == '=');
+        target = parse_target(relation ? k + trimmed : k + "=" + trimmed, at);
+      } else {
+        throw Error(at, fmt::format("[[optimize.targets]] {} must be a number (= target) or a "
+                                    "string with its relation (\"<= 1\", \">= 0.6\")",
+                                    k));
+      }
+    }
+  }
+  if (!target)
+    throw Error(where, fmt::format("[[optimize.targets]]: no quantity; write one of {} (e.g. "
+                                   "efl_mm = 100, distortion_percent = \"<= 1\")",
+                                   target_quantity_names()));
+  target->weight = weight;
+  target->field = field;
+  target->where =
+      where.line > 0 ? fmt::format("{}:{}:{}", where.file, where.line, where.column) : where.file;
+  validate_target(*target, where);
+  return *target;
+}
+
+}  // namespace
 
 bool apply_optimize_key(const std::string& key, const toml::node& node, const SourceLocation& where,
                         OptimizeOptions& options) {
@@ -125,6 +202,22 @@ bool apply_optimize_key(const std::string& key, const toml::node& node, const So
       if (!v) throw Error(where, "[optimize] freeze entries must be strings");
       options.freeze.push_back(*v);
     }
+  } else if (key == "targets") {
+    const toml::array* items = node.as_array();
+    if (!items)
+      throw Error(where, "[optimize] targets must be an array of tables ([[optimize.targets]])");
+    options.targets.clear();
+    for (const auto& item : *items) {
+      const toml::table* table = item.as_table();
+      const SourceLocation at = location_of(item, where);
+      if (!table)
+        throw Error(at, "[optimize] targets entries must be tables ([[optimize.targets]])");
+      options.targets.push_back(parse_target_table(*table, at));
+    }
+  } else if (key == "focus_only") {
+    const auto v = node.value<bool>();
+    if (!v) throw Error(where, "[optimize] focus_only must be true or false");
+    options.focus_only = *v;
   } else if (key == "vary") {
     const toml::array* items = node.as_array();
     if (!items)
@@ -190,9 +283,25 @@ ResolvedOptimizeOptions resolve_optimize_options(const Lens& lens,
                                                  const OptimizeOverrides& overrides) {
   ResolvedOptimizeOptions r;
   OptimizeOptions& o = r.options;
-  // Bounds first (the paper's for the paper's lenses, else from the lens itself), then the lens
+  // The targets: the table's, each replaced by the caller's of the same quantity and field.
+  OptimizeOptions table_only;
+  apply_optimize_table(lens, table_only);
+  std::vector<DesignTarget> targets;
+  for (const DesignTarget& t : table_only.targets) {
+    bool replaced = false;
+    for (const DesignTarget& u : overrides.targets)
+      replaced = replaced || (u.quantity == t.quantity && u.field == t.field);
+    if (!replaced) targets.push_back(t);
+  }
+  for (const DesignTarget& t : overrides.targets) {
+    validate_target(t, SourceLocation{t.where});
+    targets.push_back(t);
+  }
+  // Bounds first (the paper's for the paper's lenses, else from the lens itself with its solved
+  // targets applied: a start scaled to another focal length has other extremes), then the lens
   // file's [optimize] table, then the caller's values.
-  o.loss = bounds_for(lens, o.loss, overrides.bounds);
+  o.loss = bounds_for(apply_target_solves(lens, targets_with_defaults(lens, targets)), o.loss,
+                      overrides.bounds);
   r.paper_bounds = overrides.bounds == BoundsMode::kPaper ||
                    (overrides.bounds == BoundsMode::kAuto && is_paper_lens(lens));
   apply_optimize_table(lens, o);
@@ -221,6 +330,8 @@ ResolvedOptimizeOptions resolve_optimize_options(const Lens& lens,
   set(overrides.min_image_clearance_mm, o.loss.min_image_clearance_mm);
   set(overrides.max_ray_angle_deg, o.loss.max_ray_angle_deg);
   set(overrides.verbose, o.verbose);
+  set(overrides.focus_only, o.focus_only);
+  o.targets = targets;
   o.validate();
   return r;
 }

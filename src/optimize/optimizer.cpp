@@ -18,6 +18,7 @@
 #include "lensopt/core/error.h"
 #include "lensopt/core/jet_width.h"
 #include "lensopt/core/text.h"
+#include "lensopt/lens/profile_sag.h"
 #include "lensopt/optimize/design_gradient.h"
 #include "lensopt/optimize/free_jacobian.h"
 #include "lensopt/optimize/profile_bounds.h"
@@ -30,6 +31,13 @@ constexpr int kStride = 24;
 // The stall test of the wavefront merit's strict rounds (ProgressCallback).
 constexpr int kStallWindow = 10;
 constexpr double kStallRelative = 1e-3;
+
+// The TraceLens of a lens at its spec scale (as analysis traces it: the spec focal length in the
+// paper's mode, as written otherwise).
+TraceLens<double> scaled_trace_lens(const Lens& lens) {
+  const double scale = lens_spec_scale(lens);
+  return make_trace_lens(std::isfinite(scale) && scale > 0.0 ? scaled(lens, scale) : lens);
+}
 
 struct DesignFunctor {
   const LensParameterization* param;
@@ -70,6 +78,150 @@ struct ProfileBoundFunctor {
     return true;
   }
 };
+
+// Glass edge thickness: for the glass space k (between surfaces k and k + 1)
+//   e_k = t_k + sag_{k+1}(h_k) - sag_k(h_k)
+// at h_k the larger clear semi-aperture of the two surfaces (semi_diameter_mm where written, else
+// the paraxial estimate of the start, profile_bounds.h), with the real profile's sag
+// (lens/profile_sag.h; q clamped at 0 outside a conic's domain, as the tolerance edge gap).
+template <typename T>
+T glass_edge_mm(const TraceLens<T>& tl, int k, double h) {
+  using std::sqrt;
+  const T rho = K<T>(h * h);
+  T spherical[kAsphereTerms];
+  for (T& a : spherical) a = K<T>(0.0);
+  auto sag = [&](int i) {
+    const T& c = tl.curvature_per_mm[i];
+    const bool profiled = tl.has_profiles();
+    const T one_plus_k = profiled ? K<T>(1.0) + tl.conic[i] : K<T>(1.0);
+    const T* a =
+        profiled ? tl.asphere.data() + static_cast<std::size_t>(i) * kAsphereTerms : spherical;
+    const T q2 = profile_q2(c, one_plus_k, rho);
+    const T q = q2 > K<T>(0.0) ? sqrt(q2) : K<T>(0.0);
+    return profile_sag_at_q(c, a, rho, q);
+  };
+  return tl.thickness_mm[k] + sag(k + 1) - sag(k);
+}
+
+// The edge-thickness bound of a run: the glass spaces, their heights (fixed for the run: the
+// start's clear apertures) and the lower bound min(min_glass_mm, half the start's thinnest edge)
+// (so the start meets it; a start with a glass of negative edge bounds it at 0).
+struct EdgeBound {
+  std::vector<int> spaces;
+  std::vector<double> heights_mm;
+  double min_edge_mm = 0.0;
+  double lambda = 100.0;  // raised tenfold per round while violated
+};
+
+EdgeBound edge_bound_for(const Lens& start, const double min_glass_mm) {
+  EdgeBound out;
+  const TraceLens<double> tl = scaled_trace_lens(start);
+  std::vector<double> h;
+  try {
+    h = paraxial_clear_semi_apertures_mm(tl, start.specs);
+  } catch (const Error&) {
+    return out;
+  }
+  const double scale = lens_spec_scale(start);
+  double thinnest = std::numeric_limits<double>::infinity();
+  for (int k = 0; k + 1 < tl.surface_count(); ++k) {
+    if (start.surfaces[k].material.is_air()) continue;
+    auto height = [&](int i) {
+      const double written = start.surfaces[i].semi_diameter_mm * scale;
+      return written > 0.0 ? written : (i < static_cast<int>(h.size()) ? h[i] : 0.0);
+    };
+    const double hk = std::max(height(k), height(k + 1));
+    if (!(std::isfinite(hk) && hk > 0.0)) continue;
+    out.spaces.push_back(k);
+    out.heights_mm.push_back(hk);
+    thinnest = std::min(thinnest, glass_edge_mm(tl, k, hk));
+  }
+  if (out.spaces.empty()) return out;
+  out.min_edge_mm = std::max(0.0, std::min(min_glass_mm, 0.5 * thinnest));
+  return out;
+}
+
+// The edge residuals sqrt(lambda) max(e_min - e_k, 0) of variables x.
+struct EdgeFunctor {
+  const LensParameterization* param;
+  GlassMode mode;
+  std::vector<int> fixed_glasses;
+  const EdgeBound* bound;
+  double lambda;
+
+  template <typename T>
+  bool operator()(T const* const* parameters, T* residuals) const {
+    const TraceLens<T> tl = param->to_trace_lens(parameters[0], mode, fixed_glasses);
+    const T root = K<T>(std::sqrt(lambda));
+    for (std::size_t i = 0; i < bound->spaces.size(); ++i) {
+      // The design margin (as with_margin's glass bound): 1 um above the bound.
+      const T short_of = K<T>(bound->min_edge_mm + 1e-3) -
+                         glass_edge_mm(tl, bound->spaces[i], bound->heights_mm[i]);
+      residuals[i] = short_of > K<T>(0.0) ? root * short_of : K<T>(0.0);
+    }
+    return true;
+  }
+};
+
+// The designer's residual targets (targets.h) of a run: their sampling, the weight lambda_T
+// (raised tenfold per round while one is unmet) and the wavefront unit.
+struct TargetTerms {
+  EdgeBound edges;                    // the glass edge-thickness bound
+  std::vector<DesignTarget> targets;  // the residual targets (solved ones excluded)
+  TargetSampling sampling;
+  // Starts at 1 (a target far from the start at 100 pulled the Cooke-sized merit of a double
+  // Gauss into a 200 um basin before the merit had a say) and rises tenfold per unmet round.
+  double lambda = 1.0;
+  double wave_unit_mm = 0.0;
+};
+
+// The target residuals of variables x (targets.h evaluate_targets).
+struct TargetFunctor {
+  const LensParameterization* param;
+  GlassMode mode;
+  std::vector<int> fixed_glasses;
+  TraceOptions sampling;
+  const TargetTerms* terms;
+  double lambda;
+
+  template <typename T>
+  bool operator()(T const* const* parameters, T* residuals) const {
+    return evaluate_targets<T>(*param, parameters[0], mode, fixed_glasses, sampling, terms->targets,
+                               terms->sampling, lambda, terms->wave_unit_mm, residuals);
+  }
+};
+
+// The number of target residuals at `sampling` (the field count of the target system).
+int target_residuals(const LensParameterization& param, const std::vector<double>& x,
+                     GlassMode mode, const std::vector<int>& fixed, const TraceOptions& sampling,
+                     const TargetTerms& terms) {
+  if (terms.targets.empty()) return 0;
+  const TraceLens<double> lens = param.to_trace_lens(x.data(), mode, fixed);
+  const TraceSystem<double> sys = target_system(param, lens, sampling);
+  return target_residual_count(terms.targets, static_cast<int>(sys.fields_deg.size()));
+}
+
+// Whether every residual target is met at the optimization sampling, with the design margins
+// (an equality within its tolerance, a bound inside its margin).
+bool targets_met(const LensParameterization& param, const std::vector<double>& x, GlassMode mode,
+                 const std::vector<int>& fixed, const TraceOptions& sampling,
+                 const TargetTerms& terms) {
+  if (terms.targets.empty()) return true;
+  TargetValues<double> values;
+  if (!evaluate_targets<double>(param, x.data(), mode, fixed, sampling, terms.targets,
+                                terms.sampling, 1.0, terms.wave_unit_mm, nullptr, &values))
+    return false;
+  for (std::size_t i = 0; i < terms.targets.size(); ++i) {
+    const DesignTarget& t = terms.targets[i];
+    for (std::size_t j = 0; j < values.items[i].size(); ++j) {
+      if (!values.item_known[i][j]) continue;
+      const double v = target_violation(t, values.items[i][j], true);
+      if (t.relation == TargetRelation::kEqual ? std::abs(v) > target_tolerance(t) : v > 0.0)
+        return false;
+    }
+  }
+  return true;
+}
 
 // The lens of x, its clear semi-apertures and its profile-bound residual count (0: no profiles).
 struct ProfileBoundSetup {
@@ -211,7 +363,7 @@ DesignLoss<double> run_phase(const LensParameterization& param, std::vector<doub
                              GlassMode mode, const std::vector<int>& fixed,
                              const std::vector<int>& frozen, const OptimizeOptions& options,
                              DesignLossOptions& loss, const std::string& name, int max_rounds,
-                             int max_iterations, Counters& counters,
+                             int max_iterations, Counters& counters, TargetTerms& targets,
                              double glass_weight_growth = 1.0) {
   const int n = param.size();
   DesignLoss<double> current = evaluate_double(param, x, mode, fixed, options.sampling, loss);
@@ -254,6 +406,21 @@ DesignLoss<double> run_phase(const LensParameterization& param, std::vector<doub
       cost->SetNumResiduals(bounds.count);
       problem.AddResidualBlock(cost, nullptr, x.data());
     }
+    // The designer's targets (targets.h): a residual block of their own, exact Jets.
+    const int target_count = target_residuals(param, x, mode, fixed, options.sampling, targets);
+    if (target_count > 0)
+      problem.AddResidualBlock(
+          make_free_jacobian_cost(
+              new TargetFunctor{&param, mode, fixed, options.sampling, &targets, targets.lambda}, n,
+              target_count, frozen),
+          nullptr, x.data());
+    const int edge_count = static_cast<int>(targets.edges.spaces.size());
+    if (edge_count > 0)
+      problem.AddResidualBlock(
+          make_free_jacobian_cost(
+              new EdgeFunctor{&param, mode, fixed, &targets.edges, targets.edges.lambda}, n,
+              edge_count, frozen),
+          nullptr, x.data());
     if (!frozen.empty()) problem.SetManifold(x.data(), new ceres::SubsetManifold(n, frozen));
     ceres::Solver::Options solver;
     solver.minimizer_type = ceres::TRUST_REGION;
@@ -298,6 +465,23 @@ DesignLoss<double> run_phase(const LensParameterization& param, std::vector<doub
         loss.weight_profile < 1e8) {
       loss.weight_profile *= 10;
       violated = true;
+    }
+    if (target_count > 0 && targets.lambda < 1e10 &&
+        !targets_met(param, x, mode, fixed, options.sampling, targets)) {
+      targets.lambda *= 10;
+      violated = true;
+    }
+    if (edge_count > 0 && targets.edges.lambda < 1e10) {
+      const TraceLens<double> tl = param.to_trace_lens(x.data(), mode, fixed);
+      bool short_edge = false;
+      for (std::size_t i = 0; i < targets.edges.spaces.size(); ++i)
+        short_edge =
+            short_edge || glass_edge_mm(tl, targets.edges.spaces[i], targets.edges.heights_mm[i]) <
+                              targets.edges.min_edge_mm + 1e-3;
+      if (short_edge) {
+        targets.edges.lambda *= 10;
+        violated = true;
+      }
     }
     loss.weight_glass *= glass_weight_growth;
     const double change = std::abs(next.merit_value() - current.merit_value()) /
@@ -503,6 +687,21 @@ ConstraintReport check_constraints(const Lens& lens, const DesignLossOptions& lo
                            false,
                            slope_deg <= loss.max_surface_slope_deg && min_q2 >= kProfileMinDomain});
   }
+  // Clear apertures: the rays a surface's semi_diameter_mm clips, traced as analyze traces them.
+  bool apertures = false;
+  for (const Surface& s : lens.surfaces) apertures = apertures || s.semi_diameter_mm > 0.0;
+  if (apertures) {
+    int vignetted = 0;
+    try {
+      const FieldOptics<double> f =
+          measure_fields(prepare_lens_system(lens, sampling), FieldOpticsOptions{false, 0});
+      for (int v : f.spots.vignetted_rays) vignetted += v;
+    } catch (const Error&) {
+      vignetted = std::numeric_limits<int>::max();
+    }
+    report.rows.push_back({"rays vignetted by clear apertures", static_cast<double>(vignetted), 0.0,
+                           false, vignetted == 0});
+  }
   return report;
 }
 
@@ -531,7 +730,19 @@ DesignLossOptions lens_derived_bounds(const Lens& lens, const DesignLossOptions&
   const DesignLoss<double> l =
       evaluate_double(param, x, GlassMode::kContinuous, {}, AnalyzeOptions{}.trace, paper, &ext);
   const int k_count = static_cast<int>(lens.surfaces.size());
-  if (l.failed_rays > 0 || static_cast<int>(ext.min_travel_mm.size()) < k_count) return out;
+  // The extremes of the rays that trace (a failed ray up to its failing surface): a space no
+  // ray crosses has nothing to derive its bound from (never the paper's bound in silence).
+  for (int k = 0; k < k_count; ++k) {
+    const bool crossed = k < static_cast<int>(ext.min_travel_mm.size()) &&
+                         std::isfinite(ext.min_travel_mm[k]) && std::isfinite(ext.max_travel_mm[k]);
+    if (!crossed)
+      throw Error(SourceLocation{lens.source_path},
+                  fmt::format("bounds derived from the start: no ray of the start crosses the "
+                              "space after surface {} ({} of its rays fail); give the bounds "
+                              "(--min-air-mm, --min-glass-mm, --max-glass-mm, "
+                              "--min-image-clearance-mm or [optimize] keys), or --bounds paper",
+                              k + 1, l.failed_rays));
+  }
   double min_air = std::numeric_limits<double>::infinity(), min_glass = min_air;
   double max_glass = 0.0;
   for (int k = 0; k + 1 < k_count; ++k) {
@@ -585,6 +796,10 @@ class LensOptimization {
         wavefront_(options.loss.merit == DesignMerit::kWavefront),
         soft_(options.loss.paper_penalties) {
     frozen_user_ = param_.select(options.freeze);
+    // --focus-only: every variable but the defocus held.
+    if (options.focus_only)
+      for (int i = 0; i < param_.size(); ++i)
+        if (param_.variables()[i].kind != LensVariable::Kind::kDefocus) frozen_user_.push_back(i);
     for (int i = 0; i < param_.size(); ++i) {
       const auto kind = param_.variables()[i].kind;
       if (kind == LensVariable::Kind::kGlass0 || kind == LensVariable::Kind::kGlass1)
@@ -598,8 +813,22 @@ class LensOptimization {
         std::all_of(glass_indices_.begin(), glass_indices_.end(), [&](int i) {
           return std::find(frozen_user_.begin(), frozen_user_.end(), i) != frozen_user_.end();
         });
-    search_ = options.glass_search != GlassSearch::kNone && !glasses_frozen_by_user;
+    search_ = options.glass_search != GlassSearch::kNone && !glasses_frozen_by_user &&
+              !options.focus_only;
     loss_ = soft_ ? options.loss : with_margin(options.loss);
+    // The residual targets (the solved ones are met by the start and the forward map).
+    for (const DesignTarget& t : options.targets)
+      if (!target_is_solved(t.quantity)) targets_.targets.push_back(t);
+    targets_.sampling.threads = options.sampling.threads;
+    targets_.edges = edge_bound_for(start, options.loss.min_glass_mm);
+    targets_.sampling.wavefront_grid = wavefront_merit_pupil(options.loss.wavefront_pupil_samples);
+    bool wave_target = false;
+    for (const DesignTarget& t : targets_.targets)
+      wave_target = wave_target || t.quantity == TargetQuantity::kRmsWavefrontWaves;
+    if (wave_target) {
+      const double unit = wavefront_mm_per_wave(prepare_lens_system(start, options.sampling));
+      targets_.wave_unit_mm = std::isfinite(unit) && unit > 0.0 ? unit : 0.0;
+    }
   }
 
   OptimizeResult run() {
@@ -627,6 +856,10 @@ class LensOptimization {
   // With the paper's soft penalties a candidate is judged by l_lens; strictly, by the merit
   // among designs that meet every constraint.
   bool feasible(const DesignLoss<double>& l) const { return soft_ || constraints_met(l); }
+  // The targets met at the optimization sampling (targets_met) by variables x, glasses `fixed`.
+  bool targets_ok(const std::vector<double>& x, const std::vector<int>& fixed) const {
+    return targets_met(param_, x, GlassMode::kFixed, fixed, options_.sampling, targets_);
+  }
   bool better(const DesignLoss<double>& a, const DesignLoss<double>& b) const {
     return soft_ ? a.total < b.total * (1 - 1e-4) : a.merit_value() < b.merit_value() * (1 - 1e-3);
   }
@@ -643,7 +876,21 @@ class LensOptimization {
                            const std::string& name, int rounds, int iterations,
                            double glass_weight_growth = 1.0) {
     return run_phase(param_, x, mode, fixed, frozen, options_, loss, name, rounds, iterations,
-                     counters_, glass_weight_growth);
+                     counters_, targets_, glass_weight_growth);
+  }
+
+  // The glass edge-thickness rows (EdgeBound) of `lens` (at its spec scale).
+  void add_edge_rows(ConstraintReport& report, const Lens& lens) const {
+    const EdgeBound& e = targets_.edges;
+    if (e.spaces.empty()) return;
+    const TraceLens<double> tl = scaled_trace_lens(lens);
+    for (std::size_t i = 0; i < e.spaces.size(); ++i) {
+      const int k = e.spaces[i];
+      const double v = glass_edge_mm(tl, k, e.heights_mm[i]);
+      report.rows.push_back(
+          {fmt::format("glass {}-{} edge at {:.3g} mm", k + 1, k + 2, e.heights_mm[i]), v,
+           e.min_edge_mm, true, v >= e.min_edge_mm});
+    }
   }
 
   // The start at full sampling.
@@ -657,6 +904,7 @@ class LensOptimization {
     for (const FieldReport& f : start_report.fields)
       result_.start_field_spot_um.push_back(f.rms_spot_um.value_or(0.0));
     result_.start_constraints = check_constraints(start_, options_.loss, full_.trace);
+    add_edge_rows(result_.start_constraints, start_);
     if (wavefront_) result_.start_wavefront_waves = full_wavefront_waves(start_, full_.trace);
   }
 
@@ -694,8 +942,13 @@ class LensOptimization {
     }
     if (!defocus_free) return;
     DesignLossOptions focus_loss = basin_loss();
-    const DesignLoss<double> f = phase(x_, GlassMode::kFixed, fixed_, all_but_defocus, focus_loss,
-                                       "focus", 1, options_.max_iterations);
+    // The merit alone (no target): a target that moves the image plane (total track, BFL) would
+    // otherwise defocus the start before any other variable can meet it; a --focus-only run
+    // holds its targets in the phases after this one.
+    TargetTerms no_targets;
+    const DesignLoss<double> f =
+        run_phase(param_, x_, GlassMode::kFixed, fixed_, all_but_defocus, options_, focus_loss,
+                  "focus", 1, options_.max_iterations, counters_, no_targets);
     result_.log.push_back(fmt::format("focus: {} (optimization sampling)", merit_text(f)));
   }
 
@@ -760,7 +1013,8 @@ class LensOptimization {
     const DesignLoss<double> b = phase(xc, GlassMode::kFixed, snapped, frozen_all_, snapped_loss,
                                        "snapped", options_.max_rounds, options_.max_iterations);
     result_.log.push_back(fmt::format("continuous then snapped: {}", merit_text(b)));
-    if (feasible(b) && (!feasible(best_) || better(b, best_))) {
+    if (feasible(b) && targets_ok(xc, snapped) &&
+        (!feasible(best_) || !targets_ok(x_, fixed_) || better(b, best_))) {
       x_ = xc;
       fixed_ = snapped;
       best_ = b;
@@ -801,7 +1055,7 @@ class LensOptimization {
           phase(trial_x, GlassMode::kFixed, trial_fixed, frozen_all_, trial_loss,
                 fmt::format("element {} as {}", m + 1, param_.glass_space().name(candidate)), 2,
                 std::max(10, options_.max_iterations / 3));
-      if (feasible(trial) && better(trial, best_)) {
+      if (feasible(trial) && targets_ok(trial_x, trial_fixed) && better(trial, best_)) {
         result_.log.push_back(fmt::format("element {}: {} -> {} ({})", m + 1,
                                           param_.glass_space().name(fixed_[m]),
                                           param_.glass_space().name(candidate), merit_text(trial)));
@@ -818,11 +1072,24 @@ class LensOptimization {
   // The lens of variables x with the phase's glasses, named and cataloged as the start.
   Lens result_lens(const std::vector<double>& x) const {
     Lens lens = param_.to_lens(x.data(), GlassMode::kFixed, fixed_);
+    if (options_.focus_only) {
+      // Refocused only: the start itself (at its spec scale) with the new image distance, its
+      // glasses as they are (not replaced by their catalog neighbours).
+      const double image_mm = lens.surfaces.back().thickness_mm;
+      const double scale = lens_spec_scale(start_);
+      lens = std::isfinite(scale) && scale > 0.0 && scale != 1.0 ? scaled(start_, scale) : start_;
+      lens.surfaces.back().thickness_mm = image_mm;
+      return lens;
+    }
     lens.name = start_.name;
     lens.source_path = start_.source_path;
     // The glasses are the glass space's catalog glasses: name that catalog, so the lens reads
     // back (a start with model glasses has none).
     if (!glass_indices_.empty()) lens.catalog_name = glass_catalog_for(start_);
+    // The clear apertures stay the start's (optimize_lens refuses a start they vignet; the
+    // constraint check counts the rays the result's apertures clip).
+    for (std::size_t k = 0; k < lens.surfaces.size(); ++k)
+      lens.surfaces[k].semi_diameter_mm = start_.surfaces[k].semi_diameter_mm;
     return lens;
   }
 
@@ -847,9 +1114,10 @@ class LensOptimization {
       return report;
     std::vector<double> x = x_;
     DesignLossOptions loss = loss_;
-    const DesignLoss<double> l = run_phase(param_, x, GlassMode::kFixed, fixed_, frozen_all_, dense,
-                                           loss, "feasibility at every constraint field",
-                                           options_.max_rounds, options_.max_iterations, counters_);
+    const DesignLoss<double> l =
+        run_phase(param_, x, GlassMode::kFixed, fixed_, frozen_all_, dense, loss,
+                  "feasibility at every constraint field", options_.max_rounds,
+                  options_.max_iterations, counters_, targets_);
     ConstraintReport dense_report = check_constraints(result_lens(x), options_.loss, full_.trace);
     const bool ok = dense_report.all_pass();
     result_.log.push_back(fmt::format(
@@ -867,6 +1135,7 @@ class LensOptimization {
     // be analysed; it is behind every start (an infinite merit below keeps the start).
     try {
       ConstraintReport final_constraints = restore_feasibility();
+      add_edge_rows(final_constraints, result_lens(x_));
       result_.lens = result_lens(x_);
       result_.lens.validate();
       const AnalysisReport final_report = analyze_lens(result_.lens, full_);
@@ -875,6 +1144,7 @@ class LensOptimization {
       for (const FieldReport& f : final_report.fields)
         result_.final_field_spot_um.push_back(f.rms_spot_um.value_or(0.0));
       result_.final_constraints = std::move(final_constraints);
+      result_.final_targets = check_targets(result_.lens, options_.targets, full_.trace);
       if (wavefront_)
         result_.final_wavefront_waves = full_wavefront_waves(result_.lens, full_.trace);
     } catch (const Error& e) {
@@ -888,18 +1158,34 @@ class LensOptimization {
     // that is not behind the result in this order is returned instead (a feasible start is never
     // traded for an infeasible result; an infeasible start only for a feasible result or a
     // smaller merit), whatever its glasses.
-    const bool start_ok = result_.start_constraints.all_pass();
-    const bool final_ok = result_.final_constraints.all_pass();
+    // The targets count with the constraints: the start here is the solved start (its efl_mm
+    // and f_number targets applied), measured as the result is.
+    const TargetReport solved_start_targets = check_targets(start_, options_.targets, full_.trace);
+    const bool start_ok = result_.start_constraints.all_pass() && solved_start_targets.all_pass();
+    const bool final_ok = result_.final_constraints.all_pass() && result_.final_targets.all_pass();
     const double start_merit = wavefront_ ? result_.start_wavefront_waves : result_.start_spot_um;
     const double final_merit = wavefront_ ? result_.final_wavefront_waves : result_.final_spot_um;
     const bool start_not_behind =
         (start_ok && !final_ok) || (start_ok == final_ok && !(final_merit < start_merit));
     if (start_not_behind || !std::isfinite(final_merit)) {
+      // Say why: the result's merit and what it fails.
+      std::string failing =
+          final_ok ? std::string() : failing_constraints(result_.final_constraints);
+      for (const TargetRow& r : result_.final_targets.rows)
+        if (!r.pass)
+          failing += fmt::format("{}target {} is {:.6g}", failing.empty() ? "" : "; ",
+                                 target_text(r.target), r.value);
+      result_.log.push_back(
+          fmt::format("the start is kept: the result (merit {:.6g}{}) is not "
+                      "ahead of it (merit {:.6g}{})",
+                      final_merit, failing.empty() ? "" : "; fails: " + failing, start_merit,
+                      start_ok ? "" : ", fails its own checks"));
       result_.lens = start_;
       result_.final_spot_um = result_.start_spot_um;
       result_.final_field_spot_um = result_.start_field_spot_um;
       result_.final_wavefront_waves = result_.start_wavefront_waves;
       result_.final_constraints = result_.start_constraints;
+      result_.final_targets = solved_start_targets;
       result_.kept_start = true;
     }
     for (const Surface& s : result_.lens.surfaces)
@@ -923,6 +1209,7 @@ class LensOptimization {
   bool search_ = false;
   DesignLossOptions loss_;
   std::vector<int> fixed_;  // the catalog glass of each element
+  TargetTerms targets_;     // the residual targets and their weight
   DesignLoss<double> best_;
   Counters counters_;
   OptimizeResult result_;
@@ -930,15 +1217,62 @@ class LensOptimization {
 
 }  // namespace
 
-OptimizeResult optimize_lens(const Lens& start, const OptimizeOptions& options) {
-  options.validate();
-  if (options.loss.merit != DesignMerit::kWavefront || options.loss.wavefront_unit_mm > 0.0)
-    return LensOptimization(start, options).run();
-  // The wavefront merit in mm (design_loss.h): the start's defocus unit, fixed for the run.
-  OptimizeOptions with_unit = options;
-  const double unit = wavefront_mm_per_wave(prepare_lens_system(start, options.sampling));
-  if (std::isfinite(unit) && unit > 0.0) with_unit.loss.wavefront_unit_mm = unit;
-  return LensOptimization(start, with_unit).run();
+namespace {
+
+// Refuses a start whose clear apertures (semi_diameter_mm) vignet rays: the design loss traces
+// unclipped pupils, so its merit would not be the merit analyze reports (header).
+void check_clear_apertures(const Lens& start, const AnalyzeOptions& full) {
+  bool any = false;
+  for (const Surface& s : start.surfaces) any = any || s.semi_diameter_mm > 0.0;
+  if (!any) return;
+  const AnalysisReport report = analyze_lens(start, full);
+  if (report.vignetted_rays == 0) return;
+  std::string where;
+  for (std::size_t k = 0; k < report.vignetted_by_surface.size(); ++k)
+    if (report.vignetted_by_surface[k] > 0)
+      where +=
+          fmt::format("{}surface {} (semi_diameter_mm = {:g}: {} rays)", where.empty() ? "" : ", ",
+                      k + 1, start.surfaces[k].semi_diameter_mm, report.vignetted_by_surface[k]);
+  throw Error(SourceLocation{start.source_path},
+              fmt::format("the clear apertures vignet {} rays of the start ({}); the optimizer "
+                          "traces unclipped pupils and would optimize rays that analyze drops. "
+                          "Remove semi_diameter_mm from those surfaces (or enlarge it), or "
+                          "describe the vignetted pupil with [system] vignetting factors "
+                          "(vdy, vcy), and run again",
+                          report.vignetted_rays, where));
+}
+
+}  // namespace
+
+OptimizeResult optimize_lens(const Lens& given_start, const OptimizeOptions& given_options) {
+  given_options.validate();
+  // The targets: the caller's, the default efl_mm of an as-written lens; the solved ones
+  // (efl_mm, f_number) applied to the start (targets.h).
+  check_target_fields(given_start, given_options.targets);
+  OptimizeOptions options = given_options;
+  options.targets = targets_with_defaults(given_start, given_options.targets);
+  const Lens start = apply_target_solves(given_start, options.targets);
+  const AnalyzeOptions full;
+  check_clear_apertures(start, full);
+  const TargetReport start_targets = check_targets(given_start, options.targets, full.trace);
+  std::vector<std::string> solve_log;
+  const double f0 = design_focal_length_mm(given_start), f1 = design_focal_length_mm(start);
+  if (f0 != f1)
+    solve_log.push_back(fmt::format(
+        "focal length: the start is scaled from {:.6g} mm to the target {:.6g} mm", f0, f1));
+  if (start.specs.f_number != given_start.specs.f_number ||
+      start.specs.aperture_value != given_start.specs.aperture_value)
+    solve_log.push_back(
+        fmt::format("aperture: F-number {:.6g} (EPD = f / N)", start.specs.f_number));
+  if (options.loss.merit == DesignMerit::kWavefront && !(options.loss.wavefront_unit_mm > 0.0)) {
+    // The wavefront merit in mm (design_loss.h): the start's defocus unit, fixed for the run.
+    const double unit = wavefront_mm_per_wave(prepare_lens_system(start, options.sampling));
+    if (std::isfinite(unit) && unit > 0.0) options.loss.wavefront_unit_mm = unit;
+  }
+  OptimizeResult result = LensOptimization(start, options).run();
+  result.start_targets = start_targets;
+  result.log.insert(result.log.begin(), solve_log.begin(), solve_log.end());
+  return result;
 }
 
 AdamResult adam_on_design_loss(const LensParameterization& param, std::vector<double> x,

@@ -30,6 +30,7 @@
 #include "lensopt/core/error.h"
 #include "lensopt/lens/lens.h"
 #include "lensopt/optimize/design_loss.h"
+#include "lensopt/optimize/targets.h"
 #include "lensopt/optimize/variables.h"
 
 namespace lensopt {
@@ -48,6 +49,11 @@ struct OptimizeOptions {
   // Surface-profile variables added to the lens's own ("k3", "a4_3": conic of surface 3, its a4);
   // variables.h normalizes them. Profile terms not named keep the start's values.
   std::vector<std::string> vary;
+  // The designer's targets (optimize/targets.h): [[optimize.targets]] and --target. The
+  // as-written mode adds the default efl_mm = the lens's own EFL (targets_with_defaults).
+  std::vector<DesignTarget> targets;
+  // Refocus only: every variable but the defocus (the last thickness) held.
+  bool focus_only = false;
   int max_iterations = 50;  // LM iterations per round
   int max_rounds = 4;       // reweighting rounds per phase
   bool soft_start = true;   // strict constraints: run the paper's soft penalties first
@@ -83,6 +89,9 @@ struct OptimizeResult {
   // sampling (the lens's spec mode, 32 x 32 pupil grid); 0 with the spot merit.
   double start_wavefront_waves = 0, final_wavefront_waves = 0;
   ConstraintReport start_constraints, final_constraints;
+  // The targets (with the default efl_mm of an as-written lens) on the start as given and on the
+  // result, at full sampling.
+  TargetReport start_targets, final_targets;
   std::vector<std::string> glasses;  // per element
   int iterations = 0;                // LM iterations, all phases
   int loss_evaluations = 0;          // residual evaluations (with or without Jacobian)
@@ -141,8 +150,10 @@ bool is_paper_lens(const Lens& lens);
 //   max glass     = max(s * paper, 1.5 * start's thickest glass)
 //   min clearance = min(s * paper, 0.75 * start's image clearance)   (from the start's BFL)
 //   max ray angle = max(paper, start's largest angle + 2 deg), at most 85 deg
-// so the start itself meets them; the weights and the rest of `paper` are kept. A start whose
-// rays fail (no extremes) gets s * paper.
+// so the start itself meets them; the weights and the rest of `paper` are kept. The extremes are
+// those of the rays that trace (a failed ray counts up to its failing surface); a start with a
+// glass or air space that no ray crosses has no bound to derive from: Error, naming the space
+// and what to give instead (the bounds, or --bounds paper), never a silent fallback.
 DesignLossOptions lens_derived_bounds(const Lens& lens, const DesignLossOptions& paper);
 
 // The bounds `mode` selects for a lens (kAuto: the paper's for is_paper_lens, else derived).
@@ -173,6 +184,9 @@ struct OptimizeOverrides {
   std::vector<std::string> freeze;               // added to the [optimize] table's
   std::optional<std::vector<std::string>> vary;  // replaces the [optimize] table's
   std::optional<bool> soft_start;
+  // Added to the [optimize] table's targets; one of the same quantity and field replaces it.
+  std::vector<DesignTarget> targets;
+  std::optional<bool> focus_only;
   std::optional<int> rings, fields, threads, max_iterations, max_rounds, glass_neighbours;
   std::optional<double> weight_ray_path, weight_ray_angle, weight_glass;
   std::optional<double> min_air_mm, min_glass_mm, max_glass_mm, min_image_clearance_mm,
@@ -187,8 +201,9 @@ struct ResolvedOptimizeOptions {
 
 // The options of optimizing `lens`, in this order: OptimizeOptions' defaults; the bounds
 // `overrides.bounds` selects (bounds_for: the paper's for the paper's lenses, else derived from
-// the lens); the lens file's [optimize] table (its TOML source, else Lens::extra_toml; Error with
-// file:line:column for a bad key); then every override that is set. Validated.
+// the lens, with the solved targets applied: apply_target_solves); the lens file's [optimize] table
+// (its TOML source, else Lens::extra_toml; Error with file:line:column for a bad key); then every
+// override that is set. Validated.
 ResolvedOptimizeOptions resolve_optimize_options(const Lens& lens,
                                                  const OptimizeOverrides& overrides);
 

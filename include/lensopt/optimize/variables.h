@@ -142,9 +142,18 @@ class LensParameterization {
     lens.nd.assign(k_count, K<T>(1.0));
     lens.vd.assign(k_count, K<T>(0.0));
     lens.is_glass.assign(k_count, 0);
-    for (int k = 0; k < k_count; ++k)
-      lens.is_glass[k] = trace_glass_kind(structure_.surfaces[k].material);
+    // A quantized or fixed glass is the catalog glass to_lens writes, traced as make_trace_lens
+    // traces a catalog glass (the paper's model, plus the catalog correction): a .zmx model glass
+    // of the structure keeps OpticStudio's model only as a continuous glass. (Tracing the
+    // structure's model here held the start's EFL to 1.6e-7 relative on the AC254-100, not
+    // exactly.)
+    const bool catalog_glasses = mode != GlassMode::kContinuous;
     for (int k = 0; k < k_count; ++k) {
+      const Material& m = structure_.surfaces[k].material;
+      lens.is_glass[k] = catalog_glasses && !m.is_air() ? static_cast<char>(ModelGlass::kPaper)
+                                                        : trace_glass_kind(m);
+    }
+    for (int k = 0; k < k_count && !catalog_glasses; ++k) {
       const Material& m = structure_.surfaces[k].material;
       if (m.kind != Material::Kind::kModel || m.model_glass != ModelGlass::kZemax || m.dpgf == 0.0)
         continue;

@@ -1,0 +1,348 @@
+// The designer's targets (optimize/targets.h).
+#include "lensopt/optimize/targets.h"
+
+#include <fmt/format.h>
+
+#include <cctype>
+#include <cmath>
+#include <limits>
+
+#include "lensopt/core/error.h"
+
+namespace lensopt {
+namespace {
+
+struct QuantityName {
+  TargetQuantity quantity;
+  const char* name;
+};
+constexpr QuantityName kQuantityNames[] = {
+    {TargetQuantity::kEflMm, "efl_mm"},
+    {TargetQuantity::kFNumber, "f_number"},
+    {TargetQuantity::kTotalTrackMm, "total_track_mm"},
+    {TargetQuantity::kBflMm, "bfl_mm"},
+    {TargetQuantity::kDistortionPercent, "distortion_percent"},
+    {TargetQuantity::kRelativeIllumination, "relative_illumination"},
+    {TargetQuantity::kRmsSpotUm, "rms_spot_um"},
+    {TargetQuantity::kRmsWavefrontWaves, "rms_wavefront_waves"},
+};
+
+std::string trimmed(const std::string& s) {
+  std::size_t a = 0, b = s.size();
+  while (a < b && std::isspace(static_cast<unsigned char>(s[a]))) ++a;
+  while (b > a && std::isspace(static_cast<unsigned char>(s[b - 1]))) --b;
+  return s.substr(a, b - a);
+}
+
+double parse_number(const std::string& text, const std::string& what, const SourceLocation& where) {
+  const std::string t = trimmed(text);
+  std::size_t used = 0;
+  double v = 0.0;
+  try {
+    v = std::stod(t, &used);
+  } catch (const std::exception&) {
+    used = 0;
+  }
+  if (t.empty() || used != t.size() || !std::isfinite(v))
+    throw Error(where, fmt::format("target: {} '{}' is not a finite number", what, t));
+  return v;
+}
+
+const char* relation_text(TargetRelation r) {
+  switch (r) {
+    case TargetRelation::kEqual:
+      return "=";
+    case TargetRelation::kAtMost:
+      return "<=";
+    case TargetRelation::kAtLeast:
+      return ">=";
+  }
+  return "?";
+}
+
+}  // namespace
+
+const char* target_quantity_name(TargetQuantity q) {
+  for (const QuantityName& n : kQuantityNames)
+    if (n.quantity == q) return n.name;
+  return "?";
+}
+
+const char* target_quantity_names() {
+  return "efl_mm, f_number, total_track_mm, bfl_mm, distortion_percent, relative_illumination, "
+         "rms_spot_um, rms_wavefront_waves";
+}
+
+TargetQuantity parse_target_quantity(const std::string& name, const SourceLocation& where) {
+  for (const QuantityName& n : kQuantityNames)
+    if (name == n.name) return n.quantity;
+  throw Error(
+      where, fmt::format("unknown target quantity '{}'; known: {}", name, target_quantity_names()));
+}
+
+std::string target_text(const DesignTarget& t) {
+  std::string out = target_quantity_name(t.quantity);
+  if (t.field > 0) out += fmt::format("[field {}]", t.field);
+  out += fmt::format(" {} {:g}", relation_text(t.relation), t.value);
+  if (t.weight != 1.0 && !target_is_solved(t.quantity))
+    out += fmt::format(" (weight {:g})", t.weight);
+  if (t.is_default) out += " (the lens's own)";
+  return out;
+}
+
+void validate_target(const DesignTarget& t, const SourceLocation& where) {
+  const std::string name = target_quantity_name(t.quantity);
+  if (!std::isfinite(t.value))
+    throw Error(where, fmt::format("target {}: the value must be a finite number", name));
+  if (!(t.weight > 0.0) || !std::isfinite(t.weight))
+    throw Error(where,
+                fmt::format("target {}: weight = {} must be a finite number > 0", name, t.weight));
+  if (t.field < 0)
+    throw Error(where, fmt::format("target {}: field = {} must be >= 1", name, t.field));
+  if (t.field > 0 && !target_per_field(t.quantity))
+    throw Error(where, fmt::format("target {}: a whole-lens quantity has no field (fields apply "
+                                   "to distortion_percent, relative_illumination, rms_spot_um, "
+                                   "rms_wavefront_waves)",
+                                   name));
+  if ((t.quantity == TargetQuantity::kEflMm || t.quantity == TargetQuantity::kFNumber) &&
+      !(t.value > 0.0))
+    throw Error(where, fmt::format("target {} = {:g}: must be > 0", name, t.value));
+  if (t.quantity == TargetQuantity::kFNumber && t.value < 0.5)
+    throw Error(where, fmt::format("target f_number = {:g}: an F-number below 0.5 is not a lens "
+                                   "in air (n sin U <= 1)",
+                                   t.value));
+}
+
+DesignTarget parse_target(const std::string& text, const SourceLocation& where) {
+  // NAME OP VALUE [, key=value ...]
+  std::vector<std::string> parts;
+  std::size_t start = 0;
+  for (std::size_t i = 0; i <= text.size(); ++i) {
+    if (i == text.size() || text[i] == ',') {
+      parts.push_back(trimmed(text.substr(start, i - start)));
+      start = i + 1;
+    }
+  }
+  const std::string& head = parts[0];
+  std::size_t op = head.find_first_of("<>=");
+  if (op == std::string::npos || op == 0)
+    throw Error(where, fmt::format("target '{}': write NAME=VALUE, NAME<=VALUE or NAME>=VALUE "
+                                   "(e.g. efl_mm=100, \"distortion_percent<=1\"), optionally "
+                                   "followed by ,weight=W ,field=N; quantities: {}",
+                                   text, target_quantity_names()));
+  DesignTarget t;
+  t.where = where.file.empty() ? std::string("--target") : where.file;
+  t.quantity = parse_target_quantity(trimmed(head.substr(0, op)), where);
+  std::string rest = head.substr(op);
+  if (rest.rfind("<=", 0) == 0) {
+    t.relation = TargetRelation::kAtMost;
+    rest = rest.substr(2);
+  } else if (rest.rfind(">=", 0) == 0) {
+    t.relation = TargetRelation::kAtLeast;
+    rest = rest.substr(2);
+  } else if (rest.rfind("==", 0) == 0) {
+    rest = rest.substr(2);
+  } else if (rest[0] == '=') {
+    rest = rest.substr(1);
+  } else {
+    throw Error(where, fmt::format("target '{}': the relation must be =, <= or >= (a strict < or "
+                                   "> is not a target a design can be held to)",
+                                   text));
+  }
+  t.value = parse_number(rest, "value", where);
+  for (std::size_t i = 1; i < parts.size(); ++i) {
+    const std::size_t eq = parts[i].find('=');
+    const std::string key = trimmed(parts[i].substr(0, eq));
+    if (eq == std::string::npos || (key != "weight" && key != "field"))
+      throw Error(where,
+                  fmt::format("target '{}': '{}' must be weight=W or field=N", text, parts[i]));
+    const double v = parse_number(parts[i].substr(eq + 1), key, where);
+    if (key == "weight") {
+      t.weight = v;
+    } else {
+      if (v != std::floor(v) || v < 1 || v > 1e6)
+        throw Error(where,
+                    fmt::format("target '{}': field = {:g} must be a field number >= 1", text, v));
+      t.field = static_cast<int>(v);
+    }
+  }
+  validate_target(t, where);
+  return t;
+}
+
+std::vector<DesignTarget> targets_with_defaults(const Lens& lens,
+                                                const std::vector<DesignTarget>& given) {
+  std::vector<DesignTarget> out = given;
+  bool has_efl = false;
+  for (const DesignTarget& t : given) has_efl = has_efl || t.quantity == TargetQuantity::kEflMm;
+  if (!has_efl && lens.specs.mode == SpecMode::kAsWritten) {
+    const double f = design_focal_length_mm(lens);
+    if (std::isfinite(f) && f > 0.0) {
+      DesignTarget t;
+      t.quantity = TargetQuantity::kEflMm;
+      t.value = f;
+      t.is_default = true;
+      t.where = "the lens's own focal length";
+      out.insert(out.begin(), t);
+    }
+  }
+  return out;
+}
+
+void check_target_fields(const Lens& lens, const std::vector<DesignTarget>& targets) {
+  const bool written = lens.specs.mode != SpecMode::kPaper && !lens.specs.fields.empty();
+  int count = 0;
+  if (written) {
+    // The distinct radial field values, as lens_setup traces them.
+    std::vector<double> values;
+    for (const FieldPoint& f : lens.specs.fields) values.push_back(std::abs(f.value));
+    std::sort(values.begin(), values.end());
+    values.erase(std::unique(values.begin(), values.end()), values.end());
+    count = static_cast<int>(values.size());
+  }
+  for (const DesignTarget& t : targets) {
+    if (t.field == 0) continue;
+    if (!written)
+      throw Error(SourceLocation{t.where},
+                  fmt::format("target {}: the lens has no written fields to number (a lens in "
+                              "the paper's spec mode samples 0..hfov at the optimization's "
+                              "count); drop the field (a bound then holds at every field)",
+                              target_text(t)));
+    if (t.field > count)
+      throw Error(SourceLocation{t.where},
+                  fmt::format("target {}: the lens has {} field{}", target_text(t), count,
+                              count == 1 ? "" : "s"));
+  }
+}
+
+Lens apply_target_solves(const Lens& lens, const std::vector<DesignTarget>& targets) {
+  Lens out = lens;
+  // efl_mm first (the F-number's EPD follows the focal length).
+  for (const DesignTarget& t : targets) {
+    if (t.quantity != TargetQuantity::kEflMm || t.is_default) continue;
+    const double f = design_focal_length_mm(out);
+    if (!(std::isfinite(f) && f > 0.0))
+      throw Error(SourceLocation{t.where},
+                  fmt::format("target {}: the lens's focal length is {:g} mm; only lenses of "
+                              "positive power can be scaled to a focal length yet",
+                              target_text(t), f));
+    double goal = f;
+    if (t.relation == TargetRelation::kEqual) goal = t.value;
+    if (t.relation == TargetRelation::kAtMost) goal = std::min(f, t.value);
+    if (t.relation == TargetRelation::kAtLeast) goal = std::max(f, t.value);
+    if (out.specs.mode == SpecMode::kPaper) {
+      // The paper's spec focal length is d / (2 tan hfov): the sensor diagonal follows it.
+      out.specs.sensor_diagonal_mm = 2.0 * goal * std::tan(out.specs.half_field_deg * kPi / 180.0);
+    } else if (goal != f) {
+      out = scaled(out, goal / f);
+    }
+  }
+  for (const DesignTarget& t : targets) {
+    if (t.quantity != TargetQuantity::kFNumber) continue;
+    const double f = design_focal_length_mm(out);
+    double current = out.specs.f_number;
+    if (out.specs.mode != SpecMode::kPaper) {
+      const TraceSystem<double> sys = prepare_lens_system(out, TraceOptions{});
+      current = sys.efl_mm / sys.epd_mm;
+    }
+    double goal = current;
+    if (t.relation == TargetRelation::kEqual) goal = t.value;
+    if (t.relation == TargetRelation::kAtMost) goal = std::min(current, t.value);
+    if (t.relation == TargetRelation::kAtLeast) goal = std::max(current, t.value);
+    if (out.specs.mode == SpecMode::kPaper) {
+      out.specs.f_number = goal;
+    } else if (out.specs.aperture_type == ApertureType::kFNumber) {
+      out.specs.f_number = goal;  // EPD = EFL / N already
+    } else if (goal != current) {
+      // The pickup EPD = f / N (held with the focal length).
+      out.specs.aperture_type = ApertureType::kEntrancePupilDiameter;
+      out.specs.aperture_value = f / goal;
+      out.specs.f_number = goal;
+    }
+  }
+  return out;
+}
+
+int target_residual_count(const std::vector<DesignTarget>& targets, int field_count) {
+  int n = 0;
+  for (const DesignTarget& t : targets) n += target_residual_count(t, field_count);
+  return n;
+}
+
+double target_unit_mm(TargetQuantity q, double focal_length_mm, double wave_unit_mm) {
+  switch (q) {
+    case TargetQuantity::kEflMm:
+    case TargetQuantity::kTotalTrackMm:
+    case TargetQuantity::kBflMm:
+      return 1.0;
+    case TargetQuantity::kFNumber:
+      return focal_length_mm / 100.0;
+    case TargetQuantity::kDistortionPercent:
+      return focal_length_mm / 100.0;
+    case TargetQuantity::kRelativeIllumination:
+      return focal_length_mm;
+    case TargetQuantity::kRmsSpotUm:
+      return 1e-3;
+    case TargetQuantity::kRmsWavefrontWaves:
+      return wave_unit_mm > 0.0 ? wave_unit_mm : 1e-3;
+  }
+  return 1.0;
+}
+
+bool target_passes(const DesignTarget& t, double value) {
+  if (!std::isfinite(value)) return false;
+  switch (t.relation) {
+    case TargetRelation::kEqual:
+      return std::abs(value - t.value) <= target_tolerance(t);
+    case TargetRelation::kAtMost:
+      return value <= t.value;
+    case TargetRelation::kAtLeast:
+      return value >= t.value;
+  }
+  return false;
+}
+
+bool TargetReport::all_pass() const {
+  for (const TargetRow& r : rows)
+    if (!r.pass) return false;
+  return true;
+}
+
+TargetReport check_targets(const Lens& lens, const std::vector<DesignTarget>& targets,
+                           const TraceOptions& sampling) {
+  TargetReport report;
+  if (targets.empty()) return report;
+  TargetValues<double> values;
+  bool traced = true;
+  try {
+    const TraceSystem<double> sys = prepare_lens_system(lens, sampling);
+    TargetSampling ts;
+    ts.wavefront_grid = make_pupil_grid(32);
+    ts.threads = sampling.threads;
+    values = measure_targets(sys, targets, ts);
+  } catch (const Error&) {
+    traced = false;
+  }
+  for (std::size_t i = 0; i < targets.size(); ++i) {
+    TargetRow row;
+    row.target = targets[i];
+    double v = std::numeric_limits<double>::quiet_NaN();
+    if (traced) {
+      bool known = false;
+      for (char k : values.item_known[i]) known = known || k;
+      if (known) v = values.value[i];
+    }
+    row.value = v;
+    row.pass = target_passes(row.target, v);
+    // A per-field bound holds at every known field (the value is the worst of them).
+    if (traced && row.pass && values.items[i].size() > 1) {
+      for (std::size_t j = 0; j < values.items[i].size(); ++j)
+        if (values.item_known[i][j] && !target_passes(row.target, values.items[i][j]))
+          row.pass = false;
+    }
+    report.rows.push_back(row);
+  }
+  return report;
+}
+
+}  // namespace lensopt
