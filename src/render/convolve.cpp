@@ -13,8 +13,8 @@
 #include "lensopt/core/threads.h"
 #include "lensopt/render/metrics.h"
 #include "lensopt/render/render.h"
-#include "render/metrics_views.h"
 #include "render/huge_pages.h"
+#include "render/metrics_views.h"
 #include "render/overlap_add.h"
 
 namespace lensopt {
@@ -67,7 +67,8 @@ std::shared_ptr<Renderer::GridEntry> Renderer::entry(int width, int height) cons
 
   // Kernel spectra, once per image size, if they fit the budget.
   const int tasks = PsfGrid::kPatches * PsfGrid::kPatches * kColourChannels;
-  const std::size_t spectrum_bytes = sizeof(std::complex<double>) * static_cast<std::size_t>(e->ny) *
+  const std::size_t spectrum_bytes = sizeof(std::complex<double>) *
+                                     static_cast<std::size_t>(e->ny) *
                                      static_cast<std::size_t>(e->nx / 2 + 1);
   if (spectrum_bytes * tasks <= kSpectraBudgetBytes) {
     e->spectra.resize(tasks);
@@ -167,8 +168,8 @@ void Renderer::blur_into(const FloatImage& input, FloatImage& out, int nthreads)
                              hi_y - lo_y + 2 * e->pad, *buffers);
         convolve_loaded_block(k, *buffers);
         add_windowed_block(*buffers, e->pad, lo_x, hi_x, lo_y, hi_y, e->window_x[px],
-                           e->window_y[py], acc + c, static_cast<std::size_t>(width) * channels,
-                           0, 0, static_cast<std::size_t>(channels));
+                           e->window_y[py], acc + c, static_cast<std::size_t>(width) * channels, 0,
+                           0, static_cast<std::size_t>(channels));
       }  // the omp for's barrier ends the phase
     }
     buffer_pool_->release(std::move(buffers));
@@ -183,21 +184,40 @@ FloatImage Renderer::blur(const FloatImage& input, int threads) const {
 }
 
 RenderResult Renderer::render(const FloatImage& input, int threads) const {
+  return render_impl(input, nullptr, threads);
+}
+
+RenderResult Renderer::render(FloatImage&& input, int threads) const {
+  return render_impl(input, &input, threads);
+}
+
+RenderResult Renderer::render_impl(const FloatImage& input, FloatImage* reuse, int threads) const {
   if (input.empty()) throw Error("cannot render an empty image");
   const int nthreads = thread_count(threads > 0 ? threads : options_.threads);
   RenderResult result;
   result.colour_channels = colour_channel_count(input.channels);
   const int width = input.width, height = input.height, colours = result.colour_channels;
   // Blur into one image the size of the input; the metrics compare it with the input; the
-  // relative illumination dims it in place; the warp reads it and writes the output. At most
-  // three images of the input's size are alive at once (input, blurred, warped).
+  // relative illumination dims it in place; the warp reads it and writes the output (into the
+  // input's memory when the caller gives it up). At most three images of the input's size are
+  // alive at once (input, blurred, warped), two when the input's memory is reused.
   FloatImage blurred;
   blur_into(input, blurred, nthreads);
   const ChannelView view = ChannelView::of(blurred);
   result.psnr_db = psnr_db(ChannelView::of(input), view, width, height, colours, nthreads);
   result.ssim = ssim(ChannelView::of(input), view, width, height, colours, nthreads);
   if (options_.relative_illumination) apply_relative_illumination(blurred, nthreads);
-  result.image = options_.distortion ? apply_distortion(blurred, nthreads) : std::move(blurred);
+  if (!options_.distortion) {
+    result.image = std::move(blurred);
+    return result;
+  }
+  FloatImage out;
+  if (reuse) {
+    out.pixels = std::move(reuse->pixels);  // the input is not read any more
+    *reuse = FloatImage();
+  }
+  warp_into(blurred, out, nthreads);
+  result.image = std::move(out);
   return result;
 }
 

@@ -28,7 +28,7 @@ struct OverlapAddBuffers {
   FftPlans plans;
   RealBuffer real;
   ComplexBuffer spectrum;
-  std::vector<int> reflect_x;  // scratch: reflected columns of the block being loaded
+  std::vector<int> reflect_x;                // scratch: reflected columns of the block being loaded
   std::vector<std::complex<double>> kernel;  // scratch: a kernel spectrum made for one block
 
   OverlapAddBuffers(int ny, int nx);

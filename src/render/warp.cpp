@@ -149,16 +149,24 @@ void Renderer::apply_relative_illumination(FloatImage& image, int threads) const
 }
 
 FloatImage Renderer::apply_distortion(const FloatImage& image, int threads) const {
+  FloatImage out;
+  warp_into(image, out, thread_count(threads > 0 ? threads : options_.threads));
+  return out;
+}
+
+void Renderer::warp_into(const FloatImage& image, FloatImage& out, int nthreads) const {
   const int width = image.width, height = image.height, channels = image.channels;
   const std::shared_ptr<const std::vector<float>> map = warp_map(width, height);
   const SensorGeometry geo =
       SensorGeometry::make(width, height, options_.res_factor, model_.sensor_diagonal_mm);
-  FloatImage out;
   out.width = width;
   out.height = height;
   out.channels = channels;
-  resize_with_huge_pages(out.pixels, static_cast<std::size_t>(width) * height * channels);
-#pragma omp parallel num_threads(thread_count(threads > 0 ? threads : options_.threads))
+  // warp_row writes every value (black where the source is outside): memory of the right size
+  // is reused as it is.
+  const std::size_t values = static_cast<std::size_t>(width) * height * channels;
+  if (out.pixels.size() != values) resize_with_huge_pages(out.pixels, values);
+#pragma omp parallel num_threads(nthreads)
   {
     std::vector<float> row(map ? 0 : static_cast<std::size_t>(width) * 2);
 #pragma omp for schedule(static)
@@ -188,7 +196,6 @@ FloatImage Renderer::apply_distortion(const FloatImage& image, int threads) cons
       }
     }
   }
-  return out;
 }
 
 }  // namespace lensopt

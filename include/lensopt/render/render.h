@@ -223,6 +223,9 @@ class Renderer {
 
   // The whole pipeline. `threads` > 0 overrides options().threads for this call.
   RenderResult render(const FloatImage& input, int threads = 0) const;
+  // The same, taking the input's memory for the output once the metrics have read it: two
+  // images of the input's size alive at once instead of three (the same values).
+  RenderResult render(FloatImage&& input, int threads = 0) const;
 
   // The steps, for tests and export.
   FloatImage blur(const FloatImage& input, int threads = 0) const;
@@ -234,6 +237,11 @@ class Renderer {
   std::shared_ptr<GridEntry> entry(int width, int height) const;
   // `out` = `input` with its colour channels (R, G, B or grey) blurred.
   void blur_into(const FloatImage& input, FloatImage& out, int nthreads) const;
+  // render(); `reuse` (if not null, possibly `input` itself) gives its memory to the output after
+  // the metrics.
+  RenderResult render_impl(const FloatImage& input, FloatImage* reuse, int threads) const;
+  // apply_distortion into `out` (its memory reused when it has the size).
+  void warp_into(const FloatImage& image, FloatImage& out, int nthreads) const;
   // Per pixel of a W x H image: the relative-illumination factor; the warp's source offset
   // (x, y interleaved, pixels; NaN where the source is outside the image). Cached per image size
   // while they take at most kMapBudgetBytes; null above (a 4K image's would take 100 MB), and
