@@ -94,7 +94,7 @@ void bind_render(py::module_& m) {
             RenderResult result;
             {
               py::gil_scoped_release release;
-              result = r.renderer->render(input);
+              result = r.renderer->render(std::move(input));
             }
             return numpy_of(std::move(result.image));
           },

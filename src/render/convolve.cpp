@@ -13,24 +13,36 @@
 #include "lensopt/core/threads.h"
 #include "lensopt/render/metrics.h"
 #include "lensopt/render/render.h"
+#include "render/huge_pages.h"
 #include "render/metrics_views.h"
 #include "render/overlap_add.h"
 
 namespace lensopt {
+namespace {
+
+// The kernel spectra of one image size are cached when they take at most this much memory
+// (1280 x 720: 56 MB); above it (a 4K image's would take 360 MB) each block transforms its kernel
+// again (one more FFT per block), so memory does not grow with the image beyond the images.
+constexpr std::size_t kSpectraBudgetBytes = std::size_t{96} << 20;
+
+}  // namespace
+
 // Everything a render of one image size needs beyond the PSF grid: windows, patch extents, one
 // FFT size for every block (the widest window plus the largest PSF radius on each side), and the
-// kernels' spectra K^ (render/overlap_add.h).
+// kernels' spectra K^ (render/overlap_add.h) when they fit kSpectraBudgetBytes (else empty).
 struct Renderer::GridEntry {
   std::shared_ptr<const PsfGrid> grid;
   int pad = 0;
   std::vector<std::vector<double>> window_x, window_y;  // [patch][pixel]
   std::vector<int> lo_x, hi_x, lo_y, hi_y;              // window extents in the image
   int nx = 0, ny = 0;
-  std::vector<std::vector<std::complex<double>>> spectra;  // [patch * 3 + channel]
+  std::vector<std::vector<std::complex<double>>> spectra;  // [patch * 3 + channel] or empty
 };
 
 Renderer::Renderer(ImagingModel model, RenderOptions options)
-    : model_(std::move(model)), options_(options) {
+    : model_(std::move(model)),
+      options_(options),
+      buffer_pool_(std::make_unique<OverlapAddPool>()) {
   options_.validate();
   if (options_.relative_illumination) require_relative_illumination(model_);
 }
@@ -53,16 +65,22 @@ std::shared_ptr<Renderer::GridEntry> Renderer::entry(int width, int height) cons
   e->nx = fft_size(widest_x + 2 * e->pad);
   e->ny = fft_size(widest_y + 2 * e->pad);
 
-  // Kernel spectra, once per image size.
+  // Kernel spectra, once per image size, if they fit the budget.
   const int tasks = PsfGrid::kPatches * PsfGrid::kPatches * kColourChannels;
-  e->spectra.resize(tasks);
+  const std::size_t spectrum_bytes = sizeof(std::complex<double>) *
+                                     static_cast<std::size_t>(e->ny) *
+                                     static_cast<std::size_t>(e->nx / 2 + 1);
+  if (spectrum_bytes * tasks <= kSpectraBudgetBytes) {
+    e->spectra.resize(tasks);
 #pragma omp parallel num_threads(thread_count(options_.threads))
-  {
-    OverlapAddBuffers buffers(e->ny, e->nx);
+    {
+      std::unique_ptr<OverlapAddBuffers> buffers = buffer_pool_->acquire(e->ny, e->nx);
 #pragma omp for schedule(dynamic, 1)
-    for (int t = 0; t < tasks; ++t) {
-      const PixelKernel& k = grid->kernels[t / kColourChannels][t % kColourChannels];
-      kernel_spectrum(k.values.data(), k.radius, buffers, e->spectra[t]);
+      for (int t = 0; t < tasks; ++t) {
+        const PixelKernel& k = grid->kernels[t / kColourChannels][t % kColourChannels];
+        kernel_spectrum(k.values.data(), k.radius, *buffers, e->spectra[t]);
+      }
+      buffer_pool_->release(std::move(buffers));
     }
   }
   grids_.insert(width, height, e);
@@ -73,12 +91,11 @@ std::shared_ptr<const PsfGrid> Renderer::psf_grid(int width, int height) const {
   return entry(width, height)->grid;
 }
 
-std::vector<float> Renderer::blur_planes(const FloatImage& input, int nthreads) const {
+void Renderer::blur_into(const FloatImage& input, FloatImage& out, int nthreads) const {
   const std::shared_ptr<GridEntry> e = entry(input.width, input.height);
   const PsfGrid& grid = *e->grid;
-  const int width = input.width, height = input.height;
-  const int colours = colour_channel_count(input.channels);
-  const std::size_t plane = static_cast<std::size_t>(width) * height;
+  const int width = input.width, height = input.height, channels = input.channels;
+  const int colours = colour_channel_count(channels);
   constexpr int n = PsfGrid::kPatches;
   // Deterministic overlap-add: the patches are added in four phases by the parity of (px, py).
   // A window reaches at most (1 + kOverlap) / 2 < 1 patch width from its centre, so two patches
@@ -104,29 +121,28 @@ std::vector<float> Renderer::blur_planes(const FloatImage& input, int nthreads) 
     for (int q = 0; q < n * n; ++q) phases[q] = {q};
   }
 
-  // The colour planes extended by symmetric reflection by the pad on each side (the pad is at
-  // most the image's size: check_image_holds_psf), so that each block is a contiguous copy.
-  const int pad = e->pad;
-  const int padded_w = width + 2 * pad, padded_h = height + 2 * pad;
-  const std::size_t padded_plane = static_cast<std::size_t>(padded_w) * padded_h;
-  std::vector<float> padded(padded_plane * colours);
-  std::vector<int> source_x(padded_w);
-  for (int i = 0; i < padded_w; ++i) source_x[i] = reflect_index(i - pad, width) * input.channels;
-  std::vector<float> acc(plane * colours, 0.0f);
+  // The accumulator is the output image itself (interleaved, its colour channels zeroed, other
+  // channels copied): no plane of the image's size beside the input and the output. Its huge
+  // pages are advised before the first touch (render/huge_pages.h).
+  const std::size_t values = static_cast<std::size_t>(width) * height * channels;
+  out.width = width;
+  out.height = height;
+  out.channels = channels;
+  resize_with_huge_pages(out.pixels, values);
+  float* acc = out.pixels.data();
+  const float* in = input.pixels.data();
 #pragma omp parallel num_threads(nthreads)
   {
+    if (colours != channels) {
 #pragma omp for schedule(static)
-    for (int j = 0; j < padded_h; ++j) {
-      const float* src =
-          input.pixels.data() +
-          static_cast<std::size_t>(reflect_index(j - pad, height)) * width * input.channels;
-      for (int c = 0; c < colours; ++c) {
-        float* dst = padded.data() + padded_plane * c + static_cast<std::size_t>(j) * padded_w;
-        for (int i = 0; i < padded_w; ++i) dst[i] = src[source_x[i] + c];
-      }
-    }  // the barrier: the planes are complete
-    OverlapAddBuffers buffers(e->ny, e->nx);
-    std::vector<std::complex<double>> grey_spectrum;
+      for (int j = 0; j < height; ++j) {
+        const std::size_t p0 = static_cast<std::size_t>(j) * width * channels;
+        for (std::size_t p = p0; p < p0 + static_cast<std::size_t>(width) * channels; ++p)
+          if ((p - p0) % channels >= static_cast<std::size_t>(colours)) acc[p] = in[p];
+      }  // the barrier: the accumulator is ready
+    }
+    std::unique_ptr<OverlapAddBuffers> buffers = buffer_pool_->acquire(e->ny, e->nx);
+    std::vector<std::complex<double>>& spectrum = buffers->kernel;
     for (const std::vector<int>& phase : phases) {
       const int tasks = static_cast<int>(phase.size()) * colours;
 #pragma omp for schedule(dynamic, 1)
@@ -135,89 +151,73 @@ std::vector<float> Renderer::blur_planes(const FloatImage& input, int nthreads) 
         const int px = q % n, py = q / n;
         const int lo_x = e->lo_x[px], lo_y = e->lo_y[py];
         const int hi_x = e->hi_x[px], hi_y = e->hi_y[py];
-        // The kernel's spectrum (grey images: the mean kernel's, made here, before the block
-        // fills the buffers).
+        // The kernel's spectrum: cached per image size (when the cache fits its budget), else
+        // made here, before the block fills the buffers (grey images: the mean kernel's).
         const std::complex<double>* k;
-        if (colours == kColourChannels) {
+        if (colours == kColourChannels && !e->spectra.empty()) {
           k = e->spectra[q * kColourChannels + c].data();
         } else {
-          kernel_spectrum(grid.grey_kernels[q].values.data(), grid.grey_kernels[q].radius, buffers,
-                          grey_spectrum);
-          k = grey_spectrum.data();
+          const PixelKernel& kernel =
+              colours == kColourChannels ? grid.kernels[q][c] : grid.grey_kernels[q];
+          kernel_spectrum(kernel.values.data(), kernel.radius, *buffers, spectrum);
+          k = spectrum.data();
         }
-        // The patch's input: its window's extent plus the largest PSF reach on each side (image
-        // column lo_x - pad is the padded plane's column lo_x).
-        load_padded_block(padded.data() + padded_plane * c, padded_w, lo_x, lo_y,
-                          hi_x - lo_x + 2 * pad, hi_y - lo_y + 2 * pad, buffers);
-        convolve_loaded_block(k, buffers);
-        add_windowed_block(buffers, pad, lo_x, hi_x, lo_y, hi_y, e->window_x[px], e->window_y[py],
-                           acc.data() + plane * c, width, 0, 0);
+        // The patch's input: its window's extent plus the largest PSF reach on each side, read
+        // from the interleaved input with symmetric reflection at the borders.
+        load_reflected_block(input, c, lo_x - e->pad, lo_y - e->pad, hi_x - lo_x + 2 * e->pad,
+                             hi_y - lo_y + 2 * e->pad, *buffers);
+        convolve_loaded_block(k, *buffers);
+        add_windowed_block(*buffers, e->pad, lo_x, hi_x, lo_y, hi_y, e->window_x[px],
+                           e->window_y[py], acc + c, static_cast<std::size_t>(width) * channels, 0,
+                           0, static_cast<std::size_t>(channels));
       }  // the omp for's barrier ends the phase
     }
+    buffer_pool_->release(std::move(buffers));
   }
-  return acc;
 }
-
-namespace {
-
-// The image `input` with its colour channels replaced by the planes `acc`, each value times
-// factor[p] if `factor` is not null (the relative illumination); other channels (alpha) kept.
-FloatImage interleave(const FloatImage& input, const std::vector<float>& acc, const float* factor,
-                      int nthreads) {
-  const int colours = colour_channel_count(input.channels), channels = input.channels;
-  const std::size_t plane = static_cast<std::size_t>(input.width) * input.height;
-  FloatImage out;
-  out.width = input.width;
-  out.height = input.height;
-  out.channels = channels;
-  out.pixels.resize(plane * channels);
-  float* o = out.pixels.data();
-  const float* a = acc.data();
-  const float* in = input.pixels.data();
-#pragma omp parallel for num_threads(nthreads) schedule(static)
-  for (int j = 0; j < input.height; ++j) {
-    const std::size_t p0 = static_cast<std::size_t>(j) * input.width, p1 = p0 + input.width;
-    if (colours == 3 && channels == 3) {
-      for (std::size_t p = p0; p < p1; ++p) {
-        const float f = factor ? factor[p] : 1.0f;
-        for (int c = 0; c < 3; ++c) o[p * 3 + c] = factor ? a[plane * c + p] * f : a[plane * c + p];
-      }
-      continue;
-    }
-    for (std::size_t p = p0; p < p1; ++p) {
-      for (int c = 0; c < channels; ++c) {
-        float v = in[p * channels + c];
-        if (c < colours) v = factor ? a[plane * c + p] * factor[p] : a[plane * c + p];
-        o[p * channels + c] = v;
-      }
-    }
-  }
-  return out;
-}
-
-}  // namespace
 
 FloatImage Renderer::blur(const FloatImage& input, int threads) const {
   const int nthreads = thread_count(threads > 0 ? threads : options_.threads);
-  return interleave(input, blur_planes(input, nthreads), nullptr, nthreads);
+  FloatImage out;
+  blur_into(input, out, nthreads);
+  return out;
 }
 
 RenderResult Renderer::render(const FloatImage& input, int threads) const {
+  return render_impl(input, nullptr, threads);
+}
+
+RenderResult Renderer::render(FloatImage&& input, int threads) const {
+  return render_impl(input, &input, threads);
+}
+
+RenderResult Renderer::render_impl(const FloatImage& input, FloatImage* reuse, int threads) const {
   if (input.empty()) throw Error("cannot render an empty image");
   const int nthreads = thread_count(threads > 0 ? threads : options_.threads);
   RenderResult result;
   result.colour_channels = colour_channel_count(input.channels);
   const int width = input.width, height = input.height, colours = result.colour_channels;
-  // The blur's planes feed the metrics directly, and the relative illumination is applied while
-  // they are interleaved: the same values as blur(), then apply_relative_illumination().
-  const std::vector<float> acc = blur_planes(input, nthreads);
-  const ChannelView blurred = ChannelView::planar(acc.data(), width, height);
-  result.psnr_db = psnr_db(ChannelView::of(input), blurred, width, height, colours, nthreads);
-  result.ssim = ssim(ChannelView::of(input), blurred, width, height, colours, nthreads);
-  std::shared_ptr<const std::vector<float>> factor;
-  if (options_.relative_illumination) factor = illumination_map(width, height);
-  result.image = interleave(input, acc, factor ? factor->data() : nullptr, nthreads);
-  if (options_.distortion) result.image = apply_distortion(result.image, nthreads);
+  // Blur into one image the size of the input; the metrics compare it with the input; the
+  // relative illumination dims it in place; the warp reads it and writes the output (into the
+  // input's memory when the caller gives it up). At most three images of the input's size are
+  // alive at once (input, blurred, warped), two when the input's memory is reused.
+  FloatImage blurred;
+  blur_into(input, blurred, nthreads);
+  const ChannelView view = ChannelView::of(blurred);
+  result.psnr_db = psnr_db(ChannelView::of(input), view, width, height, colours, nthreads);
+  result.ssim = ssim(ChannelView::of(input), view, width, height, colours, nthreads);
+  if (options_.relative_illumination) apply_relative_illumination(blurred, nthreads);
+  if (!options_.distortion) {
+    result.image = std::move(blurred);
+    return result;
+  }
+  FloatImage out;
+  if (reuse) {
+    out.pixels = std::move(reuse->pixels);  // the input is not read any more
+    *reuse = FloatImage();
+  }
+  warp_into(blurred, out, nthreads);
+  result.image = std::move(out);
   return result;
 }
 

@@ -430,10 +430,11 @@ RenderResult render_file(const Renderer& renderer, const fs::path& input, const 
   if (same_file(input, output))
     throw Error(SourceLocation{output.string()},
                 "refusing to write the rendered image over its input");
-  const LoadedImage loaded = read_image(input);
+  LoadedImage loaded = read_image(input);
   RenderResult result;
   try {
-    result = renderer.render(loaded.image, threads);
+    // The input's memory becomes the output's (render/render.h).
+    result = renderer.render(std::move(loaded.image), threads);
   } catch (const Error& e) {
     throw Error(SourceLocation{input.string()}, e.message());
   }

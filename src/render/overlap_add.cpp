@@ -31,20 +31,6 @@ void load_reflected_block(const FloatImage& image, int c, int x_first, int y_fir
   fftw_execute_dft_r2c(b.plans.forward, b.real.data, b.spectrum.data);
 }
 
-void load_padded_block(const float* plane, std::size_t stride, int x, int y, int cols, int rows,
-                       OverlapAddBuffers& b) {
-  const int nx = b.nx, ny = b.ny;
-  for (int j = 0; j < rows; ++j) {
-    const float* src = plane + static_cast<std::size_t>(y + j) * stride + x;
-    double* row = b.real.data + static_cast<std::size_t>(j) * nx;
-    for (int i = 0; i < cols; ++i) row[i] = src[i];
-    std::fill(row + cols, row + nx, 0.0);
-  }
-  std::fill(b.real.data + static_cast<std::size_t>(rows) * nx,
-            b.real.data + static_cast<std::size_t>(ny) * nx, 0.0);
-  fftw_execute_dft_r2c(b.plans.forward, b.real.data, b.spectrum.data);
-}
-
 void convolve_loaded_block(const std::complex<double>* kernel_spectrum, OverlapAddBuffers& b) {
   // (a + ib)(c + id) = (ac - bd) + i(ad + bc), written out on the interleaved doubles: the
   // product std::complex computes, without its NaN recovery branch (no NaN reaches here), so

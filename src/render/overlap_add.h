@@ -12,6 +12,8 @@
 
 #include <complex>
 #include <cstddef>
+#include <memory>
+#include <mutex>
 #include <vector>
 
 #include "core/fft.h"
@@ -26,7 +28,8 @@ struct OverlapAddBuffers {
   FftPlans plans;
   RealBuffer real;
   ComplexBuffer spectrum;
-  std::vector<int> reflect_x;  // scratch: reflected columns of the block being loaded
+  std::vector<int> reflect_x;                // scratch: reflected columns of the block being loaded
+  std::vector<std::complex<double>> kernel;  // scratch: a kernel spectrum made for one block
 
   OverlapAddBuffers(int ny, int nx);
   std::size_t real_size() const { return static_cast<std::size_t>(ny) * nx; }
@@ -34,6 +37,32 @@ struct OverlapAddBuffers {
   std::complex<double>* complex_spectrum() {
     return reinterpret_cast<std::complex<double>*>(spectrum.data);
   }
+};
+
+// The FFT buffers of a Renderer, kept between renders: a render takes one set per thread and
+// gives it back, so a run of many images allocates (and faults in) its buffers once, not per
+// image. Sets of another size than asked for are dropped (a run's images usually share one size).
+class OverlapAddPool {
+ public:
+  std::unique_ptr<OverlapAddBuffers> acquire(int ny, int nx) {
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      while (!free_.empty()) {
+        std::unique_ptr<OverlapAddBuffers> b = std::move(free_.back());
+        free_.pop_back();
+        if (b->ny == ny && b->nx == nx) return b;
+      }
+    }
+    return std::make_unique<OverlapAddBuffers>(ny, nx);
+  }
+  void release(std::unique_ptr<OverlapAddBuffers> b) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    free_.push_back(std::move(b));
+  }
+
+ private:
+  std::mutex mutex_;
+  std::vector<std::unique_ptr<OverlapAddBuffers>> free_;
 };
 
 // K^ of a (2r+1)^2 kernel (row-major, centre at (r, r)) into `out`: the r2c transform of the
@@ -56,29 +85,32 @@ void kernel_spectrum(const V* kernel, int radius, OverlapAddBuffers& b,
 void load_reflected_block(const FloatImage& image, int c, int x_first, int y_first, int cols,
                           int rows, OverlapAddBuffers& b);
 
-// The same from a colour plane already extended by reflection (`stride` floats per row): the
-// block's rows y .. y + rows - 1, columns x .. x + cols - 1 of the plane (plane coordinates).
-void load_padded_block(const float* plane, std::size_t stride, int x, int y, int cols, int rows,
-                       OverlapAddBuffers& b);
-
 // b.spectrum *= K^ element-wise, and the blurred block back into b.real (c2r).
 void convolve_loaded_block(const std::complex<double>* kernel_spectrum, OverlapAddBuffers& b);
 
 // Adds w_y(j) w_x(i) Bq(i, j) for (i, j) in [x0, x1) x [y0, y1) (image coordinates) into
-// dst[(j - dst_y0) stride + (i - dst_x0)]; Bq(i, j) is b.real at row j - y0 + pad, column
-// i - x0 + pad (the block loaded from (x0 - pad, y0 - pad)). Out: float (the Renderer's image) or
-// double (the joint's region, zero-initialized: the sum is then the product to the last bit).
+// dst[(j - dst_y0) stride + (i - dst_x0) column_stride]; Bq(i, j) is b.real at row j - y0 + pad,
+// column i - x0 + pad (the block loaded from (x0 - pad, y0 - pad)). Out: float (the Renderer's
+// interleaved image, column_stride = its channels) or double (the joint's region,
+// zero-initialized: the sum is then the product to the last bit).
 template <typename Out>
 void add_windowed_block(const OverlapAddBuffers& b, int pad, int x0, int x1, int y0, int y1,
                         const std::vector<double>& window_x, const std::vector<double>& window_y,
-                        Out* dst, std::size_t stride, int dst_x0, int dst_y0) {
+                        Out* dst, std::size_t stride, int dst_x0, int dst_y0,
+                        std::size_t column_stride = 1) {
   const int width = x1 - x0;
   const double* wx = window_x.data() + x0;
   for (int j = y0; j < y1; ++j) {
     const double wy = window_y[j];
     const double* row = b.real.data + static_cast<std::size_t>(j - y0 + pad) * b.nx + pad;
-    Out* out = dst + static_cast<std::size_t>(j - dst_y0) * stride + (x0 - dst_x0);
-    for (int i = 0; i < width; ++i) out[i] += static_cast<Out>(wy * wx[i] * row[i]);
+    Out* out = dst + static_cast<std::size_t>(j - dst_y0) * stride +
+               static_cast<std::size_t>(x0 - dst_x0) * column_stride;
+    if (column_stride == 1) {
+      for (int i = 0; i < width; ++i) out[i] += static_cast<Out>(wy * wx[i] * row[i]);
+    } else {
+      for (int i = 0; i < width; ++i)
+        out[static_cast<std::size_t>(i) * column_stride] += static_cast<Out>(wy * wx[i] * row[i]);
+    }
   }
 }
 

@@ -17,6 +17,7 @@
 #include "lensopt/core/threads.h"
 #include "lensopt/render/distortion_warp.h"
 #include "lensopt/render/render.h"
+#include "render/huge_pages.h"
 
 namespace lensopt {
 namespace {
@@ -64,48 +65,58 @@ __attribute__((target_clones("arch=x86-64-v3", "default"))) void warp_row(const 
 
 }  // namespace
 
+void Renderer::illumination_row(const SensorGeometry& geo, int j, float* factor) const {
+  for (int i = 0; i < geo.width; ++i)
+    factor[i] = static_cast<float>(relative_illumination_at(model_, geo.radius_mm(i, j)));
+}
+
+void Renderer::warp_row_offsets(const SensorGeometry& geo, int j, float* offsets) const {
+  const InverseDistortion inverse(model_.centroid_y_mm, model_.reference_y_mm);
+  constexpr float kOutside = std::numeric_limits<float>::quiet_NaN();
+  for (int i = 0; i < geo.width; ++i) {
+    float* o = offsets + static_cast<std::size_t>(i) * 2;
+    double sx, sy;
+    if (inverse.source(geo, i, j, sx, sy)) {
+      // Stored as the sample position minus the pixel's corner (i, j), minus 1/2 (so the taps
+      // are at floor(i + offset) - 1 ...): small numbers, exact in float to 1e-5 pixel.
+      o[0] = static_cast<float>(sx - 0.5 - i);
+      o[1] = static_cast<float>(sy - 0.5 - j);
+    } else {
+      o[0] = o[1] = kOutside;  // black: the scene there was not captured
+    }
+  }
+}
+
 std::shared_ptr<const std::vector<float>> Renderer::illumination_map(int width, int height) const {
   std::lock_guard<std::mutex> lock(mutex_);
+  require_relative_illumination(model_);  // here, not inside the parallel loops
   if (auto found = illumination_maps_.find(width, height)) return found;
-  require_relative_illumination(model_);  // here, not inside the parallel loop
+  const std::size_t pixels = static_cast<std::size_t>(width) * height;
+  if (pixels * sizeof(float) > kMapBudgetBytes) return nullptr;
   const SensorGeometry geo =
       SensorGeometry::make(width, height, options_.res_factor, model_.sensor_diagonal_mm);
-  auto map = std::make_shared<std::vector<float>>(static_cast<std::size_t>(width) * height);
+  auto map = std::make_shared<std::vector<float>>(pixels);
 #pragma omp parallel for num_threads(thread_count(options_.threads)) schedule(static)
   for (int j = 0; j < height; ++j)
-    for (int i = 0; i < width; ++i)
-      (*map)[static_cast<std::size_t>(j) * width + i] =
-          static_cast<float>(relative_illumination_at(model_, geo.radius_mm(i, j)));
+    illumination_row(geo, j, map->data() + static_cast<std::size_t>(j) * width);
   illumination_maps_.insert(width, height, map);
   return map;
 }
 
 std::shared_ptr<const std::vector<float>> Renderer::warp_map(int width, int height) const {
   std::lock_guard<std::mutex> lock(mutex_);
+  // The inverse map (render/distortion_warp.h); undistorted_radius_mm throws (here, outside the
+  // parallel loops) if it is not invertible.
+  undistorted_radius_mm(model_, 0.0);
   if (auto found = warp_maps_.find(width, height)) return found;
+  const std::size_t pixels = static_cast<std::size_t>(width) * height;
+  if (pixels * 2 * sizeof(float) > kMapBudgetBytes) return nullptr;
   const SensorGeometry geo =
       SensorGeometry::make(width, height, options_.res_factor, model_.sensor_diagonal_mm);
-  // The inverse map (render/distortion_warp.h); undistorted_radius_mm throws (here, outside the
-  // parallel loop) if it is not invertible.
-  undistorted_radius_mm(model_, 0.0);
-  const InverseDistortion inverse(model_.centroid_y_mm, model_.reference_y_mm);
-  auto map = std::make_shared<std::vector<float>>(static_cast<std::size_t>(width) * height * 2);
-  constexpr float kOutside = std::numeric_limits<float>::quiet_NaN();
+  auto map = std::make_shared<std::vector<float>>(pixels * 2);
 #pragma omp parallel for num_threads(thread_count(options_.threads)) schedule(static)
-  for (int j = 0; j < height; ++j) {
-    for (int i = 0; i < width; ++i) {
-      float* o = map->data() + (static_cast<std::size_t>(j) * width + i) * 2;
-      double sx, sy;
-      if (inverse.source(geo, i, j, sx, sy)) {
-        // Stored as the sample position minus the pixel's corner (i, j), minus 1/2 (so the taps
-        // are at floor(i + offset) - 1 ...): small numbers, exact in float to 1e-5 pixel.
-        o[0] = static_cast<float>(sx - 0.5 - i);
-        o[1] = static_cast<float>(sy - 0.5 - j);
-      } else {
-        o[0] = o[1] = kOutside;  // black: the scene there was not captured
-      }
-    }
-  }
+  for (int j = 0; j < height; ++j)
+    warp_row_offsets(geo, j, map->data() + static_cast<std::size_t>(j) * width * 2);
   warp_maps_.insert(width, height, map);
   return map;
 }
@@ -113,44 +124,78 @@ std::shared_ptr<const std::vector<float>> Renderer::warp_map(int width, int heig
 void Renderer::apply_relative_illumination(FloatImage& image, int threads) const {
   const std::shared_ptr<const std::vector<float>> map = illumination_map(image.width, image.height);
   const int colours = colour_channel_count(image.channels);
-  const std::size_t pixels = static_cast<std::size_t>(image.width) * image.height;
-  const float* __restrict factor = map->data();
-  float* __restrict pixels_out = image.pixels.data();
-  const int channels = image.channels;
-#pragma omp parallel for num_threads(thread_count(threads > 0 ? threads : options_.threads)) \
-    schedule(static)
-  for (std::size_t p = 0; p < pixels; ++p) {
-    const float ri = factor[p];
-    for (int c = 0; c < colours; ++c) pixels_out[p * channels + c] *= ri;
+  const int width = image.width, channels = image.channels;
+  const SensorGeometry geo = SensorGeometry::make(image.width, image.height, options_.res_factor,
+                                                  model_.sensor_diagonal_mm);
+#pragma omp parallel num_threads(thread_count(threads > 0 ? threads : options_.threads))
+  {
+    std::vector<float> row(map ? 0 : width);  // a row's factors when the map is not kept
+#pragma omp for schedule(static)
+    for (int j = 0; j < image.height; ++j) {
+      const float* __restrict factor;
+      if (map) {
+        factor = map->data() + static_cast<std::size_t>(j) * width;
+      } else {
+        illumination_row(geo, j, row.data());
+        factor = row.data();
+      }
+      float* __restrict out = image.pixels.data() + static_cast<std::size_t>(j) * width * channels;
+      for (int i = 0; i < width; ++i) {
+        const float ri = factor[i];
+        for (int c = 0; c < colours; ++c) out[static_cast<std::size_t>(i) * channels + c] *= ri;
+      }
+    }
   }
 }
 
 FloatImage Renderer::apply_distortion(const FloatImage& image, int threads) const {
+  FloatImage out;
+  warp_into(image, out, thread_count(threads > 0 ? threads : options_.threads));
+  return out;
+}
+
+void Renderer::warp_into(const FloatImage& image, FloatImage& out, int nthreads) const {
   const int width = image.width, height = image.height, channels = image.channels;
   const std::shared_ptr<const std::vector<float>> map = warp_map(width, height);
-  FloatImage out(width, height, channels, 0.0f);
-#pragma omp parallel for num_threads(thread_count(threads > 0 ? threads : options_.threads)) \
-    schedule(static)
-  for (int j = 0; j < height; ++j) {
-    const float* offsets = map->data() + static_cast<std::size_t>(j) * width * 2;
-    float* dst = out.pixels.data() + static_cast<std::size_t>(j) * width * channels;
-    const float* src = image.pixels.data();
-    switch (channels) {
-      case 1:
-        warp_row<1>(src, width, height, channels, offsets, j, dst);
-        break;
-      case 3:
-        warp_row<3>(src, width, height, channels, offsets, j, dst);
-        break;
-      case 4:
-        warp_row<4>(src, width, height, channels, offsets, j, dst);
-        break;
-      default:
-        warp_row<0>(src, width, height, channels, offsets, j, dst);
-        break;
+  const SensorGeometry geo =
+      SensorGeometry::make(width, height, options_.res_factor, model_.sensor_diagonal_mm);
+  out.width = width;
+  out.height = height;
+  out.channels = channels;
+  // warp_row writes every value (black where the source is outside): memory of the right size
+  // is reused as it is.
+  const std::size_t values = static_cast<std::size_t>(width) * height * channels;
+  if (out.pixels.size() != values) resize_with_huge_pages(out.pixels, values);
+#pragma omp parallel num_threads(nthreads)
+  {
+    std::vector<float> row(map ? 0 : static_cast<std::size_t>(width) * 2);
+#pragma omp for schedule(static)
+    for (int j = 0; j < height; ++j) {
+      const float* offsets;
+      if (map) {
+        offsets = map->data() + static_cast<std::size_t>(j) * width * 2;
+      } else {
+        warp_row_offsets(geo, j, row.data());
+        offsets = row.data();
+      }
+      float* dst = out.pixels.data() + static_cast<std::size_t>(j) * width * channels;
+      const float* src = image.pixels.data();
+      switch (channels) {
+        case 1:
+          warp_row<1>(src, width, height, channels, offsets, j, dst);
+          break;
+        case 3:
+          warp_row<3>(src, width, height, channels, offsets, j, dst);
+          break;
+        case 4:
+          warp_row<4>(src, width, height, channels, offsets, j, dst);
+          break;
+        default:
+          warp_row<0>(src, width, height, channels, offsets, j, dst);
+          break;
+      }
     }
   }
-  return out;
 }
 
 }  // namespace lensopt

@@ -196,6 +196,8 @@ double distortion_at(const ImagingModel& model, double radius_mm);  // D(r)
 // centroid heights ybar_h do not increase with the field (the map is not invertible).
 double undistorted_radius_mm(const ImagingModel& model, double distorted_radius_mm);
 
+class OverlapAddPool;  // src/render/overlap_add.h
+
 // One rendered image.
 struct RenderResult {
   FloatImage image;    // blurred, dimmed, distorted (as enabled)
@@ -221,6 +223,9 @@ class Renderer {
 
   // The whole pipeline. `threads` > 0 overrides options().threads for this call.
   RenderResult render(const FloatImage& input, int threads = 0) const;
+  // The same, taking the input's memory for the output once the metrics have read it: two
+  // images of the input's size alive at once instead of three (the same values).
+  RenderResult render(FloatImage&& input, int threads = 0) const;
 
   // The steps, for tests and export.
   FloatImage blur(const FloatImage& input, int threads = 0) const;
@@ -230,12 +235,23 @@ class Renderer {
  private:
   struct GridEntry;
   std::shared_ptr<GridEntry> entry(int width, int height) const;
-  // The blurred colour channels of `input`, one width x height plane each (R, G, B or grey).
-  std::vector<float> blur_planes(const FloatImage& input, int nthreads) const;
+  // `out` = `input` with its colour channels (R, G, B or grey) blurred.
+  void blur_into(const FloatImage& input, FloatImage& out, int nthreads) const;
+  // render(); `reuse` (if not null, possibly `input` itself) gives its memory to the output after
+  // the metrics.
+  RenderResult render_impl(const FloatImage& input, FloatImage* reuse, int threads) const;
+  // apply_distortion into `out` (its memory reused when it has the size).
+  void warp_into(const FloatImage& image, FloatImage& out, int nthreads) const;
   // Per pixel of a W x H image: the relative-illumination factor; the warp's source offset
-  // (x, y interleaved, pixels; NaN where the source is outside the image).
+  // (x, y interleaved, pixels; NaN where the source is outside the image). Cached per image size
+  // while they take at most kMapBudgetBytes; null above (a 4K image's would take 100 MB), and
+  // the callers make each row's values as they need them (the same values).
+  static constexpr std::size_t kMapBudgetBytes = std::size_t{48} << 20;
   std::shared_ptr<const std::vector<float>> illumination_map(int width, int height) const;
   std::shared_ptr<const std::vector<float>> warp_map(int width, int height) const;
+  // Row j's values of those maps, for pixels [0, width) (the function the maps are made with).
+  void illumination_row(const SensorGeometry& geo, int j, float* factor) const;
+  void warp_row_offsets(const SensorGeometry& geo, int j, float* offsets) const;
 
   // The most recently used image sizes (a dataset of many sizes does not keep them all).
   template <typename V>
@@ -266,6 +282,8 @@ class Renderer {
   mutable SizeCache<GridEntry> grids_;
   mutable SizeCache<const std::vector<float>> illumination_maps_;
   mutable SizeCache<const std::vector<float>> warp_maps_;
+  // The FFT buffers of the blur, kept between renders (render/overlap_add.h).
+  std::unique_ptr<OverlapAddPool> buffer_pool_;
 };
 
 // Number of colour channels of an image with `channels` channels (3 for RGB/RGBA, 1 for grey).
