@@ -163,7 +163,7 @@ SpotGradient mean_spot_gradient_fast(const TraceLens<double>& lens, const Specs&
                                      const std::vector<PrescriptionVariable>& variables,
                                      const TraceOptions& options) {
   if (!adjoint_supported(lens)) return mean_spot_gradient_auto(lens, specs, variables, options);
-  return with_jet_width<8, 16, 24>(static_cast<int>(variables.size()), [&](auto width) {
+  return with_jet_width(static_cast<int>(variables.size()), [&](auto width) {
     return mean_spot_gradient_adjoint<decltype(width)::value>(lens, specs, variables, options);
   });
 }

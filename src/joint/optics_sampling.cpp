@@ -128,12 +128,12 @@ Optics sample_optics(const LensParameterization& param, GlassMode mode,
                      bool derivatives, ImagingTimings& timings) {
   if (!derivatives)
     return sample_optics_as<double>(param, mode, fixed_glasses, options, x, timings);
-  constexpr int kCap = jet_width_cap<8, 12, 16, 24, 32>;
+  constexpr int kCap = kJetWidthCap;
   const int n = param.size();
   if (n > kCap)
     throw Error(
         fmt::format("joint imaging supports up to {} lens variables, the lens has {}", kCap, n));
-  return with_jet_width<8, 12, 16, 24, 32>(n, [&](auto width) {
+  return with_jet_width(n, [&](auto width) {
     return sample_optics_as<ceres::Jet<double, decltype(width)::value>>(param, mode, fixed_glasses,
                                                                         options, x, timings);
   });

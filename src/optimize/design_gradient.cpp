@@ -335,7 +335,7 @@ DesignValueGradient design_loss_gradient(const LensParameterization& param,
   if (options.merit == DesignMerit::kWavefront)
     return design_loss_gradient_jets(param, x, mode, fixed_glasses, sampling, options);
   const int n = param.size();
-  return with_jet_width<8, 16, kDesignGradientWidth>(n, [&](auto width) {
+  return with_jet_width(n, [&](auto width) {
     return design_adjoint_gradient<decltype(width)::value>(param, x, mode, fixed_glasses, sampling,
                                                            options);
   });
@@ -350,7 +350,7 @@ DesignValueGradient design_loss_gradient_jets(const LensParameterization& param,
   const int n = param.size();
   out.gradient.assign(n, 0.0);
   // The narrowest Jet that holds the variables in one pass; blocks of kDesignGradientWidth above.
-  with_jet_width<8, 16, kDesignGradientWidth>(n, [&](auto width) {
+  with_jet_width(n, [&](auto width) {
     constexpr int kWidth = decltype(width)::value;
     for (int first = 0; first < n; first += kWidth)
       accumulate<kWidth>(param, x, first, mode, fixed_glasses, sampling, options, out);

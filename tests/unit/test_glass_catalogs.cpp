@@ -1,5 +1,6 @@
 // The catalogs made from the refractiveindex.info database (tools/make-rii-catalogs.py), the
 // database's formulas, OpticStudio's model glass and the Zemax catalog names.
+#include <ceres/jet.h>
 #include <doctest/doctest.h>
 
 #include <cmath>

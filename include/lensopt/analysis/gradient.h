@@ -70,11 +70,11 @@ SpotGradient mean_spot_gradient(const TraceLens<double>& lens_in, const Specs& s
 namespace lensopt {
 
 // The gradient with the Jet width that covers the variables in the fewest passes (one pass up
-// to 24 variables: every lens of the paper).
+// to kJetWidthCap variables: every lens of the paper).
 inline SpotGradient mean_spot_gradient_auto(const TraceLens<double>& lens, const Specs& specs,
                                             const std::vector<PrescriptionVariable>& variables,
                                             const TraceOptions& options) {
-  return with_jet_width<8, 16, 24>(static_cast<int>(variables.size()), [&](auto width) {
+  return with_jet_width(static_cast<int>(variables.size()), [&](auto width) {
     return mean_spot_gradient<decltype(width)::value>(lens, specs, variables, options);
   });
 }

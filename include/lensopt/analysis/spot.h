@@ -27,6 +27,7 @@
 #include <cmath>
 #include <vector>
 
+#include "lensopt/core/jet_width.h"
 #include "lensopt/core/threads.h"
 #include "lensopt/trace/system.h"
 
@@ -310,5 +311,13 @@ template <typename T>
 SpotResult<T> evaluate_spots(const TraceSystem<T>& sys, int threads = 0) {
   return trace_fields(sys, threads, [](int, int, const RayBundle<T>&) {});
 }
+
+// evaluate_spots on the Jets of core/jet_width.h is compiled once per width, in a translation unit
+// of its own (src/analysis/spot_jet.cpp.in).
+#define LENSOPT_EVALUATE_SPOTS_JET(N)                                                      \
+  extern template SpotResult<ceres::Jet<double, N>> evaluate_spots<ceres::Jet<double, N>>( \
+      const TraceSystem<ceres::Jet<double, N>>&, int);
+LENSOPT_FOR_EACH_JET_WIDTH(LENSOPT_EVALUATE_SPOTS_JET)
+#undef LENSOPT_EVALUATE_SPOTS_JET
 
 }  // namespace lensopt

@@ -18,12 +18,13 @@
 
 #include <vector>
 
+#include "lensopt/core/jet_width.h"
 #include "lensopt/optimize/design_loss.h"
 #include "lensopt/optimize/variables.h"
 
 namespace lensopt {
 
-inline constexpr int kDesignGradientWidth = 24;
+inline constexpr int kDesignGradientWidth = kJetWidthCap;
 
 struct DesignValueGradient {
   DesignLoss<double> loss;       // the terms' values (paper's linear hinges)

@@ -65,6 +65,7 @@
 
 #include "lensopt/analysis/spot.h"
 #include "lensopt/analysis/wavefront.h"
+#include "lensopt/core/jet_width.h"
 #include "lensopt/core/threads.h"
 #include "lensopt/optimize/design_sampling.h"
 #include "lensopt/optimize/profile_bounds.h"
@@ -559,5 +560,16 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
       value_of(merit) + value_of(path) + value_of(angle) + value_of(glass_loss) + value_of(profile);
   return std::isfinite(total_value);
 }
+
+// evaluate_design on the Jets of core/jet_width.h is compiled once per width, in a translation unit
+// of its own (src/optimize/design_loss_jet.cpp.in, at the inlining budget of the LM Jacobian).
+#define LENSOPT_DESIGN_LOSS_JET(N)                                                            \
+  extern template bool evaluate_design<ceres::Jet<double, N>>(                                \
+      const LensParameterization&, const ceres::Jet<double, N>*, GlassMode,                   \
+      const std::vector<int>&, const TraceOptions&, const DesignLossOptions&,                 \
+      const std::vector<double>*, ceres::Jet<double, N>*, DesignLoss<ceres::Jet<double, N>>*, \
+      DesignExtremes*);
+LENSOPT_FOR_EACH_JET_WIDTH(LENSOPT_DESIGN_LOSS_JET)
+#undef LENSOPT_DESIGN_LOSS_JET
 
 }  // namespace lensopt

@@ -69,8 +69,8 @@ class FreeJacobianCost final : public ceres::CostFunction {
 };
 
 // The cost function for n variables of which `frozen` are held, at the narrowest Jet width of
-// 4, 8, ..., 24 that takes every free variable in one pass (more passes above 24). Takes
-// ownership of `functor`.
+// core/jet_width.h that takes every free variable in one pass (more passes above kJetWidthCap).
+// Takes ownership of `functor`.
 template <typename Functor>
 ceres::CostFunction* make_free_jacobian_cost(Functor* functor, int n, int residuals,
                                              const std::vector<int>& frozen) {
@@ -78,7 +78,7 @@ ceres::CostFunction* make_free_jacobian_cost(Functor* functor, int n, int residu
   for (int i = 0; i < n; ++i)
     if (std::find(frozen.begin(), frozen.end(), i) == frozen.end()) free.push_back(i);
   const int m = static_cast<int>(free.size());
-  return with_jet_width<4, 8, 12, 16, 20, 24>(m, [&](auto width) -> ceres::CostFunction* {
+  return with_jet_width(m, [&](auto width) -> ceres::CostFunction* {
     return new FreeJacobianCost<Functor, decltype(width)::value>(functor, n, residuals, free);
   });
 }

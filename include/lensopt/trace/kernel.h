@@ -32,6 +32,7 @@
 #include <type_traits>
 #include <vector>
 
+#include "lensopt/core/jet_width.h"
 #include "lensopt/core/scalar.h"
 #include "lensopt/lens/trace_lens.h"
 
@@ -179,6 +180,28 @@ bool any_not_forward(const T* n, std::size_t count) {
 }
 
 }  // namespace detail
+
+namespace detail {
+
+// The Jet traces of the widths of core/jet_width.h, compiled once each for several x86-64 levels
+// with every Jet operation inlined (src/trace/kernel_jet.cpp.in, one translation unit per width).
+#define LENSOPT_DECLARE_JET_TRACE(N)                                                  \
+  void trace_bundle_jet(const TraceLens<ceres::Jet<double, N>>& lens, int w, int end, \
+                        bool to_image, RayBundle<ceres::Jet<double, N>>& rays,        \
+                        RayRecord<ceres::Jet<double, N>>* record);
+LENSOPT_FOR_EACH_JET_WIDTH(LENSOPT_DECLARE_JET_TRACE)
+#undef LENSOPT_DECLARE_JET_TRACE
+
+}  // namespace detail
+
+// trace_bundle (below) on ceres::Jet<double, N> for a listed width N: the compiled trace above.
+template <int N>
+requires(is_jet_width(N)) void trace_bundle(const TraceLens<ceres::Jet<double, N>>& lens, int w,
+                                            int end, bool to_image,
+                                            RayBundle<ceres::Jet<double, N>>& rays,
+                                            RayRecord<ceres::Jet<double, N>>* record) {
+  detail::trace_bundle_jet(lens, w, end, to_image, rays, record);
+}
 
 // Traces every ray of `rays` through surfaces [0, end) at wavelength number w (end = K for the
 // whole lens), leaving positions relative to vertex end-1 on that surface. If `to_image`, rays

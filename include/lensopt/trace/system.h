@@ -33,6 +33,7 @@
 #include <vector>
 
 #include "lensopt/core/constants.h"
+#include "lensopt/core/jet_width.h"
 #include "lensopt/core/scalar.h"
 #include "lensopt/glass/dispersion.h"
 #include "lensopt/lens/trace_lens.h"
@@ -552,5 +553,13 @@ TraceSystem<double> prepare_lens_system(const Lens& lens, const TraceOptions& op
 // primary wavelength in the paper's spec mode, 1 in the as-written mode. NaN or infinite for a
 // lens without power.
 double lens_spec_scale(const Lens& lens);
+
+// prepare_system on the Jets of core/jet_width.h is compiled once per width, in a translation unit
+// of its own (src/trace/system_jet.cpp.in).
+#define LENSOPT_PREPARE_SYSTEM_JET(N)                                                       \
+  extern template TraceSystem<ceres::Jet<double, N>> prepare_system<ceres::Jet<double, N>>( \
+      const TraceLens<ceres::Jet<double, N>>&, const SystemSetup&, const TraceOptions&);
+LENSOPT_FOR_EACH_JET_WIDTH(LENSOPT_PREPARE_SYSTEM_JET)
+#undef LENSOPT_PREPARE_SYSTEM_JET
 
 }  // namespace lensopt

@@ -1,0 +1,141 @@
+// The Jet trace of the listed widths (core/jet_width.h) runs a copy compiled for the CPU's x86-64
+// level with every Jet operation inlined (src/trace/kernel_jet.cpp.in); it must give the bits of
+// the plain template, which this file compiles for baseline x86-64 (SSE2).
+#include <ceres/jet.h>
+#include <doctest/doctest.h>
+
+#include <cmath>
+#include <cstring>
+#include <string>
+#include <type_traits>
+#include <vector>
+
+#include "lensopt/core/jet_width.h"
+#include "lensopt/formats/lens_file.h"
+#include "lensopt/trace/kernel.h"
+#include "test_support.h"
+
+using namespace lensopt;
+
+namespace {
+
+bool same_bits(double a, double b) {
+  return std::memcmp(&a, &b, sizeof a) == 0;
+}
+
+template <int N>
+bool same_bits(const ceres::Jet<double, N>& a, const ceres::Jet<double, N>& b) {
+  if (!same_bits(a.a, b.a)) return false;
+  for (int j = 0; j < N; ++j)
+    if (!same_bits(a.v[j], b.v[j])) return false;
+  return true;
+}
+
+// Every value and derivative of two vectors of Jets equal bit for bit.
+template <int N>
+int differing(const std::vector<ceres::Jet<double, N>>& a,
+              const std::vector<ceres::Jet<double, N>>& b) {
+  if (a.size() != b.size()) return -1;
+  int count = 0;
+  for (std::size_t i = 0; i < a.size(); ++i) count += !same_bits(a[i], b[i]);
+  return count;
+}
+
+// A lens with every prescription variable seeded (directions cycling through the N of the
+// Jet) and a fan of rays over the pupil whose start points carry derivatives too.
+template <int N>
+void check_lens_width(const std::string& file) {
+  using J = ceres::Jet<double, N>;
+  const Lens lens = read_lens(test::source_dir() / "lenses" / file);
+  const TraceLens<double> plain = make_trace_lens(lens);
+  const std::vector<PrescriptionVariable> variables = all_prescription_variables(lens);
+  const int count = std::min<int>(N, static_cast<int>(variables.size()));
+  const TraceLens<J> tl =
+      convert_trace_lens<J>(plain, variables, 0, count, [](double v, int j) { return J(v, j); });
+  const int k_count = tl.surface_count();
+  for (int w = 0; w < static_cast<int>(tl.wavelengths_nm.size()); ++w) {
+    RayBundle<J> rays;
+    const int side = 21;
+    rays.resize(side * side);
+    const double entrance =
+        std::abs(lens.surfaces[0].semi_diameter_mm) > 0 ? lens.surfaces[0].semi_diameter_mm : 10.0;
+    for (int i = 0; i < side; ++i) {
+      for (int k = 0; k < side; ++k) {
+        const int r = i * side + k;
+        // A grid 1.3x the first surface's semi-diameter (some rays vignetted or missing) and a
+        // field angle of 0.15 rad in y.
+        rays.x[r] = J(1.3 * entrance * (2.0 * k / (side - 1) - 1.0), r % N);
+        rays.y[r] = J(1.3 * entrance * (2.0 * i / (side - 1) - 1.0), (r + 1) % N);
+        rays.z[r] = J(-5.0);
+        rays.l[r] = J(0.0);
+        rays.m[r] = J(std::sin(0.15));
+        rays.n[r] = J(std::cos(0.15));
+      }
+    }
+    for (const bool record_on : {false, true}) {
+      RayBundle<J> compiled = rays, generic = rays;
+      RayRecord<J> record_c, record_g;
+      record_c.resize(k_count, rays.size(), true);
+      record_g.resize(k_count, rays.size(), true);
+      // The overload for listed widths: the compiled copy.
+      trace_bundle(tl, w, k_count, true, compiled, record_on ? &record_c : nullptr);
+      // The plain template (explicit argument), compiled in this file.
+      trace_bundle<J>(tl, w, k_count, true, generic, record_on ? &record_g : nullptr);
+      CAPTURE(file);
+      CAPTURE(N);
+      CAPTURE(w);
+      CAPTURE(record_on);
+      CHECK(differing(compiled.x, generic.x) == 0);
+      CHECK(differing(compiled.y, generic.y) == 0);
+      CHECK(differing(compiled.z, generic.z) == 0);
+      CHECK(differing(compiled.l, generic.l) == 0);
+      CHECK(differing(compiled.m, generic.m) == 0);
+      CHECK(differing(compiled.n, generic.n) == 0);
+      CHECK(compiled.status == generic.status);
+      CHECK(compiled.failed_surface == generic.failed_surface);
+      int ok = 0;
+      for (std::uint8_t s : compiled.status) ok += s == kRayOk;
+      CHECK(ok > 0);                              // the grid traces some rays
+      CHECK(ok < static_cast<int>(rays.size()));  // and fails some
+      if (record_on) {
+        for (int k = 0; k < k_count; ++k) {
+          CHECK(differing(record_c.axial_travel_mm[k], record_g.axial_travel_mm[k]) == 0);
+          CHECK(differing(record_c.cos2_incidence[k], record_g.cos2_incidence[k]) == 0);
+          CHECK(differing(record_c.cos2_refraction[k], record_g.cos2_refraction[k]) == 0);
+        }
+        CHECK(differing(record_c.optical_path_mm, record_g.optical_path_mm) == 0);
+      }
+    }
+  }
+}
+
+}  // namespace
+
+TEST_CASE("jet widths: one increasing list, dispatch to the narrowest width that holds n") {
+  for (int i = 1; i < kJetWidthCount; ++i) CHECK(kJetWidths[i - 1] < kJetWidths[i]);
+  CHECK(kJetWidthCap == kJetWidths[kJetWidthCount - 1]);
+  auto width_for = [](int n) {
+    return with_jet_width(n, [](auto w) { return decltype(w)::value; });
+  };
+  for (int n = 0; n <= kJetWidthCap + 5; ++n) {
+    const int w = width_for(n);
+    CAPTURE(n);
+    CHECK(is_jet_width(w));
+    if (n > kJetWidthCap) {
+      CHECK(w == kJetWidthCap);  // blocks of the last width above it
+    } else {
+      CHECK(w >= n);
+      for (int i = 0; i < kJetWidthCount && kJetWidths[i] < w; ++i) CHECK(kJetWidths[i] < n);
+    }
+  }
+  CHECK_FALSE(is_jet_width(kJetWidthCap + 1));
+}
+
+TEST_CASE("trace: the compiled Jet trace of every listed width gives the template's bits") {
+  // A spherical lens (the sphere loop) and one with an even asphere (trace/profile.h's loops).
+#define LENSOPT_CHECK_WIDTH(N)       \
+  check_lens_width<N>("cooke.toml"); \
+  check_lens_width<N>("doublet-asphere.toml");
+  LENSOPT_FOR_EACH_JET_WIDTH(LENSOPT_CHECK_WIDTH)
+#undef LENSOPT_CHECK_WIDTH
+}
