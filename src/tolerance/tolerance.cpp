@@ -341,8 +341,11 @@ ToleranceModel::ToleranceModel(const Lens& lens, const ToleranceOptions& options
     // The nominal's chief-ray angles (deg) label the fields.
     m.fields_deg = prepare_lens_system(m.scaled_lens, to).fields_deg;
   }
-  m.rays = static_cast<int>(paper_pupil_samples(options.rings).size()) *
-           (m.as_written && needs_full_pupil(m.written.vignetting) ? 2 : 1);
+  m.rays =
+      static_cast<int>(paper_pupil_samples(options.rings).size()) *
+      ((m.as_written && needs_full_pupil(m.written.vignetting)) || m.scaled_lens.breaks_symmetry()
+           ? 2
+           : 1);
 
   // Clear semi-apertures (clear_semi_apertures_mm). An element's rim is at the larger of its
   // two surfaces' apertures; two surfaces across air meet first at the smaller one.

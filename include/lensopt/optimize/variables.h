@@ -144,6 +144,7 @@ class LensParameterization {
     lens.is_glass.assign(k_count, 0);
     for (int k = 0; k < k_count; ++k)
       lens.is_glass[k] = trace_glass_kind(structure_.surfaces[k].material);
+    lens.geometry = make_trace_geometry<T>(structure_);
     for (int k = 0; k < k_count; ++k) {
       const Material& m = structure_.surfaces[k].material;
       if (m.kind != Material::Kind::kModel || m.model_glass != ModelGlass::kZemax || m.dpgf == 0.0)
