@@ -154,7 +154,8 @@ void add_profile_parameters(const Lens& lens, const Tolerances& tol,
 
 namespace {
 
-// Element decenters and tilts (TEDX, TEDY, TETX, TETY; see the header): each run of glasses,
+// Element decenters and tilts (TEDX, TEDY, TETX, TETY; see the header): each run of glasses (a
+// "group": a cemented pair is one group but two elements in the rows above),
 // surfaces a .. b (b the first surface followed by air), as a whole.
 void add_placement_parameters(const Lens& lens, const Tolerances& tol,
                               std::vector<ToleranceParameter>& out) {
@@ -188,7 +189,7 @@ void add_placement_parameters(const Lens& lens, const Tolerances& tol,
       p.limit = k.limit;
       p.name = fmt::format("{}{}", k.name, element);
       p.column = fmt::format("{}{}_{}", k.name, element, k.unit);
-      p.description = fmt::format("element {} {} ({})", element, k.what, surfaces);
+      p.description = fmt::format("group {} {} ({})", element, k.what, surfaces);
       p.limit_text = format_limit(
           k.limit, k.kind == Kind::kDecenterX || k.kind == Kind::kDecenterY ? " mm" : " arcmin");
       out.push_back(p);
