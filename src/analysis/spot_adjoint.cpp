@@ -77,6 +77,10 @@ bool adjoint_supported(const TraceLens<double>& lens) {
   // Spheres, conics and even aspheres without clear apertures (clipping apertures, when a lens
   // has them, take the Jet path: the backward pass has no step for them).
   if (lens.surface_count() == 0) return false;
+  // 3D placements, mirrors and obscurations (issue 32) have no backward step: the Jet path.
+  if (lens.geometry.placed() || !lens.geometry.medium_sign.empty() ||
+      !lens.geometry.obscuration_mm.empty())
+    return false;
   for (double r : lens.semi_diameter_mm)
     if (r > 0) return false;
   for (std::uint8_t kind : lens.profile)

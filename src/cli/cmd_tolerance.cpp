@@ -20,6 +20,9 @@
 namespace lensopt::cli {
 namespace {
 
+// --curvature-pct .. --asphere-sag-um, --decenter-mm, --tilt-arcmin (Tolerances' order).
+constexpr int kToleranceOptionCount = 8;
+
 struct ToleranceCommand {
   std::string lens_path;
   // Values of options given on the command line; the defaults are ToleranceOptions'.
@@ -46,7 +49,7 @@ struct ToleranceCommand {
   CLI::Option* compensator_opt = nullptr;
   CLI::Option* rings_opt = nullptr;
   CLI::Option* fields_opt = nullptr;
-  CLI::Option* tolerance_opts[6] = {};
+  CLI::Option* tolerance_opts[kToleranceOptionCount] = {};
 };
 
 // A CLI tolerance must be a finite number >= 0; the message names the option.
@@ -60,10 +63,13 @@ void check_cli_tolerance(const CLI::Option* opt, double value) {
 }
 
 void run_tolerance_command(const ToleranceCommand& cmd) {
-  const double cli_values[6] = {cmd.tolerances.curvature_pct,    cmd.tolerances.glass_thickness_mm,
-                                cmd.tolerances.air_thickness_mm, cmd.tolerances.nd,
-                                cmd.tolerances.vd_pct,           cmd.tolerances.asphere_sag_um};
-  for (int i = 0; i < 6; ++i) check_cli_tolerance(cmd.tolerance_opts[i], cli_values[i]);
+  const double cli_values[kToleranceOptionCount] = {
+      cmd.tolerances.curvature_pct,    cmd.tolerances.glass_thickness_mm,
+      cmd.tolerances.air_thickness_mm, cmd.tolerances.nd,
+      cmd.tolerances.vd_pct,           cmd.tolerances.asphere_sag_um,
+      cmd.tolerances.decenter_mm,      cmd.tolerances.tilt_arcmin};
+  for (int i = 0; i < kToleranceOptionCount; ++i)
+    check_cli_tolerance(cmd.tolerance_opts[i], cli_values[i]);
 
   // The outputs are checked before the (long) run; none may replace the lens.
   for (const std::string& out : {cmd.csv_path, cmd.histogram_path})
@@ -75,11 +81,12 @@ void run_tolerance_command(const ToleranceCommand& cmd) {
   // The lens's [tolerance] table over the defaults (one function for the CLI and Python), then
   // what the command line gives.
   ToleranceOptions options = tolerance_options_for(lens);
-  double* targets[6] = {
+  double* targets[kToleranceOptionCount] = {
       &options.tolerances.curvature_pct,    &options.tolerances.glass_thickness_mm,
       &options.tolerances.air_thickness_mm, &options.tolerances.nd,
-      &options.tolerances.vd_pct,           &options.tolerances.asphere_sag_um};
-  for (int i = 0; i < 6; ++i)
+      &options.tolerances.vd_pct,           &options.tolerances.asphere_sag_um,
+      &options.tolerances.decenter_mm,      &options.tolerances.tilt_arcmin};
+  for (int i = 0; i < kToleranceOptionCount; ++i)
     if (cmd.tolerance_opts[i]->count() > 0) *targets[i] = cli_values[i];
   if (cmd.distribution_opt->count() > 0)
     options.distribution = parse_tolerance_distribution(cmd.distribution);
@@ -176,6 +183,12 @@ void setup_tolerance(CLI::App& app) {
       "--asphere-sag-um", cmd->tolerances.asphere_sag_um,
       "conic and asphere terms of non-spherical surfaces: +- sag at the clear semi-aperture, um, "
       "each term alone (default 1)");
+  cmd->tolerance_opts[6] =
+      sub->add_option("--decenter-mm", cmd->tolerances.decenter_mm,
+                      "element decenter in x and in y, +- mm (default 0.02; 0: off)");
+  cmd->tolerance_opts[7] =
+      sub->add_option("--tilt-arcmin", cmd->tolerances.tilt_arcmin,
+                      "element tilt about x and about y, +- arcmin (default 1; 0: off)");
   cmd->rings_opt =
       sub->add_option("--rings", cmd->rings,
                       "pupil rings per trial (default 16; the paper's full sampling is 32)")

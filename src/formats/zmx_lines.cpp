@@ -29,12 +29,14 @@ bool ZmxParser::surface_line(const Line& line, const std::string& key) {
   if (key == "TYPE") {
     RawSurface& s = surface(line);
     const std::string type = line.fields.size() > 1 ? upper(line.fields[1]) : "";
-    if (type != "STANDARD" && type != "EVENASPH")
+    if (type != "STANDARD" && type != "EVENASPH" && type != "COORDBRK")
       fail(line, 1,
            fmt::format("surface {} has type {}, which lensopt does not support; it imports "
-                       "STANDARD (sphere or conic) and EVENASPH surfaces only",
+                       "STANDARD (sphere or conic), EVENASPH and COORDBRK surfaces only",
                        s.number, type.empty() ? std::string("(none)") : type));
     s.even_asphere = type == "EVENASPH";
+    s.coordinate_break = type == "COORDBRK";
+    s.type_line = line.number;
     return true;
   }
   if (key == "CURV") {
@@ -61,9 +63,11 @@ bool ZmxParser::surface_line(const Line& line, const std::string& key) {
     const std::string name(line.fields[1]);
     s.glas_line = line.number;
     s.glas_column = line.columns[1];
-    if (upper(name) == "MIRROR")
-      fail(line, 1,
-           fmt::format("surface {} is a mirror; lensopt models refracting lenses only", s.number));
+    if (upper(name) == "MIRROR") {
+      // A reflecting surface; the medium before it continues (zmx_read.cpp).
+      s.mirror = true;
+      return true;
+    }
     // "GLAS ___BLANK 1 0 nd vd dPgF ...": OpticStudio's model glass. (A named glass with the
     // same fields, "GLAS N-LAK9 1 0 nd vd", is a catalog glass: optiland's lens1.zmx.)
     if (name == "___BLANK") {
@@ -114,6 +118,50 @@ bool ZmxParser::surface_line(const Line& line, const std::string& key) {
   }
   if (key == "COMM") {
     surface(line);  // a surface comment: nothing to keep
+    return true;
+  }
+  if (key == "PARM" && surface(line).coordinate_break) {
+    // COORDBRK: PARM 1 decenter x, 2 decenter y, 3 tilt about x, 4 about y, 5 about z (deg),
+    // 6 order (0: decenter then tilt; otherwise tilt then decenter).
+    RawSurface& s = surface(line);
+    const int index = integer(line, 1, "the PARM number");
+    const double value = number(line, 2, "the PARM value");
+    if (index >= 1 && index <= 6) {
+      s.parm[index] = value;
+    } else if (value != 0.0) {
+      fail(line, 1,
+           fmt::format("surface {}: COORDBRK has PARM 1..6 (decenter x, y, tilt x, y, z, order); "
+                       "PARM {} = {} is not one of them",
+                       s.number, index, line.fields[2]));
+    } else {
+      ignore(line);
+    }
+    return true;
+  }
+  if (key == "CLAP" || key == "OBSC") {
+    // "CLAP rmin rmax ..." a circular aperture, "OBSC rmin rmax ..." a circular obscuration.
+    RawSurface& s = surface(line);
+    const double r_min = number(line, 1, fmt::format("{} (minimum radius)", key));
+    const double r_max = number(line, 2, fmt::format("{} (maximum radius)", key));
+    if (!(r_min >= 0.0) || !(r_max > r_min))
+      fail(line, 1,
+           fmt::format("{} {} {}: the radii must satisfy 0 <= min < max", key, line.fields[1],
+                       line.fields[2]));
+    (key == "CLAP" ? s.clap_min : s.obsc_min) = r_min;
+    (key == "CLAP" ? s.clap_max : s.obsc_max) = r_max;
+    (key == "CLAP" ? s.clap_line : s.obsc_line) = line.number;
+    return true;
+  }
+  if (key == "OBDC") {
+    RawSurface& s = surface(line);
+    s.obdc_x = number(line, 1, "OBDC (aperture decenter x)");
+    s.obdc_y = number(line, 2, "OBDC (aperture decenter y)");
+    return true;
+  }
+  if (key == "SCBD") {
+    RawSurface& s = surface(line);
+    s.scbd_line = line.number;
+    for (std::size_t i = 0; i < 8; ++i) s.scbd[i] = number(line, i + 1, "an SCBD value");
     return true;
   }
   if (key == "PARM" && surface(line).even_asphere) {

@@ -50,6 +50,20 @@ struct RawSurface {
   bool even_asphere = false;      // TYPE EVENASPH
   double conic = 0.0;             // CONI
   double parm[9] = {};            // PARM 1..8 of EVENASPH: a2, a4, ..., a16 (lens units)
+  // TYPE COORDBRK: PARM 1..6 = decenter x, y (lens units), tilt x, y, z (deg), order.
+  bool coordinate_break = false;
+  int type_line = 0;
+  bool mirror = false;  // GLAS MIRROR
+  // CLAP rmin rmax (circular aperture), OBSC rmin rmax (circular obscuration), OBDC x y
+  // (their decenter), lens units.
+  double clap_min = 0.0, clap_max = 0.0;
+  int clap_line = 0;
+  double obsc_min = 0.0, obsc_max = 0.0;
+  int obsc_line = 0;
+  double obdc_x = 0.0, obdc_y = 0.0;
+  // SCBD: a surface's own tilt/decenter (read on the image surface).
+  int scbd_line = 0;
+  double scbd[8] = {};
 };
 
 struct Wavelength {
@@ -149,6 +163,7 @@ class ZmxParser {
 
   std::string name_;
   bool has_name_ = false;
+  bool breaks_symmetry_ = false;  // a COORDBRK, SCBD or aperture decenter (set_fields)
   double unit_mm_ = 1.0;
   std::optional<double> enpd_;
   std::optional<double> fnum_;

@@ -120,9 +120,48 @@ LensSourceLines ZmxParser::build_surfaces(Lens& lens) {
     if (raw.thickness_infinite)
       fail_at(raw.disz_line, 1, fmt::format("surface {} has an infinite thickness", raw.number));
     Surface surface;
+    const Material before = lens.surfaces.empty() ? Material::air() : lens.surfaces.back().material;
+    if (raw.scbd_line > 0)
+      fail_at(raw.scbd_line, 1,
+              fmt::format("surface {}: a surface's own tilt/decenter (SCBD) is read on the image "
+                          "surface only; write it as COORDBRK surfaces around surface {}",
+                          raw.number, raw.number));
+    if (raw.coordinate_break) {
+      // COORDBRK: a dummy surface that moves the frame of what follows (lens.h Placement).
+      if (raw.is_stop)
+        fail_at(raw.stop_line, 1,
+                fmt::format("surface {} is a coordinate break and cannot be the stop", raw.number));
+      surface.coordinate_break = true;
+      surface.placement = Placement{
+          raw.parm[1] * unit_mm_, raw.parm[2] * unit_mm_, raw.parm[3], raw.parm[4], raw.parm[5],
+          raw.parm[6] != 0.0};
+      surface.thickness_mm = raw.thickness_mm * unit_mm_;
+      surface.material = before;
+      breaks_symmetry_ = true;
+      lens.surfaces.push_back(surface);
+      source_lines.surfaces.push_back(raw.line);
+      continue;
+    }
     surface.curvature_per_mm = raw.curvature_per_mm / unit_mm_;
     surface.thickness_mm = raw.thickness_mm * unit_mm_;
     surface.semi_diameter_mm = raw.semi_diameter_mm * unit_mm_;
+    // Surface apertures: CLAP (a circular aperture: rmax clips, rmin > 0 obscures the centre),
+    // OBSC (a circular obscuration from the centre), OBDC their decenter.
+    if (raw.clap_line > 0) {
+      surface.semi_diameter_mm = raw.clap_max * unit_mm_;
+      surface.obscuration_mm = raw.clap_min * unit_mm_;
+    }
+    if (raw.obsc_line > 0) {
+      if (raw.obsc_min > 0.0)
+        fail_at(raw.obsc_line, 1,
+                fmt::format("surface {}: an annular obscuration (OBSC with a minimum radius {}) "
+                            "is not supported; lensopt's obscuration is central",
+                            raw.number, raw.obsc_min));
+      surface.obscuration_mm = std::max(surface.obscuration_mm, raw.obsc_max * unit_mm_);
+    }
+    surface.aperture_decenter_x_mm = raw.obdc_x * unit_mm_;
+    surface.aperture_decenter_y_mm = raw.obdc_y * unit_mm_;
+    if (raw.obdc_x != 0.0 || raw.obdc_y != 0.0) breaks_symmetry_ = true;
     surface.conic = raw.conic;
     if (raw.even_asphere) {
       // a_{2i} in lens units^(1-2i).
@@ -134,6 +173,11 @@ LensSourceLines ZmxParser::build_surfaces(Lens& lens) {
       }
     }
     surface.material = resolve_glass(raw, catalogs, used_catalogs, dispersion);
+    if (raw.mirror) {
+      // GLAS MIRROR: the medium before continues, traversed backwards (thicknesses negative).
+      surface.mirror = true;
+      surface.material = before;
+    }
     if (raw.is_stop) {
       if (++stop_count > 1)
         fail_at(
@@ -158,6 +202,25 @@ LensSourceLines ZmxParser::build_surfaces(Lens& lens) {
     }
     lens.surfaces.push_back(surface);
     source_lines.surfaces.push_back(raw.line);
+  }
+  if (const RawSurface& image = surfaces_.back(); image.scbd_line > 0) {
+    // The image surface's own tilt/decenter: "SCBD 1 order 0 dx dy tx ty tz" (the form
+    // OpticStudio writes for a before-surface tilt), a coordinate break at the image vertex.
+    const double* v = image.scbd;
+    if (v[0] != 1.0 || v[2] != 0.0)
+      fail_at(image.scbd_line, 1,
+              fmt::format("image surface: SCBD {} {} {} ... is a form lensopt does not read (it "
+                          "reads 'SCBD 1 order 0 dx dy tx ty tz')",
+                          v[0], v[1], v[2]));
+    if (Placement p{v[3] * unit_mm_, v[4] * unit_mm_, v[5], v[6], v[7], v[1] != 0.0}; p.any()) {
+      Surface cb;
+      cb.coordinate_break = true;
+      cb.placement = p;
+      cb.material = lens.surfaces.back().material;
+      lens.surfaces.push_back(cb);
+      source_lines.surfaces.push_back(image.line);
+      breaks_symmetry_ = true;
+    }
   }
   if (stop_count == 0) {
     // OpticStudio's default stop is surface 1.
@@ -281,6 +344,12 @@ void ZmxParser::set_fields(Specs& specs) {
   for (std::size_t i = 0; i < field_count; ++i) {
     const double x = i < xfln_.size() ? xfln_[i] : 0.0;
     const double y = i < yfln_.size() ? yfln_[i] : 0.0;
+    if (breaks_symmetry_ && (x != 0.0 || y < 0.0))
+      fail_at(yfln_line_ > 0 ? yfln_line_ : last_line_, 1,
+              fmt::format("field {} is at (x, y) = ({:g}, {:g}); a lens without rotational "
+                          "symmetry (coordinate breaks, decentred apertures) cannot turn it onto "
+                          "+y, and lensopt traces fields on +y only",
+                          i + 1, x, y));
     FieldPoint f;
     f.value = x == 0.0 ? std::abs(y) : std::hypot(x, y);
     f.weight = i < field_weights_.size() ? field_weights_[i] : 1.0;

@@ -237,6 +237,26 @@ std::string format_zmx(const Lens& lens) {
   }
   int number = 1;
   for (const Surface& s : lens.surfaces) {
+    if (s.coordinate_break) {
+      // TYPE COORDBRK, PARM 1..6: decenter x, y, tilt x, y, z, order.
+      const Placement& p = s.placement;
+      line(fmt::format("SURF {}", number++));
+      line("  TYPE COORDBRK");
+      line("  CURV 0");
+      const double parm[6] = {p.decenter_x_mm, p.decenter_y_mm, p.tilt_x_deg,
+                              p.tilt_y_deg,    p.tilt_z_deg,    p.tilt_first ? 1.0 : 0.0};
+      for (int j = 0; j < 6; ++j) line(fmt::format("  PARM {} {}", j + 1, number_text(parm[j])));
+      line(fmt::format("  DISZ {}", number_text(s.thickness_mm)));
+      continue;
+    }
+    if (s.mirror && !s.material.is_air())
+      throw Error(SourceLocation{lens.source_path},
+                  fmt::format("surface {}: a mirror inside glass is not written to .zmx", number));
+    if (s.placement.any() || s.restore_frame)
+      throw Error(SourceLocation{lens.source_path},
+                  fmt::format("surface {}: a surface's own decenter_tilt is not written to .zmx; "
+                              "express it as coordinate breaks around the surface",
+                              number));
     line(fmt::format("SURF {}", number++));
     line(s.has_asphere() ? "  TYPE EVENASPH" : "  TYPE STANDARD");
     line(fmt::format("  CURV {}", number_text(s.curvature_per_mm)));
@@ -246,6 +266,8 @@ std::string format_zmx(const Lens& lens) {
         line(fmt::format("  PARM {} {}", j + 2, number_text(s.asphere[j])));
     }
     line(fmt::format("  DISZ {}", number_text(s.thickness_mm)));
+    // GLAS MIRROR (a mirror in air: the switch below then writes no glass).
+    if (s.mirror) line("  GLAS MIRROR 0 0 1.5 40 0 0 0 0 0 0");
     switch (s.material.kind) {
       case Material::Kind::kAir:
         break;
@@ -267,6 +289,17 @@ std::string format_zmx(const Lens& lens) {
           fmt::format("  DIAM {} 0", number_text(automatic[static_cast<std::size_t>(number - 2)])));
     }
     if (s.conic != 0.0) line(fmt::format("  CONI {}", number_text(s.conic)));
+    // Surface apertures: CLAP rmin rmax (a clear aperture, rmin obscuring the centre) or OBSC
+    // 0 r (an obscuration alone), OBDC their decenter.
+    const bool decentred = s.aperture_decenter_x_mm != 0.0 || s.aperture_decenter_y_mm != 0.0;
+    if (s.semi_diameter_mm > 0.0 && (s.obscuration_mm > 0.0 || decentred))
+      line(fmt::format("  CLAP {} {} 0", number_text(s.obscuration_mm),
+                       number_text(s.semi_diameter_mm)));
+    else if (s.obscuration_mm > 0.0)
+      line(fmt::format("  OBSC 0 {} 0", number_text(s.obscuration_mm)));
+    if (decentred)
+      line(fmt::format("  OBDC {} {}", number_text(s.aperture_decenter_x_mm),
+                       number_text(s.aperture_decenter_y_mm)));
   }
   line(fmt::format("SURF {}", number));
   line("  TYPE STANDARD");

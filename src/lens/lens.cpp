@@ -161,10 +161,45 @@ void validate_lens(const Lens& lens, const LensSourceLines& lines) {
         length = std::max(length, std::abs(1.0 / s.curvature_per_mm));
   }
   int stops = 0;
+  bool reflected = false;  // an odd number of mirrors so far: thicknesses run backwards
   for (std::size_t i = 0; i < surfaces.size(); ++i) {
     const Surface& s = surfaces[i];
     const int n = static_cast<int>(i) + 1;
     const int line = surface_line(i);
+    {
+      const Placement& p = s.placement;
+      for (double v : {p.decenter_x_mm, p.decenter_y_mm, p.tilt_x_deg, p.tilt_y_deg, p.tilt_z_deg,
+                       s.obscuration_mm, s.aperture_decenter_x_mm, s.aperture_decenter_y_mm})
+        if (!std::isfinite(v))
+          fail_at(line,
+                  fmt::format("surface {}: a decenter, tilt or obscuration is not finite", n));
+      for (double t : {p.tilt_x_deg, p.tilt_y_deg, p.tilt_z_deg})
+        if (std::abs(t) > 360.0)
+          fail_at(line, fmt::format("surface {}: tilt {:g} deg is outside [-360, 360]", n, t));
+      if (s.obscuration_mm < 0.0)
+        fail_at(line, fmt::format("surface {}: obscuration radius {:g} mm must be >= 0", n,
+                                  s.obscuration_mm));
+      if (s.coordinate_break) {
+        if (s.curvature_per_mm != 0.0 || !s.is_spherical() || s.mirror || s.is_stop ||
+            s.semi_diameter_mm > 0.0 || s.obscuration_mm > 0.0)
+          fail_at(line, fmt::format("surface {}: a coordinate break is a dummy surface: no "
+                                    "curvature, profile, mirror, stop or aperture",
+                                    n));
+        if (s.restore_frame)
+          fail_at(line, fmt::format("surface {}: a coordinate break moves the frame of what "
+                                    "follows; restore_frame is for a tilted or decentred surface",
+                                    n));
+      }
+      const Material& before = i > 0 ? surfaces[i - 1].material : Material::air();
+      if ((s.mirror || s.coordinate_break) &&
+          (s.material.kind != before.kind || s.material.glass_name != before.glass_name ||
+           s.material.nd != before.nd || s.material.vd != before.vd))
+        fail_at(line, fmt::format("surface {}: the medium after a {} is the one before it ({}), "
+                                  "not {}",
+                                  n, s.mirror ? "mirror" : "coordinate break", before.label(),
+                                  s.material.label()));
+      if (s.mirror) reflected = !reflected;
+    }
     if (!std::isfinite(s.curvature_per_mm))
       fail_at(line, fmt::format("surface {}: curvature is not finite (radius too small)", n));
     if (!std::isfinite(s.thickness_mm))
@@ -197,9 +232,9 @@ void validate_lens(const Lens& lens, const LensSourceLines& lines) {
       if (!(s.material.vd >= kMinAbbe && s.material.vd <= kMaxAbbe))
         fail_at(line, fmt::format("surface {}: glass {} has vd = {} (must be in [{:g}, {:g}])", n,
                                   s.material.label(), s.material.vd, kMinAbbe, kMaxAbbe));
-      if (i + 1 < surfaces.size() && !(s.thickness_mm >= 0))
-        fail_at(line, fmt::format("surface {}: a glass thickness of {:g} mm must be >= 0", n,
-                                  s.thickness_mm));
+      if (i + 1 < surfaces.size() && !((reflected ? -s.thickness_mm : s.thickness_mm) >= 0))
+        fail_at(line, fmt::format("surface {}: a glass thickness of {:g} mm must be {} 0", n,
+                                  s.thickness_mm, reflected ? "<= (after a mirror)" : ">="));
     }
   }
   if (!(length > 0)) fail("the lens has no length: every thickness is 0 and every surface flat");
@@ -359,6 +394,11 @@ Lens scaled(const Lens& lens, double scale) {
     s.curvature_per_mm /= scale;
     s.thickness_mm *= scale;
     s.semi_diameter_mm *= scale;
+    s.obscuration_mm *= scale;
+    s.aperture_decenter_x_mm *= scale;
+    s.aperture_decenter_y_mm *= scale;
+    s.placement.decenter_x_mm *= scale;  // tilts are angles
+    s.placement.decenter_y_mm *= scale;
     s.asphere_r2_per_mm /= scale;
     double power = scale;  // s^(2i-1) for a_{2i}: s^3 for a4
     for (double& a : s.asphere) {

@@ -83,9 +83,23 @@ constexpr std::array<std::string_view, 14> kSystemKeys = {"mode",
 constexpr std::array<std::string_view, 2> kLensKeys = {"name", "catalog"};
 constexpr std::array<std::string_view, 6> kSpecsKeys = {
     "f_number", "half_field_deg", "sensor_diagonal_mm", "wavelengths_nm", "channels", "dispersion"};
-constexpr std::array<std::string_view, 9> kSurfaceKeys = {
-    "radius_mm", "curvature_per_mm", "thickness_mm", "material", "stop", "semi_diameter_mm",
-    "conic",     "asphere",          "asphere_r2"};
+constexpr std::array<std::string_view, 13> kSurfaceKeys = {"radius_mm",
+                                                           "curvature_per_mm",
+                                                           "thickness_mm",
+                                                           "material",
+                                                           "stop",
+                                                           "semi_diameter_mm",
+                                                           "conic",
+                                                           "asphere",
+                                                           "asphere_r2",
+                                                           "coordinate_break",
+                                                           "decenter_tilt",
+                                                           "obscuration_mm",
+                                                           "aperture_decenter_mm"};
+// A coordinate_break or decenter_tilt table (lens.h Placement).
+constexpr std::array<std::string_view, 7> kPlacementKeys = {
+    "decenter_x_mm", "decenter_y_mm", "tilt_x_deg",   "tilt_y_deg",
+    "tilt_z_deg",    "order",         "restore_frame"};
 constexpr std::array<std::string_view, 4> kModelGlassKeys = {"nd", "vd", "model", "dpgf"};
 constexpr std::array<std::string_view, 2> kCatalogGlassKeys = {"glass", "catalog"};
 
@@ -515,10 +529,79 @@ Material read_material(const TomlReader& reader, const toml::node& node, int sur
                                 surface_number, type_phrase(node)));
 }
 
+// A coordinate_break = { ... } or decenter_tilt = { ... } table: decenters (mm), tilts (deg),
+// order = "decenter-first" (OpticStudio's order 0, default) or "tilt-first" (order 1) and, for
+// decenter_tilt, restore_frame.
+void read_placement(const TomlReader& reader, const toml::node& node, int surface_number,
+                    bool coordinate_break, Surface& surface) {
+  const std::string what = fmt::format("surface {}: {}", surface_number,
+                                       coordinate_break ? "coordinate_break" : "decenter_tilt");
+  const toml::table& t = reader.table(node, what);
+  reader.check_keys(t, kPlacementKeys, what);
+  Placement& p = surface.placement;
+  auto value = [&](std::string_view key, double& out) {
+    if (const Entry e = entry(t, key))
+      out = reader.finite_number(*e.node, fmt::format("{}.{}", what, key));
+  };
+  value("decenter_x_mm", p.decenter_x_mm);
+  value("decenter_y_mm", p.decenter_y_mm);
+  value("tilt_x_deg", p.tilt_x_deg);
+  value("tilt_y_deg", p.tilt_y_deg);
+  value("tilt_z_deg", p.tilt_z_deg);
+  if (const Entry e = entry(t, "order")) {
+    const std::string order = reader.string(*e.node, fmt::format("{}.order", what));
+    if (order == "tilt-first")
+      p.tilt_first = true;
+    else if (order != "decenter-first")
+      reader.fail(*e.node, fmt::format("{}.order = \"{}\" must be \"decenter-first\" "
+                                       "(OpticStudio's order 0) or \"tilt-first\" (order 1)",
+                                       what, order));
+  }
+  if (const Entry e = entry(t, "restore_frame")) {
+    if (coordinate_break)
+      reader.fail(e, fmt::format("{}: restore_frame belongs to decenter_tilt (a coordinate "
+                                 "break moves the frame of everything after it)",
+                                 what));
+    surface.restore_frame = reader.boolean(*e.node, "restore_frame");
+  }
+}
+
 Surface read_surface(const TomlReader& reader, const toml::table& table, int surface_number,
                      const Lens& lens, const Catalog* catalog) {
   reader.check_keys(table, kSurfaceKeys, fmt::format("surface {}", surface_number));
   Surface surface;
+  const Material before = lens.surfaces.empty() ? Material::air() : lens.surfaces.back().material;
+  if (const Entry cb = entry(table, "coordinate_break")) {
+    // A dummy surface: only its placement and thickness.
+    for (std::string_view key :
+         {"radius_mm", "curvature_per_mm", "material", "stop", "semi_diameter_mm", "conic",
+          "asphere", "asphere_r2", "decenter_tilt", "obscuration_mm", "aperture_decenter_mm"})
+      if (const Entry e = entry(table, key))
+        reader.fail(e, fmt::format("surface {}: a coordinate break has only coordinate_break "
+                                   "and thickness_mm, not {}",
+                                   surface_number, key));
+    surface.coordinate_break = true;
+    surface.material = before;
+    read_placement(reader, *cb.node, surface_number, true, surface);
+    const Entry thickness = entry(table, "thickness_mm");
+    if (!thickness)
+      reader.fail(table.source(), fmt::format("surface {}: missing thickness_mm", surface_number));
+    surface.thickness_mm = reader.finite_number(*thickness.node, "thickness_mm");
+    return surface;
+  }
+  if (const Entry e = entry(table, "decenter_tilt"))
+    read_placement(reader, *e.node, surface_number, false, surface);
+  if (const Entry e = entry(table, "obscuration_mm")) {
+    surface.obscuration_mm = reader.finite_number(*e.node, "obscuration_mm");
+    if (!(surface.obscuration_mm >= 0.0))
+      reader.fail(*e.node, fmt::format("obscuration_mm = {} must be >= 0", surface.obscuration_mm));
+  }
+  if (const Entry e = entry(table, "aperture_decenter_mm")) {
+    const toml::array& xy = reader.array(*e.node, "aperture_decenter_mm");
+    if (xy.size() != 2) reader.fail(*e.node, "aperture_decenter_mm must be [x, y] (mm)");
+    surface.aperture_decenter_x_mm = reader.finite_number(xy[0], "aperture_decenter_mm x");
+    surface.aperture_decenter_y_mm = reader.finite_number(xy[1], "aperture_decenter_mm y");
+  }
   const Entry radius = entry(table, "radius_mm");
   const Entry curvature = entry(table, "curvature_per_mm");
   if (radius && curvature) {
@@ -542,8 +625,16 @@ Surface read_surface(const TomlReader& reader, const toml::table& table, int sur
   if (!thickness)
     reader.fail(table.source(), fmt::format("surface {}: missing thickness_mm", surface_number));
   surface.thickness_mm = reader.finite_number(*thickness.node, "thickness_mm");
-  if (const Entry e = entry(table, "material"))
-    surface.material = read_material(reader, *e.node, surface_number, lens, catalog);
+  if (const Entry e = entry(table, "material")) {
+    const auto* name = e.node->as_string();
+    if (name && to_lower(name->get()) == "mirror") {
+      // A reflecting surface: the medium before it continues, traversed backwards.
+      surface.mirror = true;
+      surface.material = before;
+    } else {
+      surface.material = read_material(reader, *e.node, surface_number, lens, catalog);
+    }
+  }
   if (const Entry e = entry(table, "stop")) {
     surface.is_stop = reader.boolean(*e.node, "stop");
     if (surface.is_stop && surface.curvature_per_mm != 0.0)

@@ -307,8 +307,30 @@ std::string format_lens_toml(const Lens& lens) {
     return found != nullptr && found->catalog == glass.catalog && found->nd == glass.nd &&
            found->vd == glass.vd && found->coefficients == glass.coefficients;
   };
+  auto placement_text = [&](const Surface& s) {
+    const Placement& p = s.placement;
+    std::vector<std::string> items;
+    auto item = [&](const char* key, double v) {
+      if (v != 0.0) items.push_back(fmt::format("{} = {}", key, number_text(v)));
+    };
+    item("decenter_x_mm", p.decenter_x_mm);
+    item("decenter_y_mm", p.decenter_y_mm);
+    item("tilt_x_deg", p.tilt_x_deg);
+    item("tilt_y_deg", p.tilt_y_deg);
+    item("tilt_z_deg", p.tilt_z_deg);
+    if (p.tilt_first) items.push_back("order = \"tilt-first\"");
+    if (s.restore_frame) items.push_back("restore_frame = true");
+    return items.empty() ? std::string("{}") : fmt::format("{{ {} }}", fmt::join(items, ", "));
+  };
   for (const Surface& surface : lens.surfaces) {
     out += "\n[[surfaces]]\n";
+    if (surface.coordinate_break) {
+      line("coordinate_break", placement_text(surface));
+      line("thickness_mm", number_text(surface.thickness_mm));
+      continue;
+    }
+    if (surface.placement.any() || surface.restore_frame)
+      line("decenter_tilt", placement_text(surface));
     const std::optional<double> radius_mm =
         surface.written_as_radius ? exact_radius_mm(surface.curvature_per_mm) : std::nullopt;
     if (radius_mm) {
@@ -317,36 +339,44 @@ std::string format_lens_toml(const Lens& lens) {
       line("curvature_per_mm", number_text(surface.curvature_per_mm));
     }
     line("thickness_mm", number_text(surface.thickness_mm));
-    switch (surface.material.kind) {
-      case Material::Kind::kAir:
-        break;
-      case Material::Kind::kCatalog:
-        // A glass of another catalog than the lens's names its catalog.
-        if (surface.material.glass && !in_lens_catalog(*surface.material.glass)) {
-          line("material", fmt::format("{{ glass = {}, catalog = {} }}",
-                                       toml_string(surface.material.glass_name),
-                                       toml_string(surface.material.glass->catalog)));
-        } else {
-          line("material", toml_string(surface.material.glass_name));
-        }
-        break;
-      case Material::Kind::kModel:
-        if (surface.material.model_glass == ModelGlass::kZemax) {
-          line("material",
-               fmt::format("{{ nd = {}, vd = {}, model = \"opticstudio\"{} }}",
-                           number_text(surface.material.nd), number_text(surface.material.vd),
-                           surface.material.dpgf == 0.0
-                               ? std::string()
-                               : fmt::format(", dpgf = {}", number_text(surface.material.dpgf))));
-        } else {
-          line("material", fmt::format("{{ nd = {}, vd = {} }}", number_text(surface.material.nd),
-                                       number_text(surface.material.vd)));
-        }
-        break;
-    }
+    if (surface.mirror) {
+      line("material", "\"mirror\"");
+    } else
+      switch (surface.material.kind) {
+        case Material::Kind::kAir:
+          break;
+        case Material::Kind::kCatalog:
+          // A glass of another catalog than the lens's names its catalog.
+          if (surface.material.glass && !in_lens_catalog(*surface.material.glass)) {
+            line("material", fmt::format("{{ glass = {}, catalog = {} }}",
+                                         toml_string(surface.material.glass_name),
+                                         toml_string(surface.material.glass->catalog)));
+          } else {
+            line("material", toml_string(surface.material.glass_name));
+          }
+          break;
+        case Material::Kind::kModel:
+          if (surface.material.model_glass == ModelGlass::kZemax) {
+            line("material",
+                 fmt::format("{{ nd = {}, vd = {}, model = \"opticstudio\"{} }}",
+                             number_text(surface.material.nd), number_text(surface.material.vd),
+                             surface.material.dpgf == 0.0
+                                 ? std::string()
+                                 : fmt::format(", dpgf = {}", number_text(surface.material.dpgf))));
+          } else {
+            line("material", fmt::format("{{ nd = {}, vd = {} }}", number_text(surface.material.nd),
+                                         number_text(surface.material.vd)));
+          }
+          break;
+      }
     if (surface.is_stop) line("stop", "true");
     if (surface.semi_diameter_mm != 0.0)
       line("semi_diameter_mm", number_text(surface.semi_diameter_mm));
+    if (surface.obscuration_mm != 0.0) line("obscuration_mm", number_text(surface.obscuration_mm));
+    if (surface.aperture_decenter_x_mm != 0.0 || surface.aperture_decenter_y_mm != 0.0)
+      line("aperture_decenter_mm",
+           fmt::format("[{}, {}]", number_text(surface.aperture_decenter_x_mm),
+                       number_text(surface.aperture_decenter_y_mm)));
     if (surface.conic != 0.0) line("conic", number_text(surface.conic));
     if (surface.asphere_r2_per_mm != 0.0)
       line("asphere_r2", number_text(surface.asphere_r2_per_mm));

@@ -182,6 +182,7 @@ TraceLens<double> make_trace_lens(const Lens& lens) {
           s.has_asphere() ? kProfileAsphere : (s.conic != 0.0 ? kProfileConic : kProfileSphere);
     }
   }
+  out.geometry = make_trace_geometry<double>(lens);
   if (lens.specs.dispersion == DispersionModel::kCatalog) {
     out.catalog_offset.assign(k_count, std::vector<double>(out.wavelengths_nm.size(), 0.0));
     for (int k = 0; k < k_count; ++k) {

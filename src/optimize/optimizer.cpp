@@ -327,7 +327,8 @@ int residual_count(const LensParameterization& param, const TraceOptions& sampli
   const DesignSampling sampled = design_sampling(param.structure(), sampling);
   const int fields = sampled.spot_fields;
   // A field with VDX or VAN: every field is traced on the full pupil (system.h).
-  const bool full_pupil = needs_full_pupil(sampled.setup.vignetting);
+  const bool full_pupil =
+      needs_full_pupil(sampled.setup.vignetting) || param.structure().breaks_symmetry();
   const int rays =
       static_cast<int>(paper_pupil_samples(sampling.rings).size()) * (full_pupil ? 2 : 1);
   int glasses = 0;

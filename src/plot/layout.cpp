@@ -361,6 +361,12 @@ LayoutGeometry compute_layout(const PlotContext& ctx, const LayoutOptions& optio
   options.validate();
   const TraceSystem<double>& sys = ctx.sys;
   const TraceLens<double>& lens = sys.lens;
+  // The drawing is the y-z section of a centred system: rays of a lens with coordinate breaks,
+  // tilts, decenters or decentred apertures (issue 32) sit in each surface's own frame.
+  if (lens.geometry.placed())
+    throw Error(SourceLocation{ctx.lens.source_path},
+                "the layout of a lens with coordinate breaks, tilts, decenters or decentred "
+                "apertures is not drawn yet; plot --kind spot, fan, field or psf work");
   const int k_count = lens.surface_count();
   LayoutGeometry g;
   g.lens_name = ctx.lens.name;

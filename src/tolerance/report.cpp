@@ -38,9 +38,12 @@ std::string tolerance_line(const Tolerances& t) {
   auto value = [](double v, const char* unit) {
     return v > 0 ? fmt::format("+-{:g}{}", v, unit) : std::string("off");
   };
-  return fmt::format("curvature {}, glass thickness {}, airspace {}, nd {}, vd {}",
-                     value(t.curvature_pct, " %"), value(t.glass_thickness_mm, " mm"),
-                     value(t.air_thickness_mm, " mm"), value(t.nd, ""), value(t.vd_pct, " %"));
+  return fmt::format(
+      "curvature {}, glass thickness {}, airspace {}, nd {}, vd {}, element decenter {}, "
+      "element tilt {}",
+      value(t.curvature_pct, " %"), value(t.glass_thickness_mm, " mm"),
+      value(t.air_thickness_mm, " mm"), value(t.nd, ""), value(t.vd_pct, " %"),
+      value(t.decenter_mm, " mm"), value(t.tilt_arcmin, " arcmin"));
 }
 
 }  // namespace
@@ -174,7 +177,9 @@ std::string format_tolerance_json(const ToleranceReport& r) {
                      {"glass_thickness_mm", o.tolerances.glass_thickness_mm},
                      {"air_thickness_mm", o.tolerances.air_thickness_mm},
                      {"nd", o.tolerances.nd},
-                     {"vd_pct", o.tolerances.vd_pct}};
+                     {"vd_pct", o.tolerances.vd_pct},
+                     {"decenter_mm", o.tolerances.decenter_mm},
+                     {"tilt_arcmin", o.tolerances.tilt_arcmin}};
   j["sampling"] = {{"rings", o.rings},
                    {"fields", r.fields_deg.size()},
                    {"wavelengths", r.wavelength_count},

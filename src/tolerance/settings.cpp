@@ -45,7 +45,8 @@ FocusCompensator parse_focus_compensator(const std::string& text) {
 
 const std::vector<std::string>& tolerance_names() {
   static const std::vector<std::string> names = {
-      "curvature_pct", "glass_thickness_mm", "air_thickness_mm", "nd", "vd_pct", "asphere_sag_um"};
+      "curvature_pct", "glass_thickness_mm", "air_thickness_mm", "nd",
+      "vd_pct",        "asphere_sag_um",     "decenter_mm",      "tilt_arcmin"};
   return names;
 }
 
@@ -68,6 +69,11 @@ void Tolerances::validate() const {
   check_tolerance("nd", nd);
   check_tolerance("vd_pct", vd_pct);
   check_tolerance("asphere_sag_um", asphere_sag_um);
+  check_tolerance("decenter_mm", decenter_mm);
+  check_tolerance("tilt_arcmin", tilt_arcmin);
+  if (tilt_arcmin > 600)
+    throw Error(
+        fmt::format("tolerance tilt_arcmin = {} must be at most 600 (10 deg)", tilt_arcmin));
   if (curvature_pct >= 100)
     throw Error(fmt::format("tolerance curvature_pct = {} must be below 100 %", curvature_pct));
   if (vd_pct >= 100) throw Error(fmt::format("tolerance vd_pct = {} must be below 100 %", vd_pct));
@@ -76,7 +82,8 @@ void Tolerances::validate() const {
 Tolerances Tolerances::times(double factor) const {
   return {curvature_pct * factor,    glass_thickness_mm * factor,
           air_thickness_mm * factor, nd * factor,
-          vd_pct * factor,           asphere_sag_um * factor};
+          vd_pct * factor,           asphere_sag_um * factor,
+          decenter_mm * factor,      tilt_arcmin * factor};
 }
 
 void ToleranceSettings::apply_to(Tolerances& t) const {
@@ -86,6 +93,8 @@ void ToleranceSettings::apply_to(Tolerances& t) const {
   if (nd) t.nd = *nd;
   if (vd_pct) t.vd_pct = *vd_pct;
   if (asphere_sag_um) t.asphere_sag_um = *asphere_sag_um;
+  if (decenter_mm) t.decenter_mm = *decenter_mm;
+  if (tilt_arcmin) t.tilt_arcmin = *tilt_arcmin;
 }
 
 void ToleranceOptions::validate() const {
@@ -173,6 +182,10 @@ ToleranceSettings parse_tolerance_table(std::string_view toml_text,
         out.vd_pct = tolerance();
       } else if (name == "asphere_sag_um") {
         out.asphere_sag_um = tolerance();
+      } else if (name == "decenter_mm") {
+        out.decenter_mm = tolerance();
+      } else if (name == "tilt_arcmin") {
+        out.tilt_arcmin = tolerance();
       } else if (name == "distribution") {
         out.distribution = parse_tolerance_distribution(text());
       } else if (name == "compensator") {
@@ -190,6 +203,7 @@ ToleranceSettings parse_tolerance_table(std::string_view toml_text,
         throw Error(where,
                     fmt::format("unknown key '{}' in [tolerance] (known: curvature_pct, "
                                 "glass_thickness_mm, air_thickness_mm, nd, vd_pct, asphere_sag_um, "
+                                "decenter_mm, tilt_arcmin, "
                                 "distribution, compensator, max_spot_um, trials, seed)",
                                 name));
       }

@@ -152,6 +152,54 @@ void add_profile_parameters(const Lens& lens, const Tolerances& tol,
 
 }  // namespace
 
+namespace {
+
+// Element decenters and tilts (TEDX, TEDY, TETX, TETY; see the header): each run of glasses (a
+// "group": a cemented pair is one group but two elements in the rows above),
+// surfaces a .. b (b the first surface followed by air), as a whole.
+void add_placement_parameters(const Lens& lens, const Tolerances& tol,
+                              std::vector<ToleranceParameter>& out) {
+  using Kind = ToleranceParameter::Kind;
+  for (const Surface& s : lens.surfaces)
+    if (s.mirror || s.breaks_symmetry()) return;  // not modelled for such lenses (header)
+  const int k_count = static_cast<int>(lens.surfaces.size());
+  int element = 0;
+  for (int a = 0; a < k_count; ++a) {
+    if (lens.surfaces[a].material.is_air()) continue;
+    int b = a;
+    while (b < k_count && !lens.surfaces[b].material.is_air()) ++b;
+    if (b >= k_count) break;  // validate() keeps the last medium air
+    ++element;
+    const std::string surfaces = fmt::format("surfaces {} to {}", a + 1, b + 1);
+    const struct {
+      Kind kind;
+      const char* name;
+      const char* unit;
+      double limit;
+      const char* what;
+    } kinds[4] = {{Kind::kDecenterX, "tedx", "mm", tol.decenter_mm, "decenter x"},
+                  {Kind::kDecenterY, "tedy", "mm", tol.decenter_mm, "decenter y"},
+                  {Kind::kTiltX, "tetx", "arcmin", tol.tilt_arcmin, "tilt about x"},
+                  {Kind::kTiltY, "tety", "arcmin", tol.tilt_arcmin, "tilt about y"}};
+    for (const auto& k : kinds) {
+      ToleranceParameter p;
+      p.kind = k.kind;
+      p.surface = a;
+      p.last_surface = b;
+      p.limit = k.limit;
+      p.name = fmt::format("{}{}", k.name, element);
+      p.column = fmt::format("{}{}_{}", k.name, element, k.unit);
+      p.description = fmt::format("group {} {} ({})", element, k.what, surfaces);
+      p.limit_text = format_limit(
+          k.limit, k.kind == Kind::kDecenterX || k.kind == Kind::kDecenterY ? " mm" : " arcmin");
+      out.push_back(p);
+    }
+    a = b - 1;  // the next element starts after b (the loop's ++a gives b, which is air)
+  }
+}
+
+}  // namespace
+
 std::vector<ToleranceParameter> tolerance_parameters(const Lens& lens, const Tolerances& tol) {
   using Kind = ToleranceParameter::Kind;
   std::vector<ToleranceParameter> out;
@@ -224,6 +272,7 @@ std::vector<ToleranceParameter> tolerance_parameters(const Lens& lens, const Tol
     }
   }
   add_profile_parameters(lens, tol, out);
+  add_placement_parameters(lens, tol, out);
   return out;
 }
 
@@ -297,6 +346,37 @@ struct ToleranceModel::Impl {
           tl.asphere[static_cast<std::size_t>(p.surface) * kAsphereTerms + p.term] += d;
           tl.profile[p.surface] = kProfileAsphere;
           break;
+        case Kind::kDecenterX:
+        case Kind::kDecenterY:
+        case Kind::kTiltX:
+        case Kind::kTiltY: {
+          if (d == 0.0) break;
+          // The nominal carries zero placements whenever these parameters are toleranced.
+          const double theta = d / 60.0 * kDegToRad;  // tilts: arcmin
+          double z = 0.0;  // vertex of surface j behind the element's first one
+          for (int j = p.surface; j <= p.last_surface; ++j) {
+            double* v = tl.geometry.placement.data() + static_cast<std::size_t>(j) * 5;
+            switch (p.kind) {
+              case Kind::kDecenterX:
+                v[0] += d;
+                break;
+              case Kind::kDecenterY:
+                v[1] += d;
+                break;
+              case Kind::kTiltX:  // Rx(theta) takes (0, 0, z) to (0, -z sin theta, z cos theta)
+                v[1] += -z * std::sin(theta);
+                v[2] += d / 60.0;
+                break;
+              default:  // kTiltY: Ry(theta) takes (0, 0, z) to (z sin theta, 0, z cos theta)
+                v[0] += z * std::sin(theta);
+                v[3] += d / 60.0;
+                break;
+            }
+            tl.geometry.flags[j] |= kPlacementMoved | kPlacementRestore;
+            z += nominal.thickness_mm[j];
+          }
+          break;
+        }
       }
     }
     return tl;
@@ -319,6 +399,20 @@ ToleranceModel::ToleranceModel(const Lens& lens, const ToleranceOptions& options
   m.scaled_lens = scaled(lens, m.scale);
   m.nominal = make_trace_lens(m.scaled_lens);
   m.parameters = tolerance_parameters(m.scaled_lens, options.tolerances);
+  // Element decenters and tilts: zero placements on the nominal, so that every trial and the
+  // nominal alike take the kernel's 3D path on the full pupil (a zero placement moves nothing).
+  bool placed = false;
+  for (const ToleranceParameter& p : m.parameters)
+    placed = placed || (p.limit > 0.0 && (p.kind == ToleranceParameter::Kind::kDecenterX ||
+                                          p.kind == ToleranceParameter::Kind::kDecenterY ||
+                                          p.kind == ToleranceParameter::Kind::kTiltX ||
+                                          p.kind == ToleranceParameter::Kind::kTiltY));
+  if (placed && !m.nominal.geometry.placed()) {
+    const std::size_t k_count = static_cast<std::size_t>(m.nominal.surface_count());
+    m.nominal.geometry.placement.assign(k_count * 5, 0.0);
+    m.nominal.geometry.flags.assign(k_count, 0);
+    m.nominal.geometry.aperture_center_mm.assign(k_count * 2, 0.0);
+  }
 
   const ParaxialData<double> par = paraxial_data(m.nominal, m.nominal.reference_nm());
   const double r_ep = par.efl_mm / lens.specs.f_number / 2.0;
@@ -341,8 +435,11 @@ ToleranceModel::ToleranceModel(const Lens& lens, const ToleranceOptions& options
     // The nominal's chief-ray angles (deg) label the fields.
     m.fields_deg = prepare_lens_system(m.scaled_lens, to).fields_deg;
   }
-  m.rays = static_cast<int>(paper_pupil_samples(options.rings).size()) *
-           (m.as_written && needs_full_pupil(m.written.vignetting) ? 2 : 1);
+  m.rays =
+      static_cast<int>(paper_pupil_samples(options.rings).size()) *
+      ((m.as_written && needs_full_pupil(m.written.vignetting)) || m.scaled_lens.breaks_symmetry()
+           ? 2
+           : 1);
 
   // Clear semi-apertures (clear_semi_apertures_mm). An element's rim is at the larger of its
   // two surfaces' apertures; two surfaces across air meet first at the smaller one.

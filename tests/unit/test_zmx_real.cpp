@@ -37,6 +37,7 @@ enum class Expect {
   kImports,      // spherical refractive, everything it uses is supported: must import
   kUnsupported,  // a feature lensopt does not model: one clear line naming it and file:line
   kPending,      // imports once system-model / asphere work lands; until then a one-line error
+  kGeometry,     // mirrors / coordinate breaks: imports, traced in test_zmx_geometry3d.cpp
 };
 
 struct RealFile {
@@ -61,8 +62,8 @@ const std::vector<RealFile>& real_files() {
       {"thorlabs_LC1715-A.zmx", Expect::kImports, "", 0},
       {"thorlabs_LD1464-A.zmx", Expect::kImports, "", 0},
       {"thorlabs_ACN254-100-A.zmx", Expect::kImports, "", 0},
-      {"rayoptics_HoO-V2C18Ex03.zmx", Expect::kUnsupported, "mirror", 86},
-      {"rayoptics_zmax_37992.zmx", Expect::kUnsupported, "COORDBRK", 86},
+      {"rayoptics_HoO-V2C18Ex03.zmx", Expect::kGeometry, "", 0},
+      {"rayoptics_zmax_37992.zmx", Expect::kGeometry, "", 0},
   };
   return files;
 }

@@ -159,7 +159,7 @@ bool projected_pupil_area(const TraceSystem<T>& sys, int h, T& area, std::string
   const VignettingFactors v =
       h < static_cast<int>(sys.vignetting.size()) ? sys.vignetting[h] : VignettingFactors{};
   const int w = sys.wavelength_count;  // reference wavelength
-  if (!v.asymmetric()) {
+  if (!v.asymmetric() && !sys.lens.geometry.placed()) {
     std::array<T, 3> d;
     if (!pupil_edge_directions(sys, h, d)) {
       if (why) *why = "an edge ray of its pupil fails";

@@ -84,6 +84,8 @@ TraceSystem<double> system_values(const TraceSystem<J>& in) {
   out.lens.conic = v(in.lens.conic);
   out.lens.asphere = v(in.lens.asphere);
   out.lens.semi_diameter_mm = in.lens.semi_diameter_mm;
+  out.lens.geometry =
+      in.lens.geometry.template convert<double>([](const J& x) { return value_of(x); });
   out.scale = value_of(in.scale);
   out.efl_mm = value_of(in.efl_mm);
   out.bfl_mm = value_of(in.bfl_mm);

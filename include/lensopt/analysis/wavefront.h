@@ -234,7 +234,8 @@ Wavefront<T> compute_wavefront(const TraceSystem<T>& sys, int h, int w, const Pu
   if (grid.mirrored && sys.full_pupil)
     throw Error(
         "a half pupil grid assumes a pupil symmetric about the meridional plane; this "
-        "system's vignetting (VDX or VAN) needs the full grid");
+        "system (vignetting VDX or VAN, or no rotational symmetry: tilts, decenters, "
+        "coordinate breaks) needs the full grid");
   const std::size_t count = grid.size();
   const int k_count = sys.lens.surface_count();
   // Grid samples and, last, the chief ray of this wavelength.

@@ -52,6 +52,23 @@ struct Material {
 // Number of even-asphere terms a4, a6, ..., a16.
 inline constexpr int kAsphereOrders = 7;
 
+// Where a surface sits in 3D (issue 32), as OpticStudio's coordinate break and surface
+// tilt/decenter define it. The frame of the surface is the current frame moved by
+//   order 0 (decenter first): translate by (dx, dy, 0), then rotate about x, the new y, the
+//                             new z:  p_parent = D + Rx(a) Ry(b) Rz(c) p_local
+//   order 1 (tilt first):     rotate about z, the new y, the new x, then translate along the
+//                             tilted axes:  p_parent = Rz(c) Ry(b) Rx(a) (D + p_local)
+// Each rotation is right-handed about its axis (a positive tilt about x turns +y towards +z).
+struct Placement {
+  double decenter_x_mm = 0.0, decenter_y_mm = 0.0;
+  double tilt_x_deg = 0.0, tilt_y_deg = 0.0, tilt_z_deg = 0.0;
+  bool tilt_first = false;  // OpticStudio's order flag (PARM 6 of a COORDBRK): 1 = tilt first
+  bool any() const {
+    return decenter_x_mm != 0.0 || decenter_y_mm != 0.0 || tilt_x_deg != 0.0 || tilt_y_deg != 0.0 ||
+           tilt_z_deg != 0.0;
+  }
+};
+
 // One refracting (or stop) surface.
 struct Surface {
   double curvature_per_mm = 0.0;   // c = 1/R; 0 for a flat surface
@@ -63,6 +80,29 @@ struct Surface {
   double conic = 0.0;              // conic constant k (dimensionless)
   double asphere_r2_per_mm = 0.0;  // a2, the r^2 term (Zemax EVENASPH PARM 1), 1/mm
   std::array<double, kAsphereOrders> asphere{};  // a4, a6, ..., a16 in mm^(1-2i) (i = 2..8)
+  // 3D placement and reflection (issue 32; kernel.h states the model). A coordinate break is a
+  // dummy surface (no intersection, no refraction, the medium before it continues) whose
+  // placement moves the frame of every surface after it; on any other surface the placement
+  // moves that surface and, unless restore_frame, everything after it too (OpticStudio's
+  // "before surface" tilt/decenter; restore_frame is its "after surface: reverse this surface").
+  Placement placement;
+  bool coordinate_break = false;
+  bool restore_frame = false;
+  // A reflecting surface: the medium after it is the one before it, traversed backwards
+  // (OpticStudio's GLAS MIRROR: the thicknesses after an odd number of mirrors are negative).
+  bool mirror = false;
+  // Central obscuration radius (mm, 0 = none): a ray with x^2 + y^2 < r^2 on the surface is
+  // blocked (e.g. a Cassegrain secondary's shadow).
+  double obscuration_mm = 0.0;
+  // Centre of the clear aperture and obscuration in the surface's frame (OpticStudio's aperture
+  // decenter, OBDC), mm.
+  double aperture_decenter_x_mm = 0.0, aperture_decenter_y_mm = 0.0;
+  // Any 3D placement, coordinate break or aperture decenter: the lens is not rotationally
+  // symmetric (traced through the general path of kernel.h on the full pupil).
+  bool breaks_symmetry() const {
+    return coordinate_break || placement.any() || aperture_decenter_x_mm != 0.0 ||
+           aperture_decenter_y_mm != 0.0;
+  }
 
   // Any a2..a16 nonzero.
   bool has_asphere() const;
@@ -179,6 +219,12 @@ struct Lens {
   int stop_index() const;
   // Number of glass elements (runs of consecutive glass media).
   int element_count() const;
+  // Some surface has a 3D placement, is a coordinate break or has a decentred aperture.
+  bool breaks_symmetry() const {
+    for (const Surface& s : surfaces)
+      if (s.breaks_symmetry()) return true;
+    return false;
+  }
   // Sum of all thicknesses but the last (first vertex to last vertex), mm.
   double track_length_mm() const;
   // Sum of all thicknesses (first vertex to image plane), mm.
@@ -190,7 +236,8 @@ struct Lens {
   void validate() const;
 };
 
-// Uniformly scales a lens: curvatures / s, thicknesses and semi-diameters * s, a_{2i} * s^(1-2i)
+// Uniformly scales a lens: curvatures / s, thicknesses, semi-diameters, obscurations and
+// decenters * s (tilts unchanged), a_{2i} * s^(1-2i)
 // (k unchanged), so every sag scales by s.
 Lens scaled(const Lens& lens, double scale);
 

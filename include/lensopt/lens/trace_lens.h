@@ -62,6 +62,83 @@ double variable_value(const Lens& lens, const PrescriptionVariable& variable);
 // Sets a variable's value in a lens.
 void set_variable_value(Lens& lens, const PrescriptionVariable& variable, double value);
 
+// Bits of TraceGeometry::flags.
+inline constexpr std::uint8_t kPlacementTiltFirst = 1;        // OpticStudio's order flag 1
+inline constexpr std::uint8_t kPlacementCoordinateBreak = 2;  // a dummy surface: frame only
+inline constexpr std::uint8_t kPlacementRestore = 4;          // the frame after is the one before
+inline constexpr std::uint8_t kPlacementMoved = 8;            // a nonzero placement
+
+// Placement in 3D, reflection and obscuration of a TraceLens (issue 32; Surface in lens.h and
+// trace/kernel.h state the model). Every array is empty for a centred refracting lens without
+// obscurations, and the kernel's rotationally symmetric path runs unchanged.
+template <typename T>
+struct TraceGeometry {
+  // K * 5: decenter x, y (mm), tilt x, y, z (deg) of each surface; empty = every surface
+  // centred (then flags and aperture_center_mm are empty too).
+  std::vector<T> placement;
+  std::vector<std::uint8_t> flags;         // K: kPlacement* bits
+  std::vector<double> aperture_center_mm;  // K * 2: clear aperture / obscuration centre, or empty
+  std::vector<double> obscuration_mm;      // K: central obscuration radius (0 none), or empty
+  // K: -1 where the medium after surface k is traversed backwards (after an odd number of
+  // mirrors); its index is then negative (TraceLens::index). Empty = all +1.
+  std::vector<signed char> medium_sign;
+
+  bool placed() const { return !placement.empty(); }
+  T value(int k, int j) const { return placement[static_cast<std::size_t>(k) * 5 + j]; }
+
+  template <typename U, typename Convert>
+  TraceGeometry<U> convert(Convert cvt) const {
+    TraceGeometry<U> out;
+    out.placement.reserve(placement.size());
+    for (const T& v : placement) out.placement.push_back(cvt(v));
+    out.flags = flags;
+    out.aperture_center_mm = aperture_center_mm;
+    out.obscuration_mm = obscuration_mm;
+    out.medium_sign = medium_sign;
+    return out;
+  }
+};
+
+// The TraceGeometry of a lens's surfaces (placements as T constants).
+template <typename T>
+TraceGeometry<T> make_trace_geometry(const Lens& lens) {
+  TraceGeometry<T> g;
+  const std::size_t k_count = lens.surfaces.size();
+  if (lens.breaks_symmetry()) {
+    g.placement.assign(k_count * 5, K<T>(0.0));
+    g.flags.assign(k_count, 0);
+    g.aperture_center_mm.assign(k_count * 2, 0.0);
+    for (std::size_t k = 0; k < k_count; ++k) {
+      const Surface& s = lens.surfaces[k];
+      const Placement& p = s.placement;
+      const double values[5] = {p.decenter_x_mm, p.decenter_y_mm, p.tilt_x_deg, p.tilt_y_deg,
+                                p.tilt_z_deg};
+      for (int j = 0; j < 5; ++j) g.placement[k * 5 + j] = K<T>(values[j]);
+      g.flags[k] = static_cast<std::uint8_t>((p.tilt_first ? kPlacementTiltFirst : 0) |
+                                             (s.coordinate_break ? kPlacementCoordinateBreak : 0) |
+                                             (s.restore_frame ? kPlacementRestore : 0) |
+                                             (p.any() ? kPlacementMoved : 0));
+      g.aperture_center_mm[k * 2] = s.aperture_decenter_x_mm;
+      g.aperture_center_mm[k * 2 + 1] = s.aperture_decenter_y_mm;
+    }
+  }
+  bool obscured = false, mirrors = false;
+  for (const Surface& s : lens.surfaces) {
+    obscured = obscured || s.obscuration_mm > 0.0;
+    mirrors = mirrors || s.mirror;
+  }
+  if (obscured)
+    for (const Surface& s : lens.surfaces) g.obscuration_mm.push_back(s.obscuration_mm);
+  if (mirrors) {
+    signed char sign = 1;
+    for (const Surface& s : lens.surfaces) {
+      if (s.mirror) sign = static_cast<signed char>(-sign);
+      g.medium_sign.push_back(sign);
+    }
+  }
+  return g;
+}
+
 template <typename T>
 struct TraceLens {
   std::vector<T> curvature_per_mm;  // K
@@ -80,8 +157,14 @@ struct TraceLens {
   // Clear semi-diameters (mm) per surface, 0 = none; empty = no surface clips (kernel step 5).
   std::vector<double> semi_diameter_mm;
   int stop = 0;
+  // 3D placement, mirrors and obscurations (issue 32); all empty for a centred refracting lens.
+  TraceGeometry<T> geometry;
 
   int surface_count() const { return static_cast<int>(curvature_per_mm.size()); }
+  // The sign of medium k's index: -1 after an odd number of mirrors (k = -1: object space, +1).
+  bool reflected(int k) const {
+    return k >= 0 && !geometry.medium_sign.empty() && geometry.medium_sign[k] < 0;
+  }
   bool has_profiles() const { return !profile.empty(); }
   // Asphere term j (0 = a2, 1 = a4, ...) of surface k; 0 when the lens has no profiles.
   T asphere_term(int k, int j) const {
@@ -106,6 +189,10 @@ struct TraceLens {
       curvature_per_mm[k] = curvature_per_mm[k] / s;
       thickness_mm[k] = thickness_mm[k] * s;
     }
+    for (std::size_t i = 0; i < geometry.placement.size(); i += 5) {
+      geometry.placement[i] = geometry.placement[i] * s;  // decenters; tilts are angles
+      geometry.placement[i + 1] = geometry.placement[i + 1] * s;
+    }
     if (asphere.empty()) return;
     for (int k = 0; k < surface_count(); ++k) {
       T power = s;  // s^(2i-1) for a_{2i}
@@ -118,11 +205,12 @@ struct TraceLens {
   }
 
   // Index of medium k at wavelength number w (k = -1 is object space: 1).
+  // A medium traversed backwards (after an odd number of mirrors) has the negative index.
   T index(int k, int w) const {
-    if (k < 0 || !is_glass[k]) return K<T>(1.0);
+    if (k < 0 || !is_glass[k]) return reflected(k) ? K<T>(-1.0) : K<T>(1.0);
     T n = model_index(k, wavelengths_nm[w]);
     if (!catalog_offset.empty()) n = n + K<T>(catalog_offset[k][w]);
-    return n;
+    return reflected(k) ? -n : n;
   }
   // The model-glass index of medium k (no catalog correction): the paper's or OpticStudio's.
   T model_index(int k, double wavelength_nm) const {
@@ -137,13 +225,13 @@ struct TraceLens {
   // wavelengths alone, so any other wavelength is a caller's error (std::logic_error), not a
   // silent switch of dispersion model.
   T index_at_nm(int k, double wavelength_nm) const {
-    if (k < 0 || !is_glass[k]) return K<T>(1.0);
+    if (k < 0 || !is_glass[k]) return reflected(k) ? K<T>(-1.0) : K<T>(1.0);
     for (int w = static_cast<int>(wavelengths_nm.size()) - 1; w >= 0; --w)
       if (wavelengths_nm[w] == wavelength_nm) return index(k, w);
     if (!catalog_offset.empty())
       throw std::logic_error("TraceLens::index_at_nm: " + std::to_string(wavelength_nm) +
                              " nm is not one of the lens's wavelengths (catalog dispersion)");
-    return model_index(k, wavelength_nm);
+    return reflected(k) ? -model_index(k, wavelength_nm) : model_index(k, wavelength_nm);
   }
   // The primary (reference) wavelength: the last one.
   double reference_nm() const { return wavelengths_nm.back(); }
@@ -200,6 +288,7 @@ TraceLens<U> convert_trace_lens(const TraceLens<T>& in,
   out.wavelengths_nm = in.wavelengths_nm;
   out.semi_diameter_mm = in.semi_diameter_mm;
   out.stop = in.stop;
+  out.geometry = in.geometry.template convert<U>([](const T& x) { return U(x); });
   (void)k_count;
   for (int j = 0; j < count; ++j) {
     const PrescriptionVariable& v = variables[first + j];

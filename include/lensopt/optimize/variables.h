@@ -148,6 +148,7 @@ class LensParameterization {
     // structure's model here held the start's EFL to 1.6e-7 relative on the AC254-100, not
     // exactly.)
     const bool catalog_glasses = mode != GlassMode::kContinuous;
+    lens.geometry = make_trace_geometry<T>(structure_);
     for (int k = 0; k < k_count; ++k) {
       const Material& m = structure_.surfaces[k].material;
       lens.is_glass[k] = catalog_glasses && !m.is_air() ? static_cast<char>(ModelGlass::kPaper)

@@ -1,5 +1,12 @@
 // Paraxial (first-order) optics of a TraceLens, templated so Jets carry derivatives.
 //
+// Mirrors follow the sign convention of reflection as refraction into n' = -n (the medium after
+// an odd number of mirrors has a negative index, TraceLens::index, and OpticStudio's negative
+// thicknesses there), so every formula below holds unchanged. 3D placements (decenters, tilts,
+// coordinate breaks; trace/kernel.h) are ignored: the paraxial data are those of the system
+// unfolded about its surfaces' own axes, which for fold mirrors and off-axis sections of a
+// parent surface (an off-axis parabola) are the parent system's first-order data.
+//
 // A paraxial ray is (y, w) with height y (mm) and reduced angle w = n u. At surface k with
 // curvature c_k between media n (before) and n' (after):
 //   refraction  w' = w - y c_k (n' - n)
@@ -67,6 +74,9 @@ ParaxialData<T> paraxial_data(const TraceLens<T>& lens, double wavelength_nm) {
       paraxial_trace(lens, ParaxialRay<T>{K<T>(1.0), K<T>(0.0)}, k_count, wavelength_nm);
   out.efl_mm = -K<T>(1.0) / marginal.w;
   out.bfl_mm = -marginal.y / marginal.w;
+  // After an odd number of mirrors the image space is traversed backwards (index -n'): the
+  // focus lies at -y n' / w, a negative distance, as OpticStudio writes the thickness there.
+  if (lens.reflected(k_count - 1)) out.bfl_mm = -out.bfl_mm;
   // Stop plane: trace up to the stop's refraction (a flat stop does not refract), then the ray
   // sits at the stop vertex. A from (1, 0), B from (0, 1).
   const int s = lens.stop;
@@ -108,7 +118,9 @@ T paraxial_image_height(const TraceLens<T>& lens, const T& entrance_pupil_z_mm, 
   const int k_count = lens.surface_count();
   ParaxialRay<T> ray{-entrance_pupil_z_mm * tan_theta, tan_theta};
   ray = paraxial_trace(lens, ray, k_count, wavelength_nm);
-  return ray.y + lens.thickness_mm[k_count - 1] * ray.w;  // image space is air (n = 1)
+  // Image space is air (n = 1; -1 after an odd number of mirrors).
+  if (lens.reflected(k_count - 1)) return ray.y - lens.thickness_mm[k_count - 1] * ray.w;
+  return ray.y + lens.thickness_mm[k_count - 1] * ray.w;
 }
 
 // Curvature of the last surface that gives focal length `efl_mm` with all else fixed:

@@ -9,6 +9,16 @@
 //   thickness   t' = t + L u         L = glass_thickness_mm, or air_thickness_mm for airspaces
 //   index       nd' = nd + L u       L = nd
 //   Abbe number vd' = vd (1 + L u)   L = vd_pct / 100          (relative)
+//   element     decenter dx' = dx + L u (L = decenter_mm) in x and in y, and tilt about x and
+//   placement   about y by L u (L = tilt_arcmin / 60 deg), of each element (a run of glasses, a
+//               cemented group moves as one) as a whole: every surface of it is decentred by the
+//               same amount, or, for a tilt theta about x through its first vertex, surface j
+//               (vertex z_j behind the first) is tilted by theta and decentred by -z_j sin(theta)
+//               in y (about y: +z_j sin(theta) in x), each with restore_frame (trace/kernel.h);
+//               the axial shift z_j (1 - cos theta) ~ z_j theta^2 / 2 (4e-8 z_j at 1 arcmin) is
+//               left out. A lens with mirrors or placements of its own gets no such parameters.
+//               With a nonzero decenter or tilt tolerance every trial, the nominal too, is
+//               traced on the full pupil (no mirror symmetry).
 //   profile     of every non-spherical surface (conic or even asphere, lens/lens.h), each term on
 //               its own, as a sag error at the surface's clear semi-aperture h (below):
 //                 k' = k + L_k u,   L_k = L / |dS/dk(h)|,  dS/dk = c^3 h^4 / (2 q (1 + q)^2),
@@ -85,12 +95,14 @@ struct Tolerances {
   double nd = 5e-4;                  // d-line index, absolute
   double vd_pct = 0.5;               // Abbe number, percent
   double asphere_sag_um = 1.0;       // conic and asphere terms: sag at the clear aperture, um
+  double decenter_mm = 0.02;         // element decenter in x and in y (TEDX, TEDY), mm
+  double tilt_arcmin = 1.0;          // element tilt about x and about y (TETX, TETY), arcmin
 
   // Throws Error naming the first negative or non-finite tolerance.
   void validate() const;
   // Every tolerance multiplied by `factor`.
   Tolerances times(double factor) const;
-  static Tolerances zero() { return {0, 0, 0, 0, 0, 0}; }
+  static Tolerances zero() { return {0, 0, 0, 0, 0, 0, 0, 0}; }
 };
 
 // The tolerance names as used by the [tolerance] table and the command line (--curvature-pct,
@@ -100,11 +112,12 @@ const std::vector<std::string>& tolerance_names();
 // What a [tolerance] table in a lens TOML may set; unset entries are nullopt.
 //   [tolerance]
 //   curvature_pct = 0.2, glass_thickness_mm = 0.05, air_thickness_mm = 0.0, nd = 5e-4,
-//   vd_pct = 0.5, asphere_sag_um = 1.0, distribution = "uniform", compensator = "paraxial",
+//   vd_pct = 0.5, asphere_sag_um = 1.0, decenter_mm = 0.02, tilt_arcmin = 1,
+//   distribution = "uniform", compensator = "paraxial",
 //   max_spot_um = 20, trials = 10000, seed = 1
 struct ToleranceSettings {
   std::optional<double> curvature_pct, glass_thickness_mm, air_thickness_mm, nd, vd_pct,
-      asphere_sag_um;
+      asphere_sag_um, decenter_mm, tilt_arcmin;
   std::optional<ToleranceDistribution> distribution;
   std::optional<FocusCompensator> compensator;
   std::optional<double> max_spot_um;
@@ -156,8 +169,20 @@ ToleranceOptions tolerance_options_for(const Lens& lens);
 
 // One toleranced number of the lens.
 struct ToleranceParameter {
-  enum class Kind { kCurvature, kThickness, kNd, kVd, kConic, kAsphere };
+  enum class Kind {
+    kCurvature,
+    kThickness,
+    kNd,
+    kVd,
+    kConic,
+    kAsphere,
+    kDecenterX,  // element decenter (TEDX): surface .. last_surface moved by d along x, mm
+    kDecenterY,
+    kTiltX,  // element tilt (TETX) about its first vertex, radians (limit from tilt_arcmin)
+    kTiltY,
+  };
   Kind kind = Kind::kCurvature;
+  int last_surface = 0;     // kDecenter*, kTilt*: the element's last surface (0-based)
   int surface = 0;          // 0-based surface index (kNd/kVd: the surface the glass follows)
   int term = 0;             // kAsphere: 0 = a2, 1 = a4, ..., 7 = a16
   bool air = false;         // kThickness: an airspace

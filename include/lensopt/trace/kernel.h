@@ -26,12 +26,31 @@
 //   OPL += n_{k-1} s_k,  s_k = (z_k - z_{k-1}') / n_dir   (geometric length of the segment that
 // ends on surface k; z_{k-1}' the start point's z in vertex-k coordinates, n_dir the segment's
 // z direction cosine), and n_{K-1} s for the last segment to the image plane.
+//
+// Mirrors (issue 32): reflection is refraction into the index -n (TraceLens::index is negative
+// in a medium traversed backwards, after an odd number of mirrors). The kernel carries the
+// direction d_s = sign(n_k) d, so a reflected ray keeps n_s > 0 in a medium whose thicknesses
+// are negative (OpticStudio's convention): with mu = n / (-n) = -1, step 4 gives
+// d' = -d + 2 cos(I) N = -(d - 2 cos(I) N), the reflected direction with the sign of the medium;
+// refraction of -d is -(refraction of d) (Snell's law reversed), the transfers s0 = -z / n_s move
+// along the true line, and OPL += n_{k-1} s stays positive (both factors change sign). The
+// rotationally symmetric loops therefore trace mirrors unchanged.
+// 3D placement (TraceGeometry, lens.h Placement): a lens with a decenter, tilt, coordinate break
+// or decentred aperture runs trace_bundle_placed instead: before surface k the ray is shifted by
+// t_{k-1} along the current z and, if the surface is placed, turned into its frame,
+//   p_local = R^T (p - D), d_local = R^T d   (decenter first; tilt first: R^T p - D),
+// then steps 2-5 run in that frame with shift 0 (apertures and obscurations about their centre).
+// A coordinate break only changes the frame; a restore_frame surface turns the ray back to the
+// parent frame after it (p = D + R p_local). Everything after a placed surface is in its frame.
+// The image plane is z = t_{K-1} in the last frame, reached along the ray's line in either
+// direction. A lens without placements never enters that path: the loops above run as before.
 #pragma once
 
 #include <cstdint>
 #include <type_traits>
 #include <vector>
 
+#include "lensopt/core/constants.h"
 #include "lensopt/core/jet_width.h"
 #include "lensopt/core/scalar.h"
 #include "lensopt/lens/trace_lens.h"
@@ -183,6 +202,296 @@ bool any_not_forward(const T* n, std::size_t count) {
 
 namespace detail {
 
+// Steps 1-4 at surface k (the sphere loop, or the profile loops of trace/profile.h). Always
+// inlined, so that the symmetric driver compiles to the code it had with the dispatch written in
+// it (not inlined, the Jet loops ran 3x slower: c, shift and mu became references the compiler
+// could not keep in registers).
+template <typename T>
+inline __attribute__((always_inline)) void intersect_surface(
+    const TraceLens<T>& lens, int k, const T& c, const T& shift, const T& mu, std::size_t count,
+    T* x, T* y, T* z, T* l, T* m, T* n, std::int32_t* failure, RayRecord<T>* record) {
+  const std::uint8_t profile = lens.has_profiles() ? lens.profile[k] : kProfileSphere;
+  if (profile != kProfileSphere) {
+    // Conic or even asphere (trace/profile.h).
+    T* travel = record && k > 0 ? record->axial_travel_mm[k - 1].data() : nullptr;
+    T* zeta_rec = record ? record->cos2_incidence[k].data() : nullptr;
+    T* zeta_prime_rec = record ? record->cos2_refraction[k].data() : nullptr;
+    const T& conic = lens.conic[k];
+    const T* a = lens.asphere.data() + static_cast<std::size_t>(k) * kAsphereTerms;
+    if constexpr (std::is_same_v<T, double>) {
+      detail::trace_surface_profile_double(profile, c, conic, a, shift, mu, count, x, y, z, l, m, n,
+                                           failure, travel, zeta_rec, zeta_prime_rec,
+                                           record != nullptr);
+    } else if (profile == kProfileConic) {
+      if (record)
+        detail::trace_surface_conic<T, true>(c, conic, shift, mu, count, x, y, z, l, m, n, failure,
+                                             travel, zeta_rec, zeta_prime_rec);
+      else
+        detail::trace_surface_conic<T, false>(c, conic, shift, mu, count, x, y, z, l, m, n, failure,
+                                              nullptr, nullptr, nullptr);
+    } else if (record) {
+      detail::trace_surface_asphere<T, true>(c, conic, a, shift, mu, count, x, y, z, l, m, n,
+                                             failure, travel, zeta_rec, zeta_prime_rec);
+    } else {
+      detail::trace_surface_asphere<T, false>(c, conic, a, shift, mu, count, x, y, z, l, m, n,
+                                              failure, nullptr, nullptr, nullptr);
+    }
+  } else if constexpr (std::is_same_v<T, double>) {
+    detail::trace_surface_double(c, shift, mu, count, x, y, z, l, m, n, failure,
+                                 record && k > 0 ? record->axial_travel_mm[k - 1].data() : nullptr,
+                                 record ? record->cos2_incidence[k].data() : nullptr,
+                                 record ? record->cos2_refraction[k].data() : nullptr,
+                                 record != nullptr);
+  } else if (record) {
+    detail::trace_surface<T, true>(c, shift, mu, count, x, y, z, l, m, n, failure,
+                                   k > 0 ? record->axial_travel_mm[k - 1].data() : nullptr,
+                                   record->cos2_incidence[k].data(),
+                                   record->cos2_refraction[k].data());
+  } else {
+    detail::trace_surface<T, false>(c, shift, mu, count, x, y, z, l, m, n, failure, nullptr,
+                                    nullptr, nullptr);
+  }
+}
+
+}  // namespace detail
+
+namespace detail {
+
+// A central obscuration of radius r centred at (cx, cy): a ray inside is vignetted.
+template <typename T>
+inline void obscure(double r, double cx, double cy, std::size_t count, const T* x, const T* y,
+                    std::int32_t* failure) {
+  const T limit = K<T>(r * r);
+  const T ox = K<T>(cx), oy = K<T>(cy);
+  for (std::size_t i = 0; i < count; ++i) {
+    const T dx = x[i] - ox, dy = y[i] - oy;
+    const bool inside = dx * dx + dy * dy < limit;
+    failure[i] = (inside && failure[i] == kRayOk) ? std::int32_t{kRayVignetted} : failure[i];
+  }
+}
+
+// The placement of surface k (Placement in lens.h): p_parent = D + R p_local (decenter first) or
+// R (D + p_local) (tilt first); r[i][j] is row i, column j of R.
+template <typename T>
+struct PlacementFrame {
+  T r[3][3];
+  T dx, dy;
+  bool tilt_first;
+};
+
+template <typename T>
+PlacementFrame<T> placement_frame(const TraceGeometry<T>& g, int k) {
+  using std::cos;
+  using std::sin;
+  const T deg = K<T>(kPi / 180.0);
+  const T a = g.value(k, 2) * deg, b = g.value(k, 3) * deg, c = g.value(k, 4) * deg;
+  const T ca = cos(a), sa = sin(a), cb = cos(b), sb = sin(b), cc = cos(c), sc = sin(c);
+  const T zero = K<T>(0.0), one = K<T>(1.0);
+  const T rx[3][3] = {{one, zero, zero}, {zero, ca, -sa}, {zero, sa, ca}};
+  const T ry[3][3] = {{cb, zero, sb}, {zero, one, zero}, {-sb, zero, cb}};
+  const T rz[3][3] = {{cc, -sc, zero}, {sc, cc, zero}, {zero, zero, one}};
+  PlacementFrame<T> f;
+  f.tilt_first = (g.flags[k] & kPlacementTiltFirst) != 0;
+  f.dx = g.value(k, 0);
+  f.dy = g.value(k, 1);
+  // Intrinsic rotations compose on the right: x, then the new y, then the new z is Rx Ry Rz.
+  const auto& first = f.tilt_first ? rz : rx;
+  const auto& last = f.tilt_first ? rx : rz;
+  T tmp[3][3];
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j)
+      tmp[i][j] = first[i][0] * ry[0][j] + first[i][1] * ry[1][j] + first[i][2] * ry[2][j];
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j)
+      f.r[i][j] = tmp[i][0] * last[0][j] + tmp[i][1] * last[1][j] + tmp[i][2] * last[2][j];
+  return f;
+}
+
+// Parent frame to the surface's frame: p_local = R^T (p - D) (decenter first) or R^T p - D
+// (tilt first); d_local = R^T d.
+template <typename T>
+void to_local(const PlacementFrame<T>& f, std::size_t count, T* x, T* y, T* z, T* l, T* m, T* n) {
+  for (std::size_t i = 0; i < count; ++i) {
+    const T px = f.tilt_first ? x[i] : x[i] - f.dx;
+    const T py = f.tilt_first ? y[i] : y[i] - f.dy;
+    const T pz = z[i];
+    T qx = f.r[0][0] * px + f.r[1][0] * py + f.r[2][0] * pz;
+    T qy = f.r[0][1] * px + f.r[1][1] * py + f.r[2][1] * pz;
+    const T qz = f.r[0][2] * px + f.r[1][2] * py + f.r[2][2] * pz;
+    if (f.tilt_first) {
+      qx = qx - f.dx;
+      qy = qy - f.dy;
+    }
+    const T dl = f.r[0][0] * l[i] + f.r[1][0] * m[i] + f.r[2][0] * n[i];
+    const T dm = f.r[0][1] * l[i] + f.r[1][1] * m[i] + f.r[2][1] * n[i];
+    const T dn = f.r[0][2] * l[i] + f.r[1][2] * m[i] + f.r[2][2] * n[i];
+    x[i] = qx;
+    y[i] = qy;
+    z[i] = qz;
+    l[i] = dl;
+    m[i] = dm;
+    n[i] = dn;
+  }
+}
+
+// The inverse of to_local: p = D + R p_local (decenter first) or R (D + p_local) (tilt first).
+template <typename T>
+void to_parent(const PlacementFrame<T>& f, std::size_t count, T* x, T* y, T* z, T* l, T* m, T* n) {
+  const T zero = K<T>(0.0);
+  for (std::size_t i = 0; i < count; ++i) {
+    const T px = f.tilt_first ? x[i] + f.dx : x[i];
+    const T py = f.tilt_first ? y[i] + f.dy : y[i];
+    const T pz = z[i];
+    const T ox = f.tilt_first ? zero : f.dx;
+    const T oy = f.tilt_first ? zero : f.dy;
+    const T qx = ox + (f.r[0][0] * px + f.r[0][1] * py + f.r[0][2] * pz);
+    const T qy = oy + (f.r[1][0] * px + f.r[1][1] * py + f.r[1][2] * pz);
+    const T qz = f.r[2][0] * px + f.r[2][1] * py + f.r[2][2] * pz;
+    const T dl = f.r[0][0] * l[i] + f.r[0][1] * m[i] + f.r[0][2] * n[i];
+    const T dm = f.r[1][0] * l[i] + f.r[1][1] * m[i] + f.r[1][2] * n[i];
+    const T dn = f.r[2][0] * l[i] + f.r[2][1] * m[i] + f.r[2][2] * n[i];
+    x[i] = qx;
+    y[i] = qy;
+    z[i] = qz;
+    l[i] = dl;
+    m[i] = dm;
+    n[i] = dn;
+  }
+}
+
+// The general path of trace_bundle for a lens with 3D placements (TraceGeometry::placed()); see
+// the header. Rays are held in the frame of the last surface traced (its frame after placement,
+// or the parent frame for a restore_frame surface).
+template <typename T>
+void trace_bundle_placed(const TraceLens<T>& lens, int w, int end, bool to_image,
+                         RayBundle<T>& rays, RayRecord<T>* record) {
+  const std::size_t count = rays.size();
+  const T one = K<T>(1.0);
+  const T zero = K<T>(0.0);
+  T* x = rays.x.data();
+  T* y = rays.y.data();
+  T* z = rays.z.data();
+  T* l = rays.l.data();
+  T* m = rays.m.data();
+  T* n = rays.n.data();
+  std::uint8_t* status = rays.status.data();
+  std::int8_t* failed_at = rays.failed_surface.data();
+  rays.failure_scratch.resize(count);
+  std::int32_t* failure = rays.failure_scratch.data();
+  const bool path = record && record->optical_path_mm.size() == count;
+  T* opl = path ? record->optical_path_mm.data() : nullptr;
+  T* start_z = path ? record->path_start_z.data() : nullptr;
+  T* start_n = path ? record->path_start_n.data() : nullptr;
+  const TraceGeometry<T>& g = lens.geometry;
+  // A ray that cannot reach surface k travelling forwards in its frame (n <= 0 or NaN) is
+  // flagged kRayBackwards there and kept finite.
+  auto check_forward = [&](int k) {
+    if (!any_not_forward(n, count)) return;
+    for (std::size_t i = 0; i < count; ++i) {
+      if (!(n[i] > zero)) {
+        if (status[i] == kRayOk) {
+          status[i] = kRayBackwards;
+          failed_at[i] = static_cast<std::int8_t>(k);
+        }
+        l[i] = zero;
+        m[i] = zero;
+        n[i] = one;
+      }
+    }
+  };
+
+  for (int k = 0; k < end; ++k) {
+    const std::uint8_t flags = g.flags[k];
+    T shift = k > 0 ? lens.thickness_mm[k - 1] : zero;
+    PlacementFrame<T> frame{};
+    if (flags & kPlacementMoved) {
+      for (std::size_t i = 0; i < count; ++i) z[i] = z[i] - shift;
+      shift = zero;
+      frame = placement_frame(g, k);
+      to_local(frame, count, x, y, z, l, m, n);
+    }
+    if (flags & kPlacementCoordinateBreak) {
+      // A dummy surface: the rays only change frame (its thickness then runs along the new z).
+      for (std::size_t i = 0; i < count; ++i) z[i] = z[i] - shift;
+      if (record) {
+        if (k > 0)
+          for (T& v : record->axial_travel_mm[k - 1]) v = lens.thickness_mm[k - 1];
+        for (T& v : record->cos2_incidence[k]) v = one;
+        for (T& v : record->cos2_refraction[k]) v = one;
+      }
+      continue;
+    }
+    check_forward(k);
+    const T c = lens.curvature_per_mm[k];
+    const T mu = lens.index(k - 1, w) / lens.index(k, w);
+    if (path) {
+      for (std::size_t i = 0; i < count; ++i) {
+        start_z[i] = z[i] - shift;
+        start_n[i] = n[i];
+      }
+    }
+    intersect_surface(lens, k, c, shift, mu, count, x, y, z, l, m, n, failure, record);
+    const double cx = g.aperture_center_mm[2 * k], cy = g.aperture_center_mm[2 * k + 1];
+    if (!lens.semi_diameter_mm.empty() && lens.semi_diameter_mm[k] > 0.0) {
+      const T limit = K<T>(lens.semi_diameter_mm[k] * lens.semi_diameter_mm[k]);
+      const T ox = K<T>(cx), oy = K<T>(cy);
+      for (std::size_t i = 0; i < count; ++i) {
+        const T dx = x[i] - ox, dy = y[i] - oy;
+        const bool outside = dx * dx + dy * dy > limit;
+        failure[i] = (outside && failure[i] == kRayOk) ? std::int32_t{kRayVignetted} : failure[i];
+      }
+    }
+    if (!g.obscuration_mm.empty() && g.obscuration_mm[k] > 0.0)
+      obscure(g.obscuration_mm[k], cx, cy, count, x, y, failure);
+    if (path) {
+      const T n_before = lens.index(k - 1, w);
+      for (std::size_t i = 0; i < count; ++i)
+        opl[i] = opl[i] + n_before * (z[i] - start_z[i]) / start_n[i];
+    }
+    std::int32_t any_failure = 0;
+    for (std::size_t i = 0; i < count; ++i) any_failure |= failure[i];
+    if (any_failure != 0) {
+      for (std::size_t i = 0; i < count; ++i) {
+        if (failure[i] != kRayOk && status[i] == kRayOk) {
+          status[i] = static_cast<std::uint8_t>(failure[i]);
+          failed_at[i] = static_cast<std::int8_t>(k);
+        }
+      }
+    }
+    if ((flags & kPlacementMoved) && (flags & kPlacementRestore))
+      to_parent(frame, count, x, y, z, l, m, n);
+  }
+
+  if (to_image) {
+    // The image plane z = t_{K-1} of the last frame, reached along the ray's line either way
+    // (a plane needs no side: after a tilted image frame a beam may arrive along -z).
+    const int last = lens.surface_count() - 1;
+    const T t = lens.thickness_mm[last];
+    T* travel = record ? record->axial_travel_mm[last].data() : nullptr;
+    const T n_image = lens.index(last, w);
+    for (std::size_t i = 0; i < count; ++i) {
+      const T z_rel = z[i] - t;
+      if (travel) travel[i] = -z_rel;
+      if (n[i] == zero) {
+        if (status[i] == kRayOk) {
+          status[i] = kRayBackwards;
+          failed_at[i] = static_cast<std::int8_t>(last);
+        }
+        continue;
+      }
+      const T s = -z_rel / n[i];
+      if (path) opl[i] = opl[i] + n_image * s;
+      x[i] = x[i] + s * l[i];
+      y[i] = y[i] + s * m[i];
+      z[i] = zero;
+    }
+  }
+}
+
+}  // namespace detail
+
+namespace detail {
+
 // The Jet traces of the widths of core/jet_width.h, compiled once each for several x86-64 levels
 // with every Jet operation inlined (src/trace/kernel_jet.cpp.in, one translation unit per width).
 #define LENSOPT_DECLARE_JET_TRACE(N)                                                  \
@@ -210,6 +519,10 @@ requires(is_jet_width(N)) void trace_bundle(const TraceLens<ceres::Jet<double, N
 template <typename T>
 void trace_bundle(const TraceLens<T>& lens, int w, int end, bool to_image, RayBundle<T>& rays,
                   RayRecord<T>* record) {
+  if (lens.geometry.placed()) {
+    detail::trace_bundle_placed(lens, w, end, to_image, rays, record);
+    return;
+  }
   using std::sqrt;
   const std::size_t count = rays.size();
   const T one = K<T>(1.0);
@@ -253,47 +566,7 @@ void trace_bundle(const TraceLens<T>& lens, int w, int end, bool to_image, RayBu
         start_n[i] = n[i] > zero ? n[i] : one;  // a backwards ray is flagged; keep it finite
       }
     }
-    const std::uint8_t profile = lens.has_profiles() ? lens.profile[k] : kProfileSphere;
-    if (profile != kProfileSphere) {
-      // Conic or even asphere (trace/profile.h).
-      T* travel = record && k > 0 ? record->axial_travel_mm[k - 1].data() : nullptr;
-      T* zeta_rec = record ? record->cos2_incidence[k].data() : nullptr;
-      T* zeta_prime_rec = record ? record->cos2_refraction[k].data() : nullptr;
-      const T& conic = lens.conic[k];
-      const T* a = lens.asphere.data() + static_cast<std::size_t>(k) * kAsphereTerms;
-      if constexpr (std::is_same_v<T, double>) {
-        detail::trace_surface_profile_double(profile, c, conic, a, shift, mu, count, x, y, z, l, m,
-                                             n, failure, travel, zeta_rec, zeta_prime_rec,
-                                             record != nullptr);
-      } else if (profile == kProfileConic) {
-        if (record)
-          detail::trace_surface_conic<T, true>(c, conic, shift, mu, count, x, y, z, l, m, n,
-                                               failure, travel, zeta_rec, zeta_prime_rec);
-        else
-          detail::trace_surface_conic<T, false>(c, conic, shift, mu, count, x, y, z, l, m, n,
-                                                failure, nullptr, nullptr, nullptr);
-      } else if (record) {
-        detail::trace_surface_asphere<T, true>(c, conic, a, shift, mu, count, x, y, z, l, m, n,
-                                               failure, travel, zeta_rec, zeta_prime_rec);
-      } else {
-        detail::trace_surface_asphere<T, false>(c, conic, a, shift, mu, count, x, y, z, l, m, n,
-                                                failure, nullptr, nullptr, nullptr);
-      }
-    } else if constexpr (std::is_same_v<T, double>) {
-      detail::trace_surface_double(
-          c, shift, mu, count, x, y, z, l, m, n, failure,
-          record && k > 0 ? record->axial_travel_mm[k - 1].data() : nullptr,
-          record ? record->cos2_incidence[k].data() : nullptr,
-          record ? record->cos2_refraction[k].data() : nullptr, record != nullptr);
-    } else if (record) {
-      detail::trace_surface<T, true>(c, shift, mu, count, x, y, z, l, m, n, failure,
-                                     k > 0 ? record->axial_travel_mm[k - 1].data() : nullptr,
-                                     record->cos2_incidence[k].data(),
-                                     record->cos2_refraction[k].data());
-    } else {
-      detail::trace_surface<T, false>(c, shift, mu, count, x, y, z, l, m, n, failure, nullptr,
-                                      nullptr, nullptr);
-    }
+    detail::intersect_surface(lens, k, c, shift, mu, count, x, y, z, l, m, n, failure, record);
     // Step 5: the clear aperture of surface k, if it has one.
     if (!lens.semi_diameter_mm.empty() && lens.semi_diameter_mm[k] > 0.0) {
       const T limit = K<T>(lens.semi_diameter_mm[k] * lens.semi_diameter_mm[k]);
@@ -302,6 +575,8 @@ void trace_bundle(const TraceLens<T>& lens, int w, int end, bool to_image, RayBu
         failure[i] = (outside && failure[i] == kRayOk) ? std::int32_t{kRayVignetted} : failure[i];
       }
     }
+    if (!lens.geometry.obscuration_mm.empty() && lens.geometry.obscuration_mm[k] > 0.0)
+      detail::obscure(lens.geometry.obscuration_mm[k], 0.0, 0.0, count, x, y, failure);
     if (path) {
       const T n_before = lens.index(k - 1, w);
       for (std::size_t i = 0; i < count; ++i)

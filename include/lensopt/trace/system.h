@@ -364,7 +364,9 @@ TraceSystem<T> prepare_system(const TraceLens<T>& lens_in, const SystemSetup& se
   sys.wavelength_count = reference_w;
   if (static_cast<int>(setup.wavelength_weights.size()) == reference_w)
     sys.wavelength_weights = setup.wavelength_weights;
-  sys.full_pupil = needs_full_pupil(setup.vignetting);
+  // A lens without rotational symmetry (3D placements, decentred apertures) has no mirror
+  // symmetry about the meridional plane either: the full pupil, every field.
+  sys.full_pupil = needs_full_pupil(setup.vignetting) || sys.lens.geometry.placed();
   sys.pupil = sys.samples_for(paper_pupil_samples(options.rings));
 
   // Fields: every written value as the chief-ray angle in object space (and, for a finite
