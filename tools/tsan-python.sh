@@ -24,20 +24,20 @@ cmake -S . -B build-tsan-python -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
   -DCMAKE_EXE_LINKER_FLAGS="-fsanitize=thread" \
   -DCMAKE_SHARED_LINKER_FLAGS="" -DCMAKE_MODULE_LINKER_FLAGS="" \
   -DLENSOPT_WITH_PYTHON=ON -DLENSOPT_WITH_TORCH=OFF >/dev/null
-cmake --build build-tsan-python -j "${JOBS:-2}" --target lensopt lensopt_python
+cmake --build build-tsan-python -j "${JOBS:-2}" --target lensopt_python
 export OMP_TOOL_LIBRARIES="$archer"
 export TSAN_OPTIONS="halt_on_error=0 second_deadlock_stack=1 ignore_noninstrumented_modules=1 ${TSAN_OPTIONS:-}"
 export OMP_NUM_THREADS="${OMP_NUM_THREADS:-2}"
 log=build-tsan-python/tsan.log
 set +e
-# The CLI the tests compare with (LENSOPT_EXECUTABLE) is the instrumented one too; it carries
-# clang's runtime linked in and must not inherit the preload (a second runtime aborts it, and
-# /bin/sh crashes under it): a sitecustomize drops LD_PRELOAD from python3's environment once
-# the interpreter has started, so its subprocesses run without it.
-mkdir -p build-tsan-python/site
-printf 'import os\nos.environ.pop("LD_PRELOAD", None)\n' > build-tsan-python/site/sitecustomize.py
-LD_PRELOAD="$runtime" PYTHONPATH="build-tsan-python/site:build-tsan-python/python" \
-  LENSOPT_EXECUTABLE="$PWD/build-tsan-python/lensopt" LENSOPT_SHARED_DIR="$PWD/../shared" \
+# The CLI the tests compare with (LENSOPT_EXECUTABLE): the regular build (tools/build.sh), not
+# instrumented. An instrumented one carries clang's runtime linked in and aborts beside the
+# preloaded one; its threads are tools/tsan.sh's subject. Python subprocesses of the tests keep
+# the preload (they import the instrumented extension).
+cli="${LENSOPT_EXECUTABLE:-$PWD/build/lensopt}"
+[ -x "$cli" ] || { echo "tsan-python: $cli missing (run tools/build.sh first)" >&2; exit 2; }
+LD_PRELOAD="$runtime" PYTHONPATH=build-tsan-python/python \
+  LENSOPT_EXECUTABLE="$cli" LENSOPT_SHARED_DIR="$PWD/../shared" \
   /usr/bin/python3 -m unittest discover -s tests/python -p "$pattern" 2>&1 | tee "$log"
 status=${PIPESTATUS[0]}
 set -e

@@ -137,8 +137,8 @@ SeidelReport seidel_report(const TraceSystem<double>& sys) {
   ParaxialRay<double> chief = c;
   if (chief.w == 0.0 && chief.y == 0.0) {
     const double u = 0.01;
-    chief = paraxial_trace(lens, ParaxialRay<double>{-sys.entrance_pupil_z_mm * u, u}, k_count,
-                           lambda);
+    chief =
+        paraxial_trace(lens, ParaxialRay<double>{-sys.entrance_pupil_z_mm * u, u}, k_count, lambda);
   }
   const double z_xp = -chief.y * n_image / chief.w;  // from the last vertex
   fo.exit_pupil_z_mm = z_xp - last_t;
