@@ -326,6 +326,18 @@ std::string format_report_json(const AnalysisReport& r) {
   j["mean_rms_spot_um"] = r.mean_rms_spot_um ? finite_or_null(*r.mean_rms_spot_um) : json(nullptr);
   j["distortion_percent"] = distortion;
   j["relative_illumination"] = ri;
+  // Why an illumination is null (unknown, never a guessed number); written only when one is.
+  bool any_unknown = false;
+  for (const FieldReport& f : r.fields) any_unknown = any_unknown || !f.relative_illumination;
+  if (any_unknown) {
+    json notes = json::array();
+    for (const FieldReport& f : r.fields)
+      notes.push_back(f.relative_illumination ? std::string()
+                                              : (f.relative_illumination_unknown.empty()
+                                                     ? std::string("unknown")
+                                                     : f.relative_illumination_unknown));
+    j["relative_illumination_notes"] = notes;
+  }
   j["centroid_y_mm"] = centroid;
   if (r.full_pupil) {  // the x centroids (0 by symmetry on a half pupil, and then not written)
     json centroid_x = json::array();
