@@ -24,23 +24,39 @@ cmake -S . -B build-tsan-python -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
   -DCMAKE_EXE_LINKER_FLAGS="-fsanitize=thread" \
   -DCMAKE_SHARED_LINKER_FLAGS="" -DCMAKE_MODULE_LINKER_FLAGS="" \
   -DLENSOPT_WITH_PYTHON=ON -DLENSOPT_WITH_TORCH=OFF >/dev/null
-cmake --build build-tsan-python -j "${JOBS:-2}" --target lensopt_python
+cmake --build build-tsan-python -j "${JOBS:-2}" --target lensopt_python lensopt
 export OMP_TOOL_LIBRARIES="$archer"
 export TSAN_OPTIONS="halt_on_error=0 second_deadlock_stack=1 ignore_noninstrumented_modules=1 ${TSAN_OPTIONS:-}"
 export OMP_NUM_THREADS="${OMP_NUM_THREADS:-2}"
 log=build-tsan-python/tsan.log
 set +e
-# The CLI the tests compare with (LENSOPT_EXECUTABLE): the regular build (tools/build.sh), not
-# instrumented. An instrumented one carries clang's runtime linked in and aborts beside the
-# preloaded one; its threads are tools/tsan.sh's subject. Python subprocesses of the tests keep
-# the preload (they import the instrumented extension).
-cli="${LENSOPT_EXECUTABLE:-$PWD/build/lensopt}"
-[ -x "$cli" ] || { echo "tsan-python: $cli missing (run tools/build.sh first)" >&2; exit 2; }
+# The CLI the tests compare with (LENSOPT_EXECUTABLE) is built here with the same compiler and
+# flags as the module, so the parity tests compare like with like (a GCC -O3 CLI differs from the
+# clang -O1 module in the last bits of e.g. a spot radius). It is instrumented too (its threads are
+# checked, with clang's runtime linked in statically), so it must not inherit the preloaded GCC
+# runtime: a wrapper drops LD_PRELOAD for it. The wrapper is a Python script, not a shell one:
+# dash crashes with GCC's TSan runtime preloaded, python3 does not. Python subprocesses of the
+# tests keep the preload (they import the instrumented extension).
+cli="${LENSOPT_EXECUTABLE:-$PWD/build-tsan-python/lensopt-nopreload}"
+if [ -z "${LENSOPT_EXECUTABLE:-}" ]; then
+  # The CLI's reports go to build-tsan-python/tsan-cli.PID (the tests capture its stderr).
+  cat >"$cli" <<EOF
+#!/usr/bin/python3
+import os, sys
+env = dict(os.environ)
+env.pop("LD_PRELOAD", None)
+env["TSAN_OPTIONS"] = env.get("TSAN_OPTIONS", "") + " log_path=$PWD/build-tsan-python/tsan-cli"
+os.execve("$PWD/build-tsan-python/lensopt", ["$PWD/build-tsan-python/lensopt", *sys.argv[1:]], env)
+EOF
+  chmod +x "$cli"
+  rm -f build-tsan-python/tsan-cli.*
+fi
+[ -x "$cli" ] || { echo "tsan-python: $cli missing" >&2; exit 2; }
 LD_PRELOAD="$runtime" PYTHONPATH=build-tsan-python/python \
   LENSOPT_EXECUTABLE="$cli" LENSOPT_SHARED_DIR="$PWD/../shared" \
   /usr/bin/python3 -m unittest discover -s tests/python -p "$pattern" 2>&1 | tee "$log"
 status=${PIPESTATUS[0]}
 set -e
-races=$(grep -c "WARNING: ThreadSanitizer" "$log" || true)
+races=$(cat "$log" build-tsan-python/tsan-cli.* 2>/dev/null | grep -c "WARNING: ThreadSanitizer" || true)
 echo "tsan-python: exit $status, $races ThreadSanitizer warnings (log: $log)"
 [ "$status" -eq 0 ] && [ "$races" -eq 0 ]
