@@ -242,8 +242,7 @@ AfocalReport analyze_afocal(const TraceSystem<double>& sys, const AfocalRayDirec
         std::complex<double> field(0.0, 0.0);
         for (std::size_t i = 0; i < grid.size(); ++i)
           if (wf.ok[i])
-            field += grid.weight[i] *
-                     std::polar(1.0, 2.0 * kPi * tilt_removed_opd(wf, grid, i));
+            field += grid.weight[i] * std::polar(1.0, 2.0 * kPi * tilt_removed_opd(wf, grid, i));
         const double strehl = std::norm(field) / (wf.valid_weight * wf.valid_weight);
         sum_w += wl_weights[w];
         sum_sq += wl_weights[w] * wf.rms_waves * wf.rms_waves;
@@ -262,14 +261,14 @@ AfocalReport analyze_afocal(const TraceSystem<double>& sys, const AfocalRayDirec
         int arrived = 0;
         for (std::uint8_t k : wf.ok) arrived += k;
         if (wf.chief_ok && arrived >= options.zernike_terms)
-          f.zernike_waves =
-              fit_zernike(wf, grid, options.zernike_terms, options.zernike_ordering)
-                  .coefficients_waves;
+          f.zernike_waves = fit_zernike(wf, grid, options.zernike_terms, options.zernike_ordering)
+                                .coefficients_waves;
       }
     }
     r.fields.push_back(std::move(f));
   }
-  if (all_traced && weights.field_sum > 0.0) r.mean_rms_angular_spot_mrad = spot_sum / weights.field_sum;
+  if (all_traced && weights.field_sum > 0.0)
+    r.mean_rms_angular_spot_mrad = spot_sum / weights.field_sum;
   return r;
 }
 
@@ -312,37 +311,40 @@ std::string format_afocal_text(const AfocalReport& r) {
                    fo.entrance_pupil_diameter_mm, fo.entrance_pupil_z_mm));
   line(fmt::format("  exit pupil diameter      {:12.6f} mm   at {:.6f} mm from the last vertex",
                    fo.exit_pupil_diameter_mm, fo.exit_pupil_z_mm));
-  line(fmt::format("  residual power           {:12.6g} diopters (marginal ray output slope "
-                   "{:.3g} rad)",
-                   fo.residual_power_diopters, fo.marginal_output_slope));
-  line(fmt::format("  sampling: {} fields x {} wavelengths x {} {}-pupil rays ({} rings); "
-                   "object {}, primary wavelength {} nm, fields by {}",
-                   r.fields.size(), r.wavelength_count, r.rays_per_field_wavelength,
-                   r.full_pupil ? "full" : "half", r.rings,
-                   r.object_distance_mm > 0 ? fmt::format("at {} mm", r.object_distance_mm)
-                                            : std::string("at infinity"),
-                   r.primary_wavelength_nm, r.field_kind));
+  line(
+      fmt::format("  residual power           {:12.6g} diopters (marginal ray output slope "
+                  "{:.3g} rad)",
+                  fo.residual_power_diopters, fo.marginal_output_slope));
+  line(
+      fmt::format("  sampling: {} fields x {} wavelengths x {} {}-pupil rays ({} rings); "
+                  "object {}, primary wavelength {} nm, fields by {}",
+                  r.fields.size(), r.wavelength_count, r.rays_per_field_wavelength,
+                  r.full_pupil ? "full" : "half", r.rings,
+                  r.object_distance_mm > 0 ? fmt::format("at {} mm", r.object_distance_mm)
+                                           : std::string("at infinity"),
+                  r.primary_wavelength_nm, r.field_kind));
   line("");
   const std::string head = fmt::format("field ({})", r.field_unit);
-  line(fmt::format("  {:>11}  angle (deg)  out chief (deg)  paraxial (deg)  ang. dist. (%)  "
-                   "RMS spot (mrad)  (arcmin)  RMS WFE (waves)  Strehl  failed  vignetted",
-                   head));
+  line(
+      fmt::format("  {:>11}  angle (deg)  out chief (deg)  paraxial (deg)  ang. dist. (%)  "
+                  "RMS spot (mrad)  (arcmin)  RMS WFE (waves)  Strehl  failed  vignetted",
+                  head));
   auto opt = [](const std::optional<double>& v, const char* f) {
     return v ? fmt::format(fmt::runtime(f), *v) : std::string("n/a");
   };
   for (const AfocalField& f : r.fields)
-    line(fmt::format("  {:11.3f}  {:11.3f}  {:>15}  {:14.6f}  {:>14}  {:>15}  {:>8}  {:>15}  {:>6}  "
-                     "{:6d}  {:9d}",
-                     f.field_value, f.field_deg,
-                     f.chief_ok ? fmt::format("{:.6f}", f.output_chief_angle_deg) : "n/a",
-                     f.paraxial_output_angle_deg,
-                     f.chief_ok ? fmt::format("{:.5f}", f.angular_distortion_percent) : "n/a",
-                     opt(f.rms_angular_spot_mrad, "{:.5f}"),
-                     f.rms_angular_spot_mrad
-                         ? fmt::format("{:.4f}", *f.rms_angular_spot_mrad * kArcminPerMrad)
-                         : "n/a",
-                     opt(f.rms_wavefront_waves, "{:.5f}"), opt(f.strehl, "{:.4f}"), f.failed_rays,
-                     f.vignetted_rays));
+    line(fmt::format(
+        "  {:11.3f}  {:11.3f}  {:>15}  {:14.6f}  {:>14}  {:>15}  {:>8}  {:>15}  {:>6}  "
+        "{:6d}  {:9d}",
+        f.field_value, f.field_deg,
+        f.chief_ok ? fmt::format("{:.6f}", f.output_chief_angle_deg) : "n/a",
+        f.paraxial_output_angle_deg,
+        f.chief_ok ? fmt::format("{:.5f}", f.angular_distortion_percent) : "n/a",
+        opt(f.rms_angular_spot_mrad, "{:.5f}"),
+        f.rms_angular_spot_mrad ? fmt::format("{:.4f}", *f.rms_angular_spot_mrad * kArcminPerMrad)
+                                : "n/a",
+        opt(f.rms_wavefront_waves, "{:.5f}"), opt(f.strehl, "{:.4f}"), f.failed_rays,
+        f.vignetted_rays));
   line("");
   line(fmt::format("  mean RMS angular spot: {}",
                    r.mean_rms_angular_spot_mrad
@@ -350,15 +352,16 @@ std::string format_afocal_text(const AfocalReport& r) {
                                      *r.mean_rms_angular_spot_mrad * kArcminPerMrad)
                        : std::string("n/a (a field has no traced ray)")));
   if (r.wavefront)
-    line(fmt::format("  wavefront: against a plane wave normal to the chief ray at the exit "
-                     "pupil, piston and tilt removed, {} x {} pupil cells",
-                     r.pupil_samples, r.pupil_samples));
+    line(
+        fmt::format("  wavefront: against a plane wave normal to the chief ray at the exit "
+                    "pupil, piston and tilt removed, {} x {} pupil cells",
+                    r.pupil_samples, r.pupil_samples));
   if (r.zernike_terms > 0)
     for (const AfocalField& f : r.fields) {
       if (f.zernike_waves.empty()) continue;
-      std::string row = fmt::format("  Zernike ({}, waves) field {:.4g} {}:",
-                                    zernike_ordering_name(r.zernike_ordering), f.field_value,
-                                    r.field_unit);
+      std::string row = fmt::format(
+          "  Zernike ({}, waves) field {:.4g} {}:", zernike_ordering_name(r.zernike_ordering),
+          f.field_value, r.field_unit);
       for (std::size_t j = 0; j < f.zernike_waves.size(); ++j)
         row += fmt::format(" Z{}{:+.5f}", j + 1, f.zernike_waves[j]);
       line(row);
@@ -388,7 +391,8 @@ std::string format_afocal_json(const AfocalReport& r) {
   j["field_unit"] = r.field_unit;
   j["field_kind"] = r.field_kind;
   j["object_at_infinity"] = !(r.object_distance_mm > 0);
-  j["object_distance_mm"] = r.object_distance_mm > 0 ? finite_or_null(r.object_distance_mm) : json(0.0);
+  j["object_distance_mm"] =
+      r.object_distance_mm > 0 ? finite_or_null(r.object_distance_mm) : json(0.0);
   j["primary_wavelength_nm"] = finite_or_null(r.primary_wavelength_nm);
   j["wavelength_count"] = r.wavelength_count;
   j["rings"] = r.rings;
@@ -405,14 +409,15 @@ std::string format_afocal_json(const AfocalReport& r) {
     o["failed_rays"] = f.failed_rays;
     o["vignetted_rays"] = f.vignetted_rays;
     o["chief_ok"] = f.chief_ok;
-    o["output_chief_angle_deg"] = f.chief_ok ? finite_or_null(f.output_chief_angle_deg) : json(nullptr);
+    o["output_chief_angle_deg"] =
+        f.chief_ok ? finite_or_null(f.output_chief_angle_deg) : json(nullptr);
     o["paraxial_output_angle_deg"] = finite_or_null(f.paraxial_output_angle_deg);
     o["angular_distortion_percent"] =
         f.chief_ok ? finite_or_null(f.angular_distortion_percent) : json(nullptr);
     o["rms_angular_spot_mrad"] = opt(f.rms_angular_spot_mrad);
-    o["rms_angular_spot_arcmin"] =
-        f.rms_angular_spot_mrad ? finite_or_null(*f.rms_angular_spot_mrad * kArcminPerMrad)
-                                : json(nullptr);
+    o["rms_angular_spot_arcmin"] = f.rms_angular_spot_mrad
+                                       ? finite_or_null(*f.rms_angular_spot_mrad * kArcminPerMrad)
+                                       : json(nullptr);
     o["centroid_direction_cosines"] = {finite_or_null(f.spot.centroid_l),
                                        finite_or_null(f.spot.centroid_m),
                                        finite_or_null(f.spot.centroid_n)};

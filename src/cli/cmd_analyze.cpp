@@ -45,9 +45,9 @@ void run_afocal(const AnalyzeCommand& cmd, const Lens& lens, const AnalyzeOption
                 fmt::format("{} does not apply to an afocal lens (image space in angle, no "
                             "focal length); analyze reports its angular magnification, pupils, "
                             "output angles, angular spot and plane-wave wavefront",
-                            cmd.prescription ? "--prescription" : !cmd.colour_band.empty()
-                                                                      ? "--colour-band"
-                                                                      : "--encircled-energy"));
+                            cmd.prescription           ? "--prescription"
+                            : !cmd.colour_band.empty() ? "--colour-band"
+                                                       : "--encircled-energy"));
   AfocalOptions afocal;
   afocal.pupil_samples = options.wave_options.pupil_samples;
   afocal.wavelength_weights = options.wave_options.wavelength_weights;
@@ -65,9 +65,9 @@ void run_afocal(const AnalyzeCommand& cmd, const Lens& lens, const AnalyzeOption
   const AfocalFirstOrder& fo = report.first_order;
   if (!std::isfinite(fo.angular_magnification) || fo.angular_magnification == 0.0 ||
       traced_rays == 0) {
-    fmt::print(stderr, "lensopt analyze: error: the afocal analysis failed ({}): {}\n", where,
-               traced_rays == 0 ? "no ray leaves the lens"
-                                : "the angular magnification is not finite");
+    fmt::print(
+        stderr, "lensopt analyze: error: the afocal analysis failed ({}): {}\n", where,
+        traced_rays == 0 ? "no ray leaves the lens" : "the angular magnification is not finite");
     throw ExitCode{2};
   }
   if (report.ray_failures > 0) {

@@ -27,18 +27,20 @@ SpotData afocal_spot_data(const Lens& lens, const TraceOptions& trace, int max_f
   const int count = static_cast<int>(out.wavelengths_nm.size());
   out.wavelength_channel.resize(count);
   for (int w = 0; w < count; ++w)
-    out.wavelength_channel[w] =
-        static_cast<int>(lens.specs.wavelength_channels.size()) == count
-            ? lens.specs.wavelength_channels[w]
-            : (out.wavelengths_nm[w] >= 580 ? 0 : out.wavelengths_nm[w] >= 500 ? 1 : 2);
+    out.wavelength_channel[w] = static_cast<int>(lens.specs.wavelength_channels.size()) == count
+                                    ? lens.specs.wavelength_channels[w]
+                                    : (out.wavelengths_nm[w] >= 580   ? 0
+                                       : out.wavelengths_nm[w] >= 500 ? 1
+                                                                      : 2);
   out.mean_rms_um = 1e3 * r.mean_rms_angular_spot_mrad.value_or(0.0);
   out.analyzed_fields = static_cast<int>(r.fields.size());
   const int n = static_cast<int>(r.fields.size());
   std::vector<int> shown;
   for (int i = 0; i < std::min(n, max_fields); ++i) {
-    const int h = n <= max_fields ? i
-                                  : static_cast<int>(std::lround(
-                                        static_cast<double>(i) * (n - 1) / (max_fields - 1)));
+    const int h =
+        n <= max_fields
+            ? i
+            : static_cast<int>(std::lround(static_cast<double>(i) * (n - 1) / (max_fields - 1)));
     if (shown.empty() || shown.back() != h) shown.push_back(h);
   }
   for (int h : shown) {

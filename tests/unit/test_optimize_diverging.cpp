@@ -7,9 +7,9 @@
 #include <string>
 
 #include "error_checks.h"
-#include "lensopt/glass/glass.h"
 #include "lensopt/formats/lens_file.h"
 #include "lensopt/formats/zmx.h"
+#include "lensopt/glass/glass.h"
 #include "lensopt/lens/lens_io.h"
 #include "lensopt/optimize/targets.h"
 #include "lensopt/optimize/variables.h"

@@ -85,17 +85,17 @@ class AfocalRayDirections {
 struct AngularSpot {
   double centroid_l = 0, centroid_m = 0, centroid_n = 1;  // d_0
   double rms_mrad = 0;
-  int count = 0;                            // arrived rays traced (mirrors not counted)
-  std::vector<double> x_mrad, y_mrad;       // a_i - abar (sagittal, tangential), every ray
-  std::vector<int> wavelength;              // per point
+  int count = 0;                       // arrived rays traced (mirrors not counted)
+  std::vector<double> x_mrad, y_mrad;  // a_i - abar (sagittal, tangential), every ray
+  std::vector<int> wavelength;         // per point
 };
 AngularSpot angular_spot(const TraceSystem<double>& sys, const AfocalRayDirections::Rays& rays,
                          bool keep_points = false);
 
 struct AfocalOptions {
-  int threads = 0;         // <= 0: all cores
-  bool wavefront = true;   // the plane-wave wavefront, Strehl (and Zernike)
-  int pupil_samples = 64;  // cells across the pupil for the wavefront
+  int threads = 0;                         // <= 0: all cores
+  bool wavefront = true;                   // the plane-wave wavefront, Strehl (and Zernike)
+  int pupil_samples = 64;                  // cells across the pupil for the wavefront
   std::vector<double> wavelength_weights;  // per spec wavelength; empty: the system's
   int zernike_terms = 0;                   // 0: no Zernike fit
   ZernikeOrdering zernike_ordering = ZernikeOrdering::kFringe;
@@ -112,10 +112,10 @@ struct AfocalField {
   int traced_rays = 0;
   int failed_rays = 0;
   int vignetted_rays = 0;
-  bool chief_ok = false;                  // the real chief ray (primary wavelength) arrived
-  double output_chief_angle_deg = 0;      // atan2(m, n) of the real chief ray
-  double paraxial_output_angle_deg = 0;   // atan(M tan u)
-  double angular_distortion_percent = 0;  // 0 on axis
+  bool chief_ok = false;                        // the real chief ray (primary wavelength) arrived
+  double output_chief_angle_deg = 0;            // atan2(m, n) of the real chief ray
+  double paraxial_output_angle_deg = 0;         // atan(M tan u)
+  double angular_distortion_percent = 0;        // 0 on axis
   std::optional<double> rms_angular_spot_mrad;  // none if no ray arrived
   AngularSpot spot;                             // its centroid (and points, keep_points)
   std::optional<double> rms_wavefront_waves;    // none without the wavefront or its chief ray
