@@ -144,8 +144,9 @@ void check_forms_image(const AnalysisReport& r) {
   if (!std::isfinite(r.efl_mm) || std::abs(r.efl_mm) > kMaxFocalLengthMm)
     problems.push_back(fmt::format(
         "it is afocal (no finite focal length: paraxial EFL {:g} mm, angular magnification "
-        "{:.6g}): its image is at "
-        "infinity, and lensopt measures spots on an image plane, not in angle",
+        "{:.6g}): its image is at infinity, and this analysis measures spots on an image "
+        "plane; afocal mode ([system] afocal = true, a .zmx FTYP afocal flag) measures it in "
+        "angle (analysis/afocal.h)",
         r.efl_mm, r.angular_magnification));
   else
     need(r.efl_mm, "the focal length (mm)", false);

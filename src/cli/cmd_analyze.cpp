@@ -7,6 +7,7 @@
 
 #include "commands.h"
 #include "lens_checks.h"
+#include "lensopt/analysis/afocal.h"
 #include "lensopt/analysis/analyze.h"
 #include "lensopt/analysis/chromatic.h"
 #include "lensopt/analysis/encircled_energy.h"
@@ -34,6 +35,48 @@ struct AnalyzeCommand {
   AnalyzeOptions options;
 };
 
+// An afocal lens (Specs::afocal): image space in angle (analysis/afocal.h). The image-plane
+// sections (prescription with EFL and Seidel sums in mm, encircled energy, the MTF of --wave) do
+// not apply: each is refused by name rather than printed with a focal length it lacks.
+void run_afocal(const AnalyzeCommand& cmd, const Lens& lens, const AnalyzeOptions& options) {
+  const std::string where = lens.source_path.empty() ? lens.name : lens.source_path;
+  if (cmd.prescription || cmd.encircled_energy || !cmd.colour_band.empty())
+    throw Error(SourceLocation{where},
+                fmt::format("{} does not apply to an afocal lens (image space in angle, no "
+                            "focal length); analyze reports its angular magnification, pupils, "
+                            "output angles, angular spot and plane-wave wavefront",
+                            cmd.prescription           ? "--prescription"
+                            : !cmd.colour_band.empty() ? "--colour-band"
+                                                       : "--encircled-energy"));
+  AfocalOptions afocal;
+  afocal.pupil_samples = options.wave_options.pupil_samples;
+  afocal.wavelength_weights = options.wave_options.wavelength_weights;
+  afocal.zernike_terms = options.wave_options.zernike_terms;
+  afocal.zernike_ordering = options.wave_options.zernike_ordering;
+  Lens traced = lens;
+  if (options.dispersion) traced.specs.dispersion = *options.dispersion;
+  const AfocalReport report = analyze_afocal_lens(traced, options.trace, afocal);
+  if (cmd.json)
+    fmt::print("{}\n", format_afocal_json(report));
+  else
+    fmt::print("{}", format_afocal_text(report));
+  int traced_rays = 0;
+  for (const AfocalField& f : report.fields) traced_rays += f.traced_rays;
+  const AfocalFirstOrder& fo = report.first_order;
+  if (!std::isfinite(fo.angular_magnification) || fo.angular_magnification == 0.0 ||
+      traced_rays == 0) {
+    fmt::print(
+        stderr, "lensopt analyze: error: the afocal analysis failed ({}): {}\n", where,
+        traced_rays == 0 ? "no ray leaves the lens" : "the angular magnification is not finite");
+    throw ExitCode{2};
+  }
+  if (report.ray_failures > 0) {
+    fmt::print(stderr, "lensopt analyze: warning: {} rays failed ({})\n", report.ray_failures,
+               where);
+    if (cmd.strict) throw ExitCode{3};
+  }
+}
+
 void run_analyze(const AnalyzeCommand& cmd) {
   AnalyzeOptions options = cmd.options;
   options.trace.ray_aiming = !cmd.no_ray_aiming;
@@ -47,6 +90,10 @@ void run_analyze(const AnalyzeCommand& cmd) {
   if (cmd.mode == "paper") lens.specs.mode = SpecMode::kPaper;
   if (cmd.mode == "as-written") lens.specs.mode = SpecMode::kAsWritten;
   check_lens_warnings(lens, "analyze", cmd.strict);
+  if (lens.specs.afocal) {
+    run_afocal(cmd, lens, options);
+    return;
+  }
   const AnalysisReport report = analyze_lens(lens, options);
   check_forms_image(report);  // a lens without an image is an error (exit 1), not nulls
   // The designer's sections, each from the system analyze traced (the same preparation).

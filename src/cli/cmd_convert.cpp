@@ -71,9 +71,11 @@ void run_convert(ConvertCommand cmd) {
   } else {
     write_file_atomic(output, format_lens_toml(lens));
   }
-  fmt::print("{} -> {}: {} surfaces, f/{}, half field {} deg, {} wavelengths\n", cmd.input_path,
-             cmd.output_path, lens.surfaces.size(), lens.specs.f_number, lens.specs.half_field_deg,
-             lens.specs.wavelengths_nm.size());
+  // An afocal lens has no F-number (no focal length): its summary says afocal instead.
+  fmt::print("{} -> {}: {} surfaces, {}, half field {} deg, {} wavelengths\n", cmd.input_path,
+             cmd.output_path, lens.surfaces.size(),
+             lens.specs.afocal ? std::string("afocal") : fmt::format("f/{}", lens.specs.f_number),
+             lens.specs.half_field_deg, lens.specs.wavelengths_nm.size());
 }
 
 }  // namespace

@@ -3,6 +3,8 @@
 
 #include <fmt/core.h>
 
+#include <string>
+
 #include "lensopt/analysis/apertures.h"
 #include "lensopt/core/error.h"
 #include "lensopt/lens/validate.h"
@@ -10,6 +12,26 @@
 namespace lensopt::cli {
 
 void check_lens_warnings(const Lens& lens, const char* command, bool strict) {
+  // An afocal lens is measured in angle (analysis/afocal.h): analyze, plot (its spot in angle)
+  // and convert take it; the commands that measure an image plane refuse it, saying why.
+  const std::string name(command);
+  if (lens.specs.afocal && name != "analyze" && name != "plot" && name != "convert") {
+    const std::string why =
+        name == "optimize"
+            ? "its merits (RMS spot, wavefront, design targets) are measured on an image plane; "
+              "an afocal merit (angular spot, plane-wave wavefront, angular magnification) is "
+              "not implemented"
+        : name == "tolerance"
+            ? "tolerancing measures the change of the image-plane spot and MTF, and an afocal "
+              "tolerance criterion (angular spot, plane-wave wavefront) is not implemented"
+            : "it needs an image plane with a sensor on it";
+    throw Error(SourceLocation{lens.source_path.empty() ? lens.name : lens.source_path},
+                fmt::format("{} cannot take an afocal lens (image at infinity, image space in "
+                            "angle): {}; analyze reports its angular magnification, pupils, "
+                            "angular spot and plane-wave wavefront, and plot --kind spot draws "
+                            "its spot in angle",
+                            name, why));
+  }
   const std::vector<std::string> glass = glass_range_warnings(lens);
   if (strict && !glass.empty())
     throw Error(SourceLocation{lens.source_path}, glass.front() + " (refused with --strict)");

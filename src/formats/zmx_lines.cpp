@@ -339,6 +339,14 @@ void ZmxParser::system_line(const Line& line, const std::string& key) {
     field_type_ = type;
     if (line.fields.size() > 3) field_count_ = integer(line, 3, "the number of fields");
     if (line.fields.size() > 4) wavelength_count_ = integer(line, 4, "the number of wavelengths");
+    // FTYP type telecentric fields wavelengths normalization ? afocal ...: the seventh value is
+    // OpticStudio's "Afocal Image Space" check box (as optiland's reader takes it).
+    if (line.fields.size() > 7) {
+      const int afocal = integer(line, 7, "the afocal image space flag");
+      if (afocal != 0 && afocal != 1)
+        fail(line, 7, fmt::format("the afocal image space flag is {}; it must be 0 or 1", afocal));
+      ftyp_afocal_ = afocal == 1;
+    }
   } else if (key == "VDXN" || key == "VDYN" || key == "VCXN" || key == "VCYN" || key == "VANN") {
     check_field_count(line);
     std::vector<double>& values = vignetting_[key];

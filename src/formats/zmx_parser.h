@@ -179,6 +179,7 @@ class ZmxParser {
   int wavelength_line_ = 0;
   bool has_ftyp_ = false;
   int ftyp_line_ = 0;
+  bool ftyp_afocal_ = false;  // FTYP's seventh value: OpticStudio's "Afocal Image Space"
   int field_count_ = -1;
   int wavelength_count_ = -1;
   std::vector<double> xfln_;

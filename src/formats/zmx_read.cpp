@@ -30,6 +30,7 @@ ZmxImport ZmxParser::parse(std::string_view bytes) {
   set_wavelengths(lens.specs);
   set_fields(lens.specs);
   set_aperture(lens);
+  lens.specs.afocal = ftyp_afocal_;
   lens.specs.half_field_deg =
       lens.specs.field_type == FieldType::kAngle ? lens.specs.max_field_value() : 0.0;
   validate(lens, source_lines);
@@ -460,14 +461,28 @@ void ZmxParser::set_summary_specs(Lens& lens) {
             fmt::format("the largest field is {} deg; lensopt needs less than 89", half_field_deg));
   lens.specs.half_field_deg = half_field_deg;
   // Any sign of power: a diverging lens (EFL < 0, a virtual image) is as valid as a converging
-  // one; the summary F-number and sensor use |EFL|. An afocal lens (no finite focal length, or
-  // |EFL| beyond kMaxFocalLengthMm) has neither: it is refused here with what it would need.
-  if (!std::isfinite(efl_mm) || !(std::abs(efl_mm) <= kMaxFocalLengthMm))
-    fail_at(aperture_line_, 1,
-            fmt::format("the lens is afocal (paraxial EFL {} mm, beyond {:g} mm): lensopt "
-                        "analyses lenses with a finite focal length, converging or diverging; "
-                        "an afocal system (image space in angle) cannot be imported yet",
-                        efl_mm, kMaxFocalLengthMm));
+  // one; the summary F-number and sensor use |EFL|. An afocal lens (FTYP's afocal flag, or no
+  // finite focal length: |EFL| beyond kMaxFocalLengthMm) has neither: its image space is in
+  // angle (analysis/afocal.h). A file that does not set the flag is read as afocal when its
+  // paraxial EFL says so (OpticStudio would measure it on the image surface as written, where
+  // its collimated output has no focus), and a warning says so.
+  const bool afocal_power = !std::isfinite(efl_mm) || !(std::abs(efl_mm) <= kMaxFocalLengthMm);
+  if (lens.specs.afocal || afocal_power) {
+    if (!lens.specs.afocal) {
+      warn(ftyp_line_ > 0 ? ftyp_line_ : aperture_line_,
+           fmt::format("the lens is afocal (paraxial EFL {:g} mm, beyond {:g} mm) but the file "
+                       "does not set Afocal Image Space (FTYP's seventh value): read in afocal "
+                       "mode, image space in angle",
+                       efl_mm, kMaxFocalLengthMm));
+      lens.specs.afocal = true;
+      if (lens.specs.aperture_type == ApertureType::kFNumber)
+        fail_at(aperture_line_, 1,
+                fmt::format("the lens is afocal (paraxial EFL {:g} mm) and has no F-number: "
+                            "its aperture must be ENPD, OBNA or FLOA",
+                            efl_mm));
+    }
+    return;
+  }
   const double abs_efl_mm = std::abs(efl_mm);
   if (!fnum_) lens.specs.f_number = abs_efl_mm / sys.epd_mm;
   if (note_sensor_mm_) {

@@ -195,8 +195,8 @@ std::string format_zmx(const Lens& lens) {
     van.push_back(number_text(f.vignetting.van_deg));
     vignetting = vignetting || f.vignetting.any();
   }
-  line(
-      fmt::format("FTYP {} 0 {} {} 0 0 0", field_type, fields.size(), specs.wavelengths_nm.size()));
+  line(fmt::format("FTYP {} 0 {} {} 0 0 {}", field_type, fields.size(), specs.wavelengths_nm.size(),
+                   specs.afocal ? 1 : 0));
   line(fmt::format("XFLN {}", fmt::join(x_texts, " ")));
   line(fmt::format("YFLN {}", fmt::join(y_texts, " ")));
   line(fmt::format("FWGN {}", fmt::join(weight_texts, " ")));

@@ -272,6 +272,22 @@ void validate_lens(const Lens& lens, const LensSourceLines& lines) {
                           "must be in [{:g}, {:g}] mm",
                           f, kMinFocalLengthMm, kMaxFocalLengthMm));
   }
+  if (specs.afocal) {
+    // An afocal lens has no focal length: nothing of it may derive from one (analysis/afocal.h).
+    if (specs.mode == SpecMode::kPaper)
+      fail(
+          "afocal = true needs a lens traced as written ([system] mode = \"as-written\"): the "
+          "paper's spec mode scales the lens to a focal length, which an afocal lens lacks");
+    if (specs.aperture_type == ApertureType::kFNumber)
+      fail(
+          "an afocal lens has no F-number (no focal length): give its aperture as \"epd\", "
+          "\"object-na\" or \"float-by-stop\"");
+    if (specs.field_type == FieldType::kParaxialImageHeight ||
+        specs.field_type == FieldType::kRealImageHeight)
+      fail(
+          "an afocal lens has no image height (its image is at infinity): give its fields by "
+          "angle or object height");
+  }
   if (specs.wavelengths_nm.empty()) fail("no wavelengths");
   for (double w : specs.wavelengths_nm)
     if (!(w > 200.0 && w < 20000.0)) fail(fmt::format("wavelength {} nm is out of range", w));

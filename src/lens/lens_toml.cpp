@@ -66,7 +66,8 @@ using detail::kChannelLetters;
 using detail::kFieldTypeNames;
 
 constexpr std::array<std::string_view, 4> kTopLevelKeys = {"lens", "specs", "system", "surfaces"};
-constexpr std::array<std::string_view, 14> kSystemKeys = {"mode",
+constexpr std::array<std::string_view, 15> kSystemKeys = {"mode",
+                                                          "afocal",
                                                           "primary_wavelength_nm",
                                                           "wavelength_weights",
                                                           "aperture",
@@ -329,6 +330,7 @@ void read_system(const TomlReader& reader, const toml::table& table, Specs& spec
       reader.fail(*e.node, fmt::format("mode = \"{}\" must be \"paper\" or \"as-written\"", mode));
     }
   }
+  if (const Entry e = entry(table, "afocal")) specs.afocal = reader.boolean(*e.node, "afocal");
   if (const Entry e = entry(table, "primary_wavelength_nm")) {
     specs.primary_wavelength_nm = reader.finite_number(*e.node, "primary_wavelength_nm");
     if (!(specs.primary_wavelength_nm > 200.0 && specs.primary_wavelength_nm < 20000.0))

@@ -250,6 +250,7 @@ std::string format_lens_toml(const Lens& lens) {
   if (!default_system) {
     out += "\n[system]\n";
     line("mode", specs.mode == SpecMode::kPaper ? "\"paper\"" : "\"as-written\"");
+    if (specs.afocal) line("afocal", "true");
     line("primary_wavelength_nm", number_text(specs.primary_wavelength_nm));
     auto list = [](const std::vector<double>& v) {
       std::vector<std::string> t;

@@ -90,6 +90,14 @@ std::string target_text(const DesignTarget& t) {
   return out;
 }
 
+// Why optimize refuses a diverging lens (variables.cpp says the same).
+constexpr const char* kDivergingRefusal =
+    "optimize cannot yet optimize a diverging lens: its variables are normalized to a positive "
+    "focal length (the last curvature is solved for EFL = +f) and its constraints assume a real "
+    "image behind the last surface (the image clearance and the paper's ray bounds), while a "
+    "diverging lens's image is virtual, before it (a negative last thickness); analyze, plot and "
+    "tolerance measure diverging lenses";
+
 void validate_target(const DesignTarget& t, const SourceLocation& where) {
   const std::string name = target_quantity_name(t.quantity);
   if (!std::isfinite(t.value))
@@ -104,8 +112,13 @@ void validate_target(const DesignTarget& t, const SourceLocation& where) {
                                    "to distortion_percent, relative_illumination, rms_spot_um, "
                                    "rms_wavefront_waves)",
                                    name));
-  if ((t.quantity == TargetQuantity::kEflMm || t.quantity == TargetQuantity::kFNumber) &&
-      !(t.value > 0.0))
+  // A negative focal length is a diverging lens (a valid target: apply_target_solves says what
+  // optimize can do with it); 0 is no lens.
+  if (t.quantity == TargetQuantity::kEflMm && t.value == 0.0)
+    throw Error(where, fmt::format("target {} = 0: a focal length must be nonzero (negative: a "
+                                   "diverging lens)",
+                                   name));
+  if (t.quantity == TargetQuantity::kFNumber && !(t.value > 0.0))
     throw Error(where, fmt::format("target {} = {:g}: must be > 0", name, t.value));
   if (t.quantity == TargetQuantity::kFNumber && t.value < 0.5)
     throw Error(where, fmt::format("target f_number = {:g}: an F-number below 0.5 is not a lens "
@@ -221,11 +234,19 @@ Lens apply_target_solves(const Lens& lens, const std::vector<DesignTarget>& targ
   for (const DesignTarget& t : targets) {
     if (t.quantity != TargetQuantity::kEflMm || t.is_default) continue;
     const double f = design_focal_length_mm(out);
-    if (!(std::isfinite(f) && f > 0.0))
+    if (!std::isfinite(f) || f == 0.0)
       throw Error(SourceLocation{t.where},
-                  fmt::format("target {}: the lens's focal length is {:g} mm; only lenses of "
-                              "positive power can be scaled to a focal length yet",
+                  fmt::format("target {}: the lens's focal length is {:g} mm (afocal: no focal "
+                              "length to scale)",
                               target_text(t), f));
+    if (f < 0.0 || (t.relation == TargetRelation::kEqual && t.value < 0.0))
+      throw Error(
+          SourceLocation{t.where},
+          fmt::format("target {}: the lens's focal length is {:.6g} mm; {}", target_text(t), f,
+                      f < 0.0 ? std::string(kDivergingRefusal)
+                              : "a negative focal length would carry the lens's power through "
+                                "zero (no continuous change of a converging lens reaches it); "
+                                "start from a diverging lens"));
     double goal = f;
     if (t.relation == TargetRelation::kEqual) goal = t.value;
     if (t.relation == TargetRelation::kAtMost) goal = std::min(f, t.value);

@@ -79,14 +79,29 @@ LensParameterization::LensParameterization(const Lens& lens, GlassSpace glasses,
                                            const std::vector<std::string>& profile_variables)
     : structure_(lens), glasses_(std::move(glasses)) {
   lens.validate();
+  const std::string where = lens.source_path.empty() ? lens.name : lens.source_path;
+  // An afocal lens is measured in angle (analysis/afocal.h): no image-plane merit applies.
+  if (lens.specs.afocal)
+    throw Error(SourceLocation{where},
+                "optimize cannot optimize an afocal lens (image at infinity): its merits (RMS "
+                "spot, wavefront, design targets) are measured on an image plane, and an afocal "
+                "merit (angular spot, plane-wave wavefront, angular magnification) is not "
+                "implemented; analyze and plot measure it in angle");
   focal_length_mm_ = design_focal_length_mm(lens);
   if (lens.specs.mode == SpecMode::kAsWritten && lens.specs.half_field_deg != 0.0 &&
       !(focal_length_mm_ > 0.0))
-    throw Error(SourceLocation{lens.source_path},
-                fmt::format("the optimizer holds a lens's own focal length, and this lens's "
-                            "paraxial focal length is {:.6g} mm: only lenses of positive power "
-                            "can be optimized yet",
-                            focal_length_mm_));
+    throw Error(SourceLocation{where},
+                fmt::format("the lens's paraxial focal length is {:.6g} mm: {}", focal_length_mm_,
+                            focal_length_mm_ < 0.0
+                                ? "optimize cannot yet optimize a diverging lens: its variables "
+                                  "are normalized to a positive focal length (the last "
+                                  "curvature is solved for EFL = +f) and its constraints assume "
+                                  "a real image behind the last surface (the image clearance "
+                                  "and the paper's ray bounds), while a diverging lens's image "
+                                  "is virtual, before it (a negative last thickness); analyze, "
+                                  "plot and tolerance measure diverging lenses"
+                                : "the lens has no finite focal length (afocal: set [system] "
+                                  "afocal = true and analyze it in angle)"));
   if (!std::isfinite(focal_length_mm_) || !(focal_length_mm_ > 0.0)) {
     // A lens traced as written has no sensor diagonal of its own (16 mm is a default): on axis
     // only, the message names what to add, not d / (2 tan 0).

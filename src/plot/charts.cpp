@@ -81,6 +81,7 @@ void draw_spots(Canvas& canvas, Rect area, const std::vector<const SpotData*>& r
   const double total_w = nf * side + (nf - 1) * gap;
   const double x0 = area.x + (area.width - total_w) / 2;
   const double px_per_um = side / box_um;
+  const char* unit = rows[0]->unit.c_str();  // the rows share one scale and so one unit
 
   // Top band: wavelength legend and the box size.
   const std::vector<LegendEntry> legend = wavelength_legend(*rows[0]);
@@ -88,7 +89,7 @@ void draw_spots(Canvas& canvas, Rect area, const std::vector<const SpotData*>& r
   draw_legend(canvas, {x0, area.y + 2}, legend, font_px * 0.9, true);
   canvas.text({x0 + lsize.x + 14, area.y + 2 + lsize.y * 0.5 + font_px * 0.35},
               fmt::format("each box {} {} wide; circle: RMS radius; centred on the centroid",
-                          format_tick(box_um, box_um), kMicro),
+                          format_tick(box_um, box_um), unit),
               TextStyle{font_px * 0.9, Anchor::kStart, "#444444"});
 
   for (int r = 0; r < nr; ++r) {
@@ -99,7 +100,7 @@ void draw_spots(Canvas& canvas, Rect area, const std::vector<const SpotData*>& r
     canvas.text(
         {x0, ry + font_px * 1.1},
         fmt::format("{}   mean RMS spot {:.1f} {} ({} field{})", spots.lens_name, spots.mean_rms_um,
-                    kMicro, spots.analyzed_fields, spots.analyzed_fields == 1 ? "" : "s"),
+                    unit, spots.analyzed_fields, spots.analyzed_fields == 1 ? "" : "s"),
         title);
     for (int j = 0; j < static_cast<int>(spots.fields.size()) && j < nf; ++j) {
       const SpotField& f = spots.fields[j];
@@ -107,8 +108,10 @@ void draw_spots(Canvas& canvas, Rect area, const std::vector<const SpotData*>& r
       const double by = ry + row_title + field_label;
       const Point c{bx + side / 2, by + side / 2};
       canvas.text({c.x, by - font_px * 0.45},
-                  fmt::format("{}  (y {:.2f} mm)", f.label,
-                              std::abs(f.centroid_y_mm) < 0.005 ? 0.0 : f.centroid_y_mm),
+                  !f.position_label.empty()
+                      ? fmt::format("{}  ({})", f.label, f.position_label)
+                      : fmt::format("{}  (y {:.2f} mm)", f.label,
+                                    std::abs(f.centroid_y_mm) < 0.005 ? 0.0 : f.centroid_y_mm),
                   TextStyle{font_px * 0.9, Anchor::kMiddle, "#333333"});
       canvas.rect({bx, by}, side, side, Style{"#b5b5b5", 1.0, "#ffffff"});
       const Style cross{"#e4e4e4", 0.8};
@@ -139,14 +142,14 @@ void draw_spots(Canvas& canvas, Rect area, const std::vector<const SpotData*>& r
                     TextStyle{font_px * 0.75, Anchor::kEnd, "#b03a2e"});
       TextStyle rms{font_px, Anchor::kMiddle, kTextColour};
       rms.bold = true;
-      canvas.text({c.x, by + side + font_px * 1.25}, fmt::format("RMS {:.1f} {}", f.rms_um, kMicro),
+      canvas.text({c.x, by + side + font_px * 1.25}, fmt::format("RMS {:.1f} {}", f.rms_um, unit),
                   rms);
     }
   }
   // Scale bar under the first box.
   const double bar_um = nice_step(0, box_um, 4);
   draw_scale_bar(canvas, {x0, area.y + top_band + nr * row_h + bottom_band * 0.45},
-                 bar_um * px_per_um, fmt::format("{} {}", format_tick(bar_um, bar_um), kMicro),
+                 bar_um * px_per_um, fmt::format("{} {}", format_tick(bar_um, bar_um), unit),
                  font_px * 0.9);
 }
 

@@ -8,6 +8,7 @@
 #include <optional>
 
 #include "lensopt/core/error.h"
+#include "lensopt/plot/afocal_plot.h"
 #include "lensopt/plot/charts.h"
 #include "lensopt/plot/layout.h"
 #include "lensopt/plot/psf_strip.h"
@@ -576,6 +577,9 @@ std::unique_ptr<Canvas> draw_plot(const PlotContext& ctx, const PlotContext* cmp
 
 PlotSummary write_plot(const Lens& lens, const Lens* compare, const PlotOptions& options,
                        const std::filesystem::path& output) {
+  // An afocal lens has no image plane: its spots are drawn in angle (plot/afocal_plot.h).
+  if (lens.specs.afocal || (compare && compare->specs.afocal))
+    return write_afocal_plot(lens, compare, options, output);
   options.validate();
   PlotSummary summary;
   summary.output = output;

@@ -25,6 +25,9 @@
 //   * A ray reaching the image plane at P with direction d is followed back to the sphere:
 //       |P + t d - C|^2 = s_c^2,  q = P - C:  t = -(q.d) + sign(s_c) sqrt((q.d)^2 - |q|^2 + s_c^2)
 //     and OPL_sphere = OPL_image + n' t (n' the image-space index).
+//     An afocal image space (Specs::afocal, analysis/afocal.h) has its reference sphere at
+//     infinity: the plane normal to the chief ray through its exit-pupil point
+//     (ReferenceSphere::plane), t = (s_c - q.d_c) / (d.d_c).
 //   * W(p) = (OPL_sphere(p) - OPL_sphere(chief of the same wavelength)) / lambda, in waves:
 //     positive where the ray's path to the sphere is longer than the chief ray's.
 //   * RMS and P-V are taken after removing piston and tilt: W is fitted by least squares with
@@ -137,6 +140,12 @@ struct ReferenceSphere {
   T centre_x_mm, centre_y_mm;  // on the image plane
   T radius_mm;                 // s_c (negative: the exit pupil is in front of the image)
   bool ok = false;             // the reference chief ray reached the image
+  // The sphere at infinity of an afocal image space (analysis/afocal.h): the plane normal to the
+  // chief ray's direction (plane_l, plane_m, plane_n) at the signed distance radius_mm from C
+  // along it (the chief ray's exit-pupil point). A ray at P = C + q on the image plane meets it
+  // after t = (s_c - q.d_c) / (d.d_c).
+  bool plane = false;
+  T plane_l = K<T>(0.0), plane_m = K<T>(0.0), plane_n = K<T>(1.0);
 };
 
 namespace detail {
@@ -263,6 +272,14 @@ Wavefront<T> compute_wavefront(const TraceSystem<T>& sys, int h, int w, const Pu
   auto opl_on_sphere = [&](std::size_t i, bool& good) {
     const T qx = rays.x[i] - sphere.centre_x_mm;
     const T qy = rays.y[i] - sphere.centre_y_mm;
+    if (sphere.plane) {
+      const T cos_to_normal =
+          rays.l[i] * sphere.plane_l + rays.m[i] * sphere.plane_m + rays.n[i] * sphere.plane_n;
+      good = rays.status[i] == kRayOk && value_of(cos_to_normal) > 0.0;
+      if (!good) return zero;
+      const T t = (r - (qx * sphere.plane_l + qy * sphere.plane_m)) / cos_to_normal;
+      return record.optical_path_mm[i] + n_image * t;
+    }
     const T b = qx * rays.l[i] + qy * rays.m[i];
     const T disc = b * b - (qx * qx + qy * qy) + r * r;
     good = rays.status[i] == kRayOk && value_of(disc) > 0.0;

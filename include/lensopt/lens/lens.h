@@ -185,6 +185,12 @@ struct Specs {
   FieldType field_type = FieldType::kAngle;
   std::vector<FieldPoint> fields;  // as written (kAsWritten); empty: 0 and half_field_deg
   double object_distance_mm = std::numeric_limits<double>::infinity();  // object to surface 1
+  // OpticStudio's "Afocal Image Space" (a .zmx FTYP's seventh value; TOML [system] afocal):
+  // the image is at infinity and image space is measured in angle (analysis/afocal.h): angular
+  // magnification, exit-pupil size, output angles, angular spot and a plane-wave reference.
+  // Needs a lens traced as written, with an aperture that does not use the EFL (EPD, object NA
+  // or float by stop) and fields by angle or object height.
+  bool afocal = false;
 
   bool object_at_infinity() const { return !std::isfinite(object_distance_mm); }
   // The largest written field value (deg or mm), or half_field_deg without written fields.

@@ -98,6 +98,9 @@ struct SpotField {
   std::vector<int> wavelength;
   double max_radius_um = 0;  // largest distance of a drawn point from the centroid
   int failed_rays = 0;
+  // The label under the field's name; empty: the centroid's height "(y ... mm)". An afocal
+  // lens's spots (in angle) give the output chief-ray angle here.
+  std::string position_label;
 };
 
 struct SpotData {
@@ -107,6 +110,9 @@ struct SpotData {
   std::vector<SpotField> fields;
   double mean_rms_um = 0;   // over analyze's fields
   int analyzed_fields = 0;  // how many: the lens's own, or the paper's 21
+  // The unit of x_um, y_um, rms_um, max_radius_um and mean_rms_um as drawn: micrometres on an
+  // image plane, or microradians for an afocal lens's angular spot (plot/afocal_plot.h).
+  std::string unit = "\u00b5m";
 };
 
 struct SpotOptions {
