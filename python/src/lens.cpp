@@ -133,15 +133,22 @@ void bind_lens(py::module_& m) {
   py::bind_vector<std::vector<Surface>>(m, "SurfaceList",
                                         "The lens's surfaces, edited in place (a list).");
 
-  py::class_<FieldPoint>(m, "FieldPoint", "One field as written: value (deg or mm) and weight.")
-      .def(py::init([](double value, double weight) {
+  py::class_<FieldPoint>(m, "FieldPoint",
+                         "One field as written: value (its y, deg or mm), weight and x (0 on the "
+                         "y axis; OpticStudio's XFLN).")
+      .def(py::init([](double value, double weight, double x) {
              FieldPoint f;
              f.value = value;
              f.weight = weight;
+             f.x = x;
              return f;
            }),
-           py::arg("value"), py::arg("weight") = 1.0)
-      .def_readwrite("value", &FieldPoint::value, "deg or mm, as Specs.field_type says")
+           py::arg("value"), py::arg("weight") = 1.0, py::arg("x") = 0.0)
+      .def_readwrite("value", &FieldPoint::value, "y: deg or mm, as Specs.field_type says")
+      .def_readwrite("x", &FieldPoint::x, "x: deg or mm (0 on the y axis)")
+      .def_property_readonly("radius", &FieldPoint::radius, "sqrt(x^2 + value^2)")
+      .def_property_readonly("azimuth_deg", &FieldPoint::azimuth_deg,
+                             "from +y towards +x; 0 on the y axis")
       .def_readwrite("weight", &FieldPoint::weight)
       .def("__repr__", [](const FieldPoint& f) {
         return "<FieldPoint " + std::to_string(f.value) + " weight " + std::to_string(f.weight) +
