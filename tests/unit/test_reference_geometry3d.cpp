@@ -65,8 +65,54 @@ TEST_CASE("reference geometry3d: coordinate breaks and tilts match optiland's tr
       fmt::format("{} rays: largest image difference {:.3e} mm (bound {:.3e} = 1e-9 EFL, EFL "
                   "{:.6f} mm), direction {:.3e}",
                   count, worst, bound, efl, worst_direction));
-  // The file's field on x (XFLN 2) imports on this lens without rotational symmetry.
+  // The file's field on x (XFLN 2) imports on this lens without rotational symmetry, and
+  // lensopt's own rays of that field (start_rays in the field's frame, turned by the kernel,
+  // image turned back to the lens frame) are optiland's: the stop is surface 1, so the entrance
+  // pupil is the stop (z = 0, radius 5) and without ray aiming a pupil point is a stop point.
   REQUIRE(lens.specs.fields.size() == 3);
   CHECK(lens.specs.fields[2].x == 2.0);
   CHECK(lens.specs.fields[2].value == 0.0);
+  TraceOptions options;
+  options.ray_aiming = false;
+  const TraceSystem<double> sys = prepare_lens_system(lens, options);
+  int hx = -1;
+  for (int h = 0; h < static_cast<int>(sys.fields_deg.size()); ++h)
+    if (sys.field_azimuth(h) != 0.0) hx = h;
+  REQUIRE(hx >= 0);
+  CHECK(sys.field_azimuth(hx) == 90.0);
+  CHECK(sys.entrance_pupil_z_mm == 0.0);
+  CHECK(sys.epd_mm == 10.0);
+  // Lens-frame stop points (0, 0), (4, 0), (0, 4) are field-frame (u, v) = (-y, x) / 5.
+  PupilSamples pupil;
+  pupil.x = {0.0, 0.0, -0.8};
+  pupil.y = {0.0, 0.8, 0.0};
+  const double stop_points[3][2] = {{0.0, 0.0}, {4.0, 0.0}, {0.0, 4.0}};
+  RayBundle<double> rays;
+  start_rays(sys, hx, 0, rays, &pupil);
+  trace_bundle(sys.lens, 0, sys.lens.surface_count(), true, rays,
+               static_cast<RayRecord<double>*>(nullptr));
+  int matched = 0;
+  double worst_field = 0.0;
+  for (int i = 0; i < 3; ++i) {
+    REQUIRE(rays.status[i] == kRayOk);
+    double x = 0, y = 0;
+    sys.field_to_lens(hx, rays.x[i], rays.y[i], x, y);
+    for (const nlohmann::json& r : ref["rays"]) {
+      if (r["field"].get<std::string>() != "x 2 deg" ||
+          r["stop_point"][0].get<double>() != stop_points[i][0] ||
+          r["stop_point"][1].get<double>() != stop_points[i][1])
+        continue;
+      ++matched;
+      const double d =
+          std::hypot(x - r["image_xy"][0].get<double>(), y - r["image_xy"][1].get<double>());
+      CAPTURE(i);
+      CHECK(d < bound);
+      worst_field = std::max(worst_field, d);
+    }
+  }
+  CHECK(matched == 3);
+  MESSAGE(
+      fmt::format("field (2, 0) deg through lensopt's field frame: largest difference "
+                  "{:.3e} mm",
+                  worst_field));
 }
