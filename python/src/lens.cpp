@@ -52,6 +52,21 @@ int name_index(const std::string& value, const std::array<const char*, N>& names
   throw Error(std::string(what) + " must be one of " + all + ", not '" + value + "'");
 }
 
+// A placement number as the TOML reader takes it: finite (lens_toml.cpp read_placement).
+double finite_placement(double v, const char* what) {
+  if (!std::isfinite(v))
+    throw Error(std::string(what) + " = " + std::to_string(v) + " is not finite");
+  return v;
+}
+
+// The order flag by its TOML name.
+bool tilt_first_of(const std::string& order) {
+  if (order == "tilt-first") return true;
+  if (order == "decenter-first") return false;
+  throw Error("order = \"" + order +
+              "\" must be \"decenter-first\" (OpticStudio's order 0) or \"tilt-first\" (order 1)");
+}
+
 // System data of the as-written mode: refused on the paper's mode, which would not trace it.
 void require_as_written(const Specs& s, const char* what) {
   if (s.mode != SpecMode::kAsWritten)
@@ -124,6 +139,64 @@ void bind_lens(py::module_& m) {
       .def_readwrite("material", &Surface::material, "medium from this surface to the next")
       .def_readwrite("is_stop", &Surface::is_stop, "the aperture stop (must be flat)")
       .def_readwrite("semi_diameter_mm", &Surface::semi_diameter_mm, "0: not set")
+      // 3D placement (issue 32), with the TOML reader's checks (lens_toml.cpp read_placement):
+      // finite numbers, order 'decenter-first' or 'tilt-first', restore_frame not on a
+      // coordinate break, obscuration >= 0.
+      .def_property(
+          "decenter_x_mm", [](const Surface& s) { return s.placement.decenter_x_mm; },
+          [](Surface& s, double v) {
+            s.placement.decenter_x_mm = finite_placement(v, "decenter_x_mm");
+          },
+          "decenter along x (mm): the surface (or, for a coordinate break, the frame after it)")
+      .def_property(
+          "decenter_y_mm", [](const Surface& s) { return s.placement.decenter_y_mm; },
+          [](Surface& s, double v) {
+            s.placement.decenter_y_mm = finite_placement(v, "decenter_y_mm");
+          },
+          "decenter along y (mm)")
+      .def_property(
+          "tilt_x_deg", [](const Surface& s) { return s.placement.tilt_x_deg; },
+          [](Surface& s, double v) { s.placement.tilt_x_deg = finite_placement(v, "tilt_x_deg"); },
+          "tilt about x (deg), OpticStudio's sense")
+      .def_property(
+          "tilt_y_deg", [](const Surface& s) { return s.placement.tilt_y_deg; },
+          [](Surface& s, double v) { s.placement.tilt_y_deg = finite_placement(v, "tilt_y_deg"); },
+          "tilt about y (deg)")
+      .def_property(
+          "tilt_z_deg", [](const Surface& s) { return s.placement.tilt_z_deg; },
+          [](Surface& s, double v) { s.placement.tilt_z_deg = finite_placement(v, "tilt_z_deg"); },
+          "tilt about z (deg)")
+      .def_property(
+          "order",
+          [](const Surface& s) {
+            return std::string(s.placement.tilt_first ? "tilt-first" : "decenter-first");
+          },
+          [](Surface& s, const std::string& order) {
+            s.placement.tilt_first = tilt_first_of(order);
+          },
+          "'decenter-first' (OpticStudio's order 0, default) or 'tilt-first' (order 1)")
+      .def_property(
+          "restore_frame", [](const Surface& s) { return s.restore_frame; },
+          [](Surface& s, bool v) {
+            if (v && s.coordinate_break)
+              throw Error(
+                  "restore_frame belongs to a surface's decenter_tilt (a coordinate break moves "
+                  "the frame of everything after it)");
+            s.restore_frame = v;
+          },
+          "the frame after the surface is the one before it (OpticStudio's 'reverse this "
+          "surface')")
+      .def_readonly("coordinate_break", &Surface::coordinate_break,
+                    "a dummy surface that only moves the frame (Lens.add_coordinate_break)")
+      .def_readwrite("mirror", &Surface::mirror, "a reflecting surface (GLAS MIRROR)")
+      .def_property(
+          "obscuration_mm", [](const Surface& s) { return s.obscuration_mm; },
+          [](Surface& s, double v) {
+            if (!std::isfinite(v) || !(v >= 0.0))
+              throw Error("obscuration_mm = " + std::to_string(v) + " must be >= 0");
+            s.obscuration_mm = v;
+          },
+          "central obscuration radius (mm, 0: none)")
       .def("__repr__", [](const Surface& s) {
         return "<Surface c=" + std::to_string(s.curvature_per_mm) +
                "/mm t=" + std::to_string(s.thickness_mm) + "mm " + s.material.label() +
@@ -133,15 +206,22 @@ void bind_lens(py::module_& m) {
   py::bind_vector<std::vector<Surface>>(m, "SurfaceList",
                                         "The lens's surfaces, edited in place (a list).");
 
-  py::class_<FieldPoint>(m, "FieldPoint", "One field as written: value (deg or mm) and weight.")
-      .def(py::init([](double value, double weight) {
+  py::class_<FieldPoint>(m, "FieldPoint",
+                         "One field as written: value (its y, deg or mm), weight and x (0 on the "
+                         "y axis; OpticStudio's XFLN).")
+      .def(py::init([](double value, double weight, double x) {
              FieldPoint f;
              f.value = value;
              f.weight = weight;
+             f.x = x;
              return f;
            }),
-           py::arg("value"), py::arg("weight") = 1.0)
-      .def_readwrite("value", &FieldPoint::value, "deg or mm, as Specs.field_type says")
+           py::arg("value"), py::arg("weight") = 1.0, py::arg("x") = 0.0)
+      .def_readwrite("value", &FieldPoint::value, "y: deg or mm, as Specs.field_type says")
+      .def_readwrite("x", &FieldPoint::x, "x: deg or mm (0 on the y axis)")
+      .def_property_readonly("radius", &FieldPoint::radius, "sqrt(x^2 + value^2)")
+      .def_property_readonly("azimuth_deg", &FieldPoint::azimuth_deg,
+                             "from +y towards +x; 0 on the y axis")
       .def_readwrite("weight", &FieldPoint::weight)
       .def("__repr__", [](const FieldPoint& f) {
         return "<FieldPoint " + std::to_string(f.value) + " weight " + std::to_string(f.weight) +
@@ -288,6 +368,40 @@ void bind_lens(py::module_& m) {
       .def("track_length_mm", &Lens::track_length_mm, "first to last vertex")
       .def("total_track_mm", &Lens::total_track_mm, "first vertex to image")
       .def("validate", &Lens::validate, "Raises LensoptError if the lens cannot be traced.")
+      .def(
+          "add_coordinate_break",
+          [](Lens& lens, int index, double thickness_mm, double decenter_x_mm, double decenter_y_mm,
+             double tilt_x_deg, double tilt_y_deg, double tilt_z_deg, const std::string& order) {
+            const int count = static_cast<int>(lens.surfaces.size());
+            if (index < 0 || index > count)
+              throw Error("add_coordinate_break: index " + std::to_string(index) +
+                          " must be in 0.." + std::to_string(count) +
+                          " (the break goes before surfaces[index]; " + std::to_string(count) +
+                          ": after the last)");
+            Surface s;
+            s.coordinate_break = true;
+            // The medium before it continues (as the TOML reader does).
+            s.material = index == 0 ? Material::air()
+                                    : lens.surfaces[static_cast<std::size_t>(index - 1)].material;
+            s.thickness_mm = finite_placement(thickness_mm, "thickness_mm");
+            s.placement.decenter_x_mm = finite_placement(decenter_x_mm, "decenter_x_mm");
+            s.placement.decenter_y_mm = finite_placement(decenter_y_mm, "decenter_y_mm");
+            s.placement.tilt_x_deg = finite_placement(tilt_x_deg, "tilt_x_deg");
+            s.placement.tilt_y_deg = finite_placement(tilt_y_deg, "tilt_y_deg");
+            s.placement.tilt_z_deg = finite_placement(tilt_z_deg, "tilt_z_deg");
+            s.placement.tilt_first = tilt_first_of(order);
+            lens.surfaces.insert(lens.surfaces.begin() + index, s);
+            return index;
+          },
+          py::arg("index"), py::kw_only(), py::arg("thickness_mm") = 0.0,
+          py::arg("decenter_x_mm") = 0.0, py::arg("decenter_y_mm") = 0.0,
+          py::arg("tilt_x_deg") = 0.0, py::arg("tilt_y_deg") = 0.0, py::arg("tilt_z_deg") = 0.0,
+          py::arg("order") = "decenter-first",
+          "Inserts a coordinate break (TOML coordinate_break, .zmx COORDBRK) before "
+          "surfaces[index]: it moves the frame of every surface after it; its thickness runs "
+          "along the new z. Returns index.")
+      .def("breaks_symmetry", &Lens::breaks_symmetry,
+           "Some surface has a placement, is a coordinate break or has a decentred aperture.")
       .def(
           "scaled", [](const Lens& l, double s) { return scaled(l, s); }, py::arg("scale"),
           "The lens scaled uniformly (curvatures / s, lengths * s).")

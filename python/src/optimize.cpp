@@ -1,6 +1,8 @@
 // Optimization in Python: the paper's lens variables (Parameterization), the design loss with
 // its exact gradient, Levenberg-Marquardt optimization and Monte-Carlo tolerancing.
+#include <algorithm>
 #include <cmath>
+#include <map>
 #include <optional>
 
 #include "bindings.h"
@@ -344,7 +346,8 @@ void bind_optimize(py::module_& m) {
          std::optional<int> rings, std::optional<int> fields,
          std::optional<std::string> distribution, std::optional<std::string> compensator,
          bool sensitivity, std::optional<double> max_spot_um, std::optional<int> threads,
-         std::optional<int> jobs) {
+         std::optional<int> jobs, std::optional<std::map<std::string, double>> tolerances,
+         std::optional<double> inverse_drop_um) {
         // The CLI's start (tolerance.h): the defaults and the lens's [tolerance] table, then the
         // arguments given (None: not given).
         ToleranceOptions o = tolerance_options_for(lens);
@@ -356,6 +359,31 @@ void bind_optimize(py::module_& m) {
         if (compensator) o.compensator = parse_focus_compensator(*compensator);
         o.sensitivity = sensitivity;
         if (max_spot_um) o.max_spot_um = *max_spot_um;
+        if (inverse_drop_um) o.inverse_drop_um = *inverse_drop_um;
+        // tolerances={'decenter_mm': 0.01, 'surface_tilt_arcmin': 1, ...}: as the CLI's
+        // --decenter-mm etc., by the [tolerance] table's names.
+        if (tolerances) {
+          const std::vector<std::string>& names = tolerance_names();
+          double* slots[] = {&o.tolerances.curvature_pct,
+                             &o.tolerances.glass_thickness_mm,
+                             &o.tolerances.air_thickness_mm,
+                             &o.tolerances.nd,
+                             &o.tolerances.vd_pct,
+                             &o.tolerances.asphere_sag_um,
+                             &o.tolerances.decenter_mm,
+                             &o.tolerances.tilt_arcmin,
+                             &o.tolerances.surface_decenter_mm,
+                             &o.tolerances.surface_tilt_arcmin};
+          static_assert(sizeof(slots) / sizeof(slots[0]) == 10);
+          for (const auto& [name, value] : *tolerances) {
+            const auto it = std::find(names.begin(), names.end(), name);
+            if (it == names.end())
+              throw Error("tolerance: unknown tolerance '" + name +
+                          "' (known: the [tolerance] "
+                          "table's names, e.g. decenter_mm, surface_tilt_arcmin)");
+            *slots[it - names.begin()] = value;
+          }
+        }
         // threads= as the CLI's --threads (jobs=: its old name, as --jobs).
         if (threads && jobs && *threads != *jobs)
           throw Error("tolerance: threads = " + std::to_string(*threads) + " and jobs = " +
@@ -370,11 +398,15 @@ void bind_optimize(py::module_& m) {
       py::arg("distribution") = py::none(), py::arg("compensator") = py::none(),
       py::arg("sensitivity") = true, py::arg("max_spot_um") = py::none(),
       py::arg("threads") = py::none(), py::arg("jobs") = py::none(),
+      py::arg("tolerances") = py::none(), py::arg("inverse_drop_um") = py::none(),
       "`lensopt tolerance`: Monte-Carlo trials of manufacturing errors, with the sensitivity "
       "table. The options start where the CLI's do (tolerance_options_for: the defaults, 10000 "
       "trials, seed 1, 16 rings, 11 fields, with the lens's [tolerance] table applied); an "
       "argument given (not None) overrides them. threads: threads over trials (0: all cores), as "
-      "the CLI's --threads (jobs: its old name).");
+      "the CLI's --threads (jobs: its old name). tolerances: a dict of tolerance limits by the "
+      "[tolerance] table's names (curvature_pct, ..., decenter_mm, tilt_arcmin, "
+      "surface_decenter_mm, surface_tilt_arcmin), as the CLI's --curvature-pct etc.; "
+      "inverse_drop_um: as --inverse-drop-um (the sensitivity rows' inverse_limit).");
 }
 
 }  // namespace lensopt::python

@@ -103,6 +103,13 @@ AnalysisReport analyze_lens(const Lens& lens_in, const AnalyzeOptions& options) 
     f.centroid_y_mm = spots.centroid_y_mm[h];
     f.centroid_x_mm = spots.centroid_x_mm[h];
     f.reference_y_mm = measured.reference_y_mm[h];
+    f.azimuth_deg = sys.field_azimuth(h);
+    f.field_x = f.field_value * std::sin(f.azimuth_deg * kPi / 180.0);
+    f.field_y = f.azimuth_deg == 0.0 ? f.field_value
+                                     : f.field_value * std::cos(f.azimuth_deg * kPi / 180.0);
+    sys.field_to_lens(h, f.centroid_x_mm, f.centroid_y_mm, f.image_centroid_x_mm,
+                      f.image_centroid_y_mm);
+    sys.field_to_lens(h, 0.0, f.reference_y_mm, f.image_reference_x_mm, f.image_reference_y_mm);
     f.distortion_percent = 100.0 * measured.distortion[h];
     if (measured.relative_illumination_known[h])
       f.relative_illumination = measured.relative_illumination[h];
@@ -230,6 +237,19 @@ std::string format_report_text(const AnalysisReport& r) {
                                              : std::string("n/a"),
                      100.0 * f.aiming_error, f.failed_rays, f.vignetted_rays));
   }
+  bool off_y = false;
+  for (const FieldReport& f : r.fields) off_y = off_y || f.azimuth_deg != 0.0;
+  if (off_y) {  // fields off the y axis: where each field and its image lie
+    line("");
+    line(fmt::format("  {:>22}  {:>9}  {:>26}  {:>26}",
+                     fmt::format("field x, y ({})", r.field_unit), "azimuth",
+                     "image centroid x, y (mm)", "paraxial chief x, y (mm)"));
+    for (const FieldReport& f : r.fields)
+      line(
+          fmt::format("  {:>10.4f}, {:>10.4f}  {:9.3f}  {:>12.6f}, {:>12.6f}  {:>12.6f}, {:>12.6f}",
+                      f.field_x, f.field_y, f.azimuth_deg, f.image_centroid_x_mm,
+                      f.image_centroid_y_mm, f.image_reference_x_mm, f.image_reference_y_mm));
+  }
   line("");
   line(fmt::format("  mean RMS spot: {}", r.mean_rms_spot_um
                                               ? fmt::format("{:.3f} um", *r.mean_rms_spot_um)
@@ -340,6 +360,28 @@ std::string format_report_json(const AnalysisReport& r) {
     j["relative_illumination_notes"] = notes;
   }
   j["centroid_y_mm"] = centroid;
+  bool off_y = false;
+  for (const FieldReport& f : r.fields) off_y = off_y || f.azimuth_deg != 0.0;
+  if (off_y) {  // fields off the y axis: both coordinates of each field and of its image
+    json fx = json::array(), fy = json::array(), az = json::array(), ix = json::array(),
+         iy = json::array(), rx = json::array(), ry = json::array();
+    for (const FieldReport& f : r.fields) {
+      fx.push_back(finite_or_null(f.field_x));
+      fy.push_back(finite_or_null(f.field_y));
+      az.push_back(finite_or_null(f.azimuth_deg));
+      ix.push_back(finite_or_null(f.image_centroid_x_mm));
+      iy.push_back(finite_or_null(f.image_centroid_y_mm));
+      rx.push_back(finite_or_null(f.image_reference_x_mm));
+      ry.push_back(finite_or_null(f.image_reference_y_mm));
+    }
+    j["field_x"] = fx;
+    j["field_y"] = fy;
+    j["field_azimuth_deg"] = az;
+    j["image_centroid_x_mm"] = ix;
+    j["image_centroid_y_mm"] = iy;
+    j["image_reference_x_mm"] = rx;
+    j["image_reference_y_mm"] = ry;
+  }
   if (r.full_pupil) {  // the x centroids (0 by symmetry on a half pupil, and then not written)
     json centroid_x = json::array();
     for (const FieldReport& f : r.fields) centroid_x.push_back(finite_or_null(f.centroid_x_mm));

@@ -143,6 +143,7 @@ LateralColour lateral_colour(const TraceSystem<double>& sys) {
       one.l[0] = rays.l[w];
       one.m[0] = rays.m[w];
       one.n[0] = rays.n[w];
+      set_field_frame(sys, h, one);
       trace_bundle(sys.lens, w, sys.lens.surface_count(), true, one,
                    static_cast<RayRecord<double>*>(nullptr));
       ok = ok && one.status[0] == kRayOk && std::isfinite(one.y[0]);

@@ -20,7 +20,7 @@ TraceSystem<double> field_sweep_system(const Lens& lens, const TraceSystem<doubl
   fine.scale_to_spec = false;
   // The lens's own setup (aperture, object distance), sampled at `fields` angles up to its
   // largest chief-ray angle; the lens of `sys` is already scaled.
-  SystemSetup setup = specs_setup(lens.specs, fine);
+  SystemSetup setup = specs_setup(lens.specs, fine, !lens.breaks_symmetry());
   setup.scale = false;
   if (lens.specs.mode == SpecMode::kPaper) {
     setup.aperture_type = ApertureType::kFNumber;

@@ -20,8 +20,9 @@
 namespace lensopt::cli {
 namespace {
 
-// --curvature-pct .. --asphere-sag-um, --decenter-mm, --tilt-arcmin (Tolerances' order).
-constexpr int kToleranceOptionCount = 8;
+// --curvature-pct .. --asphere-sag-um, --decenter-mm, --tilt-arcmin, --surface-decenter-mm,
+// --surface-tilt-arcmin (Tolerances' order).
+constexpr int kToleranceOptionCount = 10;
 
 struct ToleranceCommand {
   std::string lens_path;
@@ -45,6 +46,8 @@ struct ToleranceCommand {
   CLI::Option* trials_opt = nullptr;
   CLI::Option* seed_opt = nullptr;
   CLI::Option* max_spot_opt = nullptr;
+  double inverse_drop_um = 0;
+  CLI::Option* inverse_drop_opt = nullptr;
   CLI::Option* distribution_opt = nullptr;
   CLI::Option* compensator_opt = nullptr;
   CLI::Option* rings_opt = nullptr;
@@ -63,11 +66,16 @@ void check_cli_tolerance(const CLI::Option* opt, double value) {
 }
 
 void run_tolerance_command(const ToleranceCommand& cmd) {
-  const double cli_values[kToleranceOptionCount] = {
-      cmd.tolerances.curvature_pct,    cmd.tolerances.glass_thickness_mm,
-      cmd.tolerances.air_thickness_mm, cmd.tolerances.nd,
-      cmd.tolerances.vd_pct,           cmd.tolerances.asphere_sag_um,
-      cmd.tolerances.decenter_mm,      cmd.tolerances.tilt_arcmin};
+  const double cli_values[kToleranceOptionCount] = {cmd.tolerances.curvature_pct,
+                                                    cmd.tolerances.glass_thickness_mm,
+                                                    cmd.tolerances.air_thickness_mm,
+                                                    cmd.tolerances.nd,
+                                                    cmd.tolerances.vd_pct,
+                                                    cmd.tolerances.asphere_sag_um,
+                                                    cmd.tolerances.decenter_mm,
+                                                    cmd.tolerances.tilt_arcmin,
+                                                    cmd.tolerances.surface_decenter_mm,
+                                                    cmd.tolerances.surface_tilt_arcmin};
   for (int i = 0; i < kToleranceOptionCount; ++i)
     check_cli_tolerance(cmd.tolerance_opts[i], cli_values[i]);
 
@@ -81,11 +89,16 @@ void run_tolerance_command(const ToleranceCommand& cmd) {
   // The lens's [tolerance] table over the defaults (one function for the CLI and Python), then
   // what the command line gives.
   ToleranceOptions options = tolerance_options_for(lens);
-  double* targets[kToleranceOptionCount] = {
-      &options.tolerances.curvature_pct,    &options.tolerances.glass_thickness_mm,
-      &options.tolerances.air_thickness_mm, &options.tolerances.nd,
-      &options.tolerances.vd_pct,           &options.tolerances.asphere_sag_um,
-      &options.tolerances.decenter_mm,      &options.tolerances.tilt_arcmin};
+  double* targets[kToleranceOptionCount] = {&options.tolerances.curvature_pct,
+                                            &options.tolerances.glass_thickness_mm,
+                                            &options.tolerances.air_thickness_mm,
+                                            &options.tolerances.nd,
+                                            &options.tolerances.vd_pct,
+                                            &options.tolerances.asphere_sag_um,
+                                            &options.tolerances.decenter_mm,
+                                            &options.tolerances.tilt_arcmin,
+                                            &options.tolerances.surface_decenter_mm,
+                                            &options.tolerances.surface_tilt_arcmin};
   for (int i = 0; i < kToleranceOptionCount; ++i)
     if (cmd.tolerance_opts[i]->count() > 0) *targets[i] = cli_values[i];
   if (cmd.distribution_opt->count() > 0)
@@ -93,6 +106,7 @@ void run_tolerance_command(const ToleranceCommand& cmd) {
   if (cmd.compensator_opt->count() > 0)
     options.compensator = parse_focus_compensator(cmd.compensator);
   if (cmd.max_spot_opt->count() > 0) options.max_spot_um = cmd.max_spot_um;
+  if (cmd.inverse_drop_opt->count() > 0) options.inverse_drop_um = cmd.inverse_drop_um;
   if (cmd.trials_opt->count() > 0) options.trials = cmd.trials;
   if (cmd.seed_opt->count() > 0) options.seed = cmd.seed;
   options.jobs = cmd.jobs;
@@ -157,6 +171,11 @@ void setup_tolerance(CLI::App& app) {
   sub->add_option("--csv", cmd->csv_path, "per-trial CSV file (written atomically)");
   sub->add_flag("--json", cmd->json, "everything as one JSON object on stdout");
   sub->add_option("--histogram", cmd->histogram_path, "histogram of the mean spot (SVG)");
+  cmd->inverse_drop_opt = sub->add_option(
+      "--inverse-drop-um", cmd->inverse_drop_um,
+      "inverse sensitivity: for each tolerance, the magnitude that alone raises the mean RMS spot "
+      "by this many um (the worse sign), a column of the sensitivity table ([tolerance] "
+      "inverse_drop_um; default: not computed)");
   cmd->max_spot_opt =
       sub->add_option("--max-spot-um", cmd->max_spot_um, "yield limit on the mean RMS spot (um)")
           ->check(CLI::PositiveNumber);
@@ -189,6 +208,14 @@ void setup_tolerance(CLI::App& app) {
   cmd->tolerance_opts[7] =
       sub->add_option("--tilt-arcmin", cmd->tolerances.tilt_arcmin,
                       "element tilt about x and about y, +- arcmin (default 1; 0: off)");
+  cmd->tolerance_opts[8] = sub->add_option(
+      "--surface-decenter-mm", cmd->tolerances.surface_decenter_mm,
+      "surface decenter in x and in y (TSDX, TSDY) of each curved surface alone, +- mm "
+      "(default 0: off)");
+  cmd->tolerance_opts[9] = sub->add_option(
+      "--surface-tilt-arcmin", cmd->tolerances.surface_tilt_arcmin,
+      "surface tilt about x and about y (TSTX, TSTY) of each surface alone: an element's wedge, a "
+      "mirror's tilt, +- arcmin (default 0: off)");
   cmd->rings_opt =
       sub->add_option("--rings", cmd->rings,
                       "pupil rings per trial (default 16; the paper's full sampling is 32)")

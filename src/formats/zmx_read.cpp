@@ -330,8 +330,8 @@ void ZmxParser::set_wavelengths(Specs& specs) {
 
 void ZmxParser::set_fields(Specs& specs) {
   const RawSurface& object = surfaces_.front();
-  // Fields: the active ones, radial distance sqrt(x^2 + y^2) (the lens is rotationally
-  // symmetric), with their weights and vignetting factors.
+  // Fields: the active ones, (x, y) as written (on the y axis of a rotationally symmetric lens
+  // |y|), with their weights and vignetting factors.
   std::size_t field_count = std::max(xfln_.size(), yfln_.size());
   if (field_count_ >= 0)
     field_count = std::min(field_count, static_cast<std::size_t>(field_count_));
@@ -345,26 +345,26 @@ void ZmxParser::set_fields(Specs& specs) {
   for (std::size_t i = 0; i < field_count; ++i) {
     const double x = i < xfln_.size() ? xfln_[i] : 0.0;
     const double y = i < yfln_.size() ? yfln_[i] : 0.0;
-    if (breaks_symmetry_ && (x != 0.0 || y < 0.0))
-      fail_at(yfln_line_ > 0 ? yfln_line_ : last_line_, 1,
-              fmt::format("field {} is at (x, y) = ({:g}, {:g}); a lens without rotational "
-                          "symmetry (coordinate breaks, decentred apertures) cannot turn it onto "
-                          "+y, and lensopt traces fields on +y only",
-                          i + 1, x, y));
+    // A field off the y axis keeps its x and y (FieldPoint: traced in the frame turned about z
+    // to put it on +y); on the y axis a rotationally symmetric lens takes |y| (a field on -y is
+    // the mirror of one on +y), a lens without that symmetry keeps y < 0 (turned by 180 deg).
     FieldPoint f;
-    f.value = x == 0.0 ? std::abs(y) : std::hypot(x, y);
+    const bool turned = x != 0.0 || (breaks_symmetry_ && y < 0.0);
+    f.value = turned ? y : std::abs(y);
+    f.x = x;
     f.weight = i < field_weights_.size() ? field_weights_[i] : 1.0;
     // OpticStudio's factors are in the pupil's x, y; lensopt's in the frame where the field lies
     // on +y (lens.h: the pupil ellipse D + R(VAN) C, D = (VDX, VDY), C = diag(1 - VCX, 1 - VCY)).
     // A field on -y mirrors y (M = diag(1, -1): M D, and M R(a) C = R(-a) C M, so VAN -> -VAN);
     // a field on +-x turns the pupil by a quarter turn Q (y' = +-x, x' = -+y: VDY' = +-VDX,
     // VDX' = -+VDY; Q R(a) C = R(a) Q C Q^T Q with Q C Q^T = diag(1 - VCY, 1 - VCX): VCX and VCY
-    // swap, VAN stays); a field off the axes turns by the angle b that takes it to +y (R(b): D'
-    // = R(b) D, VAN' = VAN + b, C stays).
+    // swap, VAN stays); a field off the axes (or on -y of a lens without rotational symmetry)
+    // turns by the angle b that takes it to +y (R(b): D' = R(b) D, VAN' = VAN + b, C stays).
+    // zmx_write.cpp inverts this.
     const double vdx = factor("VDXN", i), vdy = factor("VDYN", i);
     const double vcx = factor("VCXN", i), vcy = factor("VCYN", i);
     const double van = factor("VANN", i);
-    if (x == 0.0) {
+    if (x == 0.0 && !turned) {
       f.vignetting.vdx = vdx;
       f.vignetting.vdy = y < 0.0 ? -vdy : vdy;
       f.vignetting.vcx = vcx;
@@ -406,11 +406,14 @@ void ZmxParser::set_fields(Specs& specs) {
     fail_at(ftyp_line_, 1, "object-height fields (FTYP 1) need a finite object distance");
   if (specs.field_type == FieldType::kAngle) {
     for (const FieldPoint& f : specs.fields)
-      if (!(f.value < 89.0))
+      if (!(f.radius() < 89.0))
         fail_at(yfln_line_ > 0 ? yfln_line_ : last_line_, 1,
-                fmt::format("the field {} deg must be less than 89", f.value));
+                fmt::format("the field {} deg must be less than 89", f.radius()));
   } else {
-    for (FieldPoint& f : specs.fields) f.value *= unit_mm_;
+    for (FieldPoint& f : specs.fields) {
+      f.value *= unit_mm_;
+      f.x *= unit_mm_;
+    }
   }
 }
 

@@ -185,14 +185,30 @@ std::string format_zmx(const Lens& lens) {
   std::vector<std::string> x_texts, y_texts, weight_texts, vdx, vdy, vcx, vcy, van;
   bool vignetting = false;
   for (const FieldPoint& f : fields) {
-    x_texts.push_back("0");
+    x_texts.push_back(number_text(f.x));
     y_texts.push_back(number_text(f.value));
     weight_texts.push_back(number_text(f.weight));
-    vdx.push_back(number_text(f.vignetting.vdx));
-    vdy.push_back(number_text(f.vignetting.vdy));
-    vcx.push_back(number_text(f.vignetting.vcx));
-    vcy.push_back(number_text(f.vignetting.vcy));
-    van.push_back(number_text(f.vignetting.van_deg));
+    // The factors are in the frame where the field lies on +y (lens.h); OpticStudio's are in the
+    // pupil's x, y: the inverse of the reader's turn (zmx_read.cpp set_fields).
+    VignettingFactors v = f.vignetting;
+    if (f.x != 0.0 && f.value == 0.0) {  // a quarter turn: VDX' = -s VDY, VDY' = s VDX, swap C
+      const double s = f.x > 0.0 ? 1.0 : -1.0;
+      v.vdx = s * f.vignetting.vdy;
+      v.vdy = -s * f.vignetting.vdx;
+      v.vcx = f.vignetting.vcy;
+      v.vcy = f.vignetting.vcx;
+    } else if ((f.x != 0.0 || f.value < 0.0) && v.any()) {  // R(-b) D', VAN' - b
+      const double b = kPi / 2.0 - std::atan2(f.value, f.x);
+      const double c = std::cos(b), sb = std::sin(b);
+      v.vdx = c * f.vignetting.vdx + sb * f.vignetting.vdy;
+      v.vdy = -sb * f.vignetting.vdx + c * f.vignetting.vdy;
+      v.van_deg = f.vignetting.van_deg - b * 180.0 / kPi;
+    }
+    vdx.push_back(number_text(v.vdx));
+    vdy.push_back(number_text(v.vdy));
+    vcx.push_back(number_text(v.vcx));
+    vcy.push_back(number_text(v.vcy));
+    van.push_back(number_text(v.van_deg));
     vignetting = vignetting || f.vignetting.any();
   }
   line(fmt::format("FTYP {} 0 {} {} 0 0 {}", field_type, fields.size(), specs.wavelengths_nm.size(),

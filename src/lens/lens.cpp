@@ -73,7 +73,7 @@ std::vector<int> default_wavelength_channels(const std::vector<double>& waveleng
 double Specs::max_field_value() const {
   if (fields.empty()) return half_field_deg;
   double out = 0.0;
-  for (const FieldPoint& f : fields) out = std::max(out, std::abs(f.value));
+  for (const FieldPoint& f : fields) out = std::max(out, f.radius());
   return out;
 }
 
@@ -306,7 +306,10 @@ void validate_lens(const Lens& lens, const LensSourceLines& lines) {
   if (!(specs.primary_wavelength_nm > 200.0 && specs.primary_wavelength_nm < 20000.0))
     fail(fmt::format("primary wavelength {} nm is out of range", specs.primary_wavelength_nm));
   for (const FieldPoint& f : specs.fields) {
-    if (!std::isfinite(f.value)) fail("a field value is not finite");
+    if (!std::isfinite(f.value) || !std::isfinite(f.x)) fail("a field value is not finite");
+    if (specs.field_type == FieldType::kAngle && !(f.radius() < 89.0))
+      fail(fmt::format("field ({:g}, {:g}) deg is {:g} deg off axis; it must be below 89", f.x,
+                       f.value, f.radius()));
     if (!(f.weight >= 0.0) || !std::isfinite(f.weight))
       fail(fmt::format("field weight {} must be >= 0", f.weight));
     const VignettingFactors& v = f.vignetting;

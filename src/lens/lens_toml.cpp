@@ -66,7 +66,7 @@ using detail::kChannelLetters;
 using detail::kFieldTypeNames;
 
 constexpr std::array<std::string_view, 4> kTopLevelKeys = {"lens", "specs", "system", "surfaces"};
-constexpr std::array<std::string_view, 15> kSystemKeys = {"mode",
+constexpr std::array<std::string_view, 16> kSystemKeys = {"mode",
                                                           "afocal",
                                                           "primary_wavelength_nm",
                                                           "wavelength_weights",
@@ -74,6 +74,7 @@ constexpr std::array<std::string_view, 15> kSystemKeys = {"mode",
                                                           "aperture_value",
                                                           "field_type",
                                                           "fields",
+                                                          "fields_x",
                                                           "field_weights",
                                                           "vdx",
                                                           "vdy",
@@ -420,6 +421,16 @@ void read_system(const TomlReader& reader, const toml::table& table, Specs& spec
                   "every field weight is 0: no field would count; give at least one "
                   "a positive weight");
   }
+  // fields_x: the x value of each field (OpticStudio's XFLN); `fields` then holds the y values.
+  per_field("fields_x", [&](FieldPoint& f, double v, const toml::node& n) {
+    f.x = v;
+    if (specs.field_type == FieldType::kAngle && !(f.radius() < 89.0))
+      reader.fail(n, fmt::format("field (x, y) = ({:g}, {:g}) deg is {:g} deg off axis; it must be "
+                                 "below 89",
+                                 f.x, f.value, f.radius()));
+  });
+  if (entry(table, "fields_x") && specs.field_type == FieldType::kAngle)
+    specs.half_field_deg = specs.max_field_value();
   per_field("vdx", [](FieldPoint& f, double v, const toml::node&) { f.vignetting.vdx = v; });
   per_field("vdy", [](FieldPoint& f, double v, const toml::node&) { f.vignetting.vdy = v; });
   per_field("vcx", [&](FieldPoint& f, double v, const toml::node& n) {

@@ -268,10 +268,12 @@ std::string format_lens_toml(const Lens& lens) {
     if (!specs.fields.empty()) {
       line("field_type",
            fmt::format("\"{}\"", kFieldTypeNames[static_cast<int>(specs.field_type)]));
-      std::vector<double> values, weights, vdx, vdy, vcx, vcy, van;
-      bool weighted = false, vignetted = false, asymmetric = false;
+      std::vector<double> values, xs, weights, vdx, vdy, vcx, vcy, van;
+      bool weighted = false, vignetted = false, asymmetric = false, off_y = false;
       for (const FieldPoint& f : specs.fields) {
         values.push_back(f.value);
+        xs.push_back(f.x);
+        off_y = off_y || f.x != 0.0;
         weights.push_back(f.weight);
         vdx.push_back(f.vignetting.vdx);
         vdy.push_back(f.vignetting.vdy);
@@ -283,6 +285,7 @@ std::string format_lens_toml(const Lens& lens) {
         asymmetric = asymmetric || f.vignetting.asymmetric();
       }
       line("fields", list(values));
+      if (off_y) line("fields_x", list(xs));
       if (weighted) line("field_weights", list(weights));
       if (vignetted) {
         if (asymmetric) line("vdx", list(vdx));

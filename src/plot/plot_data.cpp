@@ -92,6 +92,20 @@ std::vector<int> field_indices(const PlotContext& ctx, const std::vector<double>
 
 std::string field_label(const TraceSystem<double>& sys, int h) {
   const bool written = h < static_cast<int>(sys.field_values.size());
+  const double a = sys.field_azimuth(h);
+  if (written && a != 0.0) {  // a field off the y axis: its x, y as written
+    const double r = sys.field_values[h];
+    const double fx = r * std::sin(a * kPi / 180.0), fy = r * std::cos(a * kPi / 180.0);
+    switch (sys.field_type) {
+      case FieldType::kAngle:
+        return fmt::format("({:.1f}\u00b0, {:.1f}\u00b0)", fx, fy);
+      case FieldType::kObjectHeight:
+        return fmt::format("object ({:.2f}, {:.2f}) mm", fx, fy);
+      case FieldType::kParaxialImageHeight:
+      case FieldType::kRealImageHeight:
+        return fmt::format("image ({:.2f}, {:.2f}) mm", fx, fy);
+    }
+  }
   switch (written ? sys.field_type : FieldType::kAngle) {
     case FieldType::kAngle:
       break;
@@ -136,8 +150,10 @@ SpotData compute_spots(const PlotContext& ctx, const SpotOptions& options) {
     f.field = h;
     f.field_deg = sys.fields_deg[h];
     f.label = field_label(sys, h);
-    f.centroid_y_mm = report.centroid_y_mm;
-    f.centroid_x_mm = report.centroid_x_mm;
+    // In the image's own x, y: a field off the y axis is traced in its frame and turned back
+    // (the same bits on the y axis).
+    f.centroid_y_mm = report.image_centroid_y_mm;
+    f.centroid_x_mm = report.image_centroid_x_mm;
     f.rms_um = report.rms_spot_um.value_or(0.0);
     for (int w = 0; w < sys.wavelength_count; ++w) {
       start_rays(sys, h, w, rays);
@@ -147,12 +163,14 @@ SpotData compute_spots(const PlotContext& ctx, const SpotOptions& options) {
           ++f.failed_rays;
           continue;
         }
-        const double x = 1000.0 * (rays.x[i] - f.centroid_x_mm);
-        const double y = 1000.0 * (rays.y[i] - f.centroid_y_mm);
+        const double x = 1000.0 * (rays.x[i] - report.centroid_x_mm);
+        const double y = 1000.0 * (rays.y[i] - report.centroid_y_mm);
         for (double sx : {1.0, -1.0}) {  // mirrored half pupil (a full pupil: each ray once)
           if (sx < 0.0 && sys.full_pupil) break;
-          f.x_um.push_back(sx * x);
-          f.y_um.push_back(y);
+          double px = sx * x, py = y;
+          sys.field_to_lens(h, sx * x, y, px, py);
+          f.x_um.push_back(px);
+          f.y_um.push_back(py);
           f.wavelength.push_back(w);
         }
         f.max_radius_um = std::max(f.max_radius_um, std::hypot(x, y));

@@ -38,12 +38,17 @@ std::string tolerance_line(const Tolerances& t) {
   auto value = [](double v, const char* unit) {
     return v > 0 ? fmt::format("+-{:g}{}", v, unit) : std::string("off");
   };
-  return fmt::format(
+  std::string text = fmt::format(
       "curvature {}, glass thickness {}, airspace {}, nd {}, vd {}, element decenter {}, "
       "element tilt {}",
       value(t.curvature_pct, " %"), value(t.glass_thickness_mm, " mm"),
       value(t.air_thickness_mm, " mm"), value(t.nd, ""), value(t.vd_pct, " %"),
       value(t.decenter_mm, " mm"), value(t.tilt_arcmin, " arcmin"));
+  if (t.surface_decenter_mm > 0 || t.surface_tilt_arcmin > 0)  // off by default: named when on
+    text +=
+        fmt::format(", surface decenter {}, surface tilt {}", value(t.surface_decenter_mm, " mm"),
+                    value(t.surface_tilt_arcmin, " arcmin"));
+  return text;
 }
 
 }  // namespace
@@ -124,7 +129,14 @@ std::string format_tolerance_text(const ToleranceReport& r, int sensitivity_rows
     line("");
     line("  Sensitivity: each tolerance alone at its limits, change in mean RMS spot (um);");
     line("  ranked by the larger |change|: tighten from the top");
-    line("  rank  param   tolerance     +limit     -limit   what");
+    const bool inverse = r.options.inverse_drop_um.has_value();
+    if (inverse)
+      line(
+          fmt::format("  inverse: the magnitude of the tolerance alone that raises the mean RMS "
+                      "spot by {:g} um (the worse sign)",
+                      *r.options.inverse_drop_um));
+    line(inverse ? "  rank  param   tolerance     +limit     -limit      inverse   what"
+                 : "  rank  param   tolerance     +limit     -limit   what");
     const int rows = std::min<int>(sensitivity_rows, static_cast<int>(r.sensitivity.size()));
     for (int i = 0; i < rows; ++i) {
       const SensitivityRow& s = r.sensitivity[i];
@@ -132,8 +144,26 @@ std::string format_tolerance_text(const ToleranceReport& r, int sensitivity_rows
       auto num = [](double v) {
         return std::isfinite(v) ? fmt::format("{:+10.4f}", v) : std::string("    failed");
       };
-      line(fmt::format("  {:4d}  {:<6}  {:>9}  {}  {}   {}", i + 1, p.name, p.limit_text,
-                       num(s.plus_um), num(s.minus_um), p.description));
+      const bool degrees = p.kind == ToleranceParameter::Kind::kTiltX ||
+                           p.kind == ToleranceParameter::Kind::kTiltY ||
+                           p.kind == ToleranceParameter::Kind::kSurfaceTiltX ||
+                           p.kind == ToleranceParameter::Kind::kSurfaceTiltY;
+      const bool millimetres = p.kind == ToleranceParameter::Kind::kThickness ||
+                               p.kind == ToleranceParameter::Kind::kDecenterX ||
+                               p.kind == ToleranceParameter::Kind::kDecenterY ||
+                               p.kind == ToleranceParameter::Kind::kSurfaceDecenterX ||
+                               p.kind == ToleranceParameter::Kind::kSurfaceDecenterY;
+      const std::string inverse_text =
+          !inverse           ? std::string()
+          : !s.inverse_limit ? fmt::format("  {:>11}", "none")
+          : degrees          ? fmt::format("  {:>11}", fmt::format("{:.4g}'", *s.inverse_limit))
+          : millimetres      ? fmt::format("  {:>11}", fmt::format("{:.4g} mm", *s.inverse_limit))
+          : (p.kind == ToleranceParameter::Kind::kCurvature ||
+             p.kind == ToleranceParameter::Kind::kVd)
+              ? fmt::format("  {:>11}", fmt::format("{:.4g} %", 100.0 * *s.inverse_limit))
+              : fmt::format("  {:>11.4g}", *s.inverse_limit);
+      line(fmt::format("  {:4d}  {:<6}  {:>9}  {}  {}{}   {}", i + 1, p.name, p.limit_text,
+                       num(s.plus_um), num(s.minus_um), inverse_text, p.description));
     }
     if (rows < static_cast<int>(r.sensitivity.size()))
       line(fmt::format("  ({} more rows in --json)", r.sensitivity.size() - rows));
@@ -179,7 +209,10 @@ std::string format_tolerance_json(const ToleranceReport& r) {
                      {"nd", o.tolerances.nd},
                      {"vd_pct", o.tolerances.vd_pct},
                      {"decenter_mm", o.tolerances.decenter_mm},
-                     {"tilt_arcmin", o.tolerances.tilt_arcmin}};
+                     {"tilt_arcmin", o.tolerances.tilt_arcmin},
+                     {"surface_decenter_mm", o.tolerances.surface_decenter_mm},
+                     {"surface_tilt_arcmin", o.tolerances.surface_tilt_arcmin}};
+  if (o.inverse_drop_um) j["inverse_drop_um"] = *o.inverse_drop_um;
   j["sampling"] = {{"rings", o.rings},
                    {"fields", r.fields_deg.size()},
                    {"wavelengths", r.wavelength_count},
@@ -236,6 +269,11 @@ std::string format_tolerance_json(const ToleranceReport& r) {
                     {"delta_efl_plus_mm", num(s.efl_plus_mm)},
                     {"delta_efl_minus_mm", num(s.efl_minus_mm)},
                     {"score_um", num(s.score_um)}});
+    if (o.inverse_drop_um) {
+      sens.back()["inverse_limit"] = s.inverse_limit ? num(*s.inverse_limit) : json(nullptr);
+      sens.back()["inverse_delta_spot_um"] =
+          s.inverse_limit ? num(s.inverse_spot_um) : json(nullptr);
+    }
   }
   j["sensitivity"] = sens;
   j["timing"] = {{"threads", r.threads},

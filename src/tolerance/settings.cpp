@@ -44,9 +44,16 @@ FocusCompensator parse_focus_compensator(const std::string& text) {
 }
 
 const std::vector<std::string>& tolerance_names() {
-  static const std::vector<std::string> names = {
-      "curvature_pct", "glass_thickness_mm", "air_thickness_mm", "nd",
-      "vd_pct",        "asphere_sag_um",     "decenter_mm",      "tilt_arcmin"};
+  static const std::vector<std::string> names = {"curvature_pct",
+                                                 "glass_thickness_mm",
+                                                 "air_thickness_mm",
+                                                 "nd",
+                                                 "vd_pct",
+                                                 "asphere_sag_um",
+                                                 "decenter_mm",
+                                                 "tilt_arcmin",
+                                                 "surface_decenter_mm",
+                                                 "surface_tilt_arcmin"};
   return names;
 }
 
@@ -74,16 +81,27 @@ void Tolerances::validate() const {
   if (tilt_arcmin > 600)
     throw Error(
         fmt::format("tolerance tilt_arcmin = {} must be at most 600 (10 deg)", tilt_arcmin));
+  check_tolerance("surface_decenter_mm", surface_decenter_mm);
+  check_tolerance("surface_tilt_arcmin", surface_tilt_arcmin);
+  if (surface_tilt_arcmin > 600)
+    throw Error(fmt::format("tolerance surface_tilt_arcmin = {} must be at most 600 (10 deg)",
+                            surface_tilt_arcmin));
   if (curvature_pct >= 100)
     throw Error(fmt::format("tolerance curvature_pct = {} must be below 100 %", curvature_pct));
   if (vd_pct >= 100) throw Error(fmt::format("tolerance vd_pct = {} must be below 100 %", vd_pct));
 }
 
 Tolerances Tolerances::times(double factor) const {
-  return {curvature_pct * factor,    glass_thickness_mm * factor,
-          air_thickness_mm * factor, nd * factor,
-          vd_pct * factor,           asphere_sag_um * factor,
-          decenter_mm * factor,      tilt_arcmin * factor};
+  return {curvature_pct * factor,
+          glass_thickness_mm * factor,
+          air_thickness_mm * factor,
+          nd * factor,
+          vd_pct * factor,
+          asphere_sag_um * factor,
+          decenter_mm * factor,
+          tilt_arcmin * factor,
+          surface_decenter_mm * factor,
+          surface_tilt_arcmin * factor};
 }
 
 void ToleranceSettings::apply_to(Tolerances& t) const {
@@ -95,6 +113,8 @@ void ToleranceSettings::apply_to(Tolerances& t) const {
   if (asphere_sag_um) t.asphere_sag_um = *asphere_sag_um;
   if (decenter_mm) t.decenter_mm = *decenter_mm;
   if (tilt_arcmin) t.tilt_arcmin = *tilt_arcmin;
+  if (surface_decenter_mm) t.surface_decenter_mm = *surface_decenter_mm;
+  if (surface_tilt_arcmin) t.surface_tilt_arcmin = *surface_tilt_arcmin;
 }
 
 void ToleranceOptions::validate() const {
@@ -107,6 +127,9 @@ void ToleranceOptions::validate() const {
     throw Error(fmt::format("fields = {} must be in [1, 1000]", fields));
   if (max_spot_um && !(std::isfinite(*max_spot_um) && *max_spot_um > 0))
     throw Error(fmt::format("max_spot_um = {} must be a positive number", *max_spot_um));
+  if (inverse_drop_um && !(std::isfinite(*inverse_drop_um) && *inverse_drop_um > 0))
+    throw Error(fmt::format("inverse_drop_um = {} must be a positive number (um of mean RMS spot)",
+                            *inverse_drop_um));
 }
 
 ToleranceSettings parse_tolerance_table(std::string_view toml_text,
@@ -186,6 +209,15 @@ ToleranceSettings parse_tolerance_table(std::string_view toml_text,
         out.decenter_mm = tolerance();
       } else if (name == "tilt_arcmin") {
         out.tilt_arcmin = tolerance();
+      } else if (name == "surface_decenter_mm") {
+        out.surface_decenter_mm = tolerance();
+      } else if (name == "surface_tilt_arcmin") {
+        out.surface_tilt_arcmin = tolerance();
+      } else if (name == "inverse_drop_um") {
+        const double v = number();
+        if (!(std::isfinite(v) && v > 0))
+          throw Error(where, fmt::format("[tolerance] inverse_drop_um = {} must be positive", v));
+        out.inverse_drop_um = v;
       } else if (name == "distribution") {
         out.distribution = parse_tolerance_distribution(text());
       } else if (name == "compensator") {
@@ -203,7 +235,8 @@ ToleranceSettings parse_tolerance_table(std::string_view toml_text,
         throw Error(where,
                     fmt::format("unknown key '{}' in [tolerance] (known: curvature_pct, "
                                 "glass_thickness_mm, air_thickness_mm, nd, vd_pct, asphere_sag_um, "
-                                "decenter_mm, tilt_arcmin, "
+                                "decenter_mm, tilt_arcmin, surface_decenter_mm, "
+                                "surface_tilt_arcmin, inverse_drop_um, "
                                 "distribution, compensator, max_spot_um, trials, seed)",
                                 name));
       }
@@ -241,6 +274,7 @@ ToleranceOptions tolerance_options_for(const Lens& lens) {
   if (table.distribution) options.distribution = *table.distribution;
   if (table.compensator) options.compensator = *table.compensator;
   options.max_spot_um = table.max_spot_um;
+  if (table.inverse_drop_um) options.inverse_drop_um = table.inverse_drop_um;
   if (table.trials) options.trials = *table.trials;
   if (table.seed) options.seed = *table.seed;
   return options;

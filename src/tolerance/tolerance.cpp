@@ -198,6 +198,50 @@ void add_placement_parameters(const Lens& lens, const Tolerances& tol,
   }
 }
 
+// Surface decenters and tilts (TSDX, TSDY, TSTX, TSTY; see the header): each surface alone,
+// added only when its tolerance is nonzero (a lens toleranced without them keeps its parameter
+// list, CSV columns and draws). Not the stop, not a coordinate break, not a surface that has a
+// placement of its own; a flat surface gets no decenter (a plane decentred in itself is the same
+// plane). A mirror's tilt is named as such.
+void add_surface_placement_parameters(const Lens& lens, const Tolerances& tol,
+                                      std::vector<ToleranceParameter>& out) {
+  using Kind = ToleranceParameter::Kind;
+  if (!(tol.surface_decenter_mm > 0.0) && !(tol.surface_tilt_arcmin > 0.0)) return;
+  const int k_count = static_cast<int>(lens.surfaces.size());
+  for (int k = 0; k < k_count; ++k) {
+    const Surface& s = lens.surfaces[k];
+    if (s.is_stop || s.coordinate_break || s.breaks_symmetry()) continue;
+    const bool flat = s.curvature_per_mm == 0.0 && s.asphere_r2_per_mm == 0.0 && !s.has_asphere();
+    const struct {
+      Kind kind;
+      const char* name;
+      const char* unit;
+      double limit;
+      const char* what;
+    } kinds[4] = {{Kind::kSurfaceDecenterX, "tsdx", "mm", tol.surface_decenter_mm, "decenter x"},
+                  {Kind::kSurfaceDecenterY, "tsdy", "mm", tol.surface_decenter_mm, "decenter y"},
+                  {Kind::kSurfaceTiltX, "tstx", "arcmin", tol.surface_tilt_arcmin,
+                   s.mirror ? "mirror tilt about x" : "tilt (wedge) about x"},
+                  {Kind::kSurfaceTiltY, "tsty", "arcmin", tol.surface_tilt_arcmin,
+                   s.mirror ? "mirror tilt about y" : "tilt (wedge) about y"}};
+    for (const auto& kind : kinds) {
+      const bool decenter =
+          kind.kind == Kind::kSurfaceDecenterX || kind.kind == Kind::kSurfaceDecenterY;
+      if (!(kind.limit > 0.0) || (decenter && flat)) continue;
+      ToleranceParameter p;
+      p.kind = kind.kind;
+      p.surface = k;
+      p.last_surface = k;
+      p.limit = kind.limit;
+      p.name = fmt::format("{}{}", kind.name, k + 1);
+      p.column = fmt::format("{}{}_{}", kind.name, k + 1, kind.unit);
+      p.description = fmt::format("surface {} {}", k + 1, kind.what);
+      p.limit_text = format_limit(kind.limit, decenter ? " mm" : " arcmin");
+      out.push_back(p);
+    }
+  }
+}
+
 }  // namespace
 
 std::vector<ToleranceParameter> tolerance_parameters(const Lens& lens, const Tolerances& tol) {
@@ -273,6 +317,7 @@ std::vector<ToleranceParameter> tolerance_parameters(const Lens& lens, const Tol
   }
   add_profile_parameters(lens, tol, out);
   add_placement_parameters(lens, tol, out);
+  add_surface_placement_parameters(lens, tol, out);
   return out;
 }
 
@@ -377,6 +422,22 @@ struct ToleranceModel::Impl {
           }
           break;
         }
+        case Kind::kSurfaceDecenterX:
+        case Kind::kSurfaceDecenterY:
+        case Kind::kSurfaceTiltX:
+        case Kind::kSurfaceTiltY: {
+          if (d == 0.0) break;
+          // The surface alone about its vertex; the ones after it stay (restore_frame). Its
+          // nominal placement is zero (add_surface_placement_parameters).
+          double* v = tl.geometry.placement.data() + static_cast<std::size_t>(p.surface) * 5;
+          const int slot = p.kind == Kind::kSurfaceDecenterX   ? 0
+                           : p.kind == Kind::kSurfaceDecenterY ? 1
+                           : p.kind == Kind::kSurfaceTiltX     ? 2
+                                                               : 3;
+          v[slot] += slot < 2 ? d : d / 60.0;  // tilts: arcmin -> deg
+          tl.geometry.flags[p.surface] |= kPlacementMoved | kPlacementRestore;
+          break;
+        }
       }
     }
     return tl;
@@ -406,7 +467,11 @@ ToleranceModel::ToleranceModel(const Lens& lens, const ToleranceOptions& options
     placed = placed || (p.limit > 0.0 && (p.kind == ToleranceParameter::Kind::kDecenterX ||
                                           p.kind == ToleranceParameter::Kind::kDecenterY ||
                                           p.kind == ToleranceParameter::Kind::kTiltX ||
-                                          p.kind == ToleranceParameter::Kind::kTiltY));
+                                          p.kind == ToleranceParameter::Kind::kTiltY ||
+                                          p.kind == ToleranceParameter::Kind::kSurfaceDecenterX ||
+                                          p.kind == ToleranceParameter::Kind::kSurfaceDecenterY ||
+                                          p.kind == ToleranceParameter::Kind::kSurfaceTiltX ||
+                                          p.kind == ToleranceParameter::Kind::kSurfaceTiltY));
   if (placed && !m.nominal.geometry.placed()) {
     const std::size_t k_count = static_cast<std::size_t>(m.nominal.surface_count());
     m.nominal.geometry.placement.assign(k_count * 5, 0.0);
@@ -484,6 +549,95 @@ int ToleranceModel::wavelength_count() const {
 }
 int ToleranceModel::rays_per_field_wavelength() const {
   return impl_->rays;
+}
+
+TraceLens<double> ToleranceModel::perturbed_trace_lens(
+    const std::vector<double>& perturbations) const {
+  const Impl& m = *impl_;
+  if (perturbations.size() != m.parameters.size())
+    throw Error(fmt::format("{} perturbations for {} toleranced parameters", perturbations.size(),
+                            m.parameters.size()));
+  return m.apply(perturbations);
+}
+
+InverseSensitivity inverse_sensitivity(const ToleranceModel& model, int parameter, double drop_um,
+                                       double nominal_spot_um) {
+  const std::vector<ToleranceParameter>& params = model.parameters();
+  if (parameter < 0 || parameter >= static_cast<int>(params.size()))
+    throw Error(fmt::format("inverse sensitivity: no parameter {}", parameter));
+  if (!(drop_um > 0.0) || !std::isfinite(drop_um))
+    throw Error(fmt::format("inverse sensitivity: drop {} um must be positive", drop_um));
+  const double limit = params[static_cast<std::size_t>(parameter)].limit;
+  InverseSensitivity out;
+  if (!(limit > 0.0)) return out;
+  const double inf = std::numeric_limits<double>::infinity();
+  // g(m) - D: the worse side's rise of the mean spot over the drop; an untraceable side counts
+  // as beyond any drop.
+  std::vector<double> d(params.size(), 0.0);
+  auto g = [&](double m) {
+    double worst = -inf;
+    for (const double sign : {1.0, -1.0}) {
+      d[static_cast<std::size_t>(parameter)] = sign * m;
+      const TrialResult r = model.evaluate(d);
+      ++out.evaluations;
+      const double rise = r.valid ? r.mean_spot_um - nominal_spot_um : inf;
+      worst = std::max(worst, std::isfinite(rise) ? rise : inf);
+    }
+    return worst - drop_um;
+  };
+  // A bracket [lo, hi] with g(lo) < 0 <= g(hi), from the limit: doubling or halving.
+  double lo = 0.0, g_lo = -drop_um, hi = limit, g_hi = g(limit);
+  if (g_hi < 0.0) {
+    lo = hi;
+    g_lo = g_hi;
+    for (int i = 0; i < 40 && g_hi < 0.0; ++i) {
+      lo = hi;
+      g_lo = g_hi;
+      hi *= 2.0;
+      g_hi = g(hi);
+    }
+    if (g_hi < 0.0) return out;  // 2^40 limits do not reach the drop
+  } else {
+    for (int i = 0; i < 60; ++i) {
+      const double m = 0.5 * hi;
+      const double gm = g(m);
+      if (gm < 0.0) {
+        lo = m;
+        g_lo = gm;
+        break;
+      }
+      hi = m;
+      g_hi = gm;
+    }
+  }
+  // Regula falsi with the Illinois step (bisection while a side is untraceable).
+  const double tol = 1e-4 * drop_um;
+  double best = hi, best_g = g_hi;
+  int side = 0;
+  for (int i = 0; i < 100 && std::abs(best_g) > tol && hi - lo > 1e-12 * hi; ++i) {
+    double m = std::isfinite(g_hi) ? (lo * g_hi - hi * g_lo) / (g_hi - g_lo) : 0.5 * (lo + hi);
+    if (!(m > lo && m < hi)) m = 0.5 * (lo + hi);
+    const double gm = g(m);
+    if (std::abs(gm) < std::abs(best_g)) {
+      best = m;
+      best_g = gm;
+    }
+    if (gm < 0.0) {
+      lo = m;
+      g_lo = gm;
+      if (side == -1) g_hi *= 0.5;
+      side = -1;
+    } else {
+      hi = m;
+      g_hi = gm;
+      if (side == 1) g_lo *= 0.5;
+      side = 1;
+    }
+  }
+  if (!std::isfinite(best_g)) return out;
+  out.limit = best;
+  out.spot_change_um = best_g + drop_um;
+  return out;
 }
 
 std::vector<double> ToleranceModel::draw(int index) const {
@@ -756,6 +910,18 @@ ToleranceReport run_tolerance(const Lens& lens, const ToleranceOptions& options)
                          ? std::max(std::abs(row.plus_um), std::abs(row.minus_um))
                          : std::numeric_limits<double>::infinity();
       report.sensitivity.push_back(row);
+    }
+    // Inverse sensitivity: each parameter's magnitude for the stated drop.
+    if (options.inverse_drop_um) {
+      std::vector<InverseSensitivity> inverse(active.size());
+#pragma omp parallel for schedule(dynamic, 1) num_threads(report.threads)
+      for (int a = 0; a < static_cast<int>(active.size()); ++a)
+        inverse[a] = inverse_sensitivity(model, active[a], *options.inverse_drop_um,
+                                         report.nominal.mean_spot_um);
+      for (std::size_t a = 0; a < active.size(); ++a) {
+        report.sensitivity[a].inverse_limit = inverse[a].limit;
+        report.sensitivity[a].inverse_spot_um = inverse[a].spot_change_um;
+      }
     }
     std::stable_sort(
         report.sensitivity.begin(), report.sensitivity.end(),

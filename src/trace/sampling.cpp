@@ -79,7 +79,7 @@ SystemSetup paper_setup(double focal_length_mm, double f_number, double half_fie
   return setup;
 }
 
-SystemSetup specs_setup(const Specs& specs, const TraceOptions& options) {
+SystemSetup specs_setup(const Specs& specs, const TraceOptions& options, bool rotational) {
   // The wavelength weights hold in both modes (the wavelengths are the lens's in both).
   const std::vector<double> wavelength_weights =
       specs.wavelength_weights.size() == specs.wavelengths_nm.size() ? specs.wavelength_weights
@@ -104,8 +104,16 @@ SystemSetup specs_setup(const Specs& specs, const TraceOptions& options) {
     setup.field_type = FieldType::kAngle;
     return setup;
   }
+  // Each field as its radial distance and azimuth (FieldPoint): a field on -y of a rotationally
+  // symmetric lens is the field on +y (mirrored), one off the y axis keeps its azimuth, and so
+  // does one on -y of a lens without that symmetry (turned by 180 deg).
   std::vector<FieldPoint> fields = specs.fields;
-  for (FieldPoint& f : fields) f.value = std::abs(f.value);  // rotational symmetry
+  std::vector<double> azimuths;
+  for (FieldPoint& f : fields) {
+    const double a = f.x != 0.0 ? f.azimuth_deg() : (!rotational && f.value < 0.0) ? 180.0 : 0.0;
+    f.value = f.radius();
+    f.x = a;  // the azimuth rides along through the sort and the merge below
+  }
   std::stable_sort(fields.begin(), fields.end(),
                    [](const FieldPoint& a, const FieldPoint& b) { return a.value < b.value; });
   // Fields at the same radial distance are one field (their weights add), unless their
@@ -116,7 +124,7 @@ SystemSetup specs_setup(const Specs& specs, const TraceOptions& options) {
   };
   std::vector<FieldPoint> unique;
   for (const FieldPoint& f : fields) {
-    if (!unique.empty() && unique.back().value == f.value &&
+    if (!unique.empty() && unique.back().value == f.value && unique.back().x == f.x &&
         same_pupil(unique.back().vignetting, f.vignetting)) {
       unique.back().weight += f.weight;
     } else {
@@ -124,19 +132,22 @@ SystemSetup specs_setup(const Specs& specs, const TraceOptions& options) {
     }
   }
   fields = unique;
-  bool any_vignetting = false;
+  bool any_vignetting = false, any_azimuth = false;
   for (const FieldPoint& f : fields) {
     setup.field_values.push_back(f.value);
+    setup.field_azimuth_deg.push_back(f.x);
+    any_azimuth = any_azimuth || f.x != 0.0;
     setup.field_weights.push_back(f.weight);
     setup.vignetting.push_back(f.vignetting);
     any_vignetting = any_vignetting || f.vignetting.any();
   }
   if (!any_vignetting) setup.vignetting.clear();
+  if (!any_azimuth) setup.field_azimuth_deg.clear();
   return setup;
 }
 
 SystemSetup lens_setup(const Lens& lens, const TraceOptions& options) {
-  SystemSetup setup = specs_setup(lens.specs, options);
+  SystemSetup setup = specs_setup(lens.specs, options, !lens.breaks_symmetry());
   const int stop = lens.stop_index();
   if (stop >= 0) setup.stop_semi_diameter_mm = lens.surfaces[stop].semi_diameter_mm;
   if (setup.aperture_type == ApertureType::kFloatByStop && !(setup.stop_semi_diameter_mm > 0.0))

@@ -118,6 +118,24 @@ class ToleranceMatchesCli(unittest.TestCase):
         self.assertEqual(ours, expected)
         self.assertFalse(any(math.isnan(s) for s in report.trial_spots_um))
 
+    def test_surface_tolerances_and_inverse_sensitivity(self):
+        # The options of docs/tolerance.md: Python's tolerances= and inverse_drop_um= are the
+        # CLI's --surface-tilt-arcmin, --decenter-mm and --inverse-drop-um.
+        path = LENSES / "cooke.toml"
+        expected = cli_json("tolerance", path, "--json", "--rings", 4, "--fields", 2,
+                            "--trials", 3, "-q", "--threads", 2, "--surface-tilt-arcmin", 1,
+                            "--decenter-mm", 0.01, "--inverse-drop-um", 2)
+        report = lensopt.tolerance(load(path), rings=4, fields=2, trials=3, jobs=2,
+                                   tolerances={"surface_tilt_arcmin": 1, "decenter_mm": 0.01},
+                                   inverse_drop_um=2)
+        ours = report.to_dict()
+        del ours["timing"], expected["timing"]
+        self.assertEqual(ours, expected)
+        self.assertTrue(any(row["parameter"].startswith("tstx") for row in ours["sensitivity"]))
+        self.assertTrue(all(row["inverse_limit"] is not None for row in ours["sensitivity"]))
+        with self.assertRaisesRegex(lensopt.LensoptError, "unknown tolerance"):
+            lensopt.tolerance(load(path), trials=1, tolerances={"wedge": 1})
+
 
 if __name__ == "__main__":
     unittest.main()

@@ -309,11 +309,14 @@ TEST_CASE("zmx-geometry3d: bad coordinate breaks and apertures are named with fi
   CHECK_THROWS_WITH_AS(
       parse_zmx(head + "SURF 2\n  TYPE STANDARD\n  DISZ 1\n  OBSC 2 5 0\n" + tail, "bad.zmx"),
       doctest::Contains("annular obscuration"), Error);
-  // A field off +y in a lens without symmetry.
+  // A field off +y in a lens without symmetry imports as (x, y) (traced in its own frame,
+  // test_trace_field_xy.cpp; it was refused before fields had an x).
   std::string x_field = head + "SURF 2\n  TYPE COORDBRK\n  PARM 3 10\n  DISZ 0\n" + tail;
   x_field.replace(x_field.find("XFLN 0"), 6, "XFLN 1");
-  CHECK_THROWS_WITH_AS(parse_zmx(x_field, "bad.zmx"), doctest::Contains("fields on +y only"),
-                       Error);
+  const ZmxImport x_import = parse_zmx(x_field, "x.zmx");
+  REQUIRE(x_import.lens.specs.fields.size() == 1);
+  CHECK(x_import.lens.specs.fields[0].x == 1.0);
+  CHECK(x_import.lens.specs.fields[0].value == 0.0);
   // And the good one imports: a tilted flat mirror behind a coordinate break.
   const ZmxImport good =
       parse_zmx(head + "SURF 2\n  TYPE COORDBRK\n  PARM 3 10\n  DISZ 0\n" + tail, "good.zmx");

@@ -46,6 +46,14 @@ struct FieldReport {
   int traced_rays = 0;
   int failed_rays = 0;
   double aiming_error = 0;  // largest |stop coord - target| / R_stop over wavelengths
+  // The field point and its image in the object's and image's own x, y (TraceSystem::
+  // field_azimuth_deg): centroid_*, reference_y_mm above are in the field's frame (the field on
+  // +y); these turn them back. On the y axis field_x = 0, field_y = field_value and the image
+  // coordinates are the centroids.
+  double azimuth_deg = 0;
+  double field_x = 0, field_y = 0;  // as written (deg or mm)
+  double image_centroid_x_mm = 0, image_centroid_y_mm = 0;
+  double image_reference_x_mm = 0, image_reference_y_mm = 0;
 };
 
 struct AnalysisReport {

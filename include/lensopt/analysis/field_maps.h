@@ -80,6 +80,7 @@ bool pupil_edge_directions(const TraceSystem<T>& sys, int h, std::array<T, 3>& o
   for (int i = 0; i < 3; ++i)
     start_pupil_ray(rays, i, r_ep * px[i], r_ep * py[i], sys.entrance_pupil_z_mm,
                     sys.object_distance_mm, sin(theta), cos(theta), object_y);
+  set_field_frame(sys, h, rays);
   // Edge rays are geometry here: clear apertures are accounted for by the transmitted fraction.
   TraceLens<T> open_lens = sys.lens;
   open_lens.semi_diameter_mm.clear();

@@ -158,12 +158,22 @@ struct VignettingFactors {
   }
 };
 
-// One field point as written: its value (deg for kAngle, mm for the heights), its weight and its
-// vignetting factors. The lens is rotationally symmetric, so a field is its radial distance.
+// One field point as written: its y value (deg for kAngle, mm for the heights), its weight, its
+// vignetting factors and its x value (OpticStudio's XFLN; 0 for a field on the y axis). The field
+// point is (x, value); its radial distance hypot(x, value). A field off the y axis (x != 0) is
+// traced in its own frame, the lens frame turned about z so that the field lies on +y (the
+// vignetting factors are in that frame); a rotationally symmetric lens traces it as the field
+// (0, hypot) and reports image coordinates turned back (trace/system.h, field azimuths).
 struct FieldPoint {
   double value = 0.0;
   double weight = 1.0;
   VignettingFactors vignetting;
+  double x = 0.0;
+  // The radial distance sqrt(x^2 + value^2) (|value| on the y axis, the same bits).
+  double radius() const { return x == 0.0 ? std::abs(value) : std::hypot(x, value); }
+  // The angle (deg) from +y towards +x of the field point: 0 on the y axis (a field on -y is
+  // mirrored, not turned, on a rotationally symmetric lens), atan2(x, value) off it.
+  double azimuth_deg() const { return x == 0.0 ? 0.0 : std::atan2(x, value) / kDegToRad; }
 };
 
 // First-order specifications and sampling (SPEC "Lens model"), and the system data an optical

@@ -65,6 +65,7 @@ inline void set_pupil_ray(const TraceSystem<double>& sys, int h, double x_norm, 
   const double object_y = sys.field_object_y_mm.empty() ? 0.0 : sys.field_object_y_mm[h];
   start_pupil_ray(rays, i, r_ep * x_norm, r_ep * y_norm, sys.entrance_pupil_z_mm,
                   sys.object_distance_mm, std::sin(theta), std::cos(theta), object_y);
+  set_field_frame(sys, h, rays);
 }
 
 // Traces the lens at `trace` (analysis defaults) and analyzes it.

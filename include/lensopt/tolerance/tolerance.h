@@ -19,6 +19,15 @@
 //               left out. A lens with mirrors or placements of its own gets no such parameters.
 //               With a nonzero decenter or tilt tolerance every trial, the nominal too, is
 //               traced on the full pupil (no mirror symmetry).
+//   surface     decenter in x and in y (TSDX, TSDY; L = surface_decenter_mm) and tilt about x
+//   placement   and about y (TSTX, TSTY; L = surface_tilt_arcmin) of one surface alone, about its
+//               vertex, the surfaces after it staying where they are (restore_frame): a tilted
+//               surface of an element is its wedge, a tilted mirror turns the beam by twice the
+//               tilt. Every surface that carries no placement of its own (not the stop, not a
+//               coordinate break, not a flat surface's decenter, which moves nothing) gets them;
+//               both are 0 (off) by default, since the element decenters and tilts above
+//               already hold the mounting errors: set them to tolerance wedge and centring of
+//               single surfaces (OpticStudio's TSDX/TSTX; e.g. 1 arcmin of wedge).
 //   profile     of every non-spherical surface (conic or even asphere, lens/lens.h), each term on
 //               its own, as a sag error at the surface's clear semi-aperture h (below):
 //                 k' = k + L_k u,   L_k = L / |dS/dk(h)|,  dS/dk = c^3 h^4 / (2 q (1 + q)^2),
@@ -54,6 +63,10 @@
 // tolerances equals it exactly.
 // Sensitivity: each parameter alone at +L and -L (compensated), the change in mean spot; rows are
 // ranked by max(|d+|, |d-|), the first row is what to tighten first.
+// Inverse sensitivity (ToleranceOptions::inverse_drop_um, OpticStudio's inverse limit): for each
+// parameter the magnitude m at which it alone, at the worse of +m and -m, raises the mean RMS spot
+// by the stated drop D: g(m) = max(S(+m), S(-m)) - S_0 = D, bracketed from the limit (doubling or
+// halving) and solved by regula falsi (Illinois) to |g - D| <= 1e-4 D (inverse_sensitivity()).
 // Statistics: sample mean and standard deviation (n - 1), percentiles by linear interpolation
 // between order statistics (p = (n - 1) q), worst = largest mean spot; the yield is the fraction
 // of all trials whose mean spot is <= max_spot_um (an untraceable trial counts as a failure, and
@@ -75,6 +88,7 @@
 #include <vector>
 
 #include "lensopt/lens/lens.h"
+#include "lensopt/lens/trace_lens.h"
 
 namespace lensopt {
 
@@ -97,12 +111,14 @@ struct Tolerances {
   double asphere_sag_um = 1.0;       // conic and asphere terms: sag at the clear aperture, um
   double decenter_mm = 0.02;         // element decenter in x and in y (TEDX, TEDY), mm
   double tilt_arcmin = 1.0;          // element tilt about x and about y (TETX, TETY), arcmin
+  double surface_decenter_mm = 0.0;  // surface decenter in x and y (TSDX, TSDY), mm; 0: off
+  double surface_tilt_arcmin = 0.0;  // surface tilt (wedge) about x and y (TSTX, TSTY); 0: off
 
   // Throws Error naming the first negative or non-finite tolerance.
   void validate() const;
   // Every tolerance multiplied by `factor`.
   Tolerances times(double factor) const;
-  static Tolerances zero() { return {0, 0, 0, 0, 0, 0, 0, 0}; }
+  static Tolerances zero() { return {0, 0, 0, 0, 0, 0, 0, 0, 0, 0}; }
 };
 
 // The tolerance names as used by the [tolerance] table and the command line (--curvature-pct,
@@ -113,11 +129,13 @@ const std::vector<std::string>& tolerance_names();
 //   [tolerance]
 //   curvature_pct = 0.2, glass_thickness_mm = 0.05, air_thickness_mm = 0.0, nd = 5e-4,
 //   vd_pct = 0.5, asphere_sag_um = 1.0, decenter_mm = 0.02, tilt_arcmin = 1,
+//   surface_decenter_mm = 0, surface_tilt_arcmin = 0, inverse_drop_um = 1,
 //   distribution = "uniform", compensator = "paraxial",
 //   max_spot_um = 20, trials = 10000, seed = 1
 struct ToleranceSettings {
   std::optional<double> curvature_pct, glass_thickness_mm, air_thickness_mm, nd, vd_pct,
-      asphere_sag_um, decenter_mm, tilt_arcmin;
+      asphere_sag_um, decenter_mm, tilt_arcmin, surface_decenter_mm, surface_tilt_arcmin;
+  std::optional<double> inverse_drop_um;
   std::optional<ToleranceDistribution> distribution;
   std::optional<FocusCompensator> compensator;
   std::optional<double> max_spot_um;
@@ -151,6 +169,9 @@ struct ToleranceOptions {
   bool ray_aiming = true;
   bool sensitivity = true;
   std::optional<double> max_spot_um;
+  // Inverse sensitivity: the magnitude of each parameter that alone raises the mean RMS spot by
+  // this much (um), in the sensitivity table; unset: not computed.
+  std::optional<double> inverse_drop_um;
   // Called now and then from worker threads (serialized): trials done, total, seconds elapsed.
   std::function<void(int done, int total, double elapsed_s)> progress;
   // The same for the sensitivity table (two evaluations per toleranced parameter), which takes
@@ -180,6 +201,10 @@ struct ToleranceParameter {
     kDecenterY,
     kTiltX,  // element tilt (TETX) about its first vertex, radians (limit from tilt_arcmin)
     kTiltY,
+    kSurfaceDecenterX,  // surface decenter (TSDX): surface `surface` alone, mm
+    kSurfaceDecenterY,
+    kSurfaceTiltX,  // surface tilt (TSTX) about its vertex, arcmin: an element's wedge
+    kSurfaceTiltY,
   };
   Kind kind = Kind::kCurvature;
   int last_surface = 0;     // kDecenter*, kTilt*: the element's last surface (0-based)
@@ -227,6 +252,11 @@ struct SensitivityRow {
   double minus_um = 0;                       // at -limit
   double efl_plus_mm = 0, efl_minus_mm = 0;  // EFL change
   double score_um = 0;                       // max(|plus|, |minus|), the ranking key
+  // Inverse sensitivity (ToleranceOptions::inverse_drop_um): the magnitude, native units, that
+  // raises the mean spot by the drop (none: not asked, or no magnitude reaches it), and the
+  // spot change there.
+  std::optional<double> inverse_limit;
+  double inverse_spot_um = 0;
 };
 
 struct ToleranceReport {
@@ -279,13 +309,22 @@ class ToleranceModel {
   // Traces the nominal with `perturbations` applied (all zero: the nominal), compensated.
   // Thread-safe; single-threaded.
   TrialResult evaluate(const std::vector<double>& perturbations) const;
-  // The lens of a trial, as a prescription (compensated last thickness).
-  Lens perturbed_lens(const std::vector<double>& perturbations) const;
+  // The traced lens of a trial before its focus compensation (the perturbations applied).
+  TraceLens<double> perturbed_trace_lens(const std::vector<double>& perturbations) const;
 
  private:
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };
+
+struct InverseSensitivity {
+  std::optional<double> limit;  // the magnitude (native units), or none if none reaches the drop
+  double spot_change_um = 0;    // max(S(+m), S(-m)) - S_0 at that magnitude
+  int evaluations = 0;          // traced trials
+};
+// The inverse sensitivity of one parameter (see the header): nominal_spot_um is S_0.
+InverseSensitivity inverse_sensitivity(const ToleranceModel& model, int parameter, double drop_um,
+                                       double nominal_spot_um);
 
 // Runs the Monte-Carlo trials and the sensitivity table.
 ToleranceReport run_tolerance(const Lens& lens, const ToleranceOptions& options);

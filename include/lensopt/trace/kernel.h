@@ -80,6 +80,14 @@ struct RayBundle {
   std::vector<std::uint8_t> status;
   std::vector<std::int8_t> failed_surface;    // surface index of the failure, -1 if none
   std::vector<std::int32_t> failure_scratch;  // per-surface failure codes (kernel scratch)
+  // The field frame (trace/system.h, TraceSystem::field_azimuth_deg): the rays of a field off the
+  // y axis of a lens with 3D placements are started in the frame turned about z by the field's
+  // azimuth a, where the field lies on +y. The placed path turns them into the lens frame,
+  // (x, y) -> (c x + s y, -s x + c y) with c = cos a, s = sin a (and so l, m), before surface 1,
+  // and back after the last surface traced, so positions and directions come out in the field
+  // frame. The rotationally symmetric path ignores it (the lens commutes with the turn).
+  double frame_cos = 1.0, frame_sin = 0.0;
+  bool turned() const { return frame_sin != 0.0 || frame_cos != 1.0; }
 
   void resize(std::size_t count) {
     x.resize(count);
@@ -359,6 +367,22 @@ void to_parent(const PlacementFrame<T>& f, std::size_t count, T* x, T* y, T* z, 
   }
 }
 
+// Turns positions and directions about z: (x, y) -> (c x + s y, -s x + c y), (l, m) likewise.
+template <typename T>
+void turn_about_z(double cos_a, double sin_a, std::size_t count, T* x, T* y, T* l, T* m) {
+  const T c = K<T>(cos_a), s = K<T>(sin_a);
+  for (std::size_t i = 0; i < count; ++i) {
+    const T px = c * x[i] + s * y[i];
+    const T py = c * y[i] - s * x[i];
+    const T pl = c * l[i] + s * m[i];
+    const T pm = c * m[i] - s * l[i];
+    x[i] = px;
+    y[i] = py;
+    l[i] = pl;
+    m[i] = pm;
+  }
+}
+
 // The general path of trace_bundle for a lens with 3D placements (TraceGeometry::placed()); see
 // the header. Rays are held in the frame of the last surface traced (its frame after placement,
 // or the parent frame for a restore_frame surface).
@@ -383,6 +407,8 @@ void trace_bundle_placed(const TraceLens<T>& lens, int w, int end, bool to_image
   T* start_z = path ? record->path_start_z.data() : nullptr;
   T* start_n = path ? record->path_start_n.data() : nullptr;
   const TraceGeometry<T>& g = lens.geometry;
+  // A field off the y axis: from its frame into the lens frame (RayBundle::frame_cos).
+  if (rays.turned()) turn_about_z(rays.frame_cos, rays.frame_sin, count, x, y, l, m);
   // A ray that cannot reach surface k travelling forwards in its frame (n <= 0 or NaN) is
   // flagged kRayBackwards there and kept finite.
   auto check_forward = [&](int k) {
@@ -486,6 +512,8 @@ void trace_bundle_placed(const TraceLens<T>& lens, int w, int end, bool to_image
       z[i] = zero;
     }
   }
+  // Back into the field's frame.
+  if (rays.turned()) turn_about_z(rays.frame_cos, -rays.frame_sin, count, x, y, l, m);
 }
 
 }  // namespace detail

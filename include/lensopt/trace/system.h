@@ -94,6 +94,29 @@ struct TraceSystem {
   T entrance_pupil_z_mm;           // from the first vertex
   T stop_radius_mm;                // real on-axis marginal ray height at the stop
   std::vector<double> fields_deg;  // chief-ray angle in object space per field
+  // Per field, the angle (deg, from +y towards +x) of the field point in the object's x-y plane
+  // (FieldPoint::azimuth_deg), or empty: every field on the y axis. Every field is traced in its
+  // own frame, the lens frame turned about z by this angle so that the field lies on +y, and
+  // every traced coordinate (spots, centroids, references) is in that frame: a rotationally
+  // symmetric lens is traced as in the y-z plane (the same bits), a lens with 3D placements
+  // turns its rays into the lens frame and back (RayBundle::frame_cos, set by start_rays and
+  // set_field_frame). field_to_lens turns a field-frame point into the lens (image) frame.
+  std::vector<double> field_azimuth_deg;
+  double field_azimuth(int h) const {
+    return h < static_cast<int>(field_azimuth_deg.size()) ? field_azimuth_deg[h] : 0.0;
+  }
+  // (u, v) in field h's frame -> (x, y) in the lens frame: x = u c + v s, y = v c - u s.
+  void field_to_lens(int h, double u, double v, double& x, double& y) const {
+    const double a = field_azimuth(h);
+    if (a == 0.0) {
+      x = u;
+      y = v;
+      return;
+    }
+    const double c = std::cos(a * kPi / 180.0), s = std::sin(a * kPi / 180.0);
+    x = u * c + v * s;
+    y = v * c - u * s;
+  }
   // The fields as written (deg or mm, field_type), their weights and vignetting factors.
   std::vector<double> field_values;
   FieldType field_type = FieldType::kAngle;
@@ -154,6 +177,20 @@ void field_ray_direction(double object_distance_mm, double sin_theta, double cos
 
 }  // namespace detail
 
+// Sets the frame of a bundle of field h's rays (RayBundle::frame_cos): turned by the field's
+// azimuth on a lens with 3D placements, else none (the symmetric path needs no turn).
+template <typename System, typename Bundle>
+void set_field_frame(const System& sys, int h, Bundle& rays) {
+  const double a = sys.field_azimuth(h);
+  if (a == 0.0 || !sys.lens.geometry.placed()) {
+    rays.frame_cos = 1.0;
+    rays.frame_sin = 0.0;
+    return;
+  }
+  rays.frame_cos = std::cos(a * kPi / 180.0);
+  rays.frame_sin = std::sin(a * kPi / 180.0);
+}
+
 // The one pupil-ray constructor: ray i of `rays` starts at the entrance-pupil point (x, y, z_ep)
 // (mm) in the direction of a field, (0, sin theta, cos theta) for an object at infinity, else
 // from the object point (0, object_y, -d) through the pupil point (detail::field_ray_direction).
@@ -192,6 +229,7 @@ void trace_aiming_rays(const TraceLens<ceres::Jet<T, 1>>& lens_a, int w, const S
   for (int i = 0; i < 3; ++i)
     start_pupil_ray(rays, i, x[i], y[i], J(z_ep), sys.object_distance_mm, std::sin(theta),
                     std::cos(theta), sys.field_object_y_mm[h]);
+  set_field_frame(sys, h, rays);
   trace_bundle(lens_a, w, lens_a.stop + 1, false, rays, static_cast<RayRecord<J>*>(nullptr));
   stop_coord[0] = rays.y[0].a;
   stop_derivative[0] = rays.y[0].v[0];
@@ -301,6 +339,7 @@ struct SystemSetup {
   std::vector<double> field_weights;
   std::vector<VignettingFactors> vignetting;  // per field, or empty
   std::vector<double> wavelength_weights;     // per spec wavelength, or empty: equal
+  std::vector<double> field_azimuth_deg;  // per field (TraceSystem::field_azimuth_deg), or empty
 };
 
 // The paper's setup: scale to f, EPD = f / N, `field_count` angles from 0 to hfov.
@@ -378,6 +417,8 @@ TraceSystem<T> prepare_system(const TraceLens<T>& lens_in, const SystemSetup& se
   sys.field_type = setup.field_type;
   sys.field_weights = setup.field_weights;
   sys.vignetting = setup.vignetting;
+  if (setup.field_azimuth_deg.size() == setup.field_values.size())
+    sys.field_azimuth_deg = setup.field_azimuth_deg;
   if (sys.field_weights.size() != setup.field_values.size())
     sys.field_weights.assign(setup.field_values.size(), 1.0);
   if (sys.vignetting.size() != setup.field_values.size())
@@ -394,6 +435,7 @@ TraceSystem<T> prepare_system(const TraceLens<T>& lens_in, const SystemSetup& se
     open_lens = sys.lens;
     open_lens.semi_diameter_mm.clear();
   }
+  int solving_field = 0;
   auto real_height = [&](double tan_theta) {
     RayBundle<T> chief;
     chief.resize(1);
@@ -401,6 +443,7 @@ TraceSystem<T> prepare_system(const TraceLens<T>& lens_in, const SystemSetup& se
     // Collimated at theta whatever the object distance: the field's direction is being solved.
     start_pupil_ray(chief, 0, K<T>(0.0), K<T>(0.0), par.entrance_pupil_z_mm,
                     std::numeric_limits<double>::infinity(), std::sin(theta), std::cos(theta), 0.0);
+    set_field_frame(sys, solving_field, chief);
     trace_bundle(open_lens, reference_w, open_lens.surface_count(), true, chief,
                  static_cast<RayRecord<T>*>(nullptr));
     const double y = value_of(chief.y[0]);
@@ -410,6 +453,7 @@ TraceSystem<T> prepare_system(const TraceLens<T>& lens_in, const SystemSetup& se
   sys.field_object_y_mm.assign(field_count, 0.0);
   for (int h = 0; h < field_count; ++h) {
     const double v = setup.field_values[h];
+    solving_field = h;
     double tan_theta = 0.0;
     switch (setup.field_type) {
       case FieldType::kAngle:
@@ -505,6 +549,7 @@ void start_rays(const TraceSystem<T>& sys, int h, int w, RayBundle<T>& rays,
   const PupilSamples& pupil = samples ? *samples : sys.pupil;
   const std::size_t count = pupil.size();
   rays.resize(count);
+  set_field_frame(sys, h, rays);
   const PupilMap<T>& map = sys.pupil_map(h, w);
   const double theta = sys.fields_deg[h] * kPi / 180.0;
   const double sin_t = std::sin(theta), cos_t = std::cos(theta);
@@ -537,13 +582,16 @@ void start_rays(const TraceSystem<T>& sys, int h, int w, RayBundle<T>& rays,
 namespace lensopt {
 
 // The setup of specs alone (no stop semi-diameter: kFloatByStop needs lens_setup).
-SystemSetup specs_setup(const Specs& specs, const TraceOptions& options);
+// A field off the y axis (FieldPoint::x != 0) keeps its azimuth; on a lens without rotational
+// symmetry (`rotational` false) so does a field on -y (azimuth 180 deg), which a rotationally
+// symmetric lens traces as the field on +y.
+SystemSetup specs_setup(const Specs& specs, const TraceOptions& options, bool rotational = true);
 
 // prepare_system with the specs of a lens (its spec mode, see lens.h).
 template <typename T>
 TraceSystem<T> prepare_system(const TraceLens<T>& lens, const Specs& specs,
                               const TraceOptions& options) {
-  return prepare_system(lens, specs_setup(specs, options), options);
+  return prepare_system(lens, specs_setup(specs, options, !lens.geometry.placed()), options);
 }
 
 // The one way from a Lens to a traced system: make_trace_lens and its spec mode. Throws Error
