@@ -175,6 +175,11 @@ std::string radius_text(double curvature) {
   return curvature == 0.0 ? std::string("inf") : fmt::format("{:.6g}", 1.0 / curvature);
 }
 
+// -0 (a flat or dummy surface's product of a 0 with a negative) printed as 0.
+double unsigned_zero(double v) {
+  return v == 0.0 ? 0.0 : v;
+}
+
 std::string medium_text(const Lens& lens, int k) {
   if (k < 0 || k >= static_cast<int>(lens.surfaces.size())) return "";
   const Material& m = lens.surfaces[k].material;
@@ -232,9 +237,10 @@ std::string format_prescription_text(const Lens& lens, const TraceSystem<double>
                    "S_I sph", "S_II coma", "S_III ast", "S_IV ptz", "S_V dist", "C_I axial",
                    "C_II lat"));
   auto row = [&](const std::string& name, const SurfaceSeidel& s) {
+    const auto z = unsigned_zero;
     line(
         fmt::format("  {:>4}  {:12.6g}  {:12.6g}  {:12.6g}  {:12.6g}  {:12.6g}  {:12.6g}  {:12.6g}",
-                    name, s.s1, s.s2, s.s3, s.s4, s.s5, s.c1, s.c2));
+                    name, z(s.s1), z(s.s2), z(s.s3), z(s.s4), z(s.s5), z(s.c1), z(s.c2)));
   };
   for (int k = 0; k < k_count; ++k) row(std::to_string(k + 1), r.surfaces[k]);
   row("sum", r.sums);
@@ -272,10 +278,11 @@ std::string format_prescription_json(const Lens& lens, const TraceSystem<double>
     j["semi_diameter_mm"] =
         finite_or_null(tl.semi_diameter_mm.empty() ? 0.0 : tl.semi_diameter_mm[k]);
     j["conic"] = finite_or_null(tl.conic.empty() ? 0.0 : tl.conic[k]);
-    j["seidel"] = {{"S_I", finite_or_null(s.s1)},   {"S_II", finite_or_null(s.s2)},
-                   {"S_III", finite_or_null(s.s3)}, {"S_IV", finite_or_null(s.s4)},
-                   {"S_V", finite_or_null(s.s5)},   {"C_I", finite_or_null(s.c1)},
-                   {"C_II", finite_or_null(s.c2)}};
+    const auto z = unsigned_zero;
+    j["seidel"] = {{"S_I", finite_or_null(z(s.s1))},   {"S_II", finite_or_null(z(s.s2))},
+                   {"S_III", finite_or_null(z(s.s3))}, {"S_IV", finite_or_null(z(s.s4))},
+                   {"S_V", finite_or_null(z(s.s5))},   {"C_I", finite_or_null(z(s.c1))},
+                   {"C_II", finite_or_null(z(s.c2))}};
     surfaces.push_back(j);
   }
   const FirstOrderData& f = r.first_order;

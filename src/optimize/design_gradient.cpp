@@ -9,6 +9,7 @@
 #include "lensopt/analysis/spot_adjoint.h"
 #include "lensopt/core/jet_width.h"
 #include "lensopt/core/threads.h"
+#include "lensopt/optimize/glass_elements.h"
 
 namespace lensopt {
 namespace {
@@ -71,8 +72,8 @@ TraceSystem<ceres::Jet<double, N>> design_system(
 // Step 2 of the header for the design loss: the loss terms of evaluate_design in double and the
 // adjoints of l_lens (without the glass term) with respect to the system's parameters.
 SystemAdjoint design_adjoint(const TraceSystem<double>& sys, const DesignSampling& sampled,
-                             const TraceOptions& sampling, const DesignLossOptions& options,
-                             DesignLoss<double>& loss) {
+                             const std::vector<int>& element_first, const TraceOptions& sampling,
+                             const DesignLossOptions& options, DesignLoss<double>& loss) {
   const int all_fields = static_cast<int>(sys.fields_deg.size());
   const int field_count = sampled.spot_fields;
   const int wl = sys.wavelength_count;
@@ -81,9 +82,13 @@ SystemAdjoint design_adjoint(const TraceSystem<double>& sys, const DesignSamplin
   const double n_r = static_cast<double>(field_count) * wl * rays;
   const PupilSamples edge = sys.samples_for(pupil_edge_samples(kEdgeRays));
   const double cos2_max = std::pow(std::cos(options.max_ray_angle_deg * kPi / 180.0), 2);
+  // evaluate_design's bounds: a split glass element (glass_elements.h) on its summed travel.
   std::vector<double> lower(k_count), upper(k_count);
   for (int k = 0; k < k_count; ++k) {
-    if (k == k_count - 1) {
+    if (!element_last_space(element_first, k)) {
+      lower[k] = 0.0;  // a part of a split element: no ray travels backwards
+      upper[k] = std::numeric_limits<double>::infinity();
+    } else if (k == k_count - 1) {
       lower[k] = options.min_image_clearance_mm;
       upper[k] = std::numeric_limits<double>::infinity();
     } else if (sys.lens.is_glass[k]) {
@@ -192,14 +197,20 @@ SystemAdjoint design_adjoint(const TraceSystem<double>& sys, const DesignSamplin
         for (std::size_t p = 0; p < count; ++p) {
           const bool traced = b.status[p] == kRayOk;
           const int last_valid = traced ? k_count - 1 : b.failed_surface[p];
+          double element_dz = 0.0;  // the travel so far in a split element
           for (int k = 0; k <= last_valid && k < k_count; ++k) {
             if (traced || k < last_valid) {
-              const double dz = record.axial_travel_mm[k][p];
+              const bool split = element_first[k] != k;
+              const double dz = (split ? element_dz : 0.0) + record.axial_travel_mm[k][p];
+              element_dz = dz;
               const double below = lower[k] - dz;
               const double above = std::isfinite(upper[k]) ? dz - upper[k] : 0.0;
               path_sum += (below > 0.0 ? below : 0.0) + (above > 0.0 ? above : 0.0);
-              travel_seed[k][p] =
+              const double seed =
                   path_weight * ((above > 0.0 ? 1.0 : 0.0) - (below > 0.0 ? 1.0 : 0.0));
+              // The summed travel's seed reaches every space of the element.
+              for (int j = element_first[k]; j <= k; ++j)
+                travel_seed[j][p] = seed;
             }
             const double va = cos2_max - record.cos2_incidence[k][p];
             const double vb = cos2_max - record.cos2_refraction[k][p];
@@ -297,8 +308,8 @@ DesignValueGradient design_adjoint_gradient(const LensParameterization& param,
         return design_loss_gradient_jets(param, x, mode, fixed_glasses, sampling, options);
       TraceOptions unscaled = sampling;
       unscaled.scale_to_spec = false;
-      adj = design_adjoint(values, design_sampling(param.structure(), unscaled), sampling, options,
-                           out.loss);
+      adj = design_adjoint(values, design_sampling(param.structure(), unscaled),
+                           element_first_spaces(param.structure()), sampling, options, out.loss);
     }
     chain_system_adjoint(sys, adj, std::min(N, n - first), out.gradient.data() + first);
     if (n == 0) break;

@@ -21,6 +21,7 @@
 #include "lensopt/lens/profile_sag.h"
 #include "lensopt/optimize/design_gradient.h"
 #include "lensopt/optimize/free_jacobian.h"
+#include "lensopt/optimize/glass_elements.h"
 #include "lensopt/optimize/profile_bounds.h"
 
 namespace lensopt {
@@ -79,13 +80,14 @@ struct ProfileBoundFunctor {
   }
 };
 
-// Glass edge thickness: for the glass space k (between surfaces k and k + 1)
-//   e_k = t_k + sag_{k+1}(h_k) - sag_k(h_k)
-// at h_k the larger clear semi-aperture of the two surfaces (semi_diameter_mm where written, else
+// Glass edge thickness: for the glass element of spaces k..m (between surfaces k and m + 1; m > k
+// for an element split by a dummy or stop surface, glass_elements.h)
+//   e_k = t_k + ... + t_m + sag_{m+1}(h_k) - sag_k(h_k)
+// at h_k the largest clear semi-aperture of its surfaces (semi_diameter_mm where written, else
 // the paraxial estimate of the start, profile_bounds.h), with the real profile's sag
 // (lens/profile_sag.h; q clamped at 0 outside a conic's domain, as the tolerance edge gap).
 template <typename T>
-T glass_edge_mm(const TraceLens<T>& tl, int k, double h) {
+T glass_edge_mm(const TraceLens<T>& tl, int k, int m, double h) {
   using std::sqrt;
   const T rho = K<T>(h * h);
   T spherical[kAsphereTerms];
@@ -100,14 +102,17 @@ T glass_edge_mm(const TraceLens<T>& tl, int k, double h) {
     const T q = q2 > K<T>(0.0) ? sqrt(q2) : K<T>(0.0);
     return profile_sag_at_q(c, a, rho, q);
   };
-  return tl.thickness_mm[k] + sag(k + 1) - sag(k);
+  T t = tl.thickness_mm[k];
+  for (int i = k + 1; i <= m; ++i) t = t + tl.thickness_mm[i];
+  return t + sag(m + 1) - sag(k);
 }
 
 // The edge-thickness bound of a run: the glass spaces, their heights (fixed for the run: the
 // start's clear apertures) and the lower bound min(min_glass_mm, half the start's thinnest edge)
 // (so the start meets it; a start with a glass of negative edge bounds it at 0).
 struct EdgeBound {
-  std::vector<int> spaces;
+  std::vector<int> spaces;  // the element's first space k
+  std::vector<int> last;    // and its last space m
   std::vector<double> heights_mm;
   double min_edge_mm = 0.0;
   double lambda = 100.0;  // raised tenfold per round while violated
@@ -124,17 +129,22 @@ EdgeBound edge_bound_for(const Lens& start, const double min_glass_mm) {
   }
   const double scale = lens_spec_scale(start);
   double thinnest = std::numeric_limits<double>::infinity();
-  for (int k = 0; k + 1 < tl.surface_count(); ++k) {
-    if (start.surfaces[k].material.is_air()) continue;
+  const std::vector<int> first = element_first_spaces(start);
+  for (int m = 0; m + 1 < tl.surface_count(); ++m) {
+    // One bound per element, at its last space m (its first k: several spaces when split).
+    if (start.surfaces[m].material.is_air() || !element_last_space(first, m)) continue;
+    const int k = first[m];
     auto height = [&](int i) {
       const double written = start.surfaces[i].semi_diameter_mm * scale;
       return written > 0.0 ? written : (i < static_cast<int>(h.size()) ? h[i] : 0.0);
     };
-    const double hk = std::max(height(k), height(k + 1));
+    double hk = 0.0;
+    for (int i = k; i <= m + 1; ++i) hk = std::max(hk, height(i));
     if (!(std::isfinite(hk) && hk > 0.0)) continue;
     out.spaces.push_back(k);
+    out.last.push_back(m);
     out.heights_mm.push_back(hk);
-    thinnest = std::min(thinnest, glass_edge_mm(tl, k, hk));
+    thinnest = std::min(thinnest, glass_edge_mm(tl, k, m, hk));
   }
   if (out.spaces.empty()) return out;
   out.min_edge_mm = std::max(0.0, std::min(min_glass_mm, 0.5 * thinnest));
@@ -156,7 +166,7 @@ struct EdgeFunctor {
     for (std::size_t i = 0; i < bound->spaces.size(); ++i) {
       // The design margin (as with_margin's glass bound): 1 um above the bound.
       const T short_of = K<T>(bound->min_edge_mm + 1e-3) -
-                         glass_edge_mm(tl, bound->spaces[i], bound->heights_mm[i]);
+                         glass_edge_mm(tl, bound->spaces[i], bound->last[i], bound->heights_mm[i]);
       residuals[i] = short_of > K<T>(0.0) ? root * short_of : K<T>(0.0);
     }
     return true;
@@ -477,7 +487,8 @@ DesignLoss<double> run_phase(const LensParameterization& param, std::vector<doub
       bool short_edge = false;
       for (std::size_t i = 0; i < targets.edges.spaces.size(); ++i)
         short_edge =
-            short_edge || glass_edge_mm(tl, targets.edges.spaces[i], targets.edges.heights_mm[i]) <
+            short_edge || glass_edge_mm(tl, targets.edges.spaces[i], targets.edges.last[i],
+                                        targets.edges.heights_mm[i]) <
                               targets.edges.min_edge_mm + 1e-3;
       if (short_edge) {
         targets.edges.lambda *= 10;
@@ -511,9 +522,11 @@ DesignLossOptions continued_bounds(const DesignLossOptions& target, const Design
                                    const Lens& structure, double t) {
   DesignLossOptions out = target;
   const int k_count = static_cast<int>(structure.surfaces.size());
+  const std::vector<int> first = element_first_spaces(structure);
   double min_air = std::numeric_limits<double>::infinity(), min_glass = min_air;
   double max_glass = -min_air;
   for (int k = 0; k + 1 < k_count; ++k) {
+    if (!element_last_space(first, k)) continue;  // a split element: its summed travel at its end
     if (structure.surfaces[k].material.is_air()) {
       min_air = std::min(min_air, start.min_travel_mm[k]);
     } else {
@@ -656,15 +669,18 @@ ConstraintReport check_constraints(const Lens& lens, const DesignLossOptions& lo
   ConstraintReport report;
   report.ray_failures = l.failed_rays;
   const int k_count = static_cast<int>(lens.surfaces.size());
+  const std::vector<int> first = element_first_spaces(lens);
   for (int k = 0; k < k_count; ++k) {
     const bool last = k == k_count - 1;
     const bool glass = !lens.surfaces[k].material.is_air();
+    // A glass element split by a dummy or stop surface: one row pair, of its summed travel.
+    if (!element_last_space(first, k)) continue;
     if (last) {
       report.rows.push_back({"image clearance", ext.min_travel_mm[k], loss.min_image_clearance_mm,
                              true, ext.min_travel_mm[k] >= loss.min_image_clearance_mm});
     } else if (glass) {
       const std::string name =
-          fmt::format("glass {}-{} ({})", k + 1, k + 2, lens.surfaces[k].material.label());
+          fmt::format("glass {}-{} ({})", first[k] + 1, k + 2, lens.surfaces[k].material.label());
       report.rows.push_back({name + " min", ext.min_travel_mm[k], loss.min_glass_mm, true,
                              ext.min_travel_mm[k] >= loss.min_glass_mm});
       report.rows.push_back({name + " max", ext.max_travel_mm[k], loss.max_glass_mm, false,
@@ -746,7 +762,11 @@ DesignLossOptions lens_derived_bounds(const Lens& lens, const DesignLossOptions&
   }
   double min_air = std::numeric_limits<double>::infinity(), min_glass = min_air;
   double max_glass = 0.0;
+  const std::vector<int> first = element_first_spaces(lens);
   for (int k = 0; k + 1 < k_count; ++k) {
+    // A glass element split by a dummy or stop surface (glass_elements.h): its summed travel, at
+    // its last space (a half of it may be 0 mm thick on axis and bounds nothing).
+    if (!element_last_space(first, k)) continue;
     if (lens.surfaces[k].material.is_air()) {
       // A zero-thickness air space (a stop at a vertex) bounds nothing.
       if (ext.max_travel_mm[k] > 0.0) min_air = std::min(min_air, ext.min_travel_mm[k]);
@@ -797,6 +817,15 @@ class LensOptimization {
         wavefront_(options.loss.merit == DesignMerit::kWavefront),
         soft_(options.loss.paper_penalties) {
     frozen_user_ = param_.select(options.freeze);
+    // A dummy surface 0 mm before the next inside a glass element (the flat stop the .zmx reader
+    // puts at the vertex of a curved stop surface) stays there: its spacing is held.
+    const std::vector<int> element_first = element_first_spaces(start);
+    for (int i = 0; i < param_.size(); ++i) {
+      const LensVariable& v = param_.variables()[i];
+      if (v.kind == LensVariable::Kind::kSpacing && element_first[v.surface] != v.surface &&
+          start.surfaces[v.surface].thickness_mm == 0.0)
+        frozen_user_.push_back(i);
+    }
     // --focus-only: every variable but the defocus held.
     if (options.focus_only)
       for (int i = 0; i < param_.size(); ++i)
@@ -886,10 +915,10 @@ class LensOptimization {
     if (e.spaces.empty()) return;
     const TraceLens<double> tl = scaled_trace_lens(lens);
     for (std::size_t i = 0; i < e.spaces.size(); ++i) {
-      const int k = e.spaces[i];
-      const double v = glass_edge_mm(tl, k, e.heights_mm[i]);
+      const int k = e.spaces[i], m = e.last[i];
+      const double v = glass_edge_mm(tl, k, m, e.heights_mm[i]);
       report.rows.push_back(
-          {fmt::format("glass {}-{} edge at {:.3g} mm", k + 1, k + 2, e.heights_mm[i]), v,
+          {fmt::format("glass {}-{} edge at {:.3g} mm", k + 1, m + 2, e.heights_mm[i]), v,
            e.min_edge_mm, true, v >= e.min_edge_mm});
     }
   }

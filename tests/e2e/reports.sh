@@ -55,6 +55,9 @@ for text in "Chromatic focal shift" "Lateral colour" "Encircled energy"; do
   grep -q "$text" "$tmp/a.txt" || fail "the text report has no '$text'"
 done
 grep -qi "nan" "$tmp/a.txt" && fail "the text report has a NaN"
+# The flat stop the reader inserts (surface 4) has Seidel terms 0, printed as 0, never "-0".
+grep -A12 "^Seidel sums" "$tmp/a.txt" | grep -qE "(^| )-0( |$)" &&
+  fail "the Seidel table prints -0: $(grep -A12 '^Seidel sums' "$tmp/a.txt")"
 "$lensopt" analyze "$lens" --prescription --colour-band 450,650 --json >"$tmp/b.json" \
   2>"$tmp/err" || fail "--colour-band 450,650 exited non-zero: $(cat "$tmp/err")"
 python3 -c "

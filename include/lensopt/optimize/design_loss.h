@@ -6,6 +6,8 @@
 //          (with the lens's wavelength and field weights, analysis/spot.h's weighted mean:
 //          sum_h phi_h S_h / sum_h phi_h, S_h and ybar_h means weighted by omega_w)
 //   l_RP = 1/n_r sum_{k,r} max(dz_min^k - dz_{k,r}, 0) + max(dz_{k,r} - dz_max^k, 0)  (mm)
+//          (a glass element split by a dummy or stop surface, glass_elements.h: dz of its last
+//          space summed over the element's spaces, its other spaces only >= 0)
 //   l_RA = 1/n_r sum_{k,r} max(cos^2 t_max - zeta_{k,r}, 0) + max(cos^2 t_max - zeta'_{k,r}, 0)
 //   l_GV = sum_m ||g_m - g_m*||^2
 // and, for lenses with conics or aspheres, l_PB lambda_PB (lambda_PB = weight_profile): the
@@ -68,6 +70,7 @@
 #include "lensopt/core/jet_width.h"
 #include "lensopt/core/threads.h"
 #include "lensopt/optimize/design_sampling.h"
+#include "lensopt/optimize/glass_elements.h"
 #include "lensopt/optimize/profile_bounds.h"
 #include "lensopt/optimize/variables.h"
 #include "lensopt/trace/system.h"
@@ -142,7 +145,9 @@ struct DesignLoss {
 };
 
 // Extremes over every traced ray, for the constraint report: per space k the smallest and
-// largest axial travel (mm), and the smallest cos^2 of any incidence or refraction angle.
+// largest axial travel (mm), and the smallest cos^2 of any incidence or refraction angle. In a
+// glass element split by a dummy surface (glass_elements.h) the travel of space k is summed from
+// the element's first space: its last space holds the element's travel.
 struct DesignExtremes {
   std::vector<double> min_travel_mm;
   std::vector<double> max_travel_mm;
@@ -277,10 +282,18 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
   const bool equal_fields = phi_sum == field_count;
   const PupilSamples edge = sys.samples_for(pupil_edge_samples(kEdgeRays));
   const double cos2_max = std::pow(std::cos(options.max_ray_angle_deg * kPi / 180.0), 2);
-  // Bounds per space: air >= min_air; glass in [min, max]; the last (image) >= clearance.
+  // Bounds per space: air >= min_air; glass in [min, max]; the last (image) >= clearance. A
+  // glass element split by a dummy surface (glass_elements.h) is bounded on its summed travel at
+  // its last space; its other spaces only by a travel >= 0.
+  const std::vector<int> element_first = element_first_spaces(param.structure());
+  std::vector<char> split(k_count, 0);  // space k continues an element (its travel is summed)
   std::vector<double> lower(k_count), upper(k_count);
   for (int k = 0; k < k_count; ++k) {
-    if (k == k_count - 1) {
+    split[k] = element_first[k] != k;
+    if (!element_last_space(element_first, k)) {
+      lower[k] = 0.0;  // a part of a split element: no ray travels backwards
+      upper[k] = std::numeric_limits<double>::infinity();
+    } else if (k == k_count - 1) {
       lower[k] = options.min_image_clearance_mm;
       upper[k] = std::numeric_limits<double>::infinity();
     } else if (lens.is_glass[k]) {
@@ -333,10 +346,14 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
         for (std::size_t p = 0; p < b.size(); ++p) {
           const bool traced = b.status[p] == kRayOk;
           const int last_valid = traced ? k_count - 1 : b.failed_surface[p];
+          T element_dz = K<T>(0.0);  // the travel so far in a split element
           for (int k = 0; k <= last_valid && k < k_count; ++k) {
-            // Ray path: the space after surface k (only up to a failure).
+            // Ray path: the space after surface k (only up to a failure); in a split element
+            // the travel summed over its spaces so far (the bound is on the element's last).
             if (traced || k < last_valid) {
-              const T dz = rec.axial_travel_mm[k][p];
+              const T dz =
+                  split[k] ? element_dz + rec.axial_travel_mm[k][p] : rec.axial_travel_mm[k][p];
+              if (k + 1 < k_count && split[k + 1]) element_dz = dz;
               DesignExtremes& e = field_extremes[hf];
               e.min_travel_mm[k] = std::min(e.min_travel_mm[k], value_of(dz));
               e.max_travel_mm[k] = std::max(e.max_travel_mm[k], value_of(dz));
