@@ -209,8 +209,7 @@ SystemAdjoint design_adjoint(const TraceSystem<double>& sys, const DesignSamplin
               const double seed =
                   path_weight * ((above > 0.0 ? 1.0 : 0.0) - (below > 0.0 ? 1.0 : 0.0));
               // The summed travel's seed reaches every space of the element.
-              for (int j = element_first[k]; j <= k; ++j)
-                travel_seed[j][p] = seed;
+              for (int j = element_first[k]; j <= k; ++j) travel_seed[j][p] = seed;
             }
             const double va = cos2_max - record.cos2_incidence[k][p];
             const double vb = cos2_max - record.cos2_refraction[k][p];

@@ -486,10 +486,9 @@ DesignLoss<double> run_phase(const LensParameterization& param, std::vector<doub
       const TraceLens<double> tl = param.to_trace_lens(x.data(), mode, fixed);
       bool short_edge = false;
       for (std::size_t i = 0; i < targets.edges.spaces.size(); ++i)
-        short_edge =
-            short_edge || glass_edge_mm(tl, targets.edges.spaces[i], targets.edges.last[i],
-                                        targets.edges.heights_mm[i]) <
-                              targets.edges.min_edge_mm + 1e-3;
+        short_edge = short_edge ||
+                     glass_edge_mm(tl, targets.edges.spaces[i], targets.edges.last[i],
+                                   targets.edges.heights_mm[i]) < targets.edges.min_edge_mm + 1e-3;
       if (short_edge) {
         targets.edges.lambda *= 10;
         violated = true;

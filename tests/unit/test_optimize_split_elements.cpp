@@ -11,6 +11,7 @@
 #include <limits>
 #include <string>
 
+#include "lensopt/analysis/analyze.h"
 #include "lensopt/core/error.h"
 #include "lensopt/formats/lens_file.h"
 #include "lensopt/glass/glass.h"
@@ -57,7 +58,8 @@ TEST_CASE("optimize split elements: the Cooke's flint split by its curved stop i
   for (const ConstraintReport::Row& r : start.rows) {
     CHECK(r.name.find("glass 4-5") == std::string::npos);
     CHECK(r.name.find("glass 3-4") == std::string::npos);
-    if (r.name == "glass 3-5 (F2) min") {
+    if (r.name.rfind("glass 3-5 (", 0) == 0 && r.name.size() > 4 &&
+        r.name.compare(r.name.size() - 4, 4, " min") == 0) {
       flint = true;
       CHECK(r.value > 0.99);
       CHECK(r.pass);
@@ -88,12 +90,20 @@ TEST_CASE("optimize split elements: optimize holds every element's edge (regress
     const Lens& out = r.lens;
     double t = 0.0;
     for (int k = a - 1; k < b - 1; ++k) t += out.surfaces[k].thickness_mm;
-    const double edge = t + sphere_sag(out.surfaces[b - 1].curvature_per_mm, h) -
-                        sphere_sag(out.surfaces[a - 1].curvature_per_mm, h);
-    INFO(row.name, ": ", edge, " mm, bound ", row.bound);
-    CHECK(edge == doctest::Approx(row.value).epsilon(1e-9));
+    auto edge = [&](double at) {
+      return t + sphere_sag(out.surfaces[b - 1].curvature_per_mm, at) -
+             sphere_sag(out.surfaces[a - 1].curvature_per_mm, at);
+    };
+    // The row prints the height to 3 digits: the edge lies between its values at the ends of
+    // the rounding interval.
+    const double d = 0.5 * std::pow(10.0, std::floor(std::log10(h)) - 2);
+    const double lo = std::min(edge(h - d), edge(h + d)), hi = std::max(edge(h - d), edge(h + d));
+    INFO(row.name, ": ", row.value, " mm in [", lo, ", ", hi, "], bound ", row.bound);
+    CHECK(row.value >= lo - 1e-12);
+    CHECK(row.value <= hi + 1e-12);
     CHECK(row.bound > 0.2);
-    CHECK(edge >= row.bound);
+    CHECK(row.value >= row.bound);
+    CHECK(row.pass);
   }
   CHECK(edges == 3);  // three elements, the flint once (glass 3-5)
 }
