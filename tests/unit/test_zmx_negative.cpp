@@ -157,10 +157,13 @@ TEST_CASE("zmx negative: an afocal lens without the flag imports in afocal mode,
   // warning saying the file did not set Afocal Image Space.
   const ZmxImport imported = parse_zmx(text, "telescope.zmx");
   CHECK(imported.lens.specs.afocal);
-  REQUIRE(imported.warnings.size() == 1);
-  CAPTURE(imported.warnings[0]);
-  CHECK(imported.warnings[0].find(":4") != std::string::npos);  // the FTYP line
-  CHECK(imported.warnings[0].find("afocal") != std::string::npos);
+  int afocal_warnings = 0;
+  for (const std::string& w : imported.warnings)
+    if (w.find("Afocal Image Space") != std::string::npos) {
+      ++afocal_warnings;
+      CHECK(w.find("telescope.zmx:4") != std::string::npos);  // the FTYP line
+    }
+  CHECK(afocal_warnings == 1);
 }
 
 TEST_CASE("zmx negative: off-axis fields of a diverging lens; render refuses with the reason") {
