@@ -212,7 +212,10 @@ TEST_CASE("vignetting: a .zmx with VDX and VAN imports and its rays follow the d
   CHECK(f[3].vignetting.vcy == 0.3);
   CHECK(f[3].vignetting.van_deg == 30.0);
   // (2, 2): azimuth 45 deg, b = 45 deg: D' = R(45) (0.07, 0), VAN' = 50.
-  CHECK(f[4].value == doctest::Approx(std::sqrt(8.0)).epsilon(1e-15));
+  // The field keeps its x and y (issue 32: fields off the y axis); its radius is sqrt(8).
+  CHECK(f[4].x == 2.0);
+  CHECK(f[4].value == 2.0);
+  CHECK(f[4].radius() == doctest::Approx(std::sqrt(8.0)).epsilon(1e-15));
   CHECK(f[4].vignetting.vdx == doctest::Approx(0.07 * std::sqrt(0.5)).epsilon(1e-14));
   CHECK(f[4].vignetting.vdy == doctest::Approx(0.07 * std::sqrt(0.5)).epsilon(1e-14));
   CHECK(f[4].vignetting.vcx == 0.1);
