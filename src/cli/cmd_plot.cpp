@@ -39,8 +39,9 @@ void run_plot(const PlotCommand& cmd) {
     fmt::print(stderr, "lensopt plot: warning: {}\n", w);
   fmt::print(stderr, "lensopt plot: wrote {} ({} page, {:.0f} x {:.0f} px{})\n", cmd.output,
              cmd.kind, summary.width_px, summary.height_px,
-             summary.spot_box_um > 0 ? fmt::format(", spot boxes {:g} um", summary.spot_box_um)
-                                     : std::string());
+             summary.spot_box_um > 0
+                 ? fmt::format(", spot boxes {:g} {}", summary.spot_box_um, summary.spot_box_unit)
+                 : std::string());
 }
 
 }  // namespace

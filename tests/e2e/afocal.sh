@@ -38,7 +38,9 @@ fi
 grep -q "does not apply to an afocal lens" "$tmp/p.err" || fail "prescription refusal: $(cat "$tmp/p.err")"
 
 # The spot diagram in angle.
-"$lensopt" plot "$zmx" --kind spot -o "$tmp/spot.svg" > /dev/null || fail "plot spot"
+"$lensopt" plot "$zmx" --kind spot -o "$tmp/spot.svg" > /dev/null 2> "$tmp/spot.err" || fail "plot spot"
+# The summary line names the boxes' unit: microradians, not micrometres.
+grep -q "spot boxes .* urad" "$tmp/spot.err" || fail "plot summary does not give the spot boxes in urad: $(cat "$tmp/spot.err")"
 grep -q "rad" "$tmp/spot.svg" || fail "spot plot not in angle units"
 if "$lensopt" plot "$zmx" --kind layout -o "$tmp/layout.svg" 2> "$tmp/l.err"; then
   fail "plot --kind layout accepted on an afocal lens"

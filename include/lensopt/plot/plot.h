@@ -61,6 +61,9 @@ struct PlotSummary {
   double width_px = 0;
   double height_px = 0;
   double spot_box_um = 0;  // the spot scale used (0 if the page has no spots)
+  // The unit of spot_box_um as drawn: "um" on an image plane, "urad" for an afocal lens's
+  // spots in angle (plot/afocal_plot).
+  std::string spot_box_unit = "um";
   std::vector<std::string> warnings;
 };
 
