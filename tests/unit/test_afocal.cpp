@@ -68,36 +68,50 @@ TwoLens two_lens_telescope(double f1, double f2, double epd, const std::string& 
   return s;
 }
 
-// An independent meridional real-ray trace of two_lens_telescope's chief ray at the primary
-// wavelength: it starts at the stop (the first vertex) with slope angle u. On a sphere of
-// curvature c with its vertex at z_k, the ray (y, z) + s (m, n) meets c (y^2 + z'^2) - 2 z' = 0
-// (z' = z - z_k) at s = C / (B + sqrt(B^2 - c C)), B = n - c (y m + z' n), C = c (y^2 + z'^2) - 2
-// z'; the unit normal there is (-c y, 1 - c z'); refraction D' = mu D + (sqrt(1 - mu^2 (1 - cos^2))
-// - mu cos) N, mu = n1 / n2, cos = D . N. Returns the output slope m / n.
-double meridional_chief_tan_out(const TwoLens& k, double u) {
+// An independent meridional real-ray trace through two_lens_telescope's four faces, glass index
+// n_glass: the ray starts at (y, z = 0) on the stop plane with direction (m, n), optical path 0.
+// On a sphere of curvature c with its vertex at z_k, the ray (y, z) + s (m, n) meets
+// c (y^2 + z'^2) - 2 z' = 0 (z' = z - z_k) at s = C / (B + sqrt(B^2 - c C)),
+// B = n - c (y m + z' n), C = c (y^2 + z'^2) - 2 z'; the unit normal there is (-c y, 1 - c z');
+// refraction D' = mu D + (sqrt(1 - mu^2 (1 - cos^2)) - mu cos) N, mu = n1 / n2, cos = D . N.
+struct MeridionalRay {
+  double y, z, m, n, path_mm;
+};
+MeridionalRay trace_meridional(const TwoLens& k, double n_glass, double y, double m, double n) {
   const double c1 = 1.0 / ((k.n - 1.0) * k.f1), c2 = -1.0 / ((k.n - 1.0) * k.f2);
   struct Face {
     double z, c, n_after;
   };
-  const Face faces[] = {
-      {0.0, c1, k.n}, {k.t, 0.0, 1.0}, {k.t + k.gap, 0.0, k.n}, {2.0 * k.t + k.gap, c2, 1.0}};
-  double y = 0.0, z = 0.0, m = std::sin(u), n = std::cos(u), n_before = 1.0;
+  const Face faces[] = {{0.0, c1, n_glass},
+                        {k.t, 0.0, 1.0},
+                        {k.t + k.gap, 0.0, n_glass},
+                        {2.0 * k.t + k.gap, c2, 1.0}};
+  MeridionalRay r{y, 0.0, m, n, 0.0};
+  double n_before = 1.0;
   for (const Face& face : faces) {
-    const double zl = z - face.z;
-    const double b = n - face.c * (y * m + zl * n);
-    const double c = face.c * (y * y + zl * zl) - 2.0 * zl;
+    const double zl = r.z - face.z;
+    const double b = r.n - face.c * (r.y * r.m + zl * r.n);
+    const double c = face.c * (r.y * r.y + zl * zl) - 2.0 * zl;
     const double s = c / (b + std::sqrt(b * b - face.c * c));
-    y += s * m;
-    z += s * n;
-    const double ny = -face.c * y, nz = 1.0 - face.c * (z - face.z);
+    r.y += s * r.m;
+    r.z += s * r.n;
+    r.path_mm += n_before * s;
+    const double ny = -face.c * r.y, nz = 1.0 - face.c * (r.z - face.z);
     const double mu = n_before / face.n_after;
-    const double cos_i = m * ny + n * nz;
+    const double cos_i = r.m * ny + r.n * nz;
     const double g = std::sqrt(1.0 - mu * mu * (1.0 - cos_i * cos_i)) - mu * cos_i;
-    m = mu * m + g * ny;
-    n = mu * n + g * nz;
+    r.m = mu * r.m + g * ny;
+    r.n = mu * r.n + g * nz;
     n_before = face.n_after;
   }
-  return m / n;
+  return r;
+}
+
+// The chief ray at the primary wavelength (the stop is the first vertex: it starts at the origin
+// at the field angle u): its output slope m / n.
+double meridional_chief_tan_out(const TwoLens& k, double u) {
+  const MeridionalRay r = trace_meridional(k, k.n, 0.0, std::sin(u), std::cos(u));
+  return r.m / r.n;
 }
 
 TEST_CASE("afocal: a Keplerian telescope f1 = 100, f2 = 25 has M = -4 and its exit pupil") {
@@ -190,41 +204,17 @@ TEST_CASE("afocal: the angular spot agrees with the spread of the exit direction
   CHECK(s.centroid_n == doctest::Approx(1.0).epsilon(1e-12));
 }
 
-// The on-axis wavefront of two_lens_telescope at one wavelength, by an independent meridional
-// trace (the faces of meridional_chief_tan_out, glass index n): the ray at pupil height h starts
+// The on-axis wavefront of two_lens_telescope at one wavelength, by trace_meridional with the
+// glass index at that wavelength: the ray at pupil height h starts
 // on the stop plane (z = 0, OPL 0) along the axis; its optical path is summed face by face and
 // continued (backwards when negative) to the reference plane z = z_plane normal to the axis.
 // W(rho) = (OPL(h) - OPL(0)) / lambda; the RMS about the disk's mean (piston; an axial pencil has
 // no tilt) by the midpoint rule in rho^2 (equal areas), `rings` rings.
 double axial_rms_waves(const TwoLens& k, double n_glass, double wavelength_nm, double z_plane,
                        double pupil_radius_mm, int rings) {
-  const double c1 = 1.0 / ((k.n - 1.0) * k.f1), c2 = -1.0 / ((k.n - 1.0) * k.f2);
-  struct Face {
-    double z, c, n_after;
-  };
-  const Face faces[] = {{0.0, c1, n_glass},
-                        {k.t, 0.0, 1.0},
-                        {k.t + k.gap, 0.0, n_glass},
-                        {2.0 * k.t + k.gap, c2, 1.0}};
   auto opl = [&](double h) {
-    double y = h, z = 0.0, m = 0.0, n = 1.0, n_before = 1.0, path = 0.0;
-    for (const Face& face : faces) {
-      const double zl = z - face.z;
-      const double b = n - face.c * (y * m + zl * n);
-      const double c = face.c * (y * y + zl * zl) - 2.0 * zl;
-      const double s = c / (b + std::sqrt(b * b - face.c * c));
-      y += s * m;
-      z += s * n;
-      path += n_before * s;
-      const double ny = -face.c * y, nz = 1.0 - face.c * (z - face.z);
-      const double mu = n_before / face.n_after;
-      const double cos_i = m * ny + n * nz;
-      const double g = std::sqrt(1.0 - mu * mu * (1.0 - cos_i * cos_i)) - mu * cos_i;
-      m = mu * m + g * ny;
-      n = mu * n + g * nz;
-      n_before = face.n_after;
-    }
-    return path + (z_plane - z) / n;
+    const MeridionalRay r = trace_meridional(k, n_glass, h, 0.0, 1.0);
+    return r.path_mm + (z_plane - r.z) / r.n;
   };
   const double lambda_mm = wavelength_nm * 1e-6, o0 = opl(0.0);
   double sum = 0, sum_sq = 0;
