@@ -220,3 +220,39 @@ TEST_CASE("tolerance surface: inverse sensitivity reproduces its drop when appli
   CHECK(format_tolerance_text(report).find("inverse") != std::string::npos);
   CHECK(format_tolerance_json(report).find("\"inverse_limit\"") != std::string::npos);
 }
+
+TEST_CASE("tolerance surface: a tilted mirror turns the reflected axial ray by twice its tilt") {
+  // A concave spherical mirror (R = -200 mm) 50 mm behind its stop, the image at its focus (the
+  // thickness after a mirror is negative). Tilting it by theta about x through its vertex, where
+  // the axial ray meets it, turns the reflected ray by 2 theta: the image plane 100 mm back sees
+  // it at 100 tan(2 theta), exactly.
+  Lens lens = singlet(0.0, 0.0, 0.0);
+  Surface stop, mirror;
+  stop.is_stop = true;
+  stop.thickness_mm = 50.0;
+  mirror.curvature_per_mm = -1.0 / 200.0;
+  mirror.mirror = true;
+  mirror.thickness_mm = -100.0;
+  lens.surfaces = {stop, mirror};
+  lens.specs.fields = {FieldPoint{0.0}, FieldPoint{0.5}};
+  const ToleranceModel model(lens, surface_options(0.0, 20.0));
+  const int tstx2 = parameter_index(model, "tstx2");
+  REQUIRE(tstx2 >= 0);
+  CHECK(model.parameters()[static_cast<std::size_t>(tstx2)].description ==
+        "surface 2 mirror tilt about x");
+  std::vector<double> d(model.parameters().size(), 0.0);
+  const RayBundle<double> nominal = axial_ray(model.perturbed_trace_lens(d));
+  REQUIRE(nominal.status[0] == kRayOk);
+  CHECK(std::abs(nominal.y[0]) < 1e-15);
+  d[static_cast<std::size_t>(tstx2)] = 20.0;  // arcmin
+  const RayBundle<double> ray = axial_ray(model.perturbed_trace_lens(d));
+  REQUIRE(ray.status[0] == kRayOk);
+  const double theta = 20.0 / 60.0 * kPi / 180.0;
+  MESSAGE(fmt::format("mirror tilted 20': image {:.15e} mm, 100 tan(2 theta) {:.15e} mm", ray.y[0],
+                      100.0 * std::tan(2.0 * theta)));
+  CHECK(std::abs(std::abs(ray.y[0]) - 100.0 * std::tan(2.0 * theta)) < 1e-12);
+  CHECK(std::abs(ray.x[0]) < 1e-15);
+  // And a trial with it evaluates (the sensitivity table's path).
+  const TrialResult tilted = model.evaluate(d);
+  REQUIRE(tilted.valid);
+}
