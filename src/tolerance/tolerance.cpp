@@ -497,8 +497,23 @@ ToleranceModel::ToleranceModel(const Lens& lens, const ToleranceOptions& options
     to.threads = 1;
     m.as_written = true;
     m.written = lens_setup(m.scaled_lens, to);
+    // With decenters or tilts toleranced the trials are not rotationally symmetric: a field on
+    // -y is then not the mirror of the one on +y, and is traced where it is written (as
+    // specs_setup does for a lens with placements of its own).
+    if (placed) {
+      const SystemSetup fields = specs_setup(m.scaled_lens.specs, to, false);
+      m.written.field_values = fields.field_values;
+      m.written.field_weights = fields.field_weights;
+      m.written.vignetting = fields.vignetting;
+      m.written.field_azimuth_deg = fields.field_azimuth_deg;
+    }
     // The nominal's chief-ray angles (deg) label the fields.
-    m.fields_deg = prepare_lens_system(m.scaled_lens, to).fields_deg;
+    const TraceSystem<double> labels =
+        prepare_system(make_trace_lens(m.scaled_lens), m.written, to);
+    if (!labels.field_solve_failure.empty())
+      throw Error(SourceLocation{lens.source_path.empty() ? lens.name : lens.source_path},
+                  labels.field_solve_failure);
+    m.fields_deg = labels.fields_deg;
   }
   m.rays =
       static_cast<int>(paper_pupil_samples(options.rings).size()) *
@@ -701,6 +716,9 @@ TrialResult ToleranceModel::evaluate(const std::vector<double>& perturbations) c
     setup.field_values = m.written.field_values;
     setup.field_weights = m.written.field_weights;
     setup.vignetting = m.written.vignetting;
+    // Each field where it is written: a field on x (or on -y of a lens without rotational
+    // symmetry) keeps its azimuth, so a trial's decenters and tilts act on it as they would.
+    setup.field_azimuth_deg = m.written.field_azimuth_deg;
     setup.object_distance_mm = m.written.object_distance_mm;
   }
   TraceSystem<double> sys = prepare_system(tl, setup, to);
