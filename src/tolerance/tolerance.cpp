@@ -476,6 +476,16 @@ struct ToleranceModel::Impl {
     return tl.thickness_mm[k] + sag(k + 1) - sag(k);
   }
 
+  // Moves surface j alone (restore_frame: the surfaces after it stay): adds `value` to slot
+  // `slot` of its placement (0, 1: decenter x, y in mm; 2, 3: tilt about x, y in deg). The one
+  // place where element (TEDX..TETY) and surface (TSDX..TSTY) perturbations and the decenter
+  // compensators change a placement; the nominal's placement of such a surface is zero.
+  static void move_surface(TraceLens<double>& tl, int j, int slot, double value) {
+    tl.geometry.placement[static_cast<std::size_t>(j) * 5 + static_cast<std::size_t>(slot)] +=
+        value;
+    tl.geometry.flags[static_cast<std::size_t>(j)] |= kPlacementMoved | kPlacementRestore;
+  }
+
   TraceLens<double> apply(const std::vector<double>& perturbations) const {
     using Kind = ToleranceParameter::Kind;
     TraceLens<double> tl = nominal;
@@ -515,44 +525,38 @@ struct ToleranceModel::Impl {
           const double theta = d / 60.0 * kDegToRad;  // tilts: arcmin
           double z = 0.0;  // vertex of surface j behind the element's first one
           for (int j = p.surface; j <= p.last_surface; ++j) {
-            double* v = tl.geometry.placement.data() + static_cast<std::size_t>(j) * 5;
             switch (p.kind) {
               case Kind::kDecenterX:
-                v[0] += d;
+                move_surface(tl, j, 0, d);
                 break;
               case Kind::kDecenterY:
-                v[1] += d;
+                move_surface(tl, j, 1, d);
                 break;
               case Kind::kTiltX:  // Rx(theta) takes (0, 0, z) to (0, -z sin theta, z cos theta)
-                v[1] += -z * std::sin(theta);
-                v[2] += d / 60.0;
+                move_surface(tl, j, 1, -z * std::sin(theta));
+                move_surface(tl, j, 2, d / 60.0);
                 break;
               default:  // kTiltY: Ry(theta) takes (0, 0, z) to (z sin theta, 0, z cos theta)
-                v[0] += z * std::sin(theta);
-                v[3] += d / 60.0;
+                move_surface(tl, j, 0, z * std::sin(theta));
+                move_surface(tl, j, 3, d / 60.0);
                 break;
             }
-            tl.geometry.flags[j] |= kPlacementMoved | kPlacementRestore;
             z += nominal.thickness_mm[j];
           }
           break;
         }
         case Kind::kSurfaceDecenterX:
-        case Kind::kSurfaceDecenterY:
-        case Kind::kSurfaceTiltX:
-        case Kind::kSurfaceTiltY: {
-          if (d == 0.0) break;
-          // The surface alone about its vertex; the ones after it stay (restore_frame). Its
-          // nominal placement is zero (add_surface_placement_parameters).
-          double* v = tl.geometry.placement.data() + static_cast<std::size_t>(p.surface) * 5;
-          const int slot = p.kind == Kind::kSurfaceDecenterX   ? 0
-                           : p.kind == Kind::kSurfaceDecenterY ? 1
-                           : p.kind == Kind::kSurfaceTiltX     ? 2
-                                                               : 3;
-          v[slot] += slot < 2 ? d : d / 60.0;  // tilts: arcmin -> deg
-          tl.geometry.flags[p.surface] |= kPlacementMoved | kPlacementRestore;
+          if (d != 0.0) move_surface(tl, p.surface, 0, d);
           break;
-        }
+        case Kind::kSurfaceDecenterY:
+          if (d != 0.0) move_surface(tl, p.surface, 1, d);
+          break;
+        case Kind::kSurfaceTiltX:  // about the surface's vertex, arcmin -> deg
+          if (d != 0.0) move_surface(tl, p.surface, 2, d / 60.0);
+          break;
+        case Kind::kSurfaceTiltY:
+          if (d != 0.0) move_surface(tl, p.surface, 3, d / 60.0);
+          break;
       }
     }
     return tl;
