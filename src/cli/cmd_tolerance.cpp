@@ -226,11 +226,11 @@ void setup_tolerance(CLI::App& app) {
   cmd->tolerance_opts[8] = sub->add_option(
       "--surface-decenter-mm", cmd->tolerances.surface_decenter_mm,
       "surface decenter in x and in y (TSDX, TSDY) of each curved surface alone, +- mm "
-      "(default 0: off)");
+      "(default 0: off; a sphere's decenter is its tilt, already in --surface-tilt-arcmin)");
   cmd->tolerance_opts[9] = sub->add_option(
       "--surface-tilt-arcmin", cmd->tolerances.surface_tilt_arcmin,
       "surface tilt about x and about y (TSTX, TSTY) of each surface alone: an element's wedge, a "
-      "mirror's tilt, +- arcmin (default 0: off)");
+      "mirror's tilt, +- arcmin (default 1; 0: off)");
   cmd->rings_opt =
       sub->add_option("--rings", cmd->rings,
                       "pupil rings per trial (default 16; the paper's full sampling is 32)")

@@ -44,7 +44,7 @@ std::string tolerance_line(const Tolerances& t) {
       value(t.curvature_pct, " %"), value(t.glass_thickness_mm, " mm"),
       value(t.air_thickness_mm, " mm"), value(t.nd, ""), value(t.vd_pct, " %"),
       value(t.decenter_mm, " mm"), value(t.tilt_arcmin, " arcmin"));
-  if (t.surface_decenter_mm > 0 || t.surface_tilt_arcmin > 0)  // off by default: named when on
+  if (t.surface_decenter_mm > 0 || t.surface_tilt_arcmin > 0)  // named when either is on
     text +=
         fmt::format(", surface decenter {}, surface tilt {}", value(t.surface_decenter_mm, " mm"),
                     value(t.surface_tilt_arcmin, " arcmin"));

@@ -25,9 +25,11 @@
 //               surface of an element is its wedge, a tilted mirror turns the beam by twice the
 //               tilt. Every surface that carries no placement of its own (not the stop, not a
 //               coordinate break, not a flat surface's decenter, which moves nothing) gets them;
-//               both are 0 (off) by default, since the element decenters and tilts above
-//               already hold the mounting errors: set them to tolerance wedge and centring of
-//               single surfaces (OpticStudio's TSDX/TSTX; e.g. 1 arcmin of wedge).
+//               defaults: tilt 1 arcmin (on: each surface's wedge, a fabrication error
+//               of the element that its mounting, the element tilt above, does not hold),
+//               decenter 0 (off: a sphere decentred by d is the sphere tilted by d / R about
+//               its vertex, the same wedge again; turn it on for aspheres, whose decenter is an
+//               error of its own). docs/tolerance.md gives the reasons.
 //   profile     of every non-spherical surface (conic or even asphere, lens/lens.h), each term on
 //               its own, as a sag error at the surface's clear semi-aperture h (below):
 //                 k' = k + L_k u,   L_k = L / |dS/dk(h)|,  dS/dk = c^3 h^4 / (2 q (1 + q)^2),
@@ -161,7 +163,7 @@ struct Tolerances {
   double decenter_mm = 0.02;         // element decenter in x and in y (TEDX, TEDY), mm
   double tilt_arcmin = 1.0;          // element tilt about x and about y (TETX, TETY), arcmin
   double surface_decenter_mm = 0.0;  // surface decenter in x and y (TSDX, TSDY), mm; 0: off
-  double surface_tilt_arcmin = 0.0;  // surface tilt (wedge) about x and y (TSTX, TSTY); 0: off
+  double surface_tilt_arcmin = 1.0;  // surface tilt (wedge) about x and y (TSTX, TSTY); 0: off
 
   // Throws Error naming the first negative or non-finite tolerance.
   void validate() const;
@@ -178,7 +180,7 @@ const std::vector<std::string>& tolerance_names();
 //   [tolerance]
 //   curvature_pct = 0.2, glass_thickness_mm = 0.05, air_thickness_mm = 0.0, nd = 5e-4,
 //   vd_pct = 0.5, asphere_sag_um = 1.0, decenter_mm = 0.02, tilt_arcmin = 1,
-//   surface_decenter_mm = 0, surface_tilt_arcmin = 0, inverse_drop_um = 1,
+//   surface_decenter_mm = 0, surface_tilt_arcmin = 1, inverse_drop_um = 1,
 //   distribution = "uniform", compensator = "paraxial" (or a list: "best-rms, image-shift",
 //   ["paraxial", "decenter:element=2"]; parse_compensators), spot_reference = "centroid",
 //   max_spot_um = 20, trials = 10000, seed = 1
