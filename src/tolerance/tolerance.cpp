@@ -660,11 +660,11 @@ ToleranceModel::ToleranceModel(const Lens& lens, const ToleranceOptions& options
                   labels.field_solve_failure);
     m.fields_deg = labels.fields_deg;
   }
-  m.rays =
-      static_cast<int>(paper_pupil_samples(options.rings).size()) *
-      ((m.as_written && needs_full_pupil(m.written.vignetting)) || m.scaled_lens.breaks_symmetry()
-           ? 2
-           : 1);
+  m.rays = static_cast<int>(paper_pupil_samples(options.rings).size()) *
+           ((m.as_written && needs_full_pupil(m.written.vignetting)) ||
+                    m.scaled_lens.breaks_symmetry() || m.nominal.geometry.placed()
+                ? 2
+                : 1);
 
   // Clear semi-apertures (clear_semi_apertures_mm). An element's rim is at the larger of its
   // two surfaces' apertures; two surfaces across air meet first at the smaller one.

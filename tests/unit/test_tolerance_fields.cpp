@@ -55,3 +55,20 @@ TEST_CASE("tolerance fields: a decentred trial sees the +y, -y and x fields apar
   CHECK(std::abs(r.rms_spot_um[1] - r.rms_spot_um[3]) > 1e-3 * r.rms_spot_um[1]);
   CHECK(std::abs(r.rms_spot_um[2] - r.rms_spot_um[3]) > 1e-3 * r.rms_spot_um[2]);
 }
+
+TEST_CASE("tolerance fields: the summary counts the full pupil of a decentred trial") {
+  // With decenters or tilts toleranced every trial is traced on the full pupil (the nominal
+  // carries zero placements): 2 R^2 rays per field and wavelength, which the summary states
+  // (it said R^2, the half pupil).
+  const Lens lens = read_lens(test::source_dir() / "lenses" / "tessar.toml");
+  ToleranceOptions o;
+  o.rings = 6;
+  o.trials = 1;
+  const ToleranceModel placed(lens, o);
+  CHECK(placed.rays_per_field_wavelength() == 72);
+  o.tolerances.decenter_mm = 0.0;
+  o.tolerances.tilt_arcmin = 0.0;
+  o.tolerances.surface_tilt_arcmin = 0.0;
+  const ToleranceModel symmetric(lens, o);
+  CHECK(symmetric.rays_per_field_wavelength() == 36);
+}
