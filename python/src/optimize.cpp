@@ -347,7 +347,7 @@ void bind_optimize(py::module_& m) {
          std::optional<std::string> distribution, std::optional<std::string> compensator,
          bool sensitivity, std::optional<double> max_spot_um, std::optional<int> threads,
          std::optional<int> jobs, std::optional<std::map<std::string, double>> tolerances,
-         std::optional<double> inverse_drop_um) {
+         std::optional<double> inverse_drop_um, std::optional<std::string> spot_reference) {
         // The CLI's start (tolerance.h): the defaults and the lens's [tolerance] table, then the
         // arguments given (None: not given).
         ToleranceOptions o = tolerance_options_for(lens);
@@ -356,7 +356,14 @@ void bind_optimize(py::module_& m) {
         if (rings) o.rings = *rings;
         if (fields) o.fields = *fields;
         if (distribution) o.distribution = parse_tolerance_distribution(*distribution);
-        if (compensator) o.compensator = parse_focus_compensator(*compensator);
+        // A compensator list as the CLI's --compensator: the focus it names (else paraxial) and
+        // the compensators beyond focus.
+        if (compensator) {
+          const CompensatorList list = parse_compensators(*compensator);
+          o.compensator = FocusCompensator::kParaxial;
+          o.apply(list);
+        }
+        if (spot_reference) o.spot_reference = parse_spot_reference(*spot_reference);
         o.sensitivity = sensitivity;
         if (max_spot_um) o.max_spot_um = *max_spot_um;
         if (inverse_drop_um) o.inverse_drop_um = *inverse_drop_um;
@@ -399,6 +406,7 @@ void bind_optimize(py::module_& m) {
       py::arg("sensitivity") = true, py::arg("max_spot_um") = py::none(),
       py::arg("threads") = py::none(), py::arg("jobs") = py::none(),
       py::arg("tolerances") = py::none(), py::arg("inverse_drop_um") = py::none(),
+      py::arg("spot_reference") = py::none(),
       "`lensopt tolerance`: Monte-Carlo trials of manufacturing errors, with the sensitivity "
       "table. The options start where the CLI's do (tolerance_options_for: the defaults, 10000 "
       "trials, seed 1, 16 rings, 11 fields, with the lens's [tolerance] table applied); an "
@@ -406,7 +414,9 @@ void bind_optimize(py::module_& m) {
       "the CLI's --threads (jobs: its old name). tolerances: a dict of tolerance limits by the "
       "[tolerance] table's names (curvature_pct, ..., decenter_mm, tilt_arcmin, "
       "surface_decenter_mm, surface_tilt_arcmin), as the CLI's --curvature-pct etc.; "
-      "inverse_drop_um: as --inverse-drop-um (the sensitivity rows' inverse_limit).");
+      "inverse_drop_um: as --inverse-drop-um (the sensitivity rows' inverse_limit); compensator: "
+      "a list as --compensator (\"best-rms,image-shift\", \"decenter:element=2\"); "
+      "spot_reference: as --spot-reference (centroid or nominal).");
 }
 
 }  // namespace lensopt::python

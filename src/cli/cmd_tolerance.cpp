@@ -50,6 +50,8 @@ struct ToleranceCommand {
   CLI::Option* inverse_drop_opt = nullptr;
   CLI::Option* distribution_opt = nullptr;
   CLI::Option* compensator_opt = nullptr;
+  std::string spot_reference = "centroid";
+  CLI::Option* spot_reference_opt = nullptr;
   CLI::Option* rings_opt = nullptr;
   CLI::Option* fields_opt = nullptr;
   CLI::Option* tolerance_opts[kToleranceOptionCount] = {};
@@ -103,8 +105,15 @@ void run_tolerance_command(const ToleranceCommand& cmd) {
     if (cmd.tolerance_opts[i]->count() > 0) *targets[i] = cli_values[i];
   if (cmd.distribution_opt->count() > 0)
     options.distribution = parse_tolerance_distribution(cmd.distribution);
-  if (cmd.compensator_opt->count() > 0)
-    options.compensator = parse_focus_compensator(cmd.compensator);
+  if (cmd.compensator_opt->count() > 0) {
+    // A list on the command line replaces the table's: the focus it names (else paraxial), and
+    // the compensators beyond focus.
+    const CompensatorList list = parse_compensators(cmd.compensator);
+    options.compensator = FocusCompensator::kParaxial;
+    options.apply(list);
+  }
+  if (cmd.spot_reference_opt->count() > 0)
+    options.spot_reference = parse_spot_reference(cmd.spot_reference);
   if (cmd.max_spot_opt->count() > 0) options.max_spot_um = cmd.max_spot_um;
   if (cmd.inverse_drop_opt->count() > 0) options.inverse_drop_um = cmd.inverse_drop_um;
   if (cmd.trials_opt->count() > 0) options.trials = cmd.trials;
@@ -183,10 +192,16 @@ void setup_tolerance(CLI::App& app) {
       sub->add_option("--distribution", cmd->distribution,
                       "uniform (default) or normal (sigma = tolerance / 2, truncated)")
           ->check(CLI::IsMember({"uniform", "normal"}));
-  cmd->compensator_opt =
-      sub->add_option("--compensator", cmd->compensator,
-                      "focus compensator on the last thickness: paraxial (default), best-rms, none")
-          ->check(CLI::IsMember({"paraxial", "best-rms", "none"}));
+  cmd->compensator_opt = sub->add_option(
+      "--compensator", cmd->compensator,
+      "compensators, comma-separated: the focus on the last thickness (paraxial, the default; "
+      "best-rms; none), image-shift (the image plane moved laterally; needs --spot-reference "
+      "nominal), decenter:element=K (group K's decenter x and y, rows tedx<K>), e.g. "
+      "\"best-rms,decenter:element=2\"");
+  cmd->spot_reference_opt = sub->add_option(
+      "--spot-reference", cmd->spot_reference,
+      "what each field's RMS spot is taken about: centroid (default, its own centroid) or "
+      "nominal (the nominal lens's image point of the field: a displaced image counts)");
   cmd->tolerance_opts[0] = sub->add_option("--curvature-pct", cmd->tolerances.curvature_pct,
                                            "curvature tolerance, +- percent (default 0.2)");
   cmd->tolerance_opts[1] =
@@ -211,11 +226,11 @@ void setup_tolerance(CLI::App& app) {
   cmd->tolerance_opts[8] = sub->add_option(
       "--surface-decenter-mm", cmd->tolerances.surface_decenter_mm,
       "surface decenter in x and in y (TSDX, TSDY) of each curved surface alone, +- mm "
-      "(default 0: off)");
+      "(default 0: off; a sphere's decenter is its tilt, already in --surface-tilt-arcmin)");
   cmd->tolerance_opts[9] = sub->add_option(
       "--surface-tilt-arcmin", cmd->tolerances.surface_tilt_arcmin,
       "surface tilt about x and about y (TSTX, TSTY) of each surface alone: an element's wedge, a "
-      "mirror's tilt, +- arcmin (default 0: off)");
+      "mirror's tilt, +- arcmin (default 1; 0: off)");
   cmd->rings_opt =
       sub->add_option("--rings", cmd->rings,
                       "pupil rings per trial (default 16; the paper's full sampling is 32)")

@@ -206,12 +206,11 @@ void check_target_fields(const Lens& lens, const std::vector<DesignTarget>& targ
   const bool written = lens.specs.mode != SpecMode::kPaper && !lens.specs.fields.empty();
   int count = 0;
   if (written) {
-    // The distinct radial field values, as lens_setup traces them.
-    std::vector<double> values;
-    for (const FieldPoint& f : lens.specs.fields) values.push_back(std::abs(f.value));
-    std::sort(values.begin(), values.end());
-    values.erase(std::unique(values.begin(), values.end()), values.end());
-    count = static_cast<int>(values.size());
+    // The fields as lens_setup traces them and analyze lists them: one per radial value and
+    // azimuth (a field on x is its own; one on -y too when the lens is not rotationally
+    // symmetric), not the distinct |y| values (which missed the x fields).
+    count = static_cast<int>(
+        specs_setup(lens.specs, TraceOptions{}, !lens.breaks_symmetry()).field_values.size());
   }
   for (const DesignTarget& t : targets) {
     if (t.field == 0) continue;

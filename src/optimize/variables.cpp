@@ -187,6 +187,14 @@ LensParameterization::LensParameterization(const Lens& lens, GlassSpace glasses,
     for (const LensVariable& u : variables_) duplicate = duplicate || u.name == v.name;
     if (!duplicate) variables_.push_back(v);
   }
+  // The structure's placements are traced at the spec scale (to_trace_lens).
+  if (lens.breaks_symmetry()) {
+    TraceOptions scale_only;
+    scale_only.ray_aiming = false;
+    scale_only.fields = 1;
+    scale_only.rings = 1;
+    geometry_scale_ = prepare_system(make_trace_lens(lens), lens.specs, scale_only).scale;
+  }
   // The structure's profiles, normalized to f = 1 (after scaling to the spec focal length).
   bool any_profile = false;
   for (const Surface& s : lens.surfaces) any_profile = any_profile || !s.is_spherical();

@@ -44,7 +44,7 @@ std::string tolerance_line(const Tolerances& t) {
       value(t.curvature_pct, " %"), value(t.glass_thickness_mm, " mm"),
       value(t.air_thickness_mm, " mm"), value(t.nd, ""), value(t.vd_pct, " %"),
       value(t.decenter_mm, " mm"), value(t.tilt_arcmin, " arcmin"));
-  if (t.surface_decenter_mm > 0 || t.surface_tilt_arcmin > 0)  // off by default: named when on
+  if (t.surface_decenter_mm > 0 || t.surface_tilt_arcmin > 0)  // named when either is on
     text +=
         fmt::format(", surface decenter {}, surface tilt {}", value(t.surface_decenter_mm, " mm"),
                     value(t.surface_tilt_arcmin, " arcmin"));
@@ -59,6 +59,12 @@ std::string format_trials_csv(const ToleranceReport& report) {
       "image_distance_mm,elements_intersect,min_edge_gap_mm";
   for (double f : report.fields_deg) out += fmt::format(",spot_um_{:g}deg", f);
   for (const ToleranceParameter& p : report.parameters) out += "," + p.column;
+  // The compensators' moves beyond focus (only with such compensators: the columns of a run
+  // without them are as before).
+  for (const std::string& name : report.compensation_names) {
+    out += ',';
+    out += name;
+  }
   out += "\n";
   for (const TrialResult& r : report.trials) {
     out += fmt::format("{},{}", r.index, r.valid ? 1 : 0);
@@ -73,6 +79,10 @@ std::string format_trials_csv(const ToleranceReport& report) {
       for (std::size_t h = 0; h < r.rms_spot_um.size(); ++h) out += ",";
     }
     for (double d : r.perturbations) out += "," + exact(d);
+    for (std::size_t i = 0; i < report.compensation_names.size(); ++i) {
+      out += ',';
+      if (r.valid && i < r.compensation.size()) out += exact(r.compensation[i]);
+    }
     out += "\n";
   }
   return out;
@@ -93,6 +103,26 @@ std::string format_tolerance_text(const ToleranceReport& r, int sensitivity_rows
   line(fmt::format("  tolerances: {}", tolerance_line(o.tolerances)));
   line(fmt::format("  {} trials, seed {}, {}; compensator: {}", o.trials, o.seed,
                    distribution_text(o.distribution), compensator_text(o.compensator)));
+  if (o.image_shift || !o.decenter_compensators.empty()) {
+    std::string extra;
+    if (o.image_shift) extra = "lateral image shift";
+    for (int k : o.decenter_compensators)
+      extra += fmt::format("{}decenter x, y of group {}", extra.empty() ? "" : ", ", k);
+    line(fmt::format("  compensators beyond focus: {} (solved per trial)", extra));
+    // The largest move of each over the valid trials.
+    std::string moves;
+    for (std::size_t i = 0; i < r.compensation_names.size(); ++i) {
+      double largest = 0.0;
+      for (const TrialResult& t : r.trials)
+        if (t.valid && i < t.compensation.size())
+          largest = std::max(largest, std::abs(t.compensation[i]));
+      moves +=
+          fmt::format("{}{} {:.4g}", moves.empty() ? "" : ", ", r.compensation_names[i], largest);
+    }
+    line(fmt::format("  largest compensator moves (mm): {}", moves));
+  }
+  if (o.spot_reference == SpotReference::kNominal)
+    line("  spot reference: the nominal image point of each field (a displaced image counts)");
   line(
       fmt::format("  sampling: {} fields x {} wavelengths x {} pupil rays ({} rings), ray "
                   "aiming {}",
@@ -189,6 +219,13 @@ std::string format_tolerance_json(const ToleranceReport& r) {
     json d = json::array();
     for (double v : t.perturbations) d.push_back(num(v));
     j["perturbations"] = d;
+    if (!r.compensation_names.empty()) {
+      json c = json::object();
+      for (std::size_t i = 0; i < r.compensation_names.size(); ++i)
+        c[r.compensation_names[i]] =
+            t.valid && i < t.compensation.size() ? num(t.compensation[i]) : json(nullptr);
+      j["compensation"] = c;
+    }
     return j;
   };
   const ToleranceOptions& o = r.options;
@@ -203,6 +240,11 @@ std::string format_tolerance_json(const ToleranceReport& r) {
   j["distribution"] = to_string(o.distribution);
   j["distribution_note"] = distribution_text(o.distribution);
   j["compensator"] = to_string(o.compensator);
+  j["spot_reference"] = to_string(o.spot_reference);
+  if (o.image_shift || !o.decenter_compensators.empty()) {
+    j["image_shift_compensator"] = o.image_shift;
+    j["decenter_compensators"] = o.decenter_compensators;
+  }
   j["tolerances"] = {{"curvature_pct", o.tolerances.curvature_pct},
                      {"glass_thickness_mm", o.tolerances.glass_thickness_mm},
                      {"air_thickness_mm", o.tolerances.air_thickness_mm},

@@ -2,6 +2,7 @@
 #include <fmt/format.h>
 #include <toml++/toml.h>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -41,6 +42,91 @@ FocusCompensator parse_focus_compensator(const std::string& text) {
   if (text == "best-rms") return FocusCompensator::kBestRms;
   if (text == "none") return FocusCompensator::kNone;
   throw Error(fmt::format("unknown compensator '{}' (expected paraxial, best-rms or none)", text));
+}
+
+std::string to_string(SpotReference reference) {
+  return reference == SpotReference::kCentroid ? "centroid" : "nominal";
+}
+
+SpotReference parse_spot_reference(const std::string& text) {
+  if (text == "centroid") return SpotReference::kCentroid;
+  if (text == "nominal") return SpotReference::kNominal;
+  throw Error(fmt::format(
+      "unknown spot reference '{}' (expected centroid: each field about its own centroid, or "
+      "nominal: about the nominal lens's image point of the field)",
+      text));
+}
+
+CompensatorList parse_compensators(const std::string& text) {
+  CompensatorList out;
+  const char* expected =
+      "expected a comma-separated list of paraxial, best-rms or none (the focus), image-shift, "
+      "decenter:element=K";
+  std::size_t start = 0;
+  bool any = false;
+  while (start <= text.size()) {
+    const std::size_t comma = std::min(text.find(',', start), text.size());
+    std::string item = text.substr(start, comma - start);
+    start = comma + 1;
+    const std::size_t a = item.find_first_not_of(" \t");
+    const std::size_t b = item.find_last_not_of(" \t");
+    item = a == std::string::npos ? std::string() : item.substr(a, b - a + 1);
+    if (item.empty())
+      throw Error(fmt::format("compensator '{}': an empty item ({})", text, expected));
+    any = true;
+    if (item == "paraxial" || item == "best-rms" || item == "none") {
+      if (out.focus)
+        throw Error(fmt::format("compensator '{}': two focus compensators ({} and {})", text,
+                                to_string(*out.focus), item));
+      out.focus = parse_focus_compensator(item);
+    } else if (item == "image-shift") {
+      if (out.image_shift)
+        throw Error(fmt::format("compensator '{}': image-shift given twice", text));
+      out.image_shift = true;
+    } else if (item.rfind("decenter:", 0) == 0) {
+      const std::string spec = item.substr(9);
+      const std::string key = "element=";
+      if (spec.rfind(key, 0) != 0)
+        throw Error(
+            fmt::format("compensator '{}': '{}' must be decenter:element=K (K the group "
+                        "of glasses, as in the rows tedx<K>)",
+                        text, item));
+      const std::string number = spec.substr(key.size());
+      std::size_t used = 0;
+      int k = 0;
+      try {
+        k = std::stoi(number, &used);
+      } catch (const std::exception&) {
+        used = 0;
+      }
+      if (used == 0 || used != number.size() || k < 1)
+        throw Error(
+            fmt::format("compensator '{}': element '{}' must be a group number >= 1 (as "
+                        "in the rows tedx<K>)",
+                        text, number));
+      for (int e : out.decenter_elements)
+        if (e == k)
+          throw Error(fmt::format("compensator '{}': decenter:element={} given twice", text, k));
+      out.decenter_elements.push_back(k);
+    } else {
+      throw Error(fmt::format("unknown compensator '{}' ({})", item, expected));
+    }
+  }
+  if (!any) throw Error(fmt::format("compensator '{}': no compensator ({})", text, expected));
+  return out;
+}
+
+void ToleranceOptions::apply(const CompensatorList& list) {
+  if (list.focus) compensator = *list.focus;
+  image_shift = list.image_shift;
+  decenter_compensators = list.decenter_elements;
+}
+
+std::string ToleranceOptions::compensators_text() const {
+  std::string out = fmt::format("{} focus", to_string(compensator));
+  if (image_shift) out += ", image shift";
+  for (int k : decenter_compensators) out += fmt::format(", decenter of group {}", k);
+  return out;
 }
 
 const std::vector<std::string>& tolerance_names() {
@@ -130,6 +216,20 @@ void ToleranceOptions::validate() const {
   if (inverse_drop_um && !(std::isfinite(*inverse_drop_um) && *inverse_drop_um > 0))
     throw Error(fmt::format("inverse_drop_um = {} must be a positive number (um of mean RMS spot)",
                             *inverse_drop_um));
+  if (image_shift && spot_reference == SpotReference::kCentroid)
+    throw Error(
+        "the image-shift compensator changes nothing while each field's spot is taken about its "
+        "own centroid (spot_reference = centroid): set spot_reference = nominal (--spot-reference "
+        "nominal) to measure the spots on the detector, about the nominal image points");
+  for (std::size_t i = 0; i < decenter_compensators.size(); ++i) {
+    if (decenter_compensators[i] < 1)
+      throw Error(fmt::format("compensator decenter:element={} must name a group >= 1",
+                              decenter_compensators[i]));
+    for (std::size_t j = 0; j < i; ++j)
+      if (decenter_compensators[j] == decenter_compensators[i])
+        throw Error(fmt::format("compensator decenter:element={} is given twice",
+                                decenter_compensators[i]));
+  }
 }
 
 ToleranceSettings parse_tolerance_table(std::string_view toml_text,
@@ -221,7 +321,22 @@ ToleranceSettings parse_tolerance_table(std::string_view toml_text,
       } else if (name == "distribution") {
         out.distribution = parse_tolerance_distribution(text());
       } else if (name == "compensator") {
-        out.compensator = parse_focus_compensator(text());
+        // A string ("best-rms", "best-rms, decenter:element=2") or an array of such strings.
+        if (const toml::array* items = value.as_array()) {
+          std::string joined;
+          for (const toml::node& item : *items) {
+            const std::optional<std::string> v = item.value<std::string>();
+            if (!v)
+              throw Error(where, "[tolerance] compensator must be a string or an array of strings");
+            joined += (joined.empty() ? "" : ",") + *v;
+          }
+          out.compensators = parse_compensators(joined);
+        } else {
+          out.compensators = parse_compensators(text());
+        }
+        if (out.compensators->focus) out.compensator = out.compensators->focus;
+      } else if (name == "spot_reference") {
+        out.spot_reference = parse_spot_reference(text());
       } else if (name == "max_spot_um") {
         const double v = number();
         if (!(std::isfinite(v) && v > 0))
@@ -237,7 +352,8 @@ ToleranceSettings parse_tolerance_table(std::string_view toml_text,
                                 "glass_thickness_mm, air_thickness_mm, nd, vd_pct, asphere_sag_um, "
                                 "decenter_mm, tilt_arcmin, surface_decenter_mm, "
                                 "surface_tilt_arcmin, inverse_drop_um, "
-                                "distribution, compensator, max_spot_um, trials, seed)",
+                                "distribution, compensator, spot_reference, max_spot_um, trials, "
+                                "seed)",
                                 name));
       }
     } catch (const Error& e) {
@@ -272,7 +388,8 @@ ToleranceOptions tolerance_options_for(const Lens& lens) {
   ToleranceOptions options;
   table.apply_to(options.tolerances);
   if (table.distribution) options.distribution = *table.distribution;
-  if (table.compensator) options.compensator = *table.compensator;
+  if (table.compensators) options.apply(*table.compensators);
+  if (table.spot_reference) options.spot_reference = *table.spot_reference;
   options.max_spot_um = table.max_spot_um;
   if (table.inverse_drop_um) options.inverse_drop_um = table.inverse_drop_um;
   if (table.trials) options.trials = *table.trials;

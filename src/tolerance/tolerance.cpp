@@ -2,6 +2,7 @@
 // The maths and conventions are in include/lensopt/tolerance/tolerance.h.
 #include "lensopt/tolerance/tolerance.h"
 
+#include <ceres/ceres.h>
 #include <fmt/format.h>
 #include <omp.h>
 
@@ -9,6 +10,7 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <functional>
 #include <limits>
 #include <mutex>
 
@@ -75,6 +77,107 @@ double minimize_convex(F&& f, double h, double tolerance) {
   const double x = 0.5 * (a + b);
   // Never worse than the starting plane (tau = 0), e.g. for a function flat to rounding.
   return f(x) <= f(0.0) ? x : 0.0;
+}
+
+// One field's spot through focus (tolerance.h, "Compensators beyond focus"), from its moments:
+// about its centroid S^2(t) = a + 2 b t + c t^2, the centroid p + t q in the image frame (mm).
+struct FieldThroughFocus {
+  double a = 0, b = 0, c = 0;
+  double px = 0, py = 0, qx = 0, qy = 0;
+};
+
+FieldThroughFocus field_through_focus(const TraceSystem<double>& sys, int h,
+                                      const ThroughFocusSpot& f) {
+  FieldThroughFocus out;
+  if (f.count() == 0 || !(f.spot.weight_sum > 0.0)) return out;
+  // The quadratic's coefficients from three values (exact up to rounding: it is a quadratic).
+  out.a = f.variance(0.0);
+  const double plus = f.variance(1.0), minus = f.variance(-1.0);
+  out.b = 0.25 * (plus - minus);
+  out.c = 0.5 * (plus + minus) - out.a;
+  // The centroid in the field's frame, (u, v) + t (du, dv), then turned into the image frame.
+  const double inv = 1.0 / f.spot.weight_sum;
+  const double u = f.spot.centroid_x();
+  const double du = f.spot.full_pupil ? f.sum_sx * inv : 0.0;
+  const double v = f.centroid(0.0);
+  const double dv = f.sy0 + f.sum_ds * inv;
+  sys.field_to_lens(h, u, v, out.px, out.py);
+  sys.field_to_lens(h, du, dv, out.qx, out.qy);
+  return out;
+}
+
+// The residuals of the image-shift solve: r_h = sqrt(w_h S_h), S_h^2 = a + 2 b t + c t^2 +
+// |p + t q - n - s|^2 (w_h = phi_h / sum phi), so sum r_h^2 is the mean RMS spot (mm).
+struct ImageShiftResidual {
+  const std::vector<FieldThroughFocus>* lines;
+  const std::vector<double>* nominal_x;
+  const std::vector<double>* nominal_y;
+  const std::vector<double>* weights;
+  template <typename T>
+  bool operator()(const T* shift, const T* tau, T* residuals) const {
+    using std::sqrt;
+    const T& t = tau[0];
+    for (std::size_t h = 0; h < lines->size(); ++h) {
+      const FieldThroughFocus& f = (*lines)[h];
+      const T dx = K<T>(f.px - (*nominal_x)[h]) + t * K<T>(f.qx) - shift[0];
+      const T dy = K<T>(f.py - (*nominal_y)[h]) + t * K<T>(f.qy) - shift[1];
+      T v = K<T>(f.a) + t * (K<T>(2.0 * f.b) + t * K<T>(f.c)) + dx * dx + dy * dy;
+      // S_h > 0 for any real spot; a point image would make sqrt(sqrt) singular at 0.
+      if (!(v > K<T>(1e-30))) v = K<T>(1e-30);
+      residuals[h] = K<T>(std::sqrt((*weights)[h])) * sqrt(sqrt(v));
+    }
+    return true;
+  }
+};
+
+struct ImageShift {
+  double x_mm = 0, y_mm = 0, tau = 0;
+};
+
+// The image shift (and, with the best-rms focus, the focus shift tau) minimizing the mean RMS
+// spot about the shifted nominal image points: Levenberg-Marquardt on ImageShiftResidual from
+// the closed-form shift of the centroids s_0 = sum_h w_h (p_h - n_h) (tau = 0); the result is
+// never worse than that start.
+ImageShift solve_image_shift(const std::vector<FieldThroughFocus>& lines,
+                             const std::vector<double>& nominal_x,
+                             const std::vector<double>& nominal_y,
+                             const std::vector<double>& weights, bool solve_focus) {
+  ImageShift start;
+  for (std::size_t h = 0; h < lines.size(); ++h) {
+    start.x_mm += weights[h] * (lines[h].px - nominal_x[h]);
+    start.y_mm += weights[h] * (lines[h].py - nominal_y[h]);
+  }
+  double shift[2] = {start.x_mm, start.y_mm};
+  double tau[1] = {0.0};
+  const ImageShiftResidual functor{&lines, &nominal_x, &nominal_y, &weights};
+  auto cost = [&](const double* s, const double* t) {
+    std::vector<double> r(lines.size());
+    functor(s, t, r.data());
+    double sum = 0.0;
+    for (double v : r) sum += v * v;
+    return sum;
+  };
+  const double start_cost = cost(shift, tau);
+  ceres::Problem problem;
+  problem.AddResidualBlock(
+      new ceres::AutoDiffCostFunction<ImageShiftResidual, ceres::DYNAMIC, 2, 1>(
+          new ImageShiftResidual(functor), static_cast<int>(lines.size())),
+      nullptr, shift, tau);
+  if (!solve_focus) problem.SetParameterBlockConstant(tau);
+  ceres::Solver::Options options;
+  options.linear_solver_type = ceres::DENSE_QR;
+  options.max_num_iterations = 200;
+  options.function_tolerance = 1e-16;
+  options.gradient_tolerance = 1e-16;
+  options.parameter_tolerance = 1e-15;
+  options.num_threads = 1;
+  options.logging_type = ceres::SILENT;
+  ceres::Solver::Summary summary;
+  ceres::Solve(options, &problem, &summary);
+  if (!(std::isfinite(shift[0]) && std::isfinite(shift[1]) && std::isfinite(tau[0])) ||
+      !(cost(shift, tau) <= start_cost))
+    return start;
+  return {shift[0], shift[1], tau[0]};
 }
 
 std::string glass_label(const Material& m) {
@@ -342,6 +445,18 @@ struct ToleranceModel::Impl {
   // already negative in the nominal, such as a stop at a curved vertex, is not checked).
   std::vector<double> gap_height_mm;
   std::vector<char> gap_checked;
+  // Compensators beyond focus (header): per decentred group its tedx/tedy parameter indices;
+  // the nominal image points q_h (image frame, mm; spot_reference nominal, once the nominal is
+  // traced).
+  std::vector<int> comp_dx, comp_dy;
+  std::vector<double> nominal_x_mm, nominal_y_mm;
+
+  // Traces the nominal with `perturbations` applied and the decentred groups moved further by
+  // `decenters` (2 per decenter compensator, x and y; null: none), compensated in focus and
+  // image shift (the evaluation of ToleranceModel::evaluate without the decenter solve).
+  TrialResult trace(const std::vector<double>& perturbations, const double* decenters) const;
+  // The nominal image points (after the rest is set up).
+  void finish_setup();
 
   // Axial distance from surface k to k+1 at height h: t_k + sag_{k+1}(h) - sag_k(h), the
   // profile's sag c h^2 / (1 + q) + a2 h^2 + ... + a16 h^16 (lens/profile_sag.h) with q clamped
@@ -359,6 +474,16 @@ struct ToleranceModel::Impl {
       return profile_sag_at_q(c, a, rho, q);
     };
     return tl.thickness_mm[k] + sag(k + 1) - sag(k);
+  }
+
+  // Moves surface j alone (restore_frame: the surfaces after it stay): adds `value` to slot
+  // `slot` of its placement (0, 1: decenter x, y in mm; 2, 3: tilt about x, y in deg). The one
+  // place where element (TEDX..TETY) and surface (TSDX..TSTY) perturbations and the decenter
+  // compensators change a placement; the nominal's placement of such a surface is zero.
+  static void move_surface(TraceLens<double>& tl, int j, int slot, double value) {
+    tl.geometry.placement[static_cast<std::size_t>(j) * 5 + static_cast<std::size_t>(slot)] +=
+        value;
+    tl.geometry.flags[static_cast<std::size_t>(j)] |= kPlacementMoved | kPlacementRestore;
   }
 
   TraceLens<double> apply(const std::vector<double>& perturbations) const {
@@ -400,44 +525,38 @@ struct ToleranceModel::Impl {
           const double theta = d / 60.0 * kDegToRad;  // tilts: arcmin
           double z = 0.0;  // vertex of surface j behind the element's first one
           for (int j = p.surface; j <= p.last_surface; ++j) {
-            double* v = tl.geometry.placement.data() + static_cast<std::size_t>(j) * 5;
             switch (p.kind) {
               case Kind::kDecenterX:
-                v[0] += d;
+                move_surface(tl, j, 0, d);
                 break;
               case Kind::kDecenterY:
-                v[1] += d;
+                move_surface(tl, j, 1, d);
                 break;
               case Kind::kTiltX:  // Rx(theta) takes (0, 0, z) to (0, -z sin theta, z cos theta)
-                v[1] += -z * std::sin(theta);
-                v[2] += d / 60.0;
+                move_surface(tl, j, 1, -z * std::sin(theta));
+                move_surface(tl, j, 2, d / 60.0);
                 break;
               default:  // kTiltY: Ry(theta) takes (0, 0, z) to (z sin theta, 0, z cos theta)
-                v[0] += z * std::sin(theta);
-                v[3] += d / 60.0;
+                move_surface(tl, j, 0, z * std::sin(theta));
+                move_surface(tl, j, 3, d / 60.0);
                 break;
             }
-            tl.geometry.flags[j] |= kPlacementMoved | kPlacementRestore;
             z += nominal.thickness_mm[j];
           }
           break;
         }
         case Kind::kSurfaceDecenterX:
-        case Kind::kSurfaceDecenterY:
-        case Kind::kSurfaceTiltX:
-        case Kind::kSurfaceTiltY: {
-          if (d == 0.0) break;
-          // The surface alone about its vertex; the ones after it stay (restore_frame). Its
-          // nominal placement is zero (add_surface_placement_parameters).
-          double* v = tl.geometry.placement.data() + static_cast<std::size_t>(p.surface) * 5;
-          const int slot = p.kind == Kind::kSurfaceDecenterX   ? 0
-                           : p.kind == Kind::kSurfaceDecenterY ? 1
-                           : p.kind == Kind::kSurfaceTiltX     ? 2
-                                                               : 3;
-          v[slot] += slot < 2 ? d : d / 60.0;  // tilts: arcmin -> deg
-          tl.geometry.flags[p.surface] |= kPlacementMoved | kPlacementRestore;
+          if (d != 0.0) move_surface(tl, p.surface, 0, d);
           break;
-        }
+        case Kind::kSurfaceDecenterY:
+          if (d != 0.0) move_surface(tl, p.surface, 1, d);
+          break;
+        case Kind::kSurfaceTiltX:  // about the surface's vertex, arcmin -> deg
+          if (d != 0.0) move_surface(tl, p.surface, 2, d / 60.0);
+          break;
+        case Kind::kSurfaceTiltY:
+          if (d != 0.0) move_surface(tl, p.surface, 3, d / 60.0);
+          break;
       }
     }
     return tl;
@@ -472,6 +591,32 @@ ToleranceModel::ToleranceModel(const Lens& lens, const ToleranceOptions& options
                                           p.kind == ToleranceParameter::Kind::kSurfaceDecenterY ||
                                           p.kind == ToleranceParameter::Kind::kSurfaceTiltX ||
                                           p.kind == ToleranceParameter::Kind::kSurfaceTiltY));
+  // Decenter compensators: the groups' tedx/tedy parameters (present, with limit 0 when the
+  // decenter tolerance is 0, on every lens without mirrors or placements of its own).
+  for (int k : options.decenter_compensators) {
+    int dx = -1, dy = -1, groups = 0;
+    for (std::size_t i = 0; i < m.parameters.size(); ++i) {
+      const ToleranceParameter& p = m.parameters[i];
+      if (p.kind == ToleranceParameter::Kind::kDecenterX) ++groups;
+      if (p.kind == ToleranceParameter::Kind::kDecenterX && p.name == fmt::format("tedx{}", k))
+        dx = static_cast<int>(i);
+      if (p.kind == ToleranceParameter::Kind::kDecenterY && p.name == fmt::format("tedy{}", k))
+        dy = static_cast<int>(i);
+    }
+    if (dx < 0 || dy < 0)
+      throw Error(SourceLocation{lens.source_path.empty() ? lens.name : lens.source_path},
+                  groups == 0
+                      ? fmt::format("compensator decenter:element={}: the lens has no groups of "
+                                    "glasses to decenter (a lens with mirrors or placements of "
+                                    "its own has no element decenters)",
+                                    k)
+                      : fmt::format("compensator decenter:element={}: the lens has {} group{} of "
+                                    "glasses (rows tedx1..tedx{})",
+                                    k, groups, groups == 1 ? "" : "s", groups));
+    m.comp_dx.push_back(dx);
+    m.comp_dy.push_back(dy);
+  }
+  placed = placed || !m.comp_dx.empty();
   if (placed && !m.nominal.geometry.placed()) {
     const std::size_t k_count = static_cast<std::size_t>(m.nominal.surface_count());
     m.nominal.geometry.placement.assign(k_count * 5, 0.0);
@@ -497,14 +642,29 @@ ToleranceModel::ToleranceModel(const Lens& lens, const ToleranceOptions& options
     to.threads = 1;
     m.as_written = true;
     m.written = lens_setup(m.scaled_lens, to);
+    // With decenters or tilts toleranced the trials are not rotationally symmetric: a field on
+    // -y is then not the mirror of the one on +y, and is traced where it is written (as
+    // specs_setup does for a lens with placements of its own).
+    if (placed) {
+      const SystemSetup fields = specs_setup(m.scaled_lens.specs, to, false);
+      m.written.field_values = fields.field_values;
+      m.written.field_weights = fields.field_weights;
+      m.written.vignetting = fields.vignetting;
+      m.written.field_azimuth_deg = fields.field_azimuth_deg;
+    }
     // The nominal's chief-ray angles (deg) label the fields.
-    m.fields_deg = prepare_lens_system(m.scaled_lens, to).fields_deg;
+    const TraceSystem<double> labels =
+        prepare_system(make_trace_lens(m.scaled_lens), m.written, to);
+    if (!labels.field_solve_failure.empty())
+      throw Error(SourceLocation{lens.source_path.empty() ? lens.name : lens.source_path},
+                  labels.field_solve_failure);
+    m.fields_deg = labels.fields_deg;
   }
-  m.rays =
-      static_cast<int>(paper_pupil_samples(options.rings).size()) *
-      ((m.as_written && needs_full_pupil(m.written.vignetting)) || m.scaled_lens.breaks_symmetry()
-           ? 2
-           : 1);
+  m.rays = static_cast<int>(paper_pupil_samples(options.rings).size()) *
+           ((m.as_written && needs_full_pupil(m.written.vignetting)) ||
+                    m.scaled_lens.breaks_symmetry() || m.nominal.geometry.placed()
+                ? 2
+                : 1);
 
   // Clear semi-apertures (clear_semi_apertures_mm). An element's rim is at the larger of its
   // two surfaces' apertures; two surfaces across air meet first at the smaller one.
@@ -528,9 +688,22 @@ ToleranceModel::ToleranceModel(const Lens& lens, const ToleranceOptions& options
                            ? 1
                            : 0;
   }
+  m.finish_setup();
 }
 
 ToleranceModel::~ToleranceModel() = default;
+
+void ToleranceModel::Impl::finish_setup() {
+  Impl& m = *this;
+  // The nominal image points q_h: the nominal's centroids on its compensated image plane.
+  if (m.options.spot_reference == SpotReference::kNominal) {
+    const TrialResult nominal = m.trace(std::vector<double>(m.parameters.size(), 0.0), nullptr);
+    if (nominal.valid) {
+      m.nominal_x_mm = nominal.centroid_x_mm;
+      m.nominal_y_mm = nominal.centroid_y_mm;
+    }
+  }
+}
 
 const std::vector<ToleranceParameter>& ToleranceModel::parameters() const {
   return impl_->parameters;
@@ -549,6 +722,15 @@ int ToleranceModel::wavelength_count() const {
 }
 int ToleranceModel::rays_per_field_wavelength() const {
   return impl_->rays;
+}
+std::vector<std::string> ToleranceModel::compensation_names() const {
+  std::vector<std::string> out;
+  if (impl_->options.image_shift) out = {"image_shift_x_mm", "image_shift_y_mm"};
+  for (int k : impl_->options.decenter_compensators) {
+    out.push_back(fmt::format("comp_dx{}_mm", k));
+    out.push_back(fmt::format("comp_dy{}_mm", k));
+  }
+  return out;
 }
 
 TraceLens<double> ToleranceModel::perturbed_trace_lens(
@@ -649,17 +831,38 @@ std::vector<double> ToleranceModel::draw(int index) const {
   return out;
 }
 
-TrialResult ToleranceModel::evaluate(const std::vector<double>& perturbations) const {
-  const Impl& m = *impl_;
-  if (perturbations.size() != m.parameters.size())
-    throw Error(fmt::format("{} perturbations for {} toleranced parameters", perturbations.size(),
-                            m.parameters.size()));
+TrialResult ToleranceModel::Impl::trace(const std::vector<double>& perturbations,
+                                        const double* decenters) const {
+  const Impl& m = *this;
   TrialResult r;
   r.perturbations = perturbations;
   const int field_count = static_cast<int>(m.fields_deg.size());
   r.rms_spot_um.assign(field_count, 0.0);
+  r.centroid_x_mm.assign(field_count, 0.0);
+  r.centroid_y_mm.assign(field_count, 0.0);
+  const bool nominal_reference =
+      m.options.spot_reference == SpotReference::kNominal && !m.nominal_x_mm.empty();
+  // The image shift moves nothing while the spots are about their centroids (and the nominal,
+  // which defines q_h, is traced before q_h exists).
+  const bool image_shift = m.options.image_shift && nominal_reference;
+  if (m.options.image_shift) r.compensation.assign(2, 0.0);
 
-  TraceLens<double> tl = m.apply(perturbations);
+  TraceLens<double> tl;
+  if (decenters != nullptr && !m.comp_dx.empty()) {
+    // The compensators' decenters add to the group's drawn ones (the same placement slots).
+    std::vector<double> moved = perturbations;
+    for (std::size_t i = 0; i < m.comp_dx.size(); ++i) {
+      moved[static_cast<std::size_t>(m.comp_dx[i])] += decenters[2 * i];
+      moved[static_cast<std::size_t>(m.comp_dy[i])] += decenters[2 * i + 1];
+      r.compensation.push_back(decenters[2 * i]);
+      r.compensation.push_back(decenters[2 * i + 1]);
+    }
+    tl = m.apply(moved);
+  } else {
+    for (std::size_t i = 0; i < m.comp_dx.size(); ++i)
+      r.compensation.insert(r.compensation.end(), 2, 0.0);
+    tl = m.apply(perturbations);
+  }
   const int last = tl.surface_count() - 1;
   // Elements that intersect (a checked edge gap below 0, or a centre thickness below 0).
   r.min_edge_gap_mm = std::numeric_limits<double>::infinity();
@@ -701,6 +904,9 @@ TrialResult ToleranceModel::evaluate(const std::vector<double>& perturbations) c
     setup.field_values = m.written.field_values;
     setup.field_weights = m.written.field_weights;
     setup.vignetting = m.written.vignetting;
+    // Each field where it is written: a field on x (or on -y of a lens without rotational
+    // symmetry) keeps its azimuth, so a trial's decenters and tilts act on it as they would.
+    setup.field_azimuth_deg = m.written.field_azimuth_deg;
     setup.object_distance_mm = m.written.object_distance_mm;
   }
   TraceSystem<double> sys = prepare_system(tl, setup, to);
@@ -724,39 +930,155 @@ TrialResult ToleranceModel::evaluate(const std::vector<double>& perturbations) c
     if (moments[h].count() == 0) r.valid = false;
   }
 
-  double tau = 0.0;
-  if (m.options.compensator == FocusCompensator::kBestRms && r.valid) {
+  // Each field's spot through focus in the image frame: about its centroid S_h^2(t) = a + 2 b t
+  // + c t^2 (ThroughFocusSpot), the centroid p + t q (field frame turned into the image frame).
+  std::vector<FieldThroughFocus> lines(field_count);
+  for (int h = 0; h < field_count && r.valid; ++h)
+    lines[h] = field_through_focus(sys, h, moments[h]);
+  const bool best_rms = m.options.compensator == FocusCompensator::kBestRms;
+  double tau = 0.0, shift_x = 0.0, shift_y = 0.0;
+  // S_h^2 at focus shift t and image shift s, about the centroid or the nominal image point.
+  auto field_s2 = [&](int h, double t, double sx, double sy) {
+    const FieldThroughFocus& f = lines[h];
+    double v = f.a + t * (2.0 * f.b + t * f.c);
+    if (nominal_reference) {
+      const double dx = f.px + t * f.qx - m.nominal_x_mm[h] - sx;
+      const double dy = f.py + t * f.qy - m.nominal_y_mm[h] - sy;
+      v += dx * dx + dy * dy;
+    }
+    return v;
+  };
+  auto field_rms = [&](int h, double t, double sx, double sy) {
+    if (!nominal_reference) return moments[h].rms(t);  // the same bits as before compensators
+    const double v = field_s2(h, t, sx, sy);
+    return v > 0.0 ? std::sqrt(v) : 0.0;
+  };
+  if (best_rms && r.valid && !image_shift) {
     auto mean_spot = [&](double t) {
       double sum = 0.0;
       for (int h = 0; h < field_count; ++h)
-        sum += spot_w.field[h] == 1.0 ? moments[h].rms(t) : spot_w.field[h] * moments[h].rms(t);
+        sum += spot_w.field[h] == 1.0 ? field_rms(h, t, 0.0, 0.0)
+                                      : spot_w.field[h] * field_rms(h, t, 0.0, 0.0);
       return sum / spot_w.field_sum;
     };
     // Start with a bracket of +-2 % of the image distance (or 0.1 mm): focus shifts from
     // manufacturing errors are far smaller; the bracket grows if needed.
     const double h = std::max(0.1, 0.02 * std::abs(t_ref));
     tau = minimize_convex(mean_spot, h, 1e-9 * std::max(1.0, std::abs(t_ref)));
+  }
+  if (image_shift && r.valid) {
+    std::vector<double> weights(field_count);
+    for (int h = 0; h < field_count; ++h) weights[h] = spot_w.field[h] / spot_w.field_sum;
+    const ImageShift s =
+        solve_image_shift(lines, m.nominal_x_mm, m.nominal_y_mm, weights, best_rms);
+    tau = s.tau;
+    shift_x = s.x_mm;
+    shift_y = s.y_mm;
+    r.compensation[0] = shift_x;
+    r.compensation[1] = shift_y;
+  }
+  if (tau != 0.0) {
     sys.lens.thickness_mm[last] = t_ref + tau;
     r.image_distance_mm = t_ref + tau;
   }
 
   double sum = 0.0;
   for (int h = 0; h < field_count; ++h) {
-    r.rms_spot_um[h] = moments[h].rms(tau) * 1000.0;
+    r.rms_spot_um[h] = field_rms(h, tau, shift_x, shift_y) * 1000.0;
     sum += spot_w.field[h] == 1.0 ? r.rms_spot_um[h] : spot_w.field[h] * r.rms_spot_um[h];
+    r.centroid_x_mm[h] = lines[h].px + tau * lines[h].qx;
+    r.centroid_y_mm[h] = lines[h].py + tau * lines[h].qy;
   }
   r.mean_spot_um = sum / spot_w.field_sum;
-  // Distortion as analyze measures it (analysis/field_maps.h), on the refocused image plane.
+  // Distortion as analyze measures it (analysis/field_maps.h), on the refocused image plane (and
+  // about the shifted image: the shift turned into the field's frame).
   const std::vector<double> y_ref = reference_heights(sys);
   for (int h = 0; h < field_count; ++h) {
     if (moments[h].count() == 0) continue;
-    const double d = 100.0 * field_distortion(moments[h].centroid(tau), y_ref[h], y_ref.back());
+    double centroid = moments[h].centroid(tau);
+    if (shift_x != 0.0 || shift_y != 0.0) {
+      const double a = sys.field_azimuth(h) * kDegToRad;
+      centroid -= a == 0.0 ? shift_y : shift_x * std::sin(a) + shift_y * std::cos(a);
+    }
+    const double d = 100.0 * field_distortion(centroid, y_ref[h], y_ref.back());
     r.max_abs_distortion_pct = std::max(r.max_abs_distortion_pct, std::abs(d));
   }
   if (!(std::isfinite(r.mean_spot_um) && std::isfinite(r.max_abs_distortion_pct) &&
         std::isfinite(r.image_distance_mm)))
     r.valid = false;
   return r;
+}
+
+namespace {
+
+// The merit of the decenter compensators (tolerance.h): the trial's mean RMS spot (um) with the
+// groups moved by x (2 per group, mm), each evaluation a full compensated trace, and its
+// gradient by central differences of step kDecenterStep.
+class DecenterMerit final : public ceres::FirstOrderFunction {
+ public:
+  static constexpr double kDecenterStep = 1e-6;  // mm
+  DecenterMerit(const std::function<bool(const double*, double*)>& merit, int count)
+      : merit_(merit), count_(count) {}
+  bool Evaluate(const double* x, double* cost, double* gradient) const override {
+    if (!merit_(x, cost)) return false;
+    if (gradient == nullptr) return true;
+    std::vector<double> at(x, x + count_);
+    for (int j = 0; j < count_; ++j) {
+      double plus = 0.0, minus = 0.0;
+      at[j] = x[j] + kDecenterStep;
+      if (!merit_(at.data(), &plus)) return false;
+      at[j] = x[j] - kDecenterStep;
+      if (!merit_(at.data(), &minus)) return false;
+      at[j] = x[j];
+      gradient[j] = (plus - minus) / (2.0 * kDecenterStep);
+    }
+    return true;
+  }
+  int NumParameters() const override { return count_; }
+
+ private:
+  const std::function<bool(const double*, double*)>& merit_;
+  int count_;
+};
+
+}  // namespace
+
+TrialResult ToleranceModel::evaluate(const std::vector<double>& perturbations) const {
+  const Impl& m = *impl_;
+  if (perturbations.size() != m.parameters.size())
+    throw Error(fmt::format("{} perturbations for {} toleranced parameters", perturbations.size(),
+                            m.parameters.size()));
+  if (m.comp_dx.empty()) return m.trace(perturbations, nullptr);
+  // Decenter compensators: the mean spot minimized over the groups' decenters from (0, 0) by
+  // Ceres' line-search BFGS on central differences; the trial ends no worse than uncompensated.
+  // (As least squares over the fields, r_h = sqrt(phi_h S_h), Levenberg-Marquardt stalls: the
+  // residuals stay large at the minimum, whose curvature is in the r_h's own second
+  // derivatives, which Gauss-Newton leaves out; it moved a 0.02 mm decenter back by 0.0001.)
+  const int count = static_cast<int>(2 * m.comp_dx.size());
+  std::vector<double> moves(static_cast<std::size_t>(count), 0.0);
+  const TrialResult start = m.trace(perturbations, moves.data());
+  if (!start.valid) return start;
+  const std::function<bool(const double*, double*)> merit = [&](const double* d, double* cost) {
+    const TrialResult r = m.trace(perturbations, d);
+    if (!r.valid || !std::isfinite(r.mean_spot_um)) return false;
+    *cost = r.mean_spot_um;
+    return true;
+  };
+  ceres::GradientProblem problem(new DecenterMerit(merit, count));
+  ceres::GradientProblemSolver::Options options;
+  options.line_search_direction_type = ceres::BFGS;
+  options.max_num_iterations = 100;
+  options.function_tolerance = 1e-15;
+  options.gradient_tolerance = 1e-13;
+  options.parameter_tolerance = 1e-13;
+  options.logging_type = ceres::SILENT;
+  ceres::GradientProblemSolver::Summary summary;
+  ceres::Solve(options, problem, moves.data(), &summary);
+  for (double v : moves)
+    if (!std::isfinite(v)) return start;
+  TrialResult best = m.trace(perturbations, moves.data());
+  if (!best.valid || !(best.mean_spot_um <= start.mean_spot_um)) return start;
+  return best;
 }
 
 SpotStatistics spot_statistics(std::vector<double> values) {
@@ -803,6 +1125,7 @@ ToleranceReport run_tolerance(const Lens& lens, const ToleranceOptions& options)
   report.rays_per_field_wavelength = model.rays_per_field_wavelength();
   report.fields_deg = model.fields_deg();
   report.parameters = model.parameters();
+  report.compensation_names = model.compensation_names();
   const std::size_t parameter_count = report.parameters.size();
   report.nominal = model.evaluate(std::vector<double>(parameter_count, 0.0));
   if (!report.nominal.valid)

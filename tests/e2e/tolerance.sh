@@ -44,7 +44,9 @@ for k in ("nominal_um", "mean_um", "std_um", "p50_um", "p90_um", "p95_um", "p99_
 assert s["p50_um"] <= s["p90_um"] <= s["p95_um"] <= s["p99_um"] <= s["worst_um"]
 assert 0.0 <= s["yield"] <= 1.0
 sens = j["sensitivity"]
-assert len(sens) == 31  # 7 curvatures, 4 thicknesses, 4 nd, 4 vd + 3 groups x (tedx, tedy, tetx, tety)
+# 7 curvatures, 4 thicknesses, 4 nd, 4 vd + 3 groups x (tedx, tedy, tetx, tety) + the 7 surfaces'
+# wedges (tstx, tsty; on by default, docs/tolerance.md)
+assert len(sens) == 45
 assert all(sens[i]["score_um"] >= sens[i + 1]["score_um"] for i in range(len(sens) - 1))
 EOF
 else

@@ -237,6 +237,7 @@ TEST_CASE("tolerance: the Tessar's sensitivity ranking is physically sensible") 
   // test_tolerance_placement.cpp.
   o.tolerances.decenter_mm = 0.0;
   o.tolerances.tilt_arcmin = 0.0;
+  o.tolerances.surface_tilt_arcmin = 0.0;
   const ToleranceReport r = run_tolerance(lens, o);
   REQUIRE(r.sensitivity.size() == 19);  // 7 curvatures, 4 glass thicknesses, 4 nd, 4 vd
   std::string ranking;

@@ -72,13 +72,42 @@ RayBundle<double> axial_ray(const TraceLens<double>& tl) {
 
 }  // namespace
 
-TEST_CASE("tolerance surface: TSDX/TSDY/TSTX/TSTY per surface, off by default, [tolerance] keys") {
+TEST_CASE(
+    "tolerance surface: TSDX/TSDY/TSTX/TSTY per surface, tilt on by default, [tolerance] "
+    "keys") {
   const Lens tessar = read_lens(test::source_dir() / "lenses" / "tessar.toml");
+  // The defaults (docs/tolerance.md): each surface's tilt (its wedge) on at 1 arcmin, its
+  // decenter off (a sphere decentred by d is the sphere tilted by d / R).
   const Tolerances defaults;
   CHECK(defaults.surface_decenter_mm == 0.0);
-  CHECK(defaults.surface_tilt_arcmin == 0.0);
-  for (const ToleranceParameter& p : tolerance_parameters(tessar, defaults))
-    CHECK(p.kind != ToleranceParameter::Kind::kSurfaceTiltX);
+  CHECK(defaults.surface_tilt_arcmin == 1.0);
+  int default_tilts = 0;
+  for (const ToleranceParameter& p : tolerance_parameters(tessar, defaults)) {
+    CHECK(p.kind != ToleranceParameter::Kind::kSurfaceDecenterX);
+    CHECK(p.kind != ToleranceParameter::Kind::kSurfaceDecenterY);
+    if (p.kind == ToleranceParameter::Kind::kSurfaceTiltX) ++default_tilts;
+  }
+  CHECK(default_tilts == 7);
+  // With both at 0 the parameter list is the one of before (no surface rows), and the draws of
+  // the parameters before the surface rows do not change with them (each trial draws in order).
+  Tolerances off = defaults;
+  off.surface_tilt_arcmin = 0.0;
+  const std::vector<ToleranceParameter> before = tolerance_parameters(tessar, off);
+  for (const ToleranceParameter& p : before)
+    CHECK(p.kind < ToleranceParameter::Kind::kSurfaceDecenterX);
+  {
+    ToleranceOptions a, b;
+    a.tolerances = off;
+    a.trials = 1;
+    b.trials = 1;
+    const ToleranceModel model_off(tessar, a), model_on(tessar, b);
+    REQUIRE(model_on.parameters().size() == before.size() + 14);
+    for (int trial : {0, 7, 123}) {
+      const std::vector<double> d_off = model_off.draw(trial), d_on = model_on.draw(trial);
+      CHECK(std::vector<double>(d_on.begin(), d_on.begin() + static_cast<long>(d_off.size())) ==
+            d_off);
+    }
+  }
   Tolerances t = defaults;
   t.surface_decenter_mm = 0.01;
   t.surface_tilt_arcmin = 1.0;

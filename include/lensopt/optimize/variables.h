@@ -234,6 +234,18 @@ class LensParameterization {
       lens.thickness_mm[last] = x[defocus_index_];  // ablation: s_{K-1} = s'_{K-1} f
     }
     lens.scale_lengths(K<T>(focal_length_mm_));
+    // The 3D placements as the structure gives them (mm), at the spec scale as prepare_system
+    // scales the structure (geometry_scale_): scale_lengths above multiplied the structure's
+    // decenters by f as if they were normalized (f = 1) lengths, which moved a 0.2 mm decenter
+    // of a 50 mm lens to 10 mm.
+    if (!lens.geometry.placement.empty()) {
+      lens.geometry = make_trace_geometry<T>(structure_);
+      if (geometry_scale_ != 1.0)
+        for (std::size_t i = 0; i < lens.geometry.placement.size(); i += 5) {
+          lens.geometry.placement[i] = lens.geometry.placement[i] * K<T>(geometry_scale_);
+          lens.geometry.placement[i + 1] = lens.geometry.placement[i + 1] * K<T>(geometry_scale_);
+        }
+    }
     return lens;
   }
 
@@ -272,6 +284,9 @@ class LensParameterization {
   // Catalog-model corrections per catalog glass j and traced wavelength (empty: abbe model).
   std::vector<std::vector<double>> glass_offsets_;
   double focal_length_mm_ = 1.0;
+  // The structure's scale to the spec focal length (prepare_system's, 1 as written): its
+  // placements' decenters are traced times this.
+  double geometry_scale_ = 1.0;
   int defocus_index_ = -1;
   // Profiles of the normalized (f = 1) structure: kind per surface, k and a'_{2i} constants.
   bool has_profiles_ = false;

@@ -25,9 +25,11 @@
 //               surface of an element is its wedge, a tilted mirror turns the beam by twice the
 //               tilt. Every surface that carries no placement of its own (not the stop, not a
 //               coordinate break, not a flat surface's decenter, which moves nothing) gets them;
-//               both are 0 (off) by default, since the element decenters and tilts above
-//               already hold the mounting errors: set them to tolerance wedge and centring of
-//               single surfaces (OpticStudio's TSDX/TSTX; e.g. 1 arcmin of wedge).
+//               defaults: tilt 1 arcmin (on: each surface's wedge, a fabrication error
+//               of the element that its mounting, the element tilt above, does not hold),
+//               decenter 0 (off: a sphere decentred by d is the sphere tilted by d / R about
+//               its vertex, the same wedge again; turn it on for aspheres, whose decenter is an
+//               error of its own). docs/tolerance.md gives the reasons.
 //   profile     of every non-spherical surface (conic or even asphere, lens/lens.h), each term on
 //               its own, as a sag error at the surface's clear semi-aperture h (below):
 //                 k' = k + L_k u,   L_k = L / |dS/dk(h)|,  dS/dk = c^3 h^4 / (2 q (1 + q)^2),
@@ -52,6 +54,39 @@
 //             is an exact quadratic and mean_h S_h(tau) is convex; a golden-section search
 //             (bracket grown from +-2 % of the image distance, to 1e-9 relative) finds tau;
 //   none      t_{K-1} = t0_{K-1}.
+// Compensators beyond focus (ToleranceOptions::image_shift, decenter_compensators; OpticStudio's
+// compensators, CODE V's), solved per trial after the focus above, each a small least squares:
+//   image shift  the image plane moves laterally by s = (s_x, s_y) (mm, image frame), the
+//               detector re-registered on the image. It matters only for a merit that is
+//               measured on the detector, spot_reference = nominal: each field's RMS radius is
+//               then taken about q_h + s, q_h the nominal lens's polychromatic centroid of
+//               field h on its own (compensated) image plane (the point the detector expects
+//               the image of that field at), so with c_h the trial's centroid
+//                 S_h^2 = RMS_h^2 + |c_h - q_h - s|^2
+//               (RMS_h about c_h, as in the default spot_reference = centroid). The default
+//               reference takes every field about its own centroid: a displaced image costs
+//               nothing there, field by field, and one common shift changes nothing (the image
+//               shift is refused with it). With the nominal reference a shift removes the part
+//               of the image displacement that all fields share (boresight: a decentred element
+//               moves the whole image), not the part that differs between fields (a change of
+//               distortion, keystone), which stays in the merit. With the best-rms focus, tau
+//               and s are solved together. S_h^2 is a convex quadratic in (tau, s_x, s_y) (the
+//               through-focus moments, a centroid linear in tau), so the mean of the S_h is
+//               convex; Ceres' Levenberg-Marquardt solves residuals r_h = sqrt(phi_h S_h /
+//               sum phi) (sum r_h^2 = the mean RMS itself) from the closed-form shift
+//               s_0 = sum_h phi_h (c_h - q_h) / sum_h phi_h, never ending above it.
+//   decenter     a chosen group of glasses (rows tedx<k>/tedy<k>: `decenter:element=k`)
+//               decentred by (d_x, d_y) (mm) on top of its perturbation, as OpticStudio's TEDX
+//               and TEDY used as compensators: the mean RMS spot minimized over the decenters
+//               by Ceres' line-search BFGS from (0, 0), the gradient by central differences
+//               (1e-6 mm) of full traces of the adjusted trial (ray aiming, and the focus and
+//               image shift solved inside); a trial ends no worse than uncompensated, so the
+//               compensated yield is never below the uncompensated one. (Least squares over the
+//               fields, r_h above, is a large-residual problem: Levenberg-Marquardt stalled.)
+//               The compensated merit of a pure decenter of group k is the compensated merit
+//               of the nominal; with fields on +y only a y decenter is not symmetric (the
+//               merit's slope at the nominal is not 0), so that can lie below the nominal's.
+// The trial's compensator moves are in TrialResult::compensation, the CSV and the JSON.
 // The aperture stop keeps its nominal physical radius: a trial's entrance pupil radius is
 // y_stop0 / A' with A' the perturbed paraxial stop magnification (y_stop = A y_0), so a front
 // group error changes the pupil as it would on the bench. Ray aiming is redone per trial.
@@ -94,12 +129,28 @@ namespace lensopt {
 
 enum class ToleranceDistribution { kUniform, kNormal };
 enum class FocusCompensator { kParaxial, kBestRms, kNone };
+// What each field's RMS spot is taken about (header, "Compensators beyond focus"): its own
+// centroid (default), or the nominal lens's image point of the field (boresight, distortion).
+enum class SpotReference { kCentroid, kNominal };
 
 // "uniform" / "normal"; "paraxial" / "best-rms" / "none". parse_* throw Error naming the value.
 std::string to_string(ToleranceDistribution distribution);
 std::string to_string(FocusCompensator compensator);
 ToleranceDistribution parse_tolerance_distribution(const std::string& text);
 FocusCompensator parse_focus_compensator(const std::string& text);
+std::string to_string(SpotReference reference);  // "centroid" / "nominal"
+SpotReference parse_spot_reference(const std::string& text);
+
+// A list of compensators, as `--compensator` and the [tolerance] table's `compensator` give it:
+// comma-separated items (or a TOML array of them), each a focus compensator (paraxial,
+// best-rms, none; at most one), `image-shift`, or `decenter:element=K` (K >= 1, the group of
+// glasses of rows tedx<K>/tedy<K>; each K once). parse_compensators throws Error naming the item.
+struct CompensatorList {
+  std::optional<FocusCompensator> focus;  // unset: the focus compensator stays as it was
+  bool image_shift = false;
+  std::vector<int> decenter_elements;  // 1-based group numbers, in the order given
+};
+CompensatorList parse_compensators(const std::string& text);
 
 // The manufacturing tolerances (+- limits). Defaults: the paper's (Optimax / Schott standard).
 struct Tolerances {
@@ -112,7 +163,7 @@ struct Tolerances {
   double decenter_mm = 0.02;         // element decenter in x and in y (TEDX, TEDY), mm
   double tilt_arcmin = 1.0;          // element tilt about x and about y (TETX, TETY), arcmin
   double surface_decenter_mm = 0.0;  // surface decenter in x and y (TSDX, TSDY), mm; 0: off
-  double surface_tilt_arcmin = 0.0;  // surface tilt (wedge) about x and y (TSTX, TSTY); 0: off
+  double surface_tilt_arcmin = 1.0;  // surface tilt (wedge) about x and y (TSTX, TSTY); 0: off
 
   // Throws Error naming the first negative or non-finite tolerance.
   void validate() const;
@@ -129,15 +180,18 @@ const std::vector<std::string>& tolerance_names();
 //   [tolerance]
 //   curvature_pct = 0.2, glass_thickness_mm = 0.05, air_thickness_mm = 0.0, nd = 5e-4,
 //   vd_pct = 0.5, asphere_sag_um = 1.0, decenter_mm = 0.02, tilt_arcmin = 1,
-//   surface_decenter_mm = 0, surface_tilt_arcmin = 0, inverse_drop_um = 1,
-//   distribution = "uniform", compensator = "paraxial",
+//   surface_decenter_mm = 0, surface_tilt_arcmin = 1, inverse_drop_um = 1,
+//   distribution = "uniform", compensator = "paraxial" (or a list: "best-rms, image-shift",
+//   ["paraxial", "decenter:element=2"]; parse_compensators), spot_reference = "centroid",
 //   max_spot_um = 20, trials = 10000, seed = 1
 struct ToleranceSettings {
   std::optional<double> curvature_pct, glass_thickness_mm, air_thickness_mm, nd, vd_pct,
       asphere_sag_um, decenter_mm, tilt_arcmin, surface_decenter_mm, surface_tilt_arcmin;
   std::optional<double> inverse_drop_um;
   std::optional<ToleranceDistribution> distribution;
-  std::optional<FocusCompensator> compensator;
+  std::optional<FocusCompensator> compensator;  // the focus compensator the list names
+  std::optional<CompensatorList> compensators;  // the whole `compensator` list
+  std::optional<SpotReference> spot_reference;
   std::optional<double> max_spot_um;
   std::optional<int> trials;
   std::optional<std::uint64_t> seed;
@@ -159,6 +213,11 @@ struct ToleranceOptions {
   Tolerances tolerances;
   ToleranceDistribution distribution = ToleranceDistribution::kUniform;
   FocusCompensator compensator = FocusCompensator::kParaxial;
+  // Compensators beyond focus (header): the lateral image shift, and the decenter of these
+  // groups of glasses (1-based, rows tedx<k>); the spot's reference.
+  bool image_shift = false;
+  std::vector<int> decenter_compensators;
+  SpotReference spot_reference = SpotReference::kCentroid;
   int trials = 10000;
   std::uint64_t seed = 1;
   int jobs = 0;  // threads over trials (0: all cores); each trial runs single-threaded
@@ -177,6 +236,11 @@ struct ToleranceOptions {
   // The same for the sensitivity table (two evaluations per toleranced parameter), which takes
   // minutes on a lens of hundreds of surfaces.
   std::function<void(int done, int total, double elapsed_s)> sensitivity_progress;
+
+  // Sets the compensators a list names (the focus only when it names one).
+  void apply(const CompensatorList& list);
+  // "paraxial focus", "best-rms focus, image shift, decenter of group 2", ...
+  std::string compensators_text() const;
 
   // Throws Error for out-of-range values (names the option).
   void validate() const;
@@ -239,6 +303,12 @@ struct TrialResult {
   bool collision = false;             // elements intersect: a checked edge gap below 0
   double min_edge_gap_mm = 0;         // smallest checked edge gap or centre thickness
   std::vector<double> perturbations;  // per parameter, native units
+  // The compensators' moves beyond focus (ToleranceReport::compensation_names): the image
+  // shift (x, y, mm) and each decentred group's (x, y, mm); empty without such compensators.
+  std::vector<double> compensation;
+  // Per field, the polychromatic centroid in the image frame (mm) on the compensated image
+  // plane (before any image shift), as the nominal image points q_h are taken.
+  std::vector<double> centroid_x_mm, centroid_y_mm;
 };
 
 struct SpotStatistics {
@@ -274,6 +344,7 @@ struct ToleranceReport {
   int rays_per_field_wavelength = 0;
   std::vector<double> fields_deg;
   std::vector<ToleranceParameter> parameters;
+  std::vector<std::string> compensation_names;  // "image_shift_x_mm", "comp_dx2_mm", ...
   TrialResult nominal;
   std::vector<TrialResult> trials;
   SpotStatistics spot;          // mean RMS spot over valid trials, um
@@ -303,6 +374,8 @@ class ToleranceModel {
   std::vector<double> fields_deg() const;
   int wavelength_count() const;
   int rays_per_field_wavelength() const;
+  // The names of TrialResult::compensation's entries.
+  std::vector<std::string> compensation_names() const;
 
   // The perturbations of trial `index` (per parameter, native units), from (seed, index) alone.
   std::vector<double> draw(int index) const;
