@@ -217,6 +217,10 @@ void bind_optimize(py::module_& m) {
               d["weight"] = t.weight;
               d["field"] = t.field > 0 ? py::object(py::int_(t.field)) : py::object(py::none());
               d["default"] = t.is_default;
+              if (t.quantity == TargetQuantity::kMtf) {
+                d["frequency_cpmm"] = t.frequency_cpmm;
+                d["orientation"] = mtf_orientation_name(t.orientation);
+              }
               const bool has_start = i < r.start_targets.rows.size();
               d["start"] = has_start && std::isfinite(r.start_targets.rows[i].value)
                                ? py::object(py::float_(r.start_targets.rows[i].value))

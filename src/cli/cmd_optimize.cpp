@@ -96,6 +96,10 @@ nlohmann::json targets_json(const TargetReport& start, const TargetReport& final
                           {"start_pass", false},
                           {"final", std::isfinite(r.value) ? nlohmann::json(r.value) : nullptr},
                           {"pass", r.pass}};
+    if (t.quantity == TargetQuantity::kMtf) {
+      row["frequency_cpmm"] = t.frequency_cpmm;
+      row["orientation"] = mtf_orientation_name(t.orientation);
+    }
     if (i < start.rows.size()) {
       if (std::isfinite(start.rows[i].value)) row["start"] = start.rows[i].value;
       row["start_pass"] = start.rows[i].pass;
@@ -360,8 +364,10 @@ void setup_optimize(CLI::App& app) {
   sub->add_option("--target", cmd->targets,
                   "a design target, repeatable: NAME=V, NAME<=V or NAME>=V with ,weight=W and "
                   ",field=N optional (efl_mm, f_number, total_track_mm, bfl_mm, "
-                  "distortion_percent, relative_illumination, rms_spot_um, rms_wavefront_waves); "
-                  "replaces the [[optimize.targets]] entry of the same quantity and field")
+                  "distortion_percent, relative_illumination, rms_spot_um, rms_wavefront_waves, "
+                  "mtf with ,freq=NU in cycles/mm and ,orientation=tangential|sagittal|average: "
+                  "the geometric MTF); replaces the [[optimize.targets]] entry of the same "
+                  "quantity and field")
       ->allow_extra_args(false)
       ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
   sub->add_flag("--focus-only", cmd->focus_only,

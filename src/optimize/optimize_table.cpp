@@ -67,6 +67,8 @@ DesignTarget parse_target_table(const toml::table& table, const SourceLocation& 
   std::optional<DesignTarget> target;
   double weight = 1.0;
   int field = 0;
+  double frequency_cpmm = 0.0;
+  std::optional<MtfOrientation> orientation;
   auto once = [&](const SourceLocation& at) {
     if (target)
       throw Error(at,
@@ -84,11 +86,22 @@ DesignTarget parse_target_table(const toml::table& table, const SourceLocation& 
       const auto v = node.value<int64_t>();
       if (!v || *v < 1) throw Error(at, "[[optimize.targets]] field must be an integer >= 1");
       field = static_cast<int>(*v);
+    } else if (k == "frequency_cpmm") {
+      const auto v = node.value<double>();
+      if (!v) throw Error(at, "[[optimize.targets]] frequency_cpmm must be a number (cycles/mm)");
+      frequency_cpmm = *v;
+    } else if (k == "orientation") {
+      const auto v = node.value<std::string>();
+      if (!v)
+        throw Error(at,
+                    "[[optimize.targets]] orientation must be \"tangential\", \"sagittal\" "
+                    "or \"average\"");
+      orientation = parse_mtf_orientation(*v, at);
     } else if (k == "target") {
       const auto v = node.value<std::string>();
       if (!v) throw Error(at, "[[optimize.targets]] target must be a string (\"efl_mm = 100\")");
       once(at);
-      target = parse_target(*v, at);
+      target = parse_target(*v, at, false);
     } else {
       once(at);
       const TargetQuantity q = parse_target_quantity(k, at);
@@ -104,7 +117,7 @@ DesignTarget parse_target_table(const toml::table& table, const SourceLocation& 
         const bool relation =
             first != std::string::npos &&
             (trimmed[first] == '<' || trimmed[first] == '>' || trimmed[first] == '=');
-        target = parse_target(relation ? k + trimmed : k + "=" + trimmed, at);
+        target = parse_target(relation ? k + trimmed : k + "=" + trimmed, at, false);
       } else {
         throw Error(at, fmt::format("[[optimize.targets]] {} must be a number (= target) or a "
                                     "string with its relation (\"<= 1\", \">= 0.6\")",
@@ -118,6 +131,8 @@ DesignTarget parse_target_table(const toml::table& table, const SourceLocation& 
                                    target_quantity_names()));
   target->weight = weight;
   target->field = field;
+  if (frequency_cpmm != 0.0) target->frequency_cpmm = frequency_cpmm;
+  if (orientation) target->orientation = *orientation;
   target->where =
       where.line > 0 ? fmt::format("{}:{}:{}", where.file, where.line, where.column) : where.file;
   validate_target(*target, where);
@@ -289,8 +304,7 @@ ResolvedOptimizeOptions resolve_optimize_options(const Lens& lens,
   std::vector<DesignTarget> targets;
   for (const DesignTarget& t : table_only.targets) {
     bool replaced = false;
-    for (const DesignTarget& u : overrides.targets)
-      replaced = replaced || (u.quantity == t.quantity && u.field == t.field);
+    for (const DesignTarget& u : overrides.targets) replaced = replaced || same_target(u, t);
     if (!replaced) targets.push_back(t);
   }
   for (const DesignTarget& t : overrides.targets) {

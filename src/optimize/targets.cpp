@@ -25,6 +25,7 @@ constexpr QuantityName kQuantityNames[] = {
     {TargetQuantity::kRelativeIllumination, "relative_illumination"},
     {TargetQuantity::kRmsSpotUm, "rms_spot_um"},
     {TargetQuantity::kRmsWavefrontWaves, "rms_wavefront_waves"},
+    {TargetQuantity::kMtf, "mtf"},
 };
 
 std::string trimmed(const std::string& s) {
@@ -70,7 +71,34 @@ const char* target_quantity_name(TargetQuantity q) {
 
 const char* target_quantity_names() {
   return "efl_mm, f_number, total_track_mm, bfl_mm, distortion_percent, relative_illumination, "
-         "rms_spot_um, rms_wavefront_waves";
+         "rms_spot_um, rms_wavefront_waves, mtf";
+}
+
+const char* mtf_orientation_name(MtfOrientation o) {
+  switch (o) {
+    case MtfOrientation::kTangential:
+      return "tangential";
+    case MtfOrientation::kSagittal:
+      return "sagittal";
+    case MtfOrientation::kAverage:
+      return "average";
+  }
+  return "?";
+}
+
+MtfOrientation parse_mtf_orientation(const std::string& name, const SourceLocation& where) {
+  if (name == "tangential" || name == "t" || name == "T") return MtfOrientation::kTangential;
+  if (name == "sagittal" || name == "s" || name == "S") return MtfOrientation::kSagittal;
+  if (name == "average" || name == "a" || name == "A") return MtfOrientation::kAverage;
+  throw Error(where, fmt::format("mtf orientation '{}': write tangential, sagittal or average "
+                                 "(of the two)",
+                                 name));
+}
+
+bool same_target(const DesignTarget& a, const DesignTarget& b) {
+  return a.quantity == b.quantity && a.field == b.field &&
+         (a.quantity != TargetQuantity::kMtf ||
+          (a.frequency_cpmm == b.frequency_cpmm && a.orientation == b.orientation));
 }
 
 TargetQuantity parse_target_quantity(const std::string& name, const SourceLocation& where) {
@@ -82,6 +110,8 @@ TargetQuantity parse_target_quantity(const std::string& name, const SourceLocati
 
 std::string target_text(const DesignTarget& t) {
   std::string out = target_quantity_name(t.quantity);
+  if (t.quantity == TargetQuantity::kMtf)
+    out += fmt::format("({:g} c/mm, {})", t.frequency_cpmm, mtf_orientation_name(t.orientation));
   if (t.field > 0) out += fmt::format("[field {}]", t.field);
   out += fmt::format(" {} {:g}", relation_text(t.relation), t.value);
   if (t.weight != 1.0 && !target_is_solved(t.quantity))
@@ -110,8 +140,19 @@ void validate_target(const DesignTarget& t, const SourceLocation& where) {
   if (t.field > 0 && !target_per_field(t.quantity))
     throw Error(where, fmt::format("target {}: a whole-lens quantity has no field (fields apply "
                                    "to distortion_percent, relative_illumination, rms_spot_um, "
-                                   "rms_wavefront_waves)",
+                                   "rms_wavefront_waves, mtf)",
                                    name));
+  if (t.quantity == TargetQuantity::kMtf) {
+    if (!(t.frequency_cpmm > 0.0) || !std::isfinite(t.frequency_cpmm))
+      throw Error(where, fmt::format("target mtf: give its frequency in cycles/mm > 0 (freq=30 "
+                                     "on the command line, frequency_cpmm = 30 in "
+                                     "[[optimize.targets]]); got {:g}",
+                                     t.frequency_cpmm));
+    if (t.value < 0.0 || t.value > 1.0)
+      throw Error(where, fmt::format("target mtf {:g}: an MTF lies in [0, 1]", t.value));
+  } else if (t.frequency_cpmm != 0.0) {
+    throw Error(where, fmt::format("target {}: a frequency applies to mtf targets only", name));
+  }
   // A negative focal length is a diverging lens (a valid target: apply_target_solves says what
   // optimize can do with it); 0 is no lens.
   if (t.quantity == TargetQuantity::kEflMm && t.value == 0.0)
@@ -126,7 +167,7 @@ void validate_target(const DesignTarget& t, const SourceLocation& where) {
                                    t.value));
 }
 
-DesignTarget parse_target(const std::string& text, const SourceLocation& where) {
+DesignTarget parse_target(const std::string& text, const SourceLocation& where, bool validate) {
   // NAME OP VALUE [, key=value ...]
   std::vector<std::string> parts;
   std::size_t start = 0;
@@ -166,11 +207,20 @@ DesignTarget parse_target(const std::string& text, const SourceLocation& where) 
   for (std::size_t i = 1; i < parts.size(); ++i) {
     const std::size_t eq = parts[i].find('=');
     const std::string key = trimmed(parts[i].substr(0, eq));
-    if (eq == std::string::npos || (key != "weight" && key != "field"))
-      throw Error(where,
-                  fmt::format("target '{}': '{}' must be weight=W or field=N", text, parts[i]));
+    const bool mtf_key = key == "freq" || key == "frequency_cpmm" || key == "orientation";
+    if (eq == std::string::npos || (key != "weight" && key != "field" && !mtf_key))
+      throw Error(where, fmt::format("target '{}': '{}' must be weight=W, field=N, or for mtf "
+                                     "freq=NU (cycles/mm) and orientation=tangential|sagittal|"
+                                     "average",
+                                     text, parts[i]));
+    if (key == "orientation") {
+      t.orientation = parse_mtf_orientation(trimmed(parts[i].substr(eq + 1)), where);
+      continue;
+    }
     const double v = parse_number(parts[i].substr(eq + 1), key, where);
-    if (key == "weight") {
+    if (key == "freq" || key == "frequency_cpmm") {
+      t.frequency_cpmm = v;
+    } else if (key == "weight") {
       t.weight = v;
     } else {
       if (v != std::floor(v) || v < 1 || v > 1e6)
@@ -179,7 +229,7 @@ DesignTarget parse_target(const std::string& text, const SourceLocation& where) 
       t.field = static_cast<int>(v);
     }
   }
-  validate_target(t, where);
+  if (validate) validate_target(t, where);
   return t;
 }
 
@@ -305,8 +355,16 @@ double target_unit_mm(TargetQuantity q, double focal_length_mm, double wave_unit
       return 1e-3;
     case TargetQuantity::kRmsWavefrontWaves:
       return wave_unit_mm > 0.0 ? wave_unit_mm : 1e-3;
+    case TargetQuantity::kMtf:
+      return 1e-3;  // per target: 1 / (frequency), set by target_unit_mm(DesignTarget, ...)
   }
   return 1.0;
+}
+
+double target_unit_mm(const DesignTarget& t, double focal_length_mm, double wave_unit_mm) {
+  // An MTF change of 0.1 at nu weighs as 0.1 / nu mm of spot: one cycle's length per unit.
+  if (t.quantity == TargetQuantity::kMtf) return 1.0 / t.frequency_cpmm;
+  return target_unit_mm(t.quantity, focal_length_mm, wave_unit_mm);
 }
 
 bool target_passes(const DesignTarget& t, double value) {

@@ -134,8 +134,11 @@ LensParameterization::LensParameterization(const Lens& lens, GlassSpace glasses,
   defocus_index_ = static_cast<int>(variables_.size());
   variables_.push_back({Kind::kDefocus, last, "defocus", "spacings"});
   int glass_count = 0;
+  element_first_ = element_first_spaces(lens);
   for (int k = 0; k < k_count; ++k) {
-    if (lens.surfaces[k].material.is_air()) continue;
+    // One glass pair per element: a space after a dummy surface inside an element (a stop at the
+    // vertex of a curved face) takes the element's (to_trace_lens, to_lens).
+    if (lens.surfaces[k].material.is_air() || element_first_[k] != k) continue;
     ++glass_count;
     variables_.push_back({Kind::kGlass0, k, fmt::format("g{}.0", k + 1), "glasses"});
     variables_.push_back({Kind::kGlass1, k, fmt::format("g{}.1", k + 1), "glasses"});
@@ -307,6 +310,10 @@ Lens LensParameterization::to_lens(const double* x, GlassMode mode,
       for (int j = 0; j < kAsphereOrders; ++j) s.asphere[j] = tl.asphere[k * kAsphereTerms + j + 1];
     }
     if (s.material.is_air()) continue;
+    if (element_first_[k] != static_cast<int>(k)) {  // a split element: its first space's glass
+      s.material = lens.surfaces[element_first_[k]].material;
+      continue;
+    }
     if (mode == GlassMode::kContinuous) {
       // The structure's model glass keeps its model (a .zmx model glass stays OpticStudio's).
       const bool zemax =

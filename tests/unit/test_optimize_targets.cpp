@@ -95,7 +95,7 @@ TEST_CASE("optimize targets: --target text and its errors") {
   fails("efl_mm=abc", "is not a finite number");
   fails("efl_mm=0", "must be nonzero");  // -5 is a diverging lens: test_optimize_diverging.cpp
   fails("total_track_mm<=130,field=2", "a whole-lens quantity has no field");
-  fails("rms_spot_um<=5,colour=red", "must be weight=W or field=N");
+  fails("rms_spot_um<=5,colour=red", "must be weight=W, field=N, or for mtf freq=NU");
   fails("rms_spot_um<=5,weight=0", "weight = 0 must be");
   fails("efl_mm", "write NAME=VALUE");
 }

@@ -14,6 +14,14 @@
 //   relative_illumination R_h (field_maps.h), fields where it is known
 //   rms_spot_um           the field's RMS spot (spot.h)
 //   rms_wavefront_waves   the field's polychromatic RMS wavefront, piston and tilt removed
+//   mtf                   the field's polychromatic geometric MTF at frequency_cpmm (cycles/mm)
+//                         in the tangential or sagittal direction, or their average (as
+//                         OpticStudio's GMTT, GMTS and GMTA operands): the modulus of the
+//                         pupil-weighted mean of exp(-2 pi i nu y_i) over the rays of the
+//                         wavefront grid (analysis/wave.h's geometric MTF, x_i for sagittal),
+//                         wavelengths weighted as the lens's, complex OTFs summed before the
+//                         modulus. Geometric: no diffraction (it reaches 1 as the spot shrinks;
+//                         analyze --wave prints it beside the diffraction MTF).
 // Per-field quantities without a field: a bound holds at every field (distortion as |D_h|, so
 // "distortion_percent <= 1" is |D| <= 1 % everywhere); an equality holds at the largest field.
 // With a field: the value of that field (signed for distortion).
@@ -69,7 +77,10 @@ enum class TargetQuantity {
   kRelativeIllumination,
   kRmsSpotUm,
   kRmsWavefrontWaves,
+  kMtf,
 };
+// The direction of an MTF target (OpticStudio's GMTT, GMTS, GMTA).
+enum class MtfOrientation { kTangential, kSagittal, kAverage };
 enum class TargetRelation { kEqual, kAtMost, kAtLeast };
 
 struct DesignTarget {
@@ -77,7 +88,9 @@ struct DesignTarget {
   TargetRelation relation = TargetRelation::kEqual;
   double value = 0.0;
   double weight = 1.0;
-  int field = 0;            // 1-based field; 0: every field (bounds) / the largest (equality)
+  int field = 0;                // 1-based field; 0: every field (bounds) / the largest (equality)
+  double frequency_cpmm = 0.0;  // mtf: the spatial frequency (cycles/mm, > 0); else 0
+  MtfOrientation orientation = MtfOrientation::kAverage;  // mtf only
   bool is_default = false;  // the as-written lens's own focal length (no target given)
   std::string where;        // where it was given ("--target", "lens.toml:12:1")
 };
@@ -86,13 +99,23 @@ struct DesignTarget {
 const char* target_quantity_name(TargetQuantity q);
 // Every name, comma-separated, for messages.
 const char* target_quantity_names();
+// "tangential", "sagittal", "average".
+const char* mtf_orientation_name(MtfOrientation o);
+// Parses an orientation (also t, s, a); throws Error at `where`.
+MtfOrientation parse_mtf_orientation(const std::string& name, const SourceLocation& where);
+// The same target of another source replaces this one (quantity, field, and for mtf its
+// frequency and orientation).
+bool same_target(const DesignTarget& a, const DesignTarget& b);
 // Parses a quantity name; throws Error at `where` naming the known ones.
 TargetQuantity parse_target_quantity(const std::string& name, const SourceLocation& where);
 // The target as the designer writes it: "efl_mm = 100", "distortion_percent[2] <= 1 (weight 3)".
 std::string target_text(const DesignTarget& target);
 // Parses "NAME=V", "NAME<=V", "NAME>=V" (spaces allowed), optionally followed by
-// ",weight=W" and ",field=N" (`optimize --target`); throws Error at `where` for bad text.
-DesignTarget parse_target(const std::string& text, const SourceLocation& where);
+// ",weight=W", ",field=N", and for mtf ",freq=NU" (cycles/mm) and ",orientation=tangential|
+// sagittal|average" (`optimize --target`); throws Error at `where` for bad text.
+// `validate` false: the caller completes the target (a TOML entry's frequency) and validates it.
+DesignTarget parse_target(const std::string& text, const SourceLocation& where,
+                          bool validate = true);
 // Checks a target (finite value, weight > 0, field >= 0, no field on a whole-lens quantity);
 // throws Error at `where`.
 void validate_target(const DesignTarget& target, const SourceLocation& where);
@@ -102,7 +125,8 @@ inline bool target_is_solved(TargetQuantity q) {
 }
 inline bool target_per_field(TargetQuantity q) {
   return q == TargetQuantity::kDistortionPercent || q == TargetQuantity::kRelativeIllumination ||
-         q == TargetQuantity::kRmsSpotUm || q == TargetQuantity::kRmsWavefrontWaves;
+         q == TargetQuantity::kRmsSpotUm || q == TargetQuantity::kRmsWavefrontWaves ||
+         q == TargetQuantity::kMtf;
 }
 // The design margin m_q of a bound (header).
 inline double target_margin(const DesignTarget& t) {
@@ -166,7 +190,8 @@ TargetValues<T> measure_targets(const TraceSystem<T>& sys, const std::vector<Des
     need_maps = need_maps || t.quantity == TargetQuantity::kDistortionPercent ||
                 t.quantity == TargetQuantity::kRelativeIllumination;
     need_spot = need_spot || t.quantity == TargetQuantity::kRmsSpotUm;
-    need_wave = need_wave || t.quantity == TargetQuantity::kRmsWavefrontWaves;
+    need_wave = need_wave || t.quantity == TargetQuantity::kRmsWavefrontWaves ||
+                t.quantity == TargetQuantity::kMtf;
   }
   FieldOptics<T> fields;
   if (need_maps || need_spot) {
@@ -177,15 +202,66 @@ TargetValues<T> measure_targets(const TraceSystem<T>& sys, const std::vector<Des
   }
   const int field_count = static_cast<int>(sys.fields_deg.size());
   std::vector<T> wave;
+  // Per target (mtf ones) and field: the geometric MTF (header).
+  std::vector<std::vector<T>> mtf(targets.size());
+  std::vector<std::vector<char>> mtf_known(targets.size());
   if (need_wave) {
+    using std::cos;
+    using std::sin;
+    using std::sqrt;
     RayBundle<T> rays;
     RayRecord<T> record;
-    for (int h = 0; h < field_count; ++h)
-      wave.push_back(field_rms_wavefront(sys, h, sampling.wavefront_grid, sys.wavelength_weights,
-                                         rays, record, [](int, const Wavefront<T>&) {}));
+    const PupilGrid& grid = sampling.wavefront_grid;
+    double omega_sum = 0.0;
+    for (int w = 0; w < sys.wavelength_count; ++w)
+      omega_sum += sys.wavelength_weights.empty() ? 1.0 : sys.wavelength_weights[w];
+    for (int h = 0; h < field_count; ++h) {
+      // The polychromatic OTFs (real, imaginary) per mtf target: tangential and sagittal.
+      std::vector<T> t_re(targets.size(), K<T>(0.0)), t_im = t_re, s_re = t_re, s_im = t_re;
+      bool arrived = true;
+      wave.push_back(field_rms_wavefront(
+          sys, h, grid, sys.wavelength_weights, rays, record, [&](int w, const Wavefront<T>& wf) {
+            const double omega =
+                (sys.wavelength_weights.empty() ? 1.0 : sys.wavelength_weights[w]) / omega_sum;
+            double a_sum = 0.0;
+            for (std::size_t i = 0; i < grid.size(); ++i)
+              if (wf.ok[i]) a_sum += grid.weight[i];
+            arrived = arrived && a_sum > 0.0;
+            if (!(a_sum > 0.0)) return;
+            for (std::size_t j = 0; j < targets.size(); ++j) {
+              if (targets[j].quantity != TargetQuantity::kMtf) continue;
+              const double k = 2.0 * kPi * targets[j].frequency_cpmm;
+              for (std::size_t i = 0; i < grid.size(); ++i) {
+                if (!wf.ok[i]) continue;
+                const double a = omega * grid.weight[i] / a_sum;
+                const T py = K<T>(k) * wf.image_y_mm[i], px = K<T>(k) * wf.image_x_mm[i];
+                t_re[j] = t_re[j] + K<T>(a) * cos(py);
+                t_im[j] = t_im[j] - K<T>(a) * sin(py);
+                // A mirrored half grid: each sample stands for (x, y) and (-x, y), whose
+                // sagittal phases cancel in the imaginary part.
+                s_re[j] = s_re[j] + K<T>(a) * cos(px);
+                if (!grid.mirrored) s_im[j] = s_im[j] - K<T>(a) * sin(px);
+              }
+            }
+          }));
+      for (std::size_t j = 0; j < targets.size(); ++j) {
+        if (targets[j].quantity != TargetQuantity::kMtf) continue;
+        auto modulus = [](const T& re, const T& im) {
+          const T m2 = re * re + im * im;
+          return m2 > K<T>(0.0) ? sqrt(m2) : K<T>(0.0);
+        };
+        const T mt = modulus(t_re[j], t_im[j]), ms = modulus(s_re[j], s_im[j]);
+        const MtfOrientation o = targets[j].orientation;
+        mtf[j].push_back(o == MtfOrientation::kTangential ? mt
+                         : o == MtfOrientation::kSagittal ? ms
+                                                          : K<T>(0.5) * (mt + ms));
+        mtf_known[j].push_back(arrived);
+      }
+    }
   }
   const ParaxialData<T> par = paraxial_data(sys.lens, sys.lens.reference_nm());
-  for (const DesignTarget& t : targets) {
+  for (std::size_t index = 0; index < targets.size(); ++index) {
+    const DesignTarget& t = targets[index];
     std::vector<T> per_field;
     std::vector<char> known;
     T whole = K<T>(0.0);
@@ -221,6 +297,10 @@ TargetValues<T> measure_targets(const TraceSystem<T>& sys, const std::vector<Des
       case TargetQuantity::kRmsWavefrontWaves:
         per_field = wave;
         known.assign(wave.size(), 1);
+        break;
+      case TargetQuantity::kMtf:
+        per_field = mtf[index];
+        known = mtf_known[index];
         break;
     }
     if (!target_per_field(t.quantity)) {
@@ -273,6 +353,8 @@ int target_residual_count(const std::vector<DesignTarget>& targets, int field_co
 // u_q of the header: the quantity's unit in millimetres of the merit. `focal_length_mm` the held
 // focal length, `wave_unit_mm` mm per wave.
 double target_unit_mm(TargetQuantity q, double focal_length_mm, double wave_unit_mm);
+// The same for a target (mtf: 1 / frequency_cpmm, the length of one cycle).
+double target_unit_mm(const DesignTarget& t, double focal_length_mm, double wave_unit_mm);
 
 // The violation v of the header (with the margin when `with_margin`), double or Jet.
 template <typename T>
@@ -324,8 +406,8 @@ bool evaluate_targets(const LensParameterization& param, const T* x, GlassMode m
     const DesignTarget& t = targets[i];
     const int count = target_residual_count(t, field_count);
     if (count == 0) continue;
-    const double scale = std::sqrt(t.weight * lambda) *
-                         target_unit_mm(t.quantity, param.focal_length_mm(), wave_unit_mm);
+    const double scale =
+        std::sqrt(t.weight * lambda) * target_unit_mm(t, param.focal_length_mm(), wave_unit_mm);
     for (int j = 0; j < count; ++j) {
       const bool known = v.item_known[i][j] != 0;
       const T r = known ? K<T>(scale) * target_violation(t, v.items[i][j], true) : K<T>(0.0);

@@ -7,6 +7,9 @@
 //   s'_k = t_k / f for k < K-1, and s'_{K-1} = (t_{K-1} - BFL) / f, the normalized defocus,
 //   g_m  = W (nd_m - mu_nd, vd_m - mu_vd)  for each glass m: the catalog's (nd, vd) whitened,
 //          W = Lambda^{-1/2} E^T from the eigen-decomposition of the catalog covariance.
+//          One glass m per physical element: a glass element split by a dummy or stop surface
+//          (optimize/glass_elements.h) has one pair, named for its first space, which every
+//          space of the element takes, so the dummy surface never refracts.
 // Forward map x -> lens (templated, so Jets carry derivatives):
 //   1. glasses: (nd, vd) = W^{-1} g + mu; quantized (default): the nearest catalog glass in
 //      whitened space, with the straight-through gradient g_q = g + stopgrad(g* - g);
@@ -29,6 +32,7 @@
 #include "lensopt/glass/glass.h"
 #include "lensopt/lens/lens.h"
 #include "lensopt/lens/trace_lens.h"
+#include "lensopt/optimize/glass_elements.h"
 #include "lensopt/paraxial/paraxial.h"
 
 namespace lensopt {
@@ -116,7 +120,8 @@ class LensParameterization {
   // length (as analysis does). Glass variables start at the lens's (nd, vd) whitened.
   std::vector<double> from_lens(const Lens& lens) const;
 
-  // The catalog glass index per glass variable pair (the nearest to each g), in surface order.
+  // The catalog glass index per glass variable pair (the nearest to each g), in surface order:
+  // one per glass element (a split element has one).
   std::vector<int> nearest_glasses(const double* x) const;
 
   // The lens of variables x (double), with catalog glass names (quantized/fixed) or model glasses
@@ -210,6 +215,16 @@ class LensParameterization {
           break;  // the surface profiles, below
       }
     }
+    // A glass element split by a dummy surface: every space takes the glass of its first space
+    // (one variable pair per element, so both sides of the dummy are the same glass).
+    for (int k = 0; k < k_count; ++k) {
+      const int e = element_first_[k];
+      if (e == k || structure_.surfaces[k].material.is_air()) continue;
+      lens.nd[k] = lens.nd[e];
+      lens.vd[k] = lens.vd[e];
+      if (!lens.catalog_offset.empty()) lens.catalog_offset[k] = lens.catalog_offset[e];
+      if (!lens.model_dpgf.empty()) lens.model_dpgf[k] = lens.model_dpgf[e];
+    }
     // Surface profiles: the structure's (normalized) terms, then the profile variables.
     if (has_profiles_) {
       lens.ensure_profiles();
@@ -281,6 +296,8 @@ class LensParameterization {
   Lens structure_;
   GlassSpace glasses_;
   std::vector<LensVariable> variables_;
+  // element_first_spaces of the structure (glass_elements.h): one glass per element.
+  std::vector<int> element_first_;
   // Catalog-model corrections per catalog glass j and traced wavelength (empty: abbe model).
   std::vector<std::vector<double>> glass_offsets_;
   double focal_length_mm_ = 1.0;
