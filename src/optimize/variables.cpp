@@ -145,6 +145,16 @@ LensParameterization::LensParameterization(const Lens& lens, GlassSpace glasses,
   // Pickups and solves (header): the last curvature is the focal-length solve.
   solves_ = LensSolves::of(lens);
   has_solves_ = solves_.any();
+  if (has_solves_) {
+    // The file's millimetres in the normalized lens's unit: the structure is traced scaled by
+    // the spec scale (the paper's mode; 1 as written), then normalized to f = 1.
+    TraceOptions scale_only;
+    scale_only.ray_aiming = false;
+    scale_only.fields = 1;
+    scale_only.rings = 1;
+    const double scale = prepare_system(make_trace_lens(lens), lens.specs, scale_only).scale;
+    solve_unit_ = scale / focal_length_mm_;
+  }
   if (lens.surfaces[last].curvature_pickup.active())
     throw Error(SourceLocation{where},
                 fmt::format("surface {} (the last) picks up its curvature from surface {}, but "

@@ -24,14 +24,14 @@ for i, block in enumerate(text[1:], start=1):
     out += "[[surfaces]]" + block.rstrip("\n") + "\n" + extra.get(i, "") + "\n"
 open(sys.argv[2], "w").write(out)
 PY
-"$lensopt" optimize "$tmp/cooke.toml" -o "$tmp/out.toml" "${quick[@]}" > "$tmp/report.txt" ||
+"$lensopt" optimize "$tmp/cooke.toml" -o "$tmp/out.toml" "${quick[@]}" > "$tmp/report.txt" 2> /dev/null ||
   fail "optimize with solves"
 grep -q "variables free (vary flags in the lens file): c1, c3, s2" "$tmp/report.txt" ||
   fail "the report names the flagged variables: $(cat "$tmp/report.txt")"
 grep -q "picked up: c4 = -1 x c3" "$tmp/report.txt" || fail "the report names the pickup"
 grep -q "solved: t7 (defocus) by the marginal ray height 0 mm" "$tmp/report.txt" ||
   fail "the report names the focus solve"
-grep -q 'pickup_curvature = { surface = 3, scale = -1 }' "$tmp/out.toml" ||
+grep -q 'pickup_curvature = { surface = 3, scale = -1' "$tmp/out.toml" ||
   fail "the written lens keeps its pickup"
 python3 - "$tmp/out.toml" <<'PY' || fail "c4 = -c3 in the result"
 import sys, re
@@ -42,7 +42,7 @@ PY
 
 # --freeze overrides a flag, --vary frees an unflagged value.
 "$lensopt" optimize "$tmp/cooke.toml" -o "$tmp/out2.toml" "${quick[@]}" --freeze c1 --vary s3 \
-  --max-iterations 3 > "$tmp/report2.txt" || fail "optimize with --freeze/--vary"
+  > "$tmp/report2.txt" 2> /dev/null || fail "optimize with --freeze/--vary"
 grep -q "held (named in freeze: --freeze / \[optimize\] freeze): c1" "$tmp/report2.txt" ||
   fail "--freeze c1 reported"
 grep -q "free (named in vary: --vary / \[optimize\] vary): s3" "$tmp/report2.txt" ||

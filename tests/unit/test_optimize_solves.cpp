@@ -68,12 +68,14 @@ TEST_CASE(
 }
 
 TEST_CASE("optimize solves: Jacobians through pickups match central finite differences") {
-  // The Cooke with c4 = -1 x c3 and t5 (the stop's air space) = 1 x t2 + 0.5 mm: the spot of a
-  // field and the total track as residual targets, their exact (Jet) derivatives by every
-  // curvature and spacing against central differences.
+  // The Cooke with c4 = -1 x c3, t5 (the stop's air space) = 1 x t2 + 0.5 mm and the image at
+  // the paraxial focus (a marginal-ray-height solve): the spot of a field and the total track as
+  // residual targets, their exact (Jet) derivatives by every curvature and spacing against
+  // central differences.
   Lens lens = read_lens(test::source_dir() / "lenses" / "cooke.toml");
   lens.surfaces[3].curvature_pickup = {2, -1.0, 0.0};
   lens.surfaces[4].thickness_pickup = {1, 1.0, 0.5};
+  lens.surfaces.back().thickness_solve.kind = ThicknessSolve::Kind::kMarginalHeight;
   lens = with_solves(lens);
   const LensParameterization param(lens, GlassSpace(*load_catalog(glass_catalog_for(lens))));
   const std::vector<double> x = param.from_lens(lens);
@@ -109,7 +111,7 @@ TEST_CASE("optimize solves: Jacobians through pickups match central finite diffe
   for (int i = 0; i < param.size(); ++i) {
     const LensVariable& v = param.variables()[i];
     if (v.group == "glasses") continue;
-    if (v.name == "c4" || v.name == "s5") {
+    if (v.name == "c4" || v.name == "s5" || v.name == "defocus") {
       // Picked up: the variable itself has no effect.
       for (int row = 0; row < count; ++row) CHECK(rj[row].v[i] == 0.0);
       continue;
@@ -126,7 +128,7 @@ TEST_CASE("optimize solves: Jacobians through pickups match central finite diffe
       ++checked;
     }
   }
-  CHECK(checked >= 20);
+  CHECK(checked >= 16);  // the free curvatures and spacings by 2 targets
   // Through the pickups, by the chain rule against the same lens without them (the same
   // values, c4 and s5 then free): d/dc3 = d/dc3 - d/dc4 and d/ds2 = d/ds2 + d/ds5.
   Lens free = lens;
@@ -191,6 +193,9 @@ TEST_CASE("optimize solves: vary flags free their variables; explicit lists over
     CHECK(log_has(c.report, "no vary flags in the lens file: every variable"));
   }
   SUBCASE("optimize changes only the flagged values (and the focal-length solve)") {
+    // A start the flagged values can improve: c1 and s2 off the baseline's.
+    lens.surfaces[0].curvature_per_mm *= 1.05;
+    lens.surfaces[1].thickness_mm *= 1.5;
     const OptimizeResult r = optimize_lens(lens, quick_options(lens));
     MESSAGE("cooke with vary flags: spot ", r.start_spot_um, " -> ", r.final_spot_um, " um");
     CHECK_FALSE(r.kept_start);
@@ -236,9 +241,12 @@ TEST_CASE(
     "focus") {
   Lens lens = read_lens(test::source_dir() / "tests" / "data" / "achromat_ac254_100_300mm.toml");
   lens.surfaces.back().thickness_solve.kind = ThicknessSolve::Kind::kMarginalHeight;
+  lens.surfaces[1].curvature_per_mm = 1.0 / 50.0;  // off the design: the bending has work to do
   const OptimizeResult r = optimize_lens(lens, quick_options(lens));
   MESSAGE("achromat at 300 mm with the focus solve: spot ", r.start_spot_um, " -> ",
           r.final_spot_um, " um");
+  CHECK_FALSE(r.kept_start);
+  CHECK(r.final_spot_um < r.start_spot_um);
   // The result's last thickness is its own paraxial image distance (re-solved after every step).
   Lens check = r.lens;
   const double written = check.surfaces.back().thickness_mm;

@@ -249,7 +249,7 @@ class LensParameterization {
     // Fixed (frozen by structure) values: the stop is flat; frozen variables are still variables.
     const int last = k_count - 1;
     // Pickups and solves before the last surface (header), in the normalized lens's unit.
-    const double unit = 1.0 / focal_length_mm_;
+    const double unit = solve_unit_;
     if (has_solves_) apply_pickups_and_solves(lens, solves_, unit, 0, last);
     lens.curvature_per_mm[last] = solve_last_curvature(lens, K<T>(1.0), reference_nm);
     if (paraxial_image_solve_) {
@@ -313,6 +313,7 @@ class LensParameterization {
   // The structure's pickups and solves (paraxial/solves.h).
   bool has_solves_ = false;
   LensSolves solves_;
+  double solve_unit_ = 1.0;  // the file's mm in the normalized lens: spec scale / f
 };
 
 // The free variables of an optimization and why (header rules 1-4).
