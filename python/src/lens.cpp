@@ -13,6 +13,7 @@
 #include "lensopt/glass/glass.h"
 #include "lensopt/lens/lens_io.h"
 #include "lensopt/lens/validate.h"
+#include "lensopt/paraxial/solves.h"
 
 PYBIND11_MAKE_OPAQUE(std::vector<lensopt::Surface>)
 
@@ -53,6 +54,34 @@ int name_index(const std::string& value, const std::array<const char*, N>& names
 }
 
 // A placement number as the TOML reader takes it: finite (lens_toml.cpp read_placement).
+// A pickup from Python: None, or a dict {'surface': n (1-based), 'scale': k, 'offset_mm': o}.
+Pickup pickup_of(const py::object& value, bool thickness) {
+  Pickup p;
+  if (value.is_none()) return p;
+  const py::dict d = value.cast<py::dict>();
+  bool has_surface = false;
+  for (const auto& [key, v] : d) {
+    const std::string k = key.cast<std::string>();
+    if (k == "surface") {
+      const int n = v.cast<int>();
+      if (n < 1) throw Error("a pickup's surface is 1-based: " + std::to_string(n));
+      p.source = n - 1;
+      has_surface = true;
+    } else if (k == "scale") {
+      p.scale = v.cast<double>();
+    } else if (k == "offset_mm" && thickness) {
+      p.offset_mm = v.cast<double>();
+    } else {
+      throw Error("unknown pickup key '" + k + "'; known: surface, scale" +
+                  (thickness ? ", offset_mm" : " (a curvature pickup has no offset)"));
+    }
+  }
+  if (!has_surface) throw Error("a pickup needs 'surface' (the 1-based source surface)");
+  if (!std::isfinite(p.scale) || !std::isfinite(p.offset_mm))
+    throw Error("a pickup's scale and offset must be finite");
+  return p;
+}
+
 double finite_placement(double v, const char* what) {
   if (!std::isfinite(v))
     throw Error(std::string(what) + " = " + std::to_string(v) + " is not finite");
@@ -197,6 +226,87 @@ void bind_lens(py::module_& m) {
             s.obscuration_mm = v;
           },
           "central obscuration radius (mm, 0: none)")
+      // Solves and variables (lens.h; issue 31): as the TOML keys, surfaces 1-based.
+      .def_property(
+          "vary",
+          [](const Surface& s) {
+            std::vector<std::string> names;
+            if (s.vary.radius) names.emplace_back("radius");
+            if (s.vary.thickness) names.emplace_back("thickness");
+            if (s.vary.conic) names.emplace_back("conic");
+            if (s.vary.glass) names.emplace_back("glass");
+            return names;
+          },
+          [](Surface& s, const std::vector<std::string>& names) {
+            VaryFlags f;
+            for (const std::string& name : names) {
+              if (name == "radius")
+                f.radius = true;
+              else if (name == "thickness")
+                f.thickness = true;
+              else if (name == "conic")
+                f.conic = true;
+              else if (name == "glass")
+                f.glass = true;
+              else
+                throw Error("unknown vary entry '" + name +
+                            "'; known: radius, thickness, conic, glass");
+            }
+            s.vary = f;
+          },
+          "values the optimizer may change: a list of 'radius', 'thickness', 'conic', 'glass' "
+          "(TOML vary); when any surface has one, only flagged values are free")
+      .def_property(
+          "pickup_curvature",
+          [](const Surface& s) -> py::object {
+            if (!s.curvature_pickup.active()) return py::none();
+            return py::dict(py::arg("surface") = s.curvature_pickup.source + 1,
+                            py::arg("scale") = s.curvature_pickup.scale);
+          },
+          [](Surface& s, const py::object& value) { s.curvature_pickup = pickup_of(value, false); },
+          "None or {'surface': n (1-based, earlier), 'scale': k}: c = k * c_n (TOML "
+          "pickup_curvature); Lens.apply_solves() evaluates it")
+      .def_property(
+          "pickup_thickness",
+          [](const Surface& s) -> py::object {
+            if (!s.thickness_pickup.active()) return py::none();
+            return py::dict(py::arg("surface") = s.thickness_pickup.source + 1,
+                            py::arg("scale") = s.thickness_pickup.scale,
+                            py::arg("offset_mm") = s.thickness_pickup.offset_mm);
+          },
+          [](Surface& s, const py::object& value) { s.thickness_pickup = pickup_of(value, true); },
+          "None or {'surface': n, 'scale': k, 'offset_mm': o}: t = k * t_n + o")
+      .def_property(
+          "solve",
+          [](const Surface& s) -> py::object {
+            if (!s.thickness_solve.active()) return py::none();
+            return py::dict(py::arg("thickness") = "marginal_height",
+                            py::arg("height_mm") = s.thickness_solve.height_mm);
+          },
+          [](Surface& s, const py::object& value) {
+            ThicknessSolve solve;
+            if (!value.is_none()) {
+              const py::dict d = value.cast<py::dict>();
+              for (const auto& [key, v] : d) {
+                const std::string k = key.cast<std::string>();
+                if (k == "thickness") {
+                  if (v.cast<std::string>() != "marginal_height")
+                    throw Error("unknown thickness solve '" + v.cast<std::string>() +
+                                "'; known: marginal_height");
+                  solve.kind = ThicknessSolve::Kind::kMarginalHeight;
+                } else if (k == "height_mm") {
+                  solve.height_mm = v.cast<double>();
+                } else {
+                  throw Error("unknown solve key '" + k + "'; known: thickness, height_mm");
+                }
+              }
+              if (!solve.active()) throw Error("a solve needs 'thickness': 'marginal_height'");
+            }
+            s.thickness_solve = solve;
+          },
+          "None or {'thickness': 'marginal_height', 'height_mm': h}: the thickness that brings "
+          "the paraxial marginal ray to height h on the next surface (h = 0 on the last: the "
+          "paraxial focus)")
       .def("__repr__", [](const Surface& s) {
         return "<Surface c=" + std::to_string(s.curvature_per_mm) +
                "/mm t=" + std::to_string(s.thickness_mm) + "mm " + s.material.label() +
@@ -368,6 +478,14 @@ void bind_lens(py::module_& m) {
       .def("track_length_mm", &Lens::track_length_mm, "first to last vertex")
       .def("total_track_mm", &Lens::total_track_mm, "first vertex to image")
       .def("validate", &Lens::validate, "Raises LensoptError if the lens cannot be traced.")
+      .def(
+          "apply_solves",
+          [](Lens& lens) {
+            lens.validate();
+            lens = with_solves(lens);
+          },
+          "Evaluates the pickups and marginal-ray-height solves in place (reading a file, "
+          "analyze and optimize do it too).")
       .def(
           "add_coordinate_break",
           [](Lens& lens, int index, double thickness_mm, double decenter_x_mm, double decenter_y_mm,

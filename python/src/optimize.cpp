@@ -320,7 +320,10 @@ void bind_optimize(py::module_& m) {
       "wavefront error, piston and tilt removed, on a wavefront_pupil_samples grid). targets: "
       "design targets as `--target` writes them ('efl_mm=100', 'distortion_percent<=1', "
       "'rms_spot_um<=5,field=2,weight=3'), replacing the lens's [[optimize.targets]] entry of "
-      "the same quantity and field; focus_only=True is `--focus-only`. Ctrl-C stops it "
+      "the same quantity and field; focus_only=True is `--focus-only`. freeze= and vary= are "
+      "`--freeze` and `--vary`: they override the lens's per-surface vary flags (Surface.vary); "
+      "pickups and solves (Surface.pickup_curvature, pickup_thickness, solve) are never "
+      "free; OptimizeResult.log says which variables were free and why. Ctrl-C stops it "
       "(KeyboardInterrupt).");
 
   py::class_<ToleranceReport>(m, "ToleranceReport", "The result of tolerance().")

@@ -355,11 +355,13 @@ void setup_optimize(CLI::App& app) {
       ->check(CLI::Range(4, 256));
   sub->add_option(
          "--freeze", cmd->freeze,
-         "variables or groups to hold (c3, s2, defocus, g1, curvatures, spacings, glasses)")
+         "variables or groups to hold (c3, s2, defocus, g1, curvatures, spacings, glasses), "
+         "overriding the lens file's vary flags")
       ->delimiter(',');
   sub->add_option("--vary", cmd->vary,
-                  "surface-profile variables to add: k3 (conic of surface 3), a4_3 (its r^4 "
-                  "term), a2_3 .. a16_3; replaces [optimize] vary")
+                  "variables to free, overriding the lens file's vary flags (c3, s2, g2, "
+                  "defocus, a group), and surface-profile variables to add: k3 (conic of "
+                  "surface 3), a4_3 (its r^4 term), a2_3 .. a16_3; replaces [optimize] vary")
       ->delimiter(',');
   sub->add_option("--target", cmd->targets,
                   "a design target, repeatable: NAME=V, NAME<=V or NAME>=V with ,weight=W and "

@@ -14,22 +14,30 @@
 #include "lensopt/core/text.h"
 #include "lensopt/formats/zmx.h"
 #include "lensopt/lens/lens_io.h"
+#include "lensopt/paraxial/solves.h"
 
 namespace lensopt {
-namespace {}  // namespace
+namespace {
 
-Lens read_lens(const std::filesystem::path& path) {
-  const std::string extension = lower_extension(path);
+Lens read_lens_as_written(const std::filesystem::path& path, const std::string& extension) {
   if (extension == ".toml") return parse_lens_toml(read_file(path), path.string());
   if (extension == ".yml" || extension == ".yaml")
     return parse_lens_yaml(read_file(path), path.string());
-  if (extension == ".zmx") {
-    // Zemax import (formats/zmx.h); its warnings (ignored lines) go to stderr.
-    ZmxImport imported = read_zmx(path);
-    for (const std::string& warning : imported.warnings)
-      fmt::print(stderr, "lensopt: warning: {}\n", warning);
-    return std::move(imported.lens);
-  }
+  // Zemax import (formats/zmx.h); its warnings (ignored lines) go to stderr.
+  ZmxImport imported = read_zmx(path);
+  for (const std::string& warning : imported.warnings)
+    fmt::print(stderr, "lensopt: warning: {}\n", warning);
+  return std::move(imported.lens);
+}
+
+}  // namespace
+
+Lens read_lens(const std::filesystem::path& path) {
+  const std::string extension = lower_extension(path);
+  if (extension == ".toml" || extension == ".yml" || extension == ".yaml" || extension == ".zmx")
+    // Pickups and solves evaluated on reading (paraxial/solves.h), so every consumer sees
+    // the values they define.
+    return with_solves(read_lens_as_written(path, extension));
   std::error_code ec;
   if (std::filesystem::is_directory(path, ec))
     throw Error(SourceLocation{path.string()},

@@ -43,6 +43,72 @@ bool ZmxParser::surface_line(const Line& line, const std::string& key) {
     RawSurface& s = surface(line);
     s.curvature_per_mm = number(line, 1, "CURV (curvature, 1/lens unit)");
     s.curv_line = line.number;
+    // "CURV c solve p1 p2 p3 ...": the solve type (0 fixed, 1 variable, 4 pickup from surface p1
+    // with scale p2 on the curvature, p3 the source column, 0 = the curvature).
+    const int solve = line.fields.size() > 2 ? integer(line, 2, "the curvature solve type") : 0;
+    if (solve == 1) {
+      s.curvature_variable = true;
+    } else if (solve == 4) {
+      const double source = number(line, 3, "the curvature pickup's source surface");
+      const double scale = line.fields.size() > 4 ? number(line, 4, "the pickup's scale") : 1.0;
+      const double column = line.fields.size() > 5 ? number(line, 5, "the pickup's column") : 0.0;
+      if (column != 0.0 || source != std::floor(source) || !std::isfinite(scale)) {
+        warn(line.number,
+             fmt::format("surface {}: a curvature pickup from column {:g} of surface {:g} is not "
+                         "supported (lensopt picks up a curvature from a curvature); the "
+                         "written curvature is kept, fixed",
+                         s.number, column, source));
+      } else {
+        s.curvature_pickup_source = static_cast<int>(source);
+        s.curvature_pickup_scale = scale;
+      }
+    } else if (solve != 0) {
+      warn(line.number,
+           fmt::format("surface {}: curvature solve type {} is not supported (lensopt reads "
+                       "variables, 1, and pickups, 4); the written curvature is kept, fixed",
+                       s.number, solve));
+    }
+    return true;
+  }
+  if (key == "PZUP") {
+    // "PZUP source scale offset column": the thickness picked up from surface `source`.
+    RawSurface& s = surface(line);
+    const double source = number(line, 1, "the thickness pickup's source surface");
+    const double scale = number(line, 2, "the thickness pickup's scale");
+    const double offset = line.fields.size() > 3 ? number(line, 3, "the pickup's offset") : 0.0;
+    const double column = line.fields.size() > 4 ? number(line, 4, "the pickup's column") : 0.0;
+    if (column != 0.0 || source != std::floor(source) || !std::isfinite(scale) ||
+        !std::isfinite(offset)) {
+      warn(line.number,
+           fmt::format("surface {}: a thickness pickup from column {:g} of surface {:g} is not "
+                       "supported (lensopt picks up a thickness from a thickness); the written "
+                       "thickness is kept, fixed",
+                       s.number, column, source));
+      return true;
+    }
+    s.thickness_pickup_source = static_cast<int>(source);
+    s.thickness_pickup_scale = scale;
+    s.thickness_pickup_offset = offset;
+    s.pzup_line = line.number;
+    return true;
+  }
+  if (key == "MAZH") {
+    // "MAZH height zone": OpticStudio's marginal-ray-height solve on the thickness; zone 0 is the
+    // paraxial marginal ray, any other zone a real ray.
+    RawSurface& s = surface(line);
+    const double height = number(line, 1, "the marginal ray height");
+    const double zone = line.fields.size() > 2 ? number(line, 2, "the pupil zone") : 0.0;
+    if (zone != 0.0 || !std::isfinite(height)) {
+      warn(line.number,
+           fmt::format("surface {}: a marginal-ray-height solve on a real ray (pupil zone {:g}) "
+                       "is not supported (lensopt solves on the paraxial ray, zone 0); the "
+                       "written thickness is kept, fixed",
+                       s.number, zone));
+      return true;
+    }
+    s.marginal_height_solve = true;
+    s.marginal_height = height;
+    s.mazh_line = line.number;
     return true;
   }
   if (key == "DISZ") {
@@ -223,6 +289,27 @@ void ZmxParser::note_line(const Line& line) {
   if (line.fields[2] != "lensopt" || line.fields.size() < 5) return;
   note_line_ = note_line_ == 0 ? line.number : note_line_;
   const std::string_view key = line.fields[3];
+  if (key == "vary") {
+    // "NOTE 0 lensopt vary <surface> radius thickness conic glass": the vary flags of a surface
+    // (the .zmx keeps a curvature flag of its own; the others have no field lensopt writes).
+    const int number = integer(line, 4, "the surface of a vary note");
+    VaryFlags flags;
+    for (std::size_t i = 5; i < line.fields.size(); ++i) {
+      const std::string_view name = line.fields[i];
+      if (name == "radius")
+        flags.radius = true;
+      else if (name == "thickness")
+        flags.thickness = true;
+      else if (name == "conic")
+        flags.conic = true;
+      else if (name == "glass")
+        flags.glass = true;
+      else
+        warn(line.number, fmt::format("unknown vary entry '{}' in a lensopt note ignored", name));
+    }
+    note_vary_.push_back({number, flags, line.number});
+    return;
+  }
   if (key == "catalog") {
     note_catalog_ = std::string(line.rest(4));
   } else if (key == "sensor_diagonal_mm") {

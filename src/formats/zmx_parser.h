@@ -64,6 +64,18 @@ struct RawSurface {
   // SCBD: a surface's own tilt/decenter (read on the image surface).
   int scbd_line = 0;
   double scbd[8] = {};
+  // Solves and variables (lens.h): a curvature variable flag (CURV c 1 ...), a curvature pickup
+  // (CURV c 4 source scale column), a thickness pickup (PZUP source scale offset column) and a
+  // marginal-ray-height solve (MAZH height zone). Sources are .zmx surface numbers.
+  bool curvature_variable = false;
+  int curvature_pickup_source = -1;
+  double curvature_pickup_scale = 1.0;
+  int thickness_pickup_source = -1, pzup_line = 0;
+  double thickness_pickup_scale = 1.0, thickness_pickup_offset = 0.0;
+  bool marginal_height_solve = false;
+  double marginal_height = 0.0;
+  int mazh_line = 0;
+  VaryFlags note_vary;  // NOTE 0 lensopt vary <surface> ... (what Zemax has no flag for here)
 };
 
 struct Wavelength {
@@ -140,6 +152,7 @@ class ZmxParser {
   void read_lines(const std::vector<Line>& lines);
   void check_object_and_image() const;
   LensSourceLines build_surfaces(Lens& lens);
+  void set_solves(Lens& lens, const std::vector<int>& lens_index);
   void set_wavelengths(Specs& specs);
   void set_fields(Specs& specs);
   void set_aperture(Lens& lens);
@@ -191,6 +204,12 @@ class ZmxParser {
   std::vector<RawSurface> surfaces_;
 
   // lensopt notes.
+  struct VaryNote {
+    int surface;  // .zmx surface number
+    VaryFlags flags;
+    int line;
+  };
+  std::vector<VaryNote> note_vary_;  // NOTE 0 lensopt vary
   std::optional<std::string> note_catalog_;
   std::optional<double> note_sensor_mm_;
   std::optional<DispersionModel> note_dispersion_;

@@ -116,6 +116,8 @@ LensSourceLines ZmxParser::build_surfaces(Lens& lens) {
   LensSourceLines source_lines;
   std::vector<std::string> used_catalogs;
   int stop_count = 0;
+  // The lens surface of each .zmx surface (-1: the object, the image), for pickups.
+  std::vector<int> lens_index(surfaces_.size(), -1);
   for (std::size_t k = 1; k + 1 < surfaces_.size(); ++k) {
     const RawSurface& raw = surfaces_[k];
     if (raw.thickness_infinite)
@@ -139,6 +141,7 @@ LensSourceLines ZmxParser::build_surfaces(Lens& lens) {
       surface.thickness_mm = raw.thickness_mm * unit_mm_;
       surface.material = before;
       breaks_symmetry_ = true;
+      lens_index[k] = static_cast<int>(lens.surfaces.size());
       lens.surfaces.push_back(surface);
       source_lines.surfaces.push_back(raw.line);
       continue;
@@ -201,6 +204,7 @@ LensSourceLines ZmxParser::build_surfaces(Lens& lens) {
         surface.is_stop = true;
       }
     }
+    lens_index[k] = static_cast<int>(lens.surfaces.size());
     lens.surfaces.push_back(surface);
     source_lines.surfaces.push_back(raw.line);
   }
@@ -232,8 +236,11 @@ LensSourceLines ZmxParser::build_surfaces(Lens& lens) {
       Surface stop;
       stop.is_stop = true;
       lens.surfaces.insert(lens.surfaces.begin(), stop);
+      for (int& i : lens_index)
+        if (i >= 0) ++i;
     }
   }
+  set_solves(lens, lens_index);
   if (!lens.surfaces.back().material.is_air()) {
     const RawSurface& raw = surfaces_[surfaces_.size() - 2];
     fail_at(raw.glas_line, raw.glas_column,
@@ -514,6 +521,84 @@ void ZmxParser::validate(const Lens& lens, const LensSourceLines& source_lines) 
     validate_lens(lens, source_lines);
   } catch (const Error& error) {
     throw Error(SourceLocation{file_, error.where().line}, error.message());
+  }
+}
+
+// Variables, pickups and solves of the .zmx surfaces onto the lens surfaces (RawSurface).
+// What lensopt cannot represent is said (file:line) and the written value kept, fixed.
+void ZmxParser::set_solves(Lens& lens, const std::vector<int>& lens_index) {
+  const int raw_count = static_cast<int>(surfaces_.size());
+  const int last = static_cast<int>(lens.surfaces.size()) - 1;
+  auto source_of = [&](int raw_source, int line, int number, const char* what) {
+    const int i = raw_source >= 0 && raw_source < raw_count ? lens_index[raw_source] : -1;
+    if (i < 0)
+      warn(line, fmt::format("surface {}: the {} pickup's source, surface {}, is {}; the written "
+                             "value is kept, fixed",
+                             number, what, raw_source,
+                             raw_source == 0 ? "the object" : "not a lens surface"));
+    return i;
+  };
+  for (int k = 1; k + 1 < raw_count; ++k) {
+    const RawSurface& raw = surfaces_[k];
+    const int i = lens_index[k];
+    if (i < 0) continue;
+    Surface& s = lens.surfaces[i];
+    if (raw.curvature_variable && !raw.coordinate_break && !s.is_stop) s.vary.radius = true;
+    if (raw.curvature_pickup_source >= 0) {
+      const int source =
+          source_of(raw.curvature_pickup_source, raw.curv_line, raw.number, "curvature");
+      if (source >= 0 && source < i && !s.is_stop) {
+        s.curvature_pickup.source = source;
+        s.curvature_pickup.scale = raw.curvature_pickup_scale;
+      } else if (source >= 0) {
+        warn(raw.curv_line, fmt::format("surface {}: a curvature pickup from surface {} (not an "
+                                        "earlier curved surface) is not supported; the written "
+                                        "curvature is kept, fixed",
+                                        raw.number, raw.curvature_pickup_source));
+      }
+    }
+    if (raw.thickness_pickup_source >= 0) {
+      const int source =
+          source_of(raw.thickness_pickup_source, raw.pzup_line, raw.number, "thickness");
+      if (source >= 0 && source < i) {
+        s.thickness_pickup.source = source;
+        s.thickness_pickup.scale = raw.thickness_pickup_scale;
+        s.thickness_pickup.offset_mm = raw.thickness_pickup_offset * unit_mm_;
+      } else if (source >= 0) {
+        warn(raw.pzup_line, fmt::format("surface {}: a thickness pickup from a later surface ({}) "
+                                        "is not supported; the written thickness is kept, fixed",
+                                        raw.number, raw.thickness_pickup_source));
+      }
+    }
+    if (raw.marginal_height_solve) {
+      if (s.thickness_pickup.active()) {
+        warn(raw.mazh_line, fmt::format("surface {}: the thickness has a pickup and a marginal-"
+                                        "ray-height solve; the solve is ignored",
+                                        raw.number));
+      } else if (raw.marginal_height != 0.0 && i != last) {
+        warn(raw.mazh_line,
+             fmt::format("surface {}: a marginal-ray-height solve with a nonzero height is read "
+                         "on the last thickness only; the written thickness is kept, fixed",
+                         raw.number));
+      } else {
+        s.thickness_solve.kind = ThicknessSolve::Kind::kMarginalHeight;
+        s.thickness_solve.height_mm = raw.marginal_height * unit_mm_;
+      }
+    }
+  }
+  for (const VaryNote& note : note_vary_) {
+    const int i = note.surface >= 0 && note.surface < raw_count ? lens_index[note.surface] : -1;
+    if (i < 0) {
+      warn(note.line,
+           fmt::format("a lensopt vary note names surface {}, not a lens surface; ignored",
+                       note.surface));
+      continue;
+    }
+    VaryFlags& f = lens.surfaces[i].vary;
+    f.radius = f.radius || note.flags.radius;
+    f.thickness = f.thickness || note.flags.thickness;
+    f.conic = f.conic || note.flags.conic;
+    f.glass = f.glass || note.flags.glass;
   }
 }
 

@@ -150,6 +150,15 @@ std::string format_zmx(const Lens& lens) {
       });
   if (paper_model_glass) line("NOTE 0 lensopt model_glass paper");
   line("NOTE 0 lensopt primary_wavelength_nm " + number_text(specs.primary_wavelength_nm));
+  // Vary flags (lens.h): the curvature's is the CURV line's variable flag too; the others
+  // have no field lensopt writes, so a note keeps them for the round trip.
+  for (std::size_t k = 0; k < lens.surfaces.size(); ++k) {
+    const VaryFlags& f = lens.surfaces[k].vary;
+    if (!f.any()) continue;
+    line(fmt::format("NOTE 0 lensopt vary {}{}{}{}{}", k + 1, f.radius ? " radius" : "",
+                     f.thickness ? " thickness" : "", f.conic ? " conic" : "",
+                     f.glass ? " glass" : ""));
+  }
   line("UNIT MM X W X CM MR CPMM");
   const bool as_written = specs.mode == SpecMode::kAsWritten;
   switch (as_written ? specs.aperture_type : ApertureType::kFNumber) {
@@ -275,13 +284,29 @@ std::string format_zmx(const Lens& lens) {
                               number));
     line(fmt::format("SURF {}", number++));
     line(s.has_asphere() ? "  TYPE EVENASPH" : "  TYPE STANDARD");
-    line(fmt::format("  CURV {}", number_text(s.curvature_per_mm)));
+    // The curvature's solve: a pickup (4: source surface, scale on the curvature, column 0)
+    // or a variable (1).
+    if (s.curvature_pickup.active())
+      line(fmt::format("  CURV {} 4 {} {} 0 \"\"", number_text(s.curvature_per_mm),
+                       s.curvature_pickup.source + 1, number_text(s.curvature_pickup.scale)));
+    else if (s.vary.radius)
+      line(fmt::format("  CURV {} 1 0 0 0 \"\"", number_text(s.curvature_per_mm)));
+    else
+      line(fmt::format("  CURV {}", number_text(s.curvature_per_mm)));
     if (s.has_asphere()) {
       line(fmt::format("  PARM 1 {}", number_text(s.asphere_r2_per_mm)));
       for (int j = 0; j < kAsphereOrders; ++j)
         line(fmt::format("  PARM {} {}", j + 2, number_text(s.asphere[j])));
     }
     line(fmt::format("  DISZ {}", number_text(s.thickness_mm)));
+    // The thickness's pickup (PZUP source scale offset column) or marginal-ray-height solve
+    // (MAZH height zone).
+    if (s.thickness_pickup.active())
+      line(fmt::format("  PZUP {} {} {} 0", s.thickness_pickup.source + 1,
+                       number_text(s.thickness_pickup.scale),
+                       number_text(s.thickness_pickup.offset_mm)));
+    if (s.thickness_solve.kind == ThicknessSolve::Kind::kMarginalHeight)
+      line(fmt::format("  MAZH {} 0", number_text(s.thickness_solve.height_mm)));
     // GLAS MIRROR (a mirror in air: the switch below then writes no glass).
     if (s.mirror) line("  GLAS MIRROR 0 0 1.5 40 0 0 0 0 0 0");
     switch (s.material.kind) {

@@ -238,7 +238,11 @@ class JointRun {
     x0_ = param_.from_lens(start);
     n_ = param_.size();
     is_frozen_.assign(n_, 0);
-    for (int i : param_.select(options.freeze)) is_frozen_[i] = 1;
+    // The lens file's vary flags, pickups and solves, then --freeze (optimize/variables.h).
+    const VariableChoice choice = choose_variables(param_, options.freeze, {}, false);
+    for (int i : choice.held) is_frozen_[i] = 1;
+    if (start.has_vary_flags() || start.has_solves())
+      for (const std::string& line : choice.report) say("lensopt optimize --joint: " + line);
     for (const std::string& note : data_.notes()) {
       say("lensopt optimize --joint: " + note);
       result_.notes.push_back(note);

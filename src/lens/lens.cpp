@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <utility>
 
 #include "lensopt/core/constants.h"
 #include "lensopt/core/error.h"
@@ -159,6 +160,42 @@ void validate_lens(const Lens& lens, const LensSourceLines& lines) {
     for (const Surface& s : surfaces)
       if (s.curvature_per_mm != 0 && std::isfinite(s.curvature_per_mm))
         length = std::max(length, std::abs(1.0 / s.curvature_per_mm));
+  }
+  // Pickups and solves (lens.h): a source before the surface, a flat stop stays flat, a
+  // nonzero marginal height only on the last thickness (paraxial/solves.h), one rule per value.
+  for (std::size_t i = 0; i < surfaces.size(); ++i) {
+    const Surface& s = surfaces[i];
+    const int n = static_cast<int>(i) + 1;
+    const int line = surface_line(i);
+    for (const auto& [p, what] : {std::pair{&s.curvature_pickup, "curvature"},
+                                  std::pair{&s.thickness_pickup, "thickness"}}) {
+      if (!p->active()) continue;
+      if (p->source >= static_cast<int>(i))
+        fail_at(line, fmt::format("surface {}: the {} pickup's source is surface {}; a pickup "
+                                  "takes its value from an earlier surface",
+                                  n, what, p->source + 1));
+      if (!std::isfinite(p->scale) || !std::isfinite(p->offset_mm))
+        fail_at(line, fmt::format("surface {}: the {} pickup's scale and offset must be finite", n,
+                                  what));
+    }
+    if (s.curvature_pickup.active() && (s.is_stop || s.coordinate_break))
+      fail_at(line, fmt::format("surface {}: a {} has no curvature to pick up", n,
+                                s.is_stop ? "stop (flat)" : "coordinate break"));
+    if (s.thickness_pickup.active() && s.thickness_solve.active())
+      fail_at(line, fmt::format("surface {}: the thickness has both a pickup and a solve", n));
+    if (s.thickness_solve.active()) {
+      if (!std::isfinite(s.thickness_solve.height_mm))
+        fail_at(line, fmt::format("surface {}: the marginal-ray height must be finite", n));
+      if (s.thickness_solve.height_mm != 0.0 && i + 1 != surfaces.size())
+        fail_at(line, fmt::format("surface {}: a marginal-ray-height solve with a nonzero height "
+                                  "({:g} mm) is supported on the last thickness only (its "
+                                  "marginal ray scales with the pupil, which a thickness before "
+                                  "it can change)",
+                                  n, s.thickness_solve.height_mm));
+    }
+    if (s.vary.radius && (s.is_stop || s.coordinate_break))
+      fail_at(line, fmt::format("surface {}: vary \"radius\" on a {}", n,
+                                s.is_stop ? "stop (it stays flat)" : "coordinate break"));
   }
   int stops = 0;
   bool reflected = false;  // an odd number of mirrors so far: thicknesses run backwards
@@ -418,6 +455,8 @@ Lens scaled(const Lens& lens, double scale) {
     s.aperture_decenter_y_mm *= scale;
     s.placement.decenter_x_mm *= scale;  // tilts are angles
     s.placement.decenter_y_mm *= scale;
+    s.thickness_pickup.offset_mm *= scale;  // pickup scales are ratios
+    s.thickness_solve.height_mm *= scale;
     s.asphere_r2_per_mm /= scale;
     double power = scale;  // s^(2i-1) for a_{2i}: s^3 for a4
     for (double& a : s.asphere) {

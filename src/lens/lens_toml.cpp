@@ -85,7 +85,7 @@ constexpr std::array<std::string_view, 16> kSystemKeys = {"mode",
 constexpr std::array<std::string_view, 2> kLensKeys = {"name", "catalog"};
 constexpr std::array<std::string_view, 6> kSpecsKeys = {
     "f_number", "half_field_deg", "sensor_diagonal_mm", "wavelengths_nm", "channels", "dispersion"};
-constexpr std::array<std::string_view, 13> kSurfaceKeys = {"radius_mm",
+constexpr std::array<std::string_view, 17> kSurfaceKeys = {"radius_mm",
                                                            "curvature_per_mm",
                                                            "thickness_mm",
                                                            "material",
@@ -97,7 +97,15 @@ constexpr std::array<std::string_view, 13> kSurfaceKeys = {"radius_mm",
                                                            "coordinate_break",
                                                            "decenter_tilt",
                                                            "obscuration_mm",
-                                                           "aperture_decenter_mm"};
+                                                           "aperture_decenter_mm",
+                                                           "vary",
+                                                           "pickup_curvature",
+                                                           "pickup_thickness",
+                                                           "solve"};
+// Solves and variables of a surface (lens.h VaryFlags, Pickup, ThicknessSolve).
+constexpr std::array<std::string_view, 4> kVaryNames = {"radius", "thickness", "conic", "glass"};
+constexpr std::array<std::string_view, 3> kPickupKeys = {"surface", "scale", "offset_mm"};
+constexpr std::array<std::string_view, 2> kSolveKeys = {"thickness", "height_mm"};
 // A coordinate_break or decenter_tilt table (lens.h Placement).
 constexpr std::array<std::string_view, 7> kPlacementKeys = {
     "decenter_x_mm", "decenter_y_mm", "tilt_x_deg",   "tilt_y_deg",
@@ -579,6 +587,76 @@ void read_placement(const TomlReader& reader, const toml::node& node, int surfac
   }
 }
 
+// vary = ["radius", ...], pickup_curvature = { surface = 2, scale = -1 },
+// pickup_thickness = { surface = 2, scale = 1, offset_mm = 0 },
+// solve = { thickness = "marginal_height", height_mm = 0 } (lens.h; 1-based surfaces).
+void read_solves(const TomlReader& reader, const toml::table& table, int surface_number,
+                 Surface& surface) {
+  const std::string where = fmt::format("surface {}", surface_number);
+  if (const Entry e = entry(table, "vary")) {
+    const toml::array& names = reader.array(*e.node, where + ": vary");
+    for (const toml::node& node : names) {
+      const std::string name = reader.string(node, where + ": vary entry");
+      if (name == "radius")
+        surface.vary.radius = true;
+      else if (name == "thickness")
+        surface.vary.thickness = true;
+      else if (name == "conic")
+        surface.vary.conic = true;
+      else if (name == "glass")
+        surface.vary.glass = true;
+      else
+        reader.fail(node, fmt::format("{}: unknown vary entry \"{}\"; known: radius, thickness, "
+                                      "conic, glass{}",
+                                      where, name, detail::did_you_mean(name, kVaryNames)));
+    }
+  }
+  auto read_pickup = [&](const Entry& e, bool thickness) {
+    const std::string what = fmt::format("{}: {}", where, e.key->str());
+    const toml::table& t = reader.table(*e.node, what);
+    reader.check_keys(t, kPickupKeys, what);
+    Pickup p;
+    const Entry source = entry(t, "surface");
+    if (!source) reader.fail(*e.node, what + " needs surface = N (the 1-based source surface)");
+    const double n = reader.finite_number(*source.node, what + " surface");
+    if (n != std::floor(n) || n < 1 || n >= surface_number)
+      reader.fail(*source.node, fmt::format("{} surface = {}: the source must be an earlier "
+                                            "surface, 1 .. {}",
+                                            what, n, surface_number - 1));
+    p.source = static_cast<int>(n) - 1;
+    if (const Entry s = entry(t, "scale")) p.scale = reader.finite_number(*s.node, what + " scale");
+    if (const Entry o = entry(t, "offset_mm")) {
+      if (!thickness)
+        reader.fail(o, what + ": a curvature pickup has no offset (c = scale * c_source)");
+      p.offset_mm = reader.finite_number(*o.node, what + " offset_mm");
+    }
+    return p;
+  };
+  if (const Entry e = entry(table, "pickup_curvature")) {
+    if (surface.is_stop) reader.fail(e, where + ": the stop is flat; it has no curvature pickup");
+    surface.curvature_pickup = read_pickup(e, false);
+  }
+  if (const Entry e = entry(table, "pickup_thickness"))
+    surface.thickness_pickup = read_pickup(e, true);
+  if (const Entry e = entry(table, "solve")) {
+    const std::string what = where + ": solve";
+    const toml::table& t = reader.table(*e.node, what);
+    reader.check_keys(t, kSolveKeys, what);
+    const Entry kind = entry(t, "thickness");
+    if (!kind) reader.fail(*e.node, what + " needs thickness = \"marginal_height\"");
+    const std::string name = reader.string(*kind.node, what + " thickness");
+    if (name != "marginal_height")
+      reader.fail(*kind.node, fmt::format("{}: unknown thickness solve \"{}\"; known: "
+                                          "marginal_height",
+                                          what, name));
+    surface.thickness_solve.kind = ThicknessSolve::Kind::kMarginalHeight;
+    if (const Entry h = entry(t, "height_mm"))
+      surface.thickness_solve.height_mm = reader.finite_number(*h.node, what + " height_mm");
+    if (surface.thickness_pickup.active())
+      reader.fail(e, where + ": the thickness has both pickup_thickness and a solve");
+  }
+}
+
 Surface read_surface(const TomlReader& reader, const toml::table& table, int surface_number,
                      const Lens& lens, const Catalog* catalog) {
   reader.check_keys(table, kSurfaceKeys, fmt::format("surface {}", surface_number));
@@ -588,7 +666,8 @@ Surface read_surface(const TomlReader& reader, const toml::table& table, int sur
     // A dummy surface: only its placement and thickness.
     for (std::string_view key :
          {"radius_mm", "curvature_per_mm", "material", "stop", "semi_diameter_mm", "conic",
-          "asphere", "asphere_r2", "decenter_tilt", "obscuration_mm", "aperture_decenter_mm"})
+          "asphere", "asphere_r2", "decenter_tilt", "obscuration_mm", "aperture_decenter_mm",
+          "vary", "pickup_curvature", "pickup_thickness", "solve"})
       if (const Entry e = entry(table, key))
         reader.fail(e, fmt::format("surface {}: a coordinate break has only coordinate_break "
                                    "and thickness_mm, not {}",
@@ -684,6 +763,7 @@ Surface read_surface(const TomlReader& reader, const toml::table& table, int sur
     reader.fail(table.source(), fmt::format("surface {}: the stop must be flat, but it has a "
                                             "conic or asphere terms",
                                             surface_number));
+  read_solves(reader, table, surface_number, surface);
   return surface;
 }
 

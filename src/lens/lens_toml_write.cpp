@@ -391,6 +391,27 @@ std::string format_lens_toml(const Lens& lens) {
       for (int j = 0; j < terms; ++j) values.push_back(number_text(surface.asphere[j]));
       line("asphere", fmt::format("[{}]", fmt::join(values, ", ")));
     }
+    // Solves and variables (lens.h), 1-based surfaces.
+    if (surface.vary.any()) {
+      std::vector<std::string> names;
+      if (surface.vary.radius) names.emplace_back("\"radius\"");
+      if (surface.vary.thickness) names.emplace_back("\"thickness\"");
+      if (surface.vary.conic) names.emplace_back("\"conic\"");
+      if (surface.vary.glass) names.emplace_back("\"glass\"");
+      line("vary", fmt::format("[{}]", fmt::join(names, ", ")));
+    }
+    if (surface.curvature_pickup.active())
+      line("pickup_curvature",
+           fmt::format("{{ surface = {}, scale = {} }}", surface.curvature_pickup.source + 1,
+                       number_text(surface.curvature_pickup.scale)));
+    if (surface.thickness_pickup.active())
+      line("pickup_thickness", fmt::format("{{ surface = {}, scale = {}, offset_mm = {} }}",
+                                           surface.thickness_pickup.source + 1,
+                                           number_text(surface.thickness_pickup.scale),
+                                           number_text(surface.thickness_pickup.offset_mm)));
+    if (surface.thickness_solve.kind == ThicknessSolve::Kind::kMarginalHeight)
+      line("solve", fmt::format("{{ thickness = \"marginal_height\", height_mm = {} }}",
+                                number_text(surface.thickness_solve.height_mm)));
   }
 
   if (!lens.extra_toml.empty()) {

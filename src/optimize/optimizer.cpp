@@ -815,7 +815,12 @@ class LensOptimization {
         x_(param_.from_lens(start)),
         wavefront_(options.loss.merit == DesignMerit::kWavefront),
         soft_(options.loss.paper_penalties) {
-    frozen_user_ = param_.select(options.freeze);
+    // Which variables are free and why (variables.h choose_variables: pickups and solves,
+    // the explicit freeze / vary lists, the file's vary flags); the report says so.
+    const VariableChoice choice =
+        choose_variables(param_, options.freeze, options.vary, options.focus_only);
+    frozen_user_ = choice.held;
+    variable_report_ = choice.report;
     // A dummy surface 0 mm before the next inside a glass element (the flat stop the .zmx reader
     // puts at the vertex of a curved stop surface) stays there: its spacing is held.
     const std::vector<int> element_first = element_first_spaces(start);
@@ -825,10 +830,6 @@ class LensOptimization {
           start.surfaces[v.surface].thickness_mm == 0.0)
         frozen_user_.push_back(i);
     }
-    // --focus-only: every variable but the defocus held.
-    if (options.focus_only)
-      for (int i = 0; i < param_.size(); ++i)
-        if (param_.variables()[i].kind != LensVariable::Kind::kDefocus) frozen_user_.push_back(i);
     for (int i = 0; i < param_.size(); ++i) {
       const auto kind = param_.variables()[i].kind;
       if (kind == LensVariable::Kind::kGlass0 || kind == LensVariable::Kind::kGlass1)
@@ -862,6 +863,7 @@ class LensOptimization {
 
   OptimizeResult run() {
     const auto clock_start = std::chrono::steady_clock::now();
+    result_.log.insert(result_.log.end(), variable_report_.begin(), variable_report_.end());
     measure_start();
     // Phase A: the start's glasses, snapped to the catalog and held; LM on the rest, with the
     // bounds the start violates tightened in stages from its own values to the targets.
@@ -1235,6 +1237,7 @@ class LensOptimization {
   const bool soft_;
   AnalyzeOptions full_;
   std::vector<int> frozen_user_, glass_indices_, frozen_all_;
+  std::vector<std::string> variable_report_;
   bool search_ = false;
   DesignLossOptions loss_;
   std::vector<int> fixed_;  // the catalog glass of each element
@@ -1280,7 +1283,8 @@ OptimizeResult optimize_lens(const Lens& given_start, const OptimizeOptions& giv
   check_target_fields(given_start, given_options.targets);
   OptimizeOptions options = given_options;
   options.targets = targets_with_defaults(given_start, given_options.targets);
-  const Lens start = apply_target_solves(given_start, options.targets);
+  // The lens file's pickups and solves met before anything is measured (paraxial/solves.h).
+  const Lens start = with_solves(apply_target_solves(given_start, options.targets));
   const AnalyzeOptions full;
   check_clear_apertures(start, full);
   const TargetReport start_targets = check_targets(given_start, options.targets, full.trace);
@@ -1310,7 +1314,8 @@ AdamResult adam_on_design_loss(const LensParameterization& param, std::vector<do
                                double target_spot_mm) {
   const int n = param.size();
   std::vector<char> frozen(n, 0);
-  for (int i : param.select(options.freeze)) frozen[i] = 1;
+  for (int i : choose_variables(param, options.freeze, options.vary, options.focus_only).held)
+    frozen[i] = 1;
   AdamMoments moments(n);
   AdamResult result;
   for (int step = 1; step <= max_steps; ++step) {

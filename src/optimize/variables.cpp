@@ -8,6 +8,7 @@
 #include <numeric>
 
 #include "lensopt/core/error.h"
+#include "lensopt/core/text.h"
 #include "lensopt/trace/system.h"
 
 namespace lensopt {
@@ -144,6 +145,26 @@ LensParameterization::LensParameterization(const Lens& lens, GlassSpace glasses,
     variables_.push_back({Kind::kGlass1, k, fmt::format("g{}.1", k + 1), "glasses"});
   }
   if (glass_count == 0) throw Error(SourceLocation{lens.source_path}, "the lens has no glass");
+  // Pickups and solves (header): the last curvature is the focal-length solve.
+  solves_ = LensSolves::of(lens);
+  has_solves_ = solves_.any();
+  if (has_solves_) {
+    // The file's millimetres in the normalized lens's unit: the structure is traced scaled by
+    // the spec scale (the paper's mode; 1 as written), then normalized to f = 1.
+    TraceOptions scale_only;
+    scale_only.ray_aiming = false;
+    scale_only.fields = 1;
+    scale_only.rings = 1;
+    const double scale = prepare_system(make_trace_lens(lens), lens.specs, scale_only).scale;
+    solve_unit_ = scale / focal_length_mm_;
+  }
+  if (lens.surfaces[last].curvature_pickup.active())
+    throw Error(SourceLocation{where},
+                fmt::format("surface {} (the last) picks up its curvature from surface {}, but "
+                            "the optimizer solves the last curvature for the focal length; put "
+                            "the pickup on an earlier surface (or add a flat dummy surface "
+                            "after it)",
+                            k_count, lens.surfaces[last].curvature_pickup.source + 1));
   // The catalog model: each catalog glass's correction at the traced wavelengths, as
   // make_trace_lens computes it for a lens holding that glass.
   if (lens.specs.dispersion == DispersionModel::kCatalog) {
@@ -166,16 +187,28 @@ LensParameterization::LensParameterization(const Lens& lens, GlassSpace glasses,
     }
   }
 
-  // Profile variables.
-  for (const std::string& name : profile_variables) {
+  // Profile variables: the named ones, then the conic of every surface the file flags
+  // (vary = ["conic"]). A name that is not a profile variable must be one of the variables
+  // above (a vary list may free c3, s2, g2, defocus or a group: choose_variables).
+  std::vector<std::string> profile_names = profile_variables;
+  for (int k = 0; k < k_count; ++k)
+    if (lens.surfaces[k].vary.conic) profile_names.push_back(fmt::format("k{}", k + 1));
+  for (const std::string& name : profile_names) {
     if (name.empty()) continue;
     PrescriptionVariable pv;
-    if (!parse_profile_variable(name, pv))
+    if (!parse_profile_variable(name, pv)) {
+      bool known = name == "curvatures" || name == "spacings" || name == "glasses" ||
+                   name == "conics" || name == "aspheres";
+      for (const LensVariable& v : variables_)
+        known = known || v.name == name || fmt::format("g{}", v.surface + 1) == name;
+      if (known) continue;
       throw Error(SourceLocation{lens.source_path},
-                  fmt::format("unknown profile variable '{}'; write k<surface> (conic) or "
-                              "a<order>_<surface> (asphere term, order 2, 4, ..., 16), e.g. k3, "
-                              "a4_3",
+                  fmt::format("unknown variable '{}' to vary; write c<surface>, s<surface>, "
+                              "g<surface>, defocus, a group (curvatures, spacings, glasses), "
+                              "k<surface> (conic) or a<order>_<surface> (asphere term, order 2, "
+                              "4, ..., 16), e.g. k3, a4_3",
                               name));
+    }
     if (pv.surface >= k_count)
       throw Error(SourceLocation{lens.source_path},
                   fmt::format("profile variable '{}': the lens has {} surfaces", name, k_count));
@@ -373,6 +406,149 @@ std::vector<int> LensParameterization::select(const std::vector<std::string>& na
   }
   std::sort(out.begin(), out.end());
   out.erase(std::unique(out.begin(), out.end()), out.end());
+  return out;
+}
+
+std::string LensParameterization::dependent_reason(int i) const {
+  const LensVariable& v = variables_.at(i);
+  const Surface& s = structure_.surfaces[v.surface];
+  switch (v.kind) {
+    case LensVariable::Kind::kCurvature:
+      if (s.curvature_pickup.active())
+        return fmt::format("picked up: c{} = {:g} x c{}", v.surface + 1, s.curvature_pickup.scale,
+                           s.curvature_pickup.source + 1);
+      return {};
+    case LensVariable::Kind::kSpacing:
+    case LensVariable::Kind::kDefocus: {
+      const std::string t = v.kind == LensVariable::Kind::kDefocus
+                                ? fmt::format("t{} (defocus)", v.surface + 1)
+                                : fmt::format("t{}", v.surface + 1);
+      if (s.thickness_pickup.active())
+        return fmt::format("picked up: {} = {:g} x t{} + {:g} mm", t, s.thickness_pickup.scale,
+                           s.thickness_pickup.source + 1, s.thickness_pickup.offset_mm);
+      if (s.thickness_solve.active())
+        return fmt::format("solved: {} by the marginal ray height {:g} mm on surface {}", t,
+                           s.thickness_solve.height_mm, v.surface + 2);
+      return {};
+    }
+    default:
+      return {};
+  }
+}
+
+bool LensParameterization::flagged(int i) const {
+  const LensVariable& v = variables_.at(i);
+  const VaryFlags& f = structure_.surfaces[v.surface].vary;
+  switch (v.kind) {
+    case LensVariable::Kind::kCurvature:
+      return f.radius;
+    case LensVariable::Kind::kSpacing:
+    case LensVariable::Kind::kDefocus:
+      return f.thickness;
+    case LensVariable::Kind::kGlass0:
+    case LensVariable::Kind::kGlass1:
+      return f.glass;
+    case LensVariable::Kind::kConic:
+      return f.conic;
+    case LensVariable::Kind::kAsphere:
+      return false;
+  }
+  return false;
+}
+
+VariableChoice choose_variables(const LensParameterization& param,
+                                const std::vector<std::string>& freeze,
+                                const std::vector<std::string>& vary, bool focus_only) {
+  const int n = param.size();
+  const Lens& lens = param.structure();
+  const std::string where = lens.source_path.empty() ? lens.name : lens.source_path;
+  // The vary list's names that are variables (profile names the constructor added are too).
+  std::vector<std::string> vary_names;
+  for (const std::string& name : vary)
+    if (!name.empty()) vary_names.push_back(name);
+  const std::vector<int> frozen = param.select(freeze);
+  const std::vector<int> freed = param.select(vary_names);
+  auto contains = [](const std::vector<int>& list, int i) {
+    return std::find(list.begin(), list.end(), i) != list.end();
+  };
+  // The profile variables the vary list added are free by construction; named again they are
+  // in `freed` too.
+  for (int i : freed) {
+    if (contains(frozen, i))
+      throw Error(SourceLocation{where},
+                  fmt::format("variable {} is both held (freeze) and freed (vary); name it in "
+                              "one list",
+                              param.variables()[i].name));
+    const std::string dependent = param.dependent_reason(i);
+    // A group ("spacings") may span dependent values: only a variable named alone is an error.
+    bool named = false;
+    for (const std::string& name : vary_names) named = named || name == param.variables()[i].name;
+    if (named && !dependent.empty())
+      throw Error(SourceLocation{where},
+                  fmt::format("vary {}: it is not a variable ({}); remove the pickup or solve "
+                              "from the lens file to vary it",
+                              param.variables()[i].name, dependent));
+  }
+  if (focus_only)
+    for (int i = 0; i < n; ++i)
+      if (param.variables()[i].kind == LensVariable::Kind::kDefocus &&
+          !param.dependent_reason(i).empty())
+        throw Error(SourceLocation{where},
+                    fmt::format("--focus-only: the image distance is not a variable ({}); "
+                                "remove that solve to refocus on the merit",
+                                param.dependent_reason(i)));
+  const bool flags = lens.has_vary_flags();
+  VariableChoice out;
+  std::vector<std::string> dependent, held_freeze, freed_list, flagged_free, unflagged_held,
+      held_focus, free_focus, free_default;
+  for (int i = 0; i < n; ++i) {
+    const LensVariable& v = param.variables()[i];
+    const std::string reason = param.dependent_reason(i);
+    bool held = false;
+    if (!reason.empty()) {
+      held = true;
+      dependent.push_back(reason);
+    } else if (focus_only) {
+      // The defocus alone is free, whatever the lists and flags say.
+      held = v.kind != LensVariable::Kind::kDefocus;
+      (held ? held_focus : free_focus).push_back(v.name);
+    } else if (contains(frozen, i)) {
+      held = true;
+      held_freeze.push_back(v.name);
+    } else if (contains(freed, i)) {
+      freed_list.push_back(v.name);
+    } else if (flags) {
+      // The profile variables a vary list named were added to be free.
+      bool named_profile = false;
+      for (const std::string& name : vary_names) named_profile = named_profile || name == v.name;
+      if (param.flagged(i) || named_profile) {
+        (named_profile ? freed_list : flagged_free).push_back(v.name);
+      } else {
+        held = true;
+        unflagged_held.push_back(v.name);
+      }
+    } else {
+      free_default.push_back(v.name);
+    }
+    if (held) out.held.push_back(i);
+  }
+  auto line = [&](const std::string& what, const std::vector<std::string>& names,
+                  const std::string& sep) {
+    if (names.empty()) return;
+    std::string text;
+    for (const std::string& name : names) text += (text.empty() ? "" : sep) + name;
+    out.report.push_back(fmt::format("variables {}: {}", what, text));
+  };
+  line("free (--focus-only)", free_focus, ", ");
+  line("free (no vary flags in the lens file: every variable)", free_default, ", ");
+  line("free (vary flags in the lens file)", flagged_free, ", ");
+  line("free (named in vary: --vary / [optimize] vary)", freed_list, ", ");
+  line("held (not flagged in the lens file, which flags others)", unflagged_held, ", ");
+  line("held (named in freeze: --freeze / [optimize] freeze)", held_freeze, ", ");
+  line("held (--focus-only)", held_focus, ", ");
+  line("not variables (pickups and solves of the lens file)", dependent, "; ");
+  out.report.push_back(fmt::format("variables: c{} is solved for the focal length {:.6g} mm",
+                                   lens.surfaces.size(), param.focal_length_mm()));
   return out;
 }
 

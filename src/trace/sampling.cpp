@@ -3,6 +3,7 @@
 #include <algorithm>
 
 #include "lensopt/core/error.h"
+#include "lensopt/paraxial/solves.h"
 #include "lensopt/trace/system.h"
 
 namespace lensopt {
@@ -158,8 +159,12 @@ SystemSetup lens_setup(const Lens& lens, const TraceOptions& options) {
 
 TraceSystem<double> prepare_lens_system(const Lens& lens, const TraceOptions& options) {
   options.validate();
-  TraceSystem<double> sys =
-      prepare_system(make_trace_lens(lens), lens_setup(lens, options), options);
+  // Pickups and solves evaluated on the lens as it is now (paraxial/solves.h): a lens edited
+  // since it was read (Python) is traced with its solves met.
+  TraceLens<double> trace_lens = make_trace_lens(lens);
+  if (lens.has_solves())
+    apply_pickups_and_solves(trace_lens, LensSolves::of(lens), 1.0, 0, trace_lens.surface_count());
+  TraceSystem<double> sys = prepare_system(trace_lens, lens_setup(lens, options), options);
   if (!sys.field_solve_failure.empty())
     throw Error(SourceLocation{lens.source_path.empty() ? lens.name : lens.source_path},
                 sys.field_solve_failure);

@@ -69,6 +69,39 @@ struct Placement {
   }
 };
 
+// Solves and variables (issue 31), as OpticStudio marks them in its Lens Data Editor.
+// Which of a surface's values the optimizer may change (TOML `vary = ["radius", "thickness",
+// "conic", "glass"]`; a .zmx curvature variable flag). When any surface of a lens carries a
+// flag, only flagged values are free (OpticStudio's rule); with none, every value is (the
+// default); optimize --freeze / --vary override the file (optimize/variables.h states the rule).
+struct VaryFlags {
+  bool radius = false, thickness = false, conic = false, glass = false;
+  bool any() const { return radius || thickness || conic || glass; }
+};
+
+// A pickup: a value computed from another surface's (OpticStudio's pickup solve). Curvature:
+// c = scale * c_source (OpticStudio scales the curvature, not the radius: scale -1 is a mirrored
+// surface R = -R_source); thickness: t = scale * t_source + offset_mm. `source` is the 0-based
+// surface (-1: no pickup); it must come before the surface.
+struct Pickup {
+  int source = -1;
+  double scale = 1.0;
+  double offset_mm = 0.0;  // thickness pickups only
+  bool active() const { return source >= 0; }
+};
+
+// A thickness solve: kMarginalHeight sets the thickness so that the paraxial marginal ray (the
+// axial object point to the edge of the entrance pupil, primary wavelength) meets the next
+// surface's tangent plane at height_mm (OpticStudio's "marginal ray height" solve, pupil zone 0;
+// height 0 on the last thickness = the paraxial image). Evaluated whenever the lens changes
+// (trace/solves.h: on reading, after each optimizer step, before analysis).
+struct ThicknessSolve {
+  enum class Kind { kNone, kMarginalHeight };
+  Kind kind = Kind::kNone;
+  double height_mm = 0.0;
+  bool active() const { return kind != Kind::kNone; }
+};
+
 // One refracting (or stop) surface.
 struct Surface {
   double curvature_per_mm = 0.0;   // c = 1/R; 0 for a flat surface
@@ -97,6 +130,10 @@ struct Surface {
   // Centre of the clear aperture and obscuration in the surface's frame (OpticStudio's aperture
   // decenter, OBDC), mm.
   double aperture_decenter_x_mm = 0.0, aperture_decenter_y_mm = 0.0;
+  // Variables, pickups and solves (above).
+  VaryFlags vary;
+  Pickup curvature_pickup, thickness_pickup;
+  ThicknessSolve thickness_solve;
   // Any 3D placement, coordinate break or aperture decenter: the lens is not rotationally
   // symmetric (traced through the general path of kernel.h on the full pupil).
   bool breaks_symmetry() const {
@@ -239,6 +276,19 @@ struct Lens {
   bool breaks_symmetry() const {
     for (const Surface& s : surfaces)
       if (s.breaks_symmetry()) return true;
+    return false;
+  }
+  // Some surface carries a vary flag (then only flagged values are free; VaryFlags).
+  bool has_vary_flags() const {
+    for (const Surface& s : surfaces)
+      if (s.vary.any()) return true;
+    return false;
+  }
+  // Some surface has a pickup or a thickness solve.
+  bool has_solves() const {
+    for (const Surface& s : surfaces)
+      if (s.curvature_pickup.active() || s.thickness_pickup.active() || s.thickness_solve.active())
+        return true;
     return false;
   }
   // Sum of all thicknesses but the last (first vertex to last vertex), mm.

@@ -23,6 +23,27 @@
 //          radius: the term's sag at the pupil's edge height in units of f, so a4 .. a16 are all
 //          O(sag / f) for LM and Adam. a'_{2i} = a_{2i} f^(2i-1) is the term of the f = 1 lens.
 // Profile terms that are not variables keep the structure's values (scaled with the lens).
+//
+// Pickups and solves (lens.h, paraxial/solves.h) are functions of their sources, evaluated in
+// the forward map on the normalized lens after step 2's variables are set and before the last
+// curvature is solved (a pickup or solve on the last thickness after step 3, replacing the
+// image solve), so the trace, the reports and the exact Jacobian all see them; the variable of
+// a picked-up or solved value is held (choose_variables). The last curvature cannot be picked
+// up (it is the focal-length solve): Error.
+//
+// Which variables are free (choose_variables), in order of precedence:
+//   1. a picked-up or solved value is never free (c_k with a curvature pickup; s_k with a
+//      thickness pickup or a marginal-ray-height solve; the defocus when the last thickness has
+//      one); the last curvature is solved for the focal length; naming one in a vary list is an
+//      Error;
+//   2. an explicit list overrides the file: `vary` names (--vary, [optimize] vary, Python's
+//      vary=) are free, `freeze` names (--freeze, [optimize] freeze) are held; a name in both
+//      is an Error; --focus-only holds everything but the defocus;
+//   3. the lens file's per-surface vary flags (TOML `vary = [...]`, .zmx variable flags): when
+//      any surface carries one, a variable is free only if its surface flags it (radius -> c_k,
+//      thickness -> s_k or, on the last surface, the defocus, glass -> g_k, conic -> k_k, which
+//      the flag adds as a variable); asphere terms are free only when named in `vary`;
+//   4. without flags every variable is free (the paper's setting).
 #pragma once
 
 #include <Eigen/Core>
@@ -34,6 +55,7 @@
 #include "lensopt/lens/trace_lens.h"
 #include "lensopt/optimize/glass_elements.h"
 #include "lensopt/paraxial/paraxial.h"
+#include "lensopt/paraxial/solves.h"
 
 namespace lensopt {
 
@@ -241,6 +263,9 @@ class LensParameterization {
     }
     // Fixed (frozen by structure) values: the stop is flat; frozen variables are still variables.
     const int last = k_count - 1;
+    // Pickups and solves before the last surface (header), in the normalized lens's unit.
+    const double unit = solve_unit_;
+    if (has_solves_) apply_pickups_and_solves(lens, solves_, unit, 0, last);
     lens.curvature_per_mm[last] = solve_last_curvature(lens, K<T>(1.0), reference_nm);
     if (paraxial_image_solve_) {
       const ParaxialData<T> par = paraxial_data(lens, reference_nm);
@@ -248,6 +273,7 @@ class LensParameterization {
     } else {
       lens.thickness_mm[last] = x[defocus_index_];  // ablation: s_{K-1} = s'_{K-1} f
     }
+    if (has_solves_) apply_pickups_and_solves(lens, solves_, unit, last, k_count);
     lens.scale_lengths(K<T>(focal_length_mm_));
     // The 3D placements as the structure gives them (mm), at the spec scale as prepare_system
     // scales the structure (geometry_scale_): scale_lengths above multiplied the structure's
@@ -292,6 +318,12 @@ class LensParameterization {
   // Throws Error naming an unknown entry.
   std::vector<int> select(const std::vector<std::string>& names) const;
 
+  // Why variable i cannot be free: "picked up: c4 = -1 x c3", "solved: marginal ray height
+  // 0 mm", or empty (header rule 1).
+  std::string dependent_reason(int i) const;
+  // Variable i's surface flags it in the lens file (header rule 3).
+  bool flagged(int i) const;
+
  private:
   Lens structure_;
   GlassSpace glasses_;
@@ -310,6 +342,23 @@ class LensParameterization {
   std::vector<std::uint8_t> profile_kind_;
   std::vector<double> conic0_, asphere0_;
   bool paraxial_image_solve_ = true;
+  // The structure's pickups and solves (paraxial/solves.h).
+  bool has_solves_ = false;
+  LensSolves solves_;
+  double solve_unit_ = 1.0;  // the file's mm in the normalized lens: spec scale / f
 };
+
+// The free variables of an optimization and why (header rules 1-4).
+struct VariableChoice {
+  std::vector<int> held;            // indices held fixed, sorted
+  std::vector<std::string> report;  // one line per reason: "free (lens file vary flags): c1, c2"
+};
+// `freeze` and `vary` are the explicit lists (names or groups as select() takes them; profile
+// names in `vary` are variables of `param` already); `focus_only` holds all but the defocus.
+// Throws Error for a name in both lists, a dependent variable in `vary`, or a focus-only run
+// whose last thickness is solved.
+VariableChoice choose_variables(const LensParameterization& param,
+                                const std::vector<std::string>& freeze,
+                                const std::vector<std::string>& vary, bool focus_only);
 
 }  // namespace lensopt
