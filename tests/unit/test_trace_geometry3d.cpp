@@ -11,10 +11,12 @@
 #include <vector>
 
 #include "lensopt/core/error.h"
+#include "lensopt/formats/lens_file.h"
 #include "lensopt/lens/lens_io.h"
 #include "lensopt/paraxial/paraxial.h"
 #include "lensopt/trace/kernel.h"
 #include "lensopt/trace/system.h"
+#include "test_support.h"
 
 using namespace lensopt;
 
@@ -550,4 +552,33 @@ thickness_mm = 1
 )",
                                        "bad.toml"),
                        doctest::Contains("a coordinate break has only"), Error);
+}
+
+TEST_CASE("geometry3d: the axial field of a decentred lens is aimed (its pupil is not symmetric)") {
+  // The Tessar with its front element decentred 0.02 mm in y and tilted 1 arcmin about x. On
+  // axis a rotationally symmetric lens needs no aiming (R_s is the axial marginal ray's stop
+  // height), but here the upper and lower rays meet the stop at different heights. Before the
+  // axial field was aimed on placed lenses, the lower ray missed -R_s by 1.02 % of R_s (analyze's
+  // "aiming err"); aimed, the one Newton step leaves under 0.01 % (the symmetric Tessar's
+  // off-axis fields: 0.004 % at 1.25 deg).
+  Lens lens = read_lens(test::source_dir() / "lenses" / "tessar.toml");
+  Placement p;
+  p.decenter_y_mm = 0.02;
+  p.tilt_x_deg = 1.0 / 60.0;
+  lens.surfaces[0].placement = p;
+  lens.surfaces[1].placement = p;
+  lens.surfaces[1].restore_frame = true;
+  TraceOptions options;
+  options.rings = 4;
+  const TraceSystem<double> sys = prepare_lens_system(lens, options);
+  REQUIRE(sys.lens.geometry.placed());
+  REQUIRE(sys.fields_deg[0] == 0.0);
+  const double rs = sys.stop_radius_mm;
+  for (int w = 0; w <= sys.wavelength_count; ++w) {
+    const auto stop = aimed_stop_coordinates(sys, 0, w);
+    CAPTURE(w);
+    CHECK(std::abs(stop[0] - rs) / rs < 1e-4);
+    CHECK(std::abs(stop[1] + rs) / rs < 1e-4);
+    CHECK(std::abs(stop[2] - rs) / rs < 1e-4);
+  }
 }

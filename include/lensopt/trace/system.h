@@ -508,8 +508,13 @@ TraceSystem<T> prepare_system(const TraceLens<T>& lens_in, const SystemSetup& se
   const T r_s = sys.stop_radius_mm;
   RayBundle<J> aiming_rays;
   for (int h = 0; h < field_count; ++h) {
-    // On axis the pupil is not aberrated by the definition of R_s (unless R_s is given).
-    if (sys.fields_deg[h] == 0.0 && setup.aperture_type != ApertureType::kFloatByStop) continue;
+    // On axis the pupil of a rotationally symmetric lens is not aberrated by the definition of
+    // R_s (unless R_s is given). A lens with 3D placements (a decentred or tilted element) is
+    // not symmetric on axis: its upper and lower rays meet the stop at different heights, so
+    // its axial field is aimed like any other.
+    if (sys.fields_deg[h] == 0.0 && setup.aperture_type != ApertureType::kFloatByStop &&
+        !sys.lens.geometry.placed())
+      continue;
     for (int w = 0; w < wl; ++w) {
       T coord[3], deriv[3];
       detail::trace_aiming_rays<T>(lens_a, w, sys, h, r_ep, sys.entrance_pupil_z_mm, identity,
