@@ -89,8 +89,7 @@ SystemAdjoint design_adjoint(const TraceSystem<double>& sys, const DesignSamplin
       lower[k] = 0.0;  // a part of a split element: no ray travels backwards
       upper[k] = std::numeric_limits<double>::infinity();
     } else if (k == k_count - 1) {
-      lower[k] = options.min_image_clearance_mm;
-      upper[k] = std::numeric_limits<double>::infinity();
+      image_space_bounds(options, lower[k], upper[k]);
     } else if (sys.lens.is_glass[k]) {
       lower[k] = options.min_glass_mm;
       upper[k] = options.max_glass_mm;

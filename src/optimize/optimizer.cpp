@@ -23,6 +23,7 @@
 #include "lensopt/optimize/free_jacobian.h"
 #include "lensopt/optimize/glass_elements.h"
 #include "lensopt/optimize/profile_bounds.h"
+#include "lensopt/optimize/virtual_image.h"
 
 namespace lensopt {
 namespace {
@@ -317,6 +318,10 @@ DesignLossOptions with_margin(DesignLossOptions loss) {
   loss.min_glass_mm += 0.001;
   loss.max_glass_mm -= 0.001;
   loss.min_image_clearance_mm += 0.005;
+  if (loss.virtual_image()) {
+    loss.min_virtual_image_mm += 0.005;
+    loss.max_virtual_image_mm -= 0.005;
+  }
   loss.max_ray_angle_deg -= 0.05;
   loss.max_surface_slope_deg -= 0.05;
   return loss;
@@ -546,6 +551,12 @@ DesignLossOptions continued_bounds(const DesignLossOptions& target, const Design
   out.min_glass_mm = lower(target.min_glass_mm, min_glass);
   out.max_glass_mm = upper(target.max_glass_mm, max_glass);
   out.min_image_clearance_mm = lower(target.min_image_clearance_mm, clearance);
+  if (target.virtual_image()) {
+    // A virtual image: the image travel dz in [-max, -min] (design_loss.h), continued as the
+    // other bounds from the start's own extremes.
+    out.max_virtual_image_mm = upper(target.max_virtual_image_mm, -start.min_travel_mm[k_count - 1]);
+    out.min_virtual_image_mm = lower(target.min_virtual_image_mm, -start.max_travel_mm[k_count - 1]);
+  }
   out.max_ray_angle_deg = upper(target.max_ray_angle_deg, angle_deg);
   return out;
 }
@@ -583,6 +594,11 @@ void DesignLossOptions::validate() const {
   positive(min_glass_mm, "min_glass_mm");
   positive(max_glass_mm, "max_glass_mm");
   positive(min_image_clearance_mm, "min_image_clearance_mm");
+  positive(min_virtual_image_mm, "min_virtual_image_mm");
+  positive(max_virtual_image_mm, "max_virtual_image_mm");
+  if (virtual_image() && max_virtual_image_mm < min_virtual_image_mm)
+    throw Error(fmt::format("max_virtual_image_mm = {} is below min_virtual_image_mm = {}",
+                            max_virtual_image_mm, min_virtual_image_mm));
   if (max_glass_mm < min_glass_mm)
     throw Error(
         fmt::format("max_glass_mm = {} is below min_glass_mm = {}", max_glass_mm, min_glass_mm));
@@ -674,7 +690,15 @@ ConstraintReport check_constraints(const Lens& lens, const DesignLossOptions& lo
     const bool glass = !lens.surfaces[k].material.is_air();
     // A glass element split by a dummy or stop surface: one row pair, of its summed travel.
     if (!element_last_space(first, k)) continue;
-    if (last) {
+    if (last && loss.virtual_image()) {
+      // A virtual image (design_loss.h): how far before the last surface the rays are traced
+      // back, -dz, within [min, max].
+      const double nearest = -ext.max_travel_mm[k], farthest = -ext.min_travel_mm[k];
+      report.rows.push_back({"virtual image distance min", nearest, loss.min_virtual_image_mm,
+                             true, nearest >= loss.min_virtual_image_mm});
+      report.rows.push_back({"virtual image distance max", farthest, loss.max_virtual_image_mm,
+                             false, farthest <= loss.max_virtual_image_mm});
+    } else if (last) {
       report.rows.push_back({"image clearance", ext.min_travel_mm[k], loss.min_image_clearance_mm,
                              true, ext.min_travel_mm[k] >= loss.min_image_clearance_mm});
     } else if (glass) {
@@ -793,7 +817,8 @@ DesignLossOptions lens_derived_bounds(const Lens& lens, const DesignLossOptions&
 DesignLossOptions bounds_for(const Lens& lens, const DesignLossOptions& paper, BoundsMode mode) {
   const bool use_paper =
       mode == BoundsMode::kPaper || (mode == BoundsMode::kAuto && is_paper_lens(lens));
-  return use_paper ? paper : lens_derived_bounds(lens, paper);
+  // A diverging lens's virtual image is bounded by its own start (virtual_image.h).
+  return with_virtual_image_bounds(lens, use_paper ? paper : lens_derived_bounds(lens, paper));
 }
 
 double design_spot_mm(const LensParameterization& param, const std::vector<double>& x,
@@ -1011,7 +1036,12 @@ class LensOptimization {
         std::max({std::abs(from.min_air_mm - target_loss.min_air_mm),
                   std::abs(from.min_glass_mm - target_loss.min_glass_mm),
                   std::abs(from.max_glass_mm - target_loss.max_glass_mm),
-                  std::abs(from.min_image_clearance_mm - target_loss.min_image_clearance_mm)});
+                  target_loss.virtual_image()
+                      ? std::max(std::abs(from.min_virtual_image_mm -
+                                          target_loss.min_virtual_image_mm),
+                                 std::abs(from.max_virtual_image_mm -
+                                          target_loss.max_virtual_image_mm))
+                      : std::abs(from.min_image_clearance_mm - target_loss.min_image_clearance_mm)});
     const double angle_gap_deg = std::abs(from.max_ray_angle_deg - target_loss.max_ray_angle_deg);
     const bool nearly_inside = length_gap_mm <= 0.01 && angle_gap_deg <= 0.5;
     for (double t : {0.25, 0.5, 0.75}) {
@@ -1293,6 +1323,10 @@ OptimizeResult optimize_lens(const Lens& given_start, const OptimizeOptions& giv
       start.specs.aperture_value != given_start.specs.aperture_value)
     solve_log.push_back(
         fmt::format("aperture: F-number {:.6g} (EPD = f / N)", start.specs.f_number));
+  // A diverging lens: its image is virtual, its merit measured there (virtual_image.h).
+  std::string virtual_image;
+  options.loss = with_virtual_image_bounds(start, options.loss, &virtual_image);
+  if (!virtual_image.empty()) solve_log.push_back(virtual_image);
   if (options.loss.merit == DesignMerit::kWavefront && !(options.loss.wavefront_unit_mm > 0.0)) {
     // The wavefront merit in mm (design_loss.h): the start's defocus unit, fixed for the run.
     const double unit = wavefront_mm_per_wave(prepare_lens_system(start, options.sampling));
