@@ -178,18 +178,17 @@ void run_optimize(const OptimizeCommand& cmd) {
   const bool wavefront = options.loss.merit == DesignMerit::kWavefront;
 
   if (!cmd.quiet && !cmd.json)
-    fmt::print(stderr,
-               "lensopt optimize: {} bounds: air >= {:.4g} mm, glass {:.4g}..{:.4g} mm, {}, ray "
-               "angle <= {:.4g} deg\n",
-               paper_bounds ? "the paper's" : "lens-derived", options.loss.min_air_mm,
-               options.loss.min_glass_mm, options.loss.max_glass_mm,
-               options.loss.virtual_image()
-                   ? fmt::format("virtual image {:.4g}..{:.4g} mm before the last surface",
-                                 options.loss.min_virtual_image_mm,
-                                 options.loss.max_virtual_image_mm)
-                   : fmt::format("image clearance >= {:.4g} mm",
-                                 options.loss.min_image_clearance_mm),
-               options.loss.max_ray_angle_deg);
+    fmt::print(
+        stderr,
+        "lensopt optimize: {} bounds: air >= {:.4g} mm, glass {:.4g}..{:.4g} mm, {}, ray "
+        "angle <= {:.4g} deg\n",
+        paper_bounds ? "the paper's" : "lens-derived", options.loss.min_air_mm,
+        options.loss.min_glass_mm, options.loss.max_glass_mm,
+        options.loss.virtual_image()
+            ? fmt::format("virtual image {:.4g}..{:.4g} mm before the last surface",
+                          options.loss.min_virtual_image_mm, options.loss.max_virtual_image_mm)
+            : fmt::format("image clearance >= {:.4g} mm", options.loss.min_image_clearance_mm),
+        options.loss.max_ray_angle_deg);
 
   OptimizeResult result;
   {

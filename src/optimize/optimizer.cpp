@@ -531,6 +531,7 @@ DesignLossOptions continued_bounds(const DesignLossOptions& target, const Design
   double max_glass = -min_air;
   for (int k = 0; k + 1 < k_count; ++k) {
     if (!element_last_space(first, k)) continue;  // a split element: its summed travel at its end
+    if (stop_at_vertex_space(structure, k)) continue;  // the stop on a vertex: no air gap
     if (structure.surfaces[k].material.is_air()) {
       min_air = std::min(min_air, start.min_travel_mm[k]);
     } else {
@@ -554,8 +555,10 @@ DesignLossOptions continued_bounds(const DesignLossOptions& target, const Design
   if (target.virtual_image()) {
     // A virtual image: the image travel dz in [-max, -min] (design_loss.h), continued as the
     // other bounds from the start's own extremes.
-    out.max_virtual_image_mm = upper(target.max_virtual_image_mm, -start.min_travel_mm[k_count - 1]);
-    out.min_virtual_image_mm = lower(target.min_virtual_image_mm, -start.max_travel_mm[k_count - 1]);
+    out.max_virtual_image_mm =
+        upper(target.max_virtual_image_mm, -start.min_travel_mm[k_count - 1]);
+    out.min_virtual_image_mm =
+        lower(target.min_virtual_image_mm, -start.max_travel_mm[k_count - 1]);
   }
   out.max_ray_angle_deg = upper(target.max_ray_angle_deg, angle_deg);
   return out;
@@ -690,12 +693,13 @@ ConstraintReport check_constraints(const Lens& lens, const DesignLossOptions& lo
     const bool glass = !lens.surfaces[k].material.is_air();
     // A glass element split by a dummy or stop surface: one row pair, of its summed travel.
     if (!element_last_space(first, k)) continue;
+    if (stop_at_vertex_space(lens, k)) continue;  // the stop on a vertex: no air gap to bound
     if (last && loss.virtual_image()) {
       // A virtual image (design_loss.h): how far before the last surface the rays are traced
       // back, -dz, within [min, max].
       const double nearest = -ext.max_travel_mm[k], farthest = -ext.min_travel_mm[k];
-      report.rows.push_back({"virtual image distance min", nearest, loss.min_virtual_image_mm,
-                             true, nearest >= loss.min_virtual_image_mm});
+      report.rows.push_back({"virtual image distance min", nearest, loss.min_virtual_image_mm, true,
+                             nearest >= loss.min_virtual_image_mm});
       report.rows.push_back({"virtual image distance max", farthest, loss.max_virtual_image_mm,
                              false, farthest <= loss.max_virtual_image_mm});
     } else if (last) {
@@ -789,7 +793,7 @@ DesignLossOptions lens_derived_bounds(const Lens& lens, const DesignLossOptions&
   for (int k = 0; k + 1 < k_count; ++k) {
     // A glass element split by a dummy or stop surface (glass_elements.h): its summed travel, at
     // its last space (a half of it may be 0 mm thick on axis and bounds nothing).
-    if (!element_last_space(first, k)) continue;
+    if (!element_last_space(first, k) || stop_at_vertex_space(lens, k)) continue;
     if (lens.surfaces[k].material.is_air()) {
       // A zero-thickness air space (a stop at a vertex) bounds nothing.
       if (ext.max_travel_mm[k] > 0.0) min_air = std::min(min_air, ext.min_travel_mm[k]);
@@ -848,6 +852,9 @@ class LensOptimization {
       const LensVariable& v = param_.variables()[i];
       if (v.kind == LensVariable::Kind::kSpacing && element_first[v.surface] != v.surface &&
           start.surfaces[v.surface].thickness_mm == 0.0)
+        frozen_user_.push_back(i);
+      // So does a flat stop 0 mm before the surface whose vertex it marks (glass_elements.h).
+      if (v.kind == LensVariable::Kind::kSpacing && stop_at_vertex_space(start, v.surface))
         frozen_user_.push_back(i);
     }
     // --focus-only: every variable but the defocus held.
@@ -1032,16 +1039,14 @@ class LensOptimization {
                     &start_extremes);
     const DesignLossOptions target_loss = loss_;
     const DesignLossOptions from = continued_bounds(target_loss, start_extremes, start_, 0.0);
-    const double length_gap_mm =
-        std::max({std::abs(from.min_air_mm - target_loss.min_air_mm),
-                  std::abs(from.min_glass_mm - target_loss.min_glass_mm),
-                  std::abs(from.max_glass_mm - target_loss.max_glass_mm),
-                  target_loss.virtual_image()
-                      ? std::max(std::abs(from.min_virtual_image_mm -
-                                          target_loss.min_virtual_image_mm),
-                                 std::abs(from.max_virtual_image_mm -
-                                          target_loss.max_virtual_image_mm))
-                      : std::abs(from.min_image_clearance_mm - target_loss.min_image_clearance_mm)});
+    const double length_gap_mm = std::max(
+        {std::abs(from.min_air_mm - target_loss.min_air_mm),
+         std::abs(from.min_glass_mm - target_loss.min_glass_mm),
+         std::abs(from.max_glass_mm - target_loss.max_glass_mm),
+         target_loss.virtual_image()
+             ? std::max(std::abs(from.min_virtual_image_mm - target_loss.min_virtual_image_mm),
+                        std::abs(from.max_virtual_image_mm - target_loss.max_virtual_image_mm))
+             : std::abs(from.min_image_clearance_mm - target_loss.min_image_clearance_mm)});
     const double angle_gap_deg = std::abs(from.max_ray_angle_deg - target_loss.max_ray_angle_deg);
     const bool nearly_inside = length_gap_mm <= 0.01 && angle_gap_deg <= 0.5;
     for (double t : {0.25, 0.5, 0.75}) {
@@ -1326,6 +1331,12 @@ OptimizeResult optimize_lens(const Lens& given_start, const OptimizeOptions& giv
   // A diverging lens: its image is virtual, its merit measured there (virtual_image.h).
   std::string virtual_image;
   options.loss = with_virtual_image_bounds(start, options.loss, &virtual_image);
+  if (virtual_image.empty() && options.loss.virtual_image())  // bounds given (bounds_for)
+    virtual_image = fmt::format(
+        "image: virtual, measured {:.6g} mm before the last surface; its distance is held "
+        "within [{:.6g}, {:.6g}] mm",
+        -start.surfaces.back().thickness_mm, options.loss.min_virtual_image_mm,
+        options.loss.max_virtual_image_mm);
   if (!virtual_image.empty()) solve_log.push_back(virtual_image);
   if (options.loss.merit == DesignMerit::kWavefront && !(options.loss.wavefront_unit_mm > 0.0)) {
     // The wavefront merit in mm (design_loss.h): the start's defocus unit, fixed for the run.

@@ -19,8 +19,8 @@ bool image_travel(const Lens& lens, double& min_dz, double& max_dz) {
   const std::vector<double> x = param.from_lens(lens);
   DesignExtremes ext;
   DesignLossOptions loss;
-  evaluate_design<double>(param, x.data(), GlassMode::kContinuous, {}, AnalyzeOptions{}.trace,
-                          loss, nullptr, nullptr, nullptr, &ext);
+  evaluate_design<double>(param, x.data(), GlassMode::kContinuous, {}, AnalyzeOptions{}.trace, loss,
+                          nullptr, nullptr, nullptr, &ext);
   if (ext.min_travel_mm.empty()) return false;
   min_dz = ext.min_travel_mm.back();
   max_dz = ext.max_travel_mm.back();

@@ -314,6 +314,9 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
       upper[k] = std::numeric_limits<double>::infinity();
     } else if (k == k_count - 1) {
       image_space_bounds(options, lower[k], upper[k]);
+    } else if (stop_at_vertex_space(param.structure(), k)) {
+      lower[k] = -std::numeric_limits<double>::infinity();  // the stop on a vertex: no air gap
+      upper[k] = std::numeric_limits<double>::infinity();
     } else if (lens.is_glass[k]) {
       lower[k] = options.min_glass_mm;
       upper[k] = options.max_glass_mm;
