@@ -182,12 +182,17 @@ void run_optimize(const OptimizeCommand& cmd) {
   const bool wavefront = options.loss.merit == DesignMerit::kWavefront;
 
   if (!cmd.quiet && !cmd.json)
-    fmt::print(stderr,
-               "lensopt optimize: {} bounds: air >= {:.4g} mm, glass {:.4g}..{:.4g} mm, image "
-               "clearance >= {:.4g} mm, ray angle <= {:.4g} deg\n",
-               paper_bounds ? "the paper's" : "lens-derived", options.loss.min_air_mm,
-               options.loss.min_glass_mm, options.loss.max_glass_mm,
-               options.loss.min_image_clearance_mm, options.loss.max_ray_angle_deg);
+    fmt::print(
+        stderr,
+        "lensopt optimize: {} bounds: air >= {:.4g} mm, glass {:.4g}..{:.4g} mm, {}, ray "
+        "angle <= {:.4g} deg\n",
+        paper_bounds ? "the paper's" : "lens-derived", options.loss.min_air_mm,
+        options.loss.min_glass_mm, options.loss.max_glass_mm,
+        options.loss.virtual_image()
+            ? fmt::format("virtual image {:.4g}..{:.4g} mm before the last surface",
+                          options.loss.min_virtual_image_mm, options.loss.max_virtual_image_mm)
+            : fmt::format("image clearance >= {:.4g} mm", options.loss.min_image_clearance_mm),
+        options.loss.max_ray_angle_deg);
 
   OptimizeResult result;
   {
@@ -225,6 +230,10 @@ void run_optimize(const OptimizeCommand& cmd) {
                    {"max_glass_mm", options.loss.max_glass_mm},
                    {"min_image_clearance_mm", options.loss.min_image_clearance_mm},
                    {"max_ray_angle_deg", options.loss.max_ray_angle_deg}};
+    if (options.loss.virtual_image()) {
+      j["bounds"]["min_virtual_image_mm"] = options.loss.min_virtual_image_mm;
+      j["bounds"]["max_virtual_image_mm"] = options.loss.max_virtual_image_mm;
+    }
     j["log"] = result.log;
     j["sampling"] = {{"rings", options.sampling.rings}, {"fields", options.sampling.fields}};
     fmt::print("{}\n", j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace));

@@ -72,7 +72,7 @@ TraceSystem<ceres::Jet<double, N>> design_system(
 // Step 2 of the header for the design loss: the loss terms of evaluate_design in double and the
 // adjoints of l_lens (without the glass term) with respect to the system's parameters.
 SystemAdjoint design_adjoint(const TraceSystem<double>& sys, const DesignSampling& sampled,
-                             const std::vector<int>& element_first, const TraceOptions& sampling,
+                             const Lens& structure, const TraceOptions& sampling,
                              const DesignLossOptions& options, DesignLoss<double>& loss) {
   const int all_fields = static_cast<int>(sys.fields_deg.size());
   const int field_count = sampled.spot_fields;
@@ -83,13 +83,16 @@ SystemAdjoint design_adjoint(const TraceSystem<double>& sys, const DesignSamplin
   const PupilSamples edge = sys.samples_for(pupil_edge_samples(kEdgeRays));
   const double cos2_max = std::pow(std::cos(options.max_ray_angle_deg * kPi / 180.0), 2);
   // evaluate_design's bounds: a split glass element (glass_elements.h) on its summed travel.
+  const std::vector<int> element_first = element_first_spaces(structure);
   std::vector<double> lower(k_count), upper(k_count);
   for (int k = 0; k < k_count; ++k) {
     if (!element_last_space(element_first, k)) {
       lower[k] = 0.0;  // a part of a split element: no ray travels backwards
       upper[k] = std::numeric_limits<double>::infinity();
     } else if (k == k_count - 1) {
-      lower[k] = options.min_image_clearance_mm;
+      image_space_bounds(options, lower[k], upper[k]);
+    } else if (stop_at_vertex_space(structure, k)) {
+      lower[k] = -std::numeric_limits<double>::infinity();  // the stop on a vertex: no air gap
       upper[k] = std::numeric_limits<double>::infinity();
     } else if (sys.lens.is_glass[k]) {
       lower[k] = options.min_glass_mm;
@@ -307,8 +310,8 @@ DesignValueGradient design_adjoint_gradient(const LensParameterization& param,
         return design_loss_gradient_jets(param, x, mode, fixed_glasses, sampling, options);
       TraceOptions unscaled = sampling;
       unscaled.scale_to_spec = false;
-      adj = design_adjoint(values, design_sampling(param.structure(), unscaled),
-                           element_first_spaces(param.structure()), sampling, options, out.loss);
+      adj = design_adjoint(values, design_sampling(param.structure(), unscaled), param.structure(),
+                           sampling, options, out.loss);
     }
     chain_system_adjoint(sys, adj, std::min(N, n - first), out.gradient.data() + first);
     if (n == 0) break;

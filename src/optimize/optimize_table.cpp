@@ -46,7 +46,8 @@ BoundsMode parse_bounds_mode(const std::string& name, const SourceLocation& wher
 const char* optimize_table_keys() {
   return "glass_search, constraints, rings, fields, max_iterations, max_rounds, glass_neighbours, "
          "weight_ray_path, weight_ray_angle, weight_glass, min_air_mm, min_glass_mm, "
-         "max_glass_mm, min_image_clearance_mm, max_ray_angle_deg, max_surface_slope_deg, "
+         "max_glass_mm, min_image_clearance_mm, min_virtual_image_mm, max_virtual_image_mm, "
+         "max_ray_angle_deg, max_surface_slope_deg, "
          "weight_profile, soft_start, freeze, vary, merit, wavefront_pupil_samples, focus_only, "
          "targets ([[optimize.targets]])";
 }
@@ -173,6 +174,10 @@ bool apply_optimize_key(const std::string& key, const toml::node& node, const So
     loss.max_glass_mm = number();
   else if (key == "min_image_clearance_mm")
     loss.min_image_clearance_mm = number();
+  else if (key == "min_virtual_image_mm")
+    loss.min_virtual_image_mm = number();
+  else if (key == "max_virtual_image_mm")
+    loss.max_virtual_image_mm = number();
   else if (key == "max_ray_angle_deg")
     loss.max_ray_angle_deg = number();
   else if (key == "max_surface_slope_deg")

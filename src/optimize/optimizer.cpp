@@ -23,6 +23,7 @@
 #include "lensopt/optimize/free_jacobian.h"
 #include "lensopt/optimize/glass_elements.h"
 #include "lensopt/optimize/profile_bounds.h"
+#include "lensopt/optimize/virtual_image.h"
 
 namespace lensopt {
 namespace {
@@ -317,6 +318,10 @@ DesignLossOptions with_margin(DesignLossOptions loss) {
   loss.min_glass_mm += 0.001;
   loss.max_glass_mm -= 0.001;
   loss.min_image_clearance_mm += 0.005;
+  if (loss.virtual_image()) {
+    loss.min_virtual_image_mm += 0.005;
+    loss.max_virtual_image_mm -= 0.005;
+  }
   loss.max_ray_angle_deg -= 0.05;
   loss.max_surface_slope_deg -= 0.05;
   return loss;
@@ -526,6 +531,7 @@ DesignLossOptions continued_bounds(const DesignLossOptions& target, const Design
   double max_glass = -min_air;
   for (int k = 0; k + 1 < k_count; ++k) {
     if (!element_last_space(first, k)) continue;  // a split element: its summed travel at its end
+    if (stop_at_vertex_space(structure, k)) continue;  // the stop on a vertex: no air gap
     if (structure.surfaces[k].material.is_air()) {
       min_air = std::min(min_air, start.min_travel_mm[k]);
     } else {
@@ -546,6 +552,14 @@ DesignLossOptions continued_bounds(const DesignLossOptions& target, const Design
   out.min_glass_mm = lower(target.min_glass_mm, min_glass);
   out.max_glass_mm = upper(target.max_glass_mm, max_glass);
   out.min_image_clearance_mm = lower(target.min_image_clearance_mm, clearance);
+  if (target.virtual_image()) {
+    // A virtual image: the image travel dz in [-max, -min] (design_loss.h), continued as the
+    // other bounds from the start's own extremes.
+    out.max_virtual_image_mm =
+        upper(target.max_virtual_image_mm, -start.min_travel_mm[k_count - 1]);
+    out.min_virtual_image_mm =
+        lower(target.min_virtual_image_mm, -start.max_travel_mm[k_count - 1]);
+  }
   out.max_ray_angle_deg = upper(target.max_ray_angle_deg, angle_deg);
   return out;
 }
@@ -583,6 +597,11 @@ void DesignLossOptions::validate() const {
   positive(min_glass_mm, "min_glass_mm");
   positive(max_glass_mm, "max_glass_mm");
   positive(min_image_clearance_mm, "min_image_clearance_mm");
+  positive(min_virtual_image_mm, "min_virtual_image_mm");
+  positive(max_virtual_image_mm, "max_virtual_image_mm");
+  if (virtual_image() && max_virtual_image_mm < min_virtual_image_mm)
+    throw Error(fmt::format("max_virtual_image_mm = {} is below min_virtual_image_mm = {}",
+                            max_virtual_image_mm, min_virtual_image_mm));
   if (max_glass_mm < min_glass_mm)
     throw Error(
         fmt::format("max_glass_mm = {} is below min_glass_mm = {}", max_glass_mm, min_glass_mm));
@@ -674,7 +693,16 @@ ConstraintReport check_constraints(const Lens& lens, const DesignLossOptions& lo
     const bool glass = !lens.surfaces[k].material.is_air();
     // A glass element split by a dummy or stop surface: one row pair, of its summed travel.
     if (!element_last_space(first, k)) continue;
-    if (last) {
+    if (stop_at_vertex_space(lens, k)) continue;  // the stop on a vertex: no air gap to bound
+    if (last && loss.virtual_image()) {
+      // A virtual image (design_loss.h): how far before the last surface the rays are traced
+      // back, -dz, within [min, max].
+      const double nearest = -ext.max_travel_mm[k], farthest = -ext.min_travel_mm[k];
+      report.rows.push_back({"virtual image distance min", nearest, loss.min_virtual_image_mm, true,
+                             nearest >= loss.min_virtual_image_mm});
+      report.rows.push_back({"virtual image distance max", farthest, loss.max_virtual_image_mm,
+                             false, farthest <= loss.max_virtual_image_mm});
+    } else if (last) {
       report.rows.push_back({"image clearance", ext.min_travel_mm[k], loss.min_image_clearance_mm,
                              true, ext.min_travel_mm[k] >= loss.min_image_clearance_mm});
     } else if (glass) {
@@ -765,7 +793,7 @@ DesignLossOptions lens_derived_bounds(const Lens& lens, const DesignLossOptions&
   for (int k = 0; k + 1 < k_count; ++k) {
     // A glass element split by a dummy or stop surface (glass_elements.h): its summed travel, at
     // its last space (a half of it may be 0 mm thick on axis and bounds nothing).
-    if (!element_last_space(first, k)) continue;
+    if (!element_last_space(first, k) || stop_at_vertex_space(lens, k)) continue;
     if (lens.surfaces[k].material.is_air()) {
       // A zero-thickness air space (a stop at a vertex) bounds nothing.
       if (ext.max_travel_mm[k] > 0.0) min_air = std::min(min_air, ext.min_travel_mm[k]);
@@ -793,7 +821,8 @@ DesignLossOptions lens_derived_bounds(const Lens& lens, const DesignLossOptions&
 DesignLossOptions bounds_for(const Lens& lens, const DesignLossOptions& paper, BoundsMode mode) {
   const bool use_paper =
       mode == BoundsMode::kPaper || (mode == BoundsMode::kAuto && is_paper_lens(lens));
-  return use_paper ? paper : lens_derived_bounds(lens, paper);
+  // A diverging lens's virtual image is bounded by its own start (virtual_image.h).
+  return with_virtual_image_bounds(lens, use_paper ? paper : lens_derived_bounds(lens, paper));
 }
 
 double design_spot_mm(const LensParameterization& param, const std::vector<double>& x,
@@ -828,6 +857,9 @@ class LensOptimization {
       const LensVariable& v = param_.variables()[i];
       if (v.kind == LensVariable::Kind::kSpacing && element_first[v.surface] != v.surface &&
           start.surfaces[v.surface].thickness_mm == 0.0)
+        frozen_user_.push_back(i);
+      // So does a flat stop 0 mm before the surface whose vertex it marks (glass_elements.h).
+      if (v.kind == LensVariable::Kind::kSpacing && stop_at_vertex_space(start, v.surface))
         frozen_user_.push_back(i);
     }
     for (int i = 0; i < param_.size(); ++i) {
@@ -1009,11 +1041,14 @@ class LensOptimization {
                     &start_extremes);
     const DesignLossOptions target_loss = loss_;
     const DesignLossOptions from = continued_bounds(target_loss, start_extremes, start_, 0.0);
-    const double length_gap_mm =
-        std::max({std::abs(from.min_air_mm - target_loss.min_air_mm),
-                  std::abs(from.min_glass_mm - target_loss.min_glass_mm),
-                  std::abs(from.max_glass_mm - target_loss.max_glass_mm),
-                  std::abs(from.min_image_clearance_mm - target_loss.min_image_clearance_mm)});
+    const double length_gap_mm = std::max(
+        {std::abs(from.min_air_mm - target_loss.min_air_mm),
+         std::abs(from.min_glass_mm - target_loss.min_glass_mm),
+         std::abs(from.max_glass_mm - target_loss.max_glass_mm),
+         target_loss.virtual_image()
+             ? std::max(std::abs(from.min_virtual_image_mm - target_loss.min_virtual_image_mm),
+                        std::abs(from.max_virtual_image_mm - target_loss.max_virtual_image_mm))
+             : std::abs(from.min_image_clearance_mm - target_loss.min_image_clearance_mm)});
     const double angle_gap_deg = std::abs(from.max_ray_angle_deg - target_loss.max_ray_angle_deg);
     const bool nearly_inside = length_gap_mm <= 0.01 && angle_gap_deg <= 0.5;
     for (double t : {0.25, 0.5, 0.75}) {
@@ -1297,6 +1332,16 @@ OptimizeResult optimize_lens(const Lens& given_start, const OptimizeOptions& giv
       start.specs.aperture_value != given_start.specs.aperture_value)
     solve_log.push_back(
         fmt::format("aperture: F-number {:.6g} (EPD = f / N)", start.specs.f_number));
+  // A diverging lens: its image is virtual, its merit measured there (virtual_image.h).
+  std::string virtual_image;
+  options.loss = with_virtual_image_bounds(start, options.loss, &virtual_image);
+  if (virtual_image.empty() && options.loss.virtual_image())  // bounds given (bounds_for)
+    virtual_image = fmt::format(
+        "image: virtual, measured {:.6g} mm before the last surface; its distance is held "
+        "within [{:.6g}, {:.6g}] mm",
+        -start.surfaces.back().thickness_mm, options.loss.min_virtual_image_mm,
+        options.loss.max_virtual_image_mm);
+  if (!virtual_image.empty()) solve_log.push_back(virtual_image);
   if (options.loss.merit == DesignMerit::kWavefront && !(options.loss.wavefront_unit_mm > 0.0)) {
     // The wavefront merit in mm (design_loss.h): the start's defocus unit, fixed for the run.
     const double unit = wavefront_mm_per_wave(prepare_lens_system(start, options.sampling));

@@ -120,14 +120,6 @@ std::string target_text(const DesignTarget& t) {
   return out;
 }
 
-// Why optimize refuses a diverging lens (variables.cpp says the same).
-constexpr const char* kDivergingRefusal =
-    "optimize cannot yet optimize a diverging lens: its variables are normalized to a positive "
-    "focal length (the last curvature is solved for EFL = +f) and its constraints assume a real "
-    "image behind the last surface (the image clearance and the paper's ray bounds), while a "
-    "diverging lens's image is virtual, before it (a negative last thickness); analyze, plot and "
-    "tolerance measure diverging lenses";
-
 void validate_target(const DesignTarget& t, const SourceLocation& where) {
   const std::string name = target_quantity_name(t.quantity);
   if (!std::isfinite(t.value))
@@ -240,7 +232,7 @@ std::vector<DesignTarget> targets_with_defaults(const Lens& lens,
   for (const DesignTarget& t : given) has_efl = has_efl || t.quantity == TargetQuantity::kEflMm;
   if (!has_efl && lens.specs.mode == SpecMode::kAsWritten) {
     const double f = design_focal_length_mm(lens);
-    if (std::isfinite(f) && f > 0.0) {
+    if (std::isfinite(f) && f != 0.0) {  // either sign (a diverging lens's is negative)
       DesignTarget t;
       t.quantity = TargetQuantity::kEflMm;
       t.value = f;
@@ -288,18 +280,19 @@ Lens apply_target_solves(const Lens& lens, const std::vector<DesignTarget>& targ
                   fmt::format("target {}: the lens's focal length is {:g} mm (afocal: no focal "
                               "length to scale)",
                               target_text(t), f));
-    if (f < 0.0 || (t.relation == TargetRelation::kEqual && t.value < 0.0))
-      throw Error(
-          SourceLocation{t.where},
-          fmt::format("target {}: the lens's focal length is {:.6g} mm; {}", target_text(t), f,
-                      f < 0.0 ? std::string(kDivergingRefusal)
-                              : "a negative focal length would carry the lens's power through "
-                                "zero (no continuous change of a converging lens reaches it); "
-                                "start from a diverging lens"));
     double goal = f;
     if (t.relation == TargetRelation::kEqual) goal = t.value;
     if (t.relation == TargetRelation::kAtMost) goal = std::min(f, t.value);
     if (t.relation == TargetRelation::kAtLeast) goal = std::max(f, t.value);
+    // A diverging lens reaches any negative focal length by scaling (optimize/virtual_image.h);
+    // no scaling carries a lens's power through zero.
+    if (!(goal * f > 0.0))
+      throw Error(SourceLocation{t.where},
+                  fmt::format("target {}: the lens's focal length is {:.6g} mm; a focal length of "
+                              "the other sign would carry the lens's power through zero (no "
+                              "continuous change of a {} lens reaches it); start from a {} lens",
+                              target_text(t), f, f > 0.0 ? "converging" : "diverging",
+                              f > 0.0 ? "diverging" : "converging"));
     if (out.specs.mode == SpecMode::kPaper) {
       // The paper's spec focal length is d / (2 tan hfov): the sensor diagonal follows it.
       out.specs.sensor_diagonal_mm = 2.0 * goal * std::tan(out.specs.half_field_deg * kPi / 180.0);
@@ -310,6 +303,13 @@ Lens apply_target_solves(const Lens& lens, const std::vector<DesignTarget>& targ
   for (const DesignTarget& t : targets) {
     if (t.quantity != TargetQuantity::kFNumber) continue;
     const double f = design_focal_length_mm(out);
+    if (f < 0.0)
+      throw Error(SourceLocation{t.where},
+                  fmt::format("target {}: the lens is diverging (EFL {:.6g} mm), its F-number "
+                              "EFL / EPD is negative and no working F-number is defined for a "
+                              "virtual image; set the entrance pupil diameter ([system] aperture "
+                              "= \"epd\") instead",
+                              target_text(t), f));
     double current = out.specs.f_number;
     if (out.specs.mode != SpecMode::kPaper) {
       const TraceSystem<double> sys = prepare_lens_system(out, TraceOptions{});
@@ -339,7 +339,8 @@ int target_residual_count(const std::vector<DesignTarget>& targets, int field_co
   return n;
 }
 
-double target_unit_mm(TargetQuantity q, double focal_length_mm, double wave_unit_mm) {
+double target_unit_mm(TargetQuantity q, double signed_focal_length_mm, double wave_unit_mm) {
+  const double focal_length_mm = std::abs(signed_focal_length_mm);  // a diverging lens's |f|
   switch (q) {
     case TargetQuantity::kEflMm:
     case TargetQuantity::kTotalTrackMm:

@@ -89,21 +89,17 @@ LensParameterization::LensParameterization(const Lens& lens, GlassSpace glasses,
                 "merit (angular spot, plane-wave wavefront, angular magnification) is not "
                 "implemented; analyze and plot measure it in angle");
   focal_length_mm_ = design_focal_length_mm(lens);
+  // Any sign of power: a diverging lens (EFL < 0, a virtual image) is normalized by |f| and its
+  // last curvature solved for EFL = -1 (header); an afocal one (no focal length) is refused.
   if (lens.specs.mode == SpecMode::kAsWritten && lens.specs.half_field_deg != 0.0 &&
-      !(focal_length_mm_ > 0.0))
+      !(std::isfinite(focal_length_mm_) && focal_length_mm_ != 0.0))
     throw Error(SourceLocation{where},
-                fmt::format("the lens's paraxial focal length is {:.6g} mm: {}", focal_length_mm_,
-                            focal_length_mm_ < 0.0
-                                ? "optimize cannot yet optimize a diverging lens: its variables "
-                                  "are normalized to a positive focal length (the last "
-                                  "curvature is solved for EFL = +f) and its constraints assume "
-                                  "a real image behind the last surface (the image clearance "
-                                  "and the paper's ray bounds), while a diverging lens's image "
-                                  "is virtual, before it (a negative last thickness); analyze, "
-                                  "plot and tolerance measure diverging lenses"
-                                : "the lens has no finite focal length (afocal: set [system] "
-                                  "afocal = true and analyze it in angle)"));
-  if (!std::isfinite(focal_length_mm_) || !(focal_length_mm_ > 0.0)) {
+                fmt::format("the lens's paraxial focal length is {:.6g} mm: the lens has no "
+                            "finite focal length (afocal: set [system] afocal = true and analyze "
+                            "it in angle)",
+                            focal_length_mm_));
+  if (!std::isfinite(focal_length_mm_) || focal_length_mm_ == 0.0 ||
+      (lens.specs.mode != SpecMode::kAsWritten && !(focal_length_mm_ > 0.0))) {
     // A lens traced as written has no sensor diagonal of its own (16 mm is a default): on axis
     // only, the message names what to add, not d / (2 tan 0).
     if (lens.specs.mode == SpecMode::kAsWritten && lens.specs.half_field_deg == 0.0)
@@ -118,6 +114,8 @@ LensParameterization::LensParameterization(const Lens& lens, GlassSpace glasses,
                     "the lens a field",
                     focal_length_mm_, lens.specs.half_field_deg, lens.specs.sensor_diagonal_mm));
   }
+  norm_mm_ = std::abs(focal_length_mm_);
+  power_sign_ = focal_length_mm_ < 0.0 ? -1.0 : 1.0;
   const int k_count = static_cast<int>(lens.surfaces.size());
   const int last = k_count - 1;
   if (lens.surfaces[last - 1].material.is_air()) {
@@ -156,7 +154,7 @@ LensParameterization::LensParameterization(const Lens& lens, GlassSpace glasses,
     scale_only.fields = 1;
     scale_only.rings = 1;
     const double scale = prepare_system(make_trace_lens(lens), lens.specs, scale_only).scale;
-    solve_unit_ = scale / focal_length_mm_;
+    solve_unit_ = scale / norm_mm_;
   }
   if (lens.surfaces[last].curvature_pickup.active())
     throw Error(SourceLocation{where},
@@ -243,7 +241,7 @@ LensParameterization::LensParameterization(const Lens& lens, GlassSpace glasses,
     scale_only.fields = 1;
     scale_only.rings = 1;
     const double scale = prepare_system(make_trace_lens(lens), lens.specs, scale_only).scale;
-    const Lens normalized = scaled(lens, scale / focal_length_mm_);
+    const Lens normalized = scaled(lens, scale / norm_mm_);
     profile_kind_.assign(k_count, kProfileSphere);
     conic0_.assign(k_count, 0.0);
     asphere0_.assign(static_cast<std::size_t>(k_count) * kAsphereTerms, 0.0);
@@ -280,7 +278,7 @@ std::vector<double> LensParameterization::from_lens(const Lens& lens_in) const {
   const TraceSystem<double> sys =
       prepare_system(make_trace_lens(lens_in), lens_in.specs, scale_only);
   const Lens lens = scaled(lens_in, sys.scale);
-  const double f = focal_length_mm_;
+  const double f = norm_mm_;  // |f|: the normalization (header)
   std::vector<double> x(variables_.size(), 0.0);
   for (int i = 0; i < size(); ++i) {
     const LensVariable& v = variables_[i];

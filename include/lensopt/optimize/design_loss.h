@@ -93,6 +93,13 @@ struct DesignLossOptions {
   double min_glass_mm = 1.0;
   double max_glass_mm = 3.0;
   double min_image_clearance_mm = 12.0;
+  // A virtual image (a diverging lens, optimize/virtual_image.h): when max_virtual_image_mm > 0
+  // the image plane lies before the last surface and every ray's image-space travel dz (negative:
+  // traced backwards to the plane) is held to -max_virtual_image_mm <= dz <=
+  // -min_virtual_image_mm; min_image_clearance_mm is then not used.
+  double min_virtual_image_mm = 0.0;
+  double max_virtual_image_mm = 0.0;
+  bool virtual_image() const { return max_virtual_image_mm > 0.0; }
   double max_ray_angle_deg = 60.0;
   // Profile bounds (optimize/profile_bounds.h): the surface normal of a conic or asphere tilts
   // at most this far from the axis up to the clear semi-aperture; its LM weight (raised tenfold
@@ -201,6 +208,18 @@ inline int constraint_field_count(int fields, int paper_fields) {
   return (c - 1) % (fields - 1) == 0 ? c : fields;
 }
 
+// The bounds of the image space's travel dz: dz >= min_image_clearance_mm (a real image), or
+// -max_virtual_image_mm <= dz <= -min_virtual_image_mm (a virtual one; DesignLossOptions).
+inline void image_space_bounds(const DesignLossOptions& options, double& lower, double& upper) {
+  if (options.virtual_image()) {
+    lower = -options.max_virtual_image_mm;
+    upper = -options.min_virtual_image_mm;
+  } else {
+    lower = options.min_image_clearance_mm;
+    upper = std::numeric_limits<double>::infinity();
+  }
+}
+
 namespace detail {
 
 template <typename T>
@@ -294,7 +313,9 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
       lower[k] = 0.0;  // a part of a split element: no ray travels backwards
       upper[k] = std::numeric_limits<double>::infinity();
     } else if (k == k_count - 1) {
-      lower[k] = options.min_image_clearance_mm;
+      image_space_bounds(options, lower[k], upper[k]);
+    } else if (stop_at_vertex_space(param.structure(), k)) {
+      lower[k] = -std::numeric_limits<double>::infinity();  // the stop on a vertex: no air gap
       upper[k] = std::numeric_limits<double>::infinity();
     } else if (lens.is_glass[k]) {
       lower[k] = options.min_glass_mm;

@@ -34,6 +34,17 @@ inline std::vector<int> element_first_spaces(const Lens& lens) {
   return first;
 }
 
+// True when space k (after surface k) is a flat stop 0 mm before the next surface, in air: the
+// stop on that surface's vertex (the flat stop the .zmx reader inserts at a curved stop surface
+// that begins an element). Its rays travel from the stop plane to the surface's sag, negative
+// before a concave face: no air gap, so no air bound applies to it, and its 0 mm is held
+// (optimizer.cpp).
+inline bool stop_at_vertex_space(const Lens& lens, int k) {
+  const Surface& s = lens.surfaces[k];
+  return k + 1 < static_cast<int>(lens.surfaces.size()) && s.is_stop && s.material.is_air() &&
+         s.thickness_mm == 0.0;
+}
+
 // True when space k carries its element's bound (the last space of its element).
 inline bool element_last_space(const std::vector<int>& first, int k) {
   return k + 1 >= static_cast<int>(first.size()) || first[k + 1] != first[k];

@@ -2,9 +2,12 @@
 // lens and them, shared by the Levenberg-Marquardt optimizer, the Adam joint optimizer and
 // tolerancing.
 //
-// For a lens of K surfaces scaled to focal length f (mm):
-//   c'_k = c_k f   for every surface but the stop and the last (the last is solved),
-//   s'_k = t_k / f for k < K-1, and s'_{K-1} = (t_{K-1} - BFL) / f, the normalized defocus,
+// For a lens of K surfaces scaled to focal length f (mm; negative for a diverging lens, whose
+// lengths are normalized by |f| and whose normalized EFL is -1):
+//   c'_k = c_k |f|   for every surface but the stop and the last (the last is solved),
+//   s'_k = t_k / |f| for k < K-1, and s'_{K-1} = (t_{K-1} - BFL) / |f|, the normalized defocus
+//          (a diverging lens's BFL < 0: its image plane is virtual, before the last surface, and
+//          the rays are traced back to it, trace/kernel.h),
 //   g_m  = W (nd_m - mu_nd, vd_m - mu_vd)  for each glass m: the catalog's (nd, vd) whitened,
 //          W = Lambda^{-1/2} E^T from the eigen-decomposition of the catalog covariance.
 //          One glass m per physical element: a glass element split by a dummy or stop surface
@@ -13,10 +16,10 @@
 // Forward map x -> lens (templated, so Jets carry derivatives):
 //   1. glasses: (nd, vd) = W^{-1} g + mu; quantized (default): the nearest catalog glass in
 //      whitened space, with the straight-through gradient g_q = g + stopgrad(g* - g);
-//   2. the normalized lens (f = 1): curvatures c', spacings s', the last curvature solved so the
-//      paraxial focal length at 587.6 nm is exactly 1 (paraxial.h: solve_last_curvature);
+//   2. the normalized lens (|f| = 1): curvatures c', spacings s', the last curvature solved so
+//      the paraxial focal length at 587.6 nm is exactly sign(f) = +-1 (solve_last_curvature);
 //   3. the paraxial image solve: s_{K-1} = BFL' + s'_{K-1} (or, without it, s_{K-1} = s'_{K-1});
-//   4. scale: c = c' / f, t = s' f, a_{2i} = a'_{2i} / f^(2i-1).
+//   4. scale: c = c' / |f|, t = s' |f|, a_{2i} = a'_{2i} / |f|^(2i-1).
 // Surface profiles (optional variables, named in the constructor's `profile_variables`):
 //   k_k  = the conic constant of surface k as it is (dimensionless, O(1));
 //   x    = a'_{2i} rho^(2i) for an asphere term, rho = 1 / (2 N) the normalized entrance-pupil
@@ -266,7 +269,7 @@ class LensParameterization {
     // Pickups and solves before the last surface (header), in the normalized lens's unit.
     const double unit = solve_unit_;
     if (has_solves_) apply_pickups_and_solves(lens, solves_, unit, 0, last);
-    lens.curvature_per_mm[last] = solve_last_curvature(lens, K<T>(1.0), reference_nm);
+    lens.curvature_per_mm[last] = solve_last_curvature(lens, K<T>(power_sign_), reference_nm);
     if (paraxial_image_solve_) {
       const ParaxialData<T> par = paraxial_data(lens, reference_nm);
       lens.thickness_mm[last] = image_distance_for_defocus_mm(par, x[defocus_index_]);
@@ -274,11 +277,11 @@ class LensParameterization {
       lens.thickness_mm[last] = x[defocus_index_];  // ablation: s_{K-1} = s'_{K-1} f
     }
     if (has_solves_) apply_pickups_and_solves(lens, solves_, unit, last, k_count);
-    lens.scale_lengths(K<T>(focal_length_mm_));
+    lens.scale_lengths(K<T>(norm_mm_));
     // The 3D placements as the structure gives them (mm), at the spec scale as prepare_system
     // scales the structure (geometry_scale_): scale_lengths above multiplied the structure's
-    // decenters by f as if they were normalized (f = 1) lengths, which moved a 0.2 mm decenter
-    // of a 50 mm lens to 10 mm.
+    // decenters by |f| as if they were normalized (|f| = 1) lengths, which moved a 0.2 mm
+    // decenter of a 50 mm lens to 10 mm.
     if (!lens.geometry.placement.empty()) {
       lens.geometry = make_trace_geometry<T>(structure_);
       if (geometry_scale_ != 1.0)
@@ -336,6 +339,8 @@ class LensParameterization {
   // The structure's scale to the spec focal length (prepare_system's, 1 as written): its
   // placements' decenters are traced times this.
   double geometry_scale_ = 1.0;
+  double norm_mm_ = 1.0;     // |f|, the length unit of the normalized lens
+  double power_sign_ = 1.0;  // the normalized lens's EFL: +1, or -1 for a diverging lens
   int defocus_index_ = -1;
   // Profiles of the normalized (f = 1) structure: kind per surface, k and a'_{2i} constants.
   bool has_profiles_ = false;
