@@ -16,6 +16,7 @@ void SystemAdjoint::reset(int surfaces, int wavelengths, int fields) {
   start.assign(static_cast<std::size_t>(fields) * wavelengths * 4, 0.0);
   conic.assign(surfaces, 0.0);
   asphere.assign(static_cast<std::size_t>(surfaces) * kAsphereTerms, 0.0);
+  decenter.assign(static_cast<std::size_t>(surfaces) * 2, 0.0);
 }
 
 void SystemAdjoint::add_bundle(const BundleAdjoint& bundle, int h, int w, int wavelengths,
@@ -28,6 +29,7 @@ void SystemAdjoint::add_bundle(const BundleAdjoint& bundle, int h, int w, int wa
     conic[k] += bundle.conic[k];
   }
   for (std::size_t i = 0; i < asphere.size(); ++i) asphere[i] += bundle.asphere[i];
+  for (std::size_t i = 0; i < decenter.size(); ++i) decenter[i] += bundle.decenter[i];
   double a_sx = 0.0, a_oy = 0.0, a_sy = 0.0, a_z = 0.0;
   if (!v.any()) {
     for (std::size_t i = 0; i < pupil.size(); ++i) {
@@ -71,18 +73,13 @@ void SystemAdjoint::add(const SystemAdjoint& other) {
   for (std::size_t i = 0; i < start.size(); ++i) start[i] += other.start[i];
   for (std::size_t i = 0; i < conic.size(); ++i) conic[i] += other.conic[i];
   for (std::size_t i = 0; i < asphere.size(); ++i) asphere[i] += other.asphere[i];
+  for (std::size_t i = 0; i < decenter.size(); ++i) decenter[i] += other.decenter[i];
 }
 
 bool adjoint_supported(const TraceLens<double>& lens) {
-  // Spheres, conics and even aspheres without clear apertures (clipping apertures, when a lens
-  // has them, take the Jet path: the backward pass has no step for them).
+  // Spheres, conics and even aspheres; clear apertures, obscurations, mirrors and 3D placements
+  // have their backward steps (trace/adjoint.h).
   if (lens.surface_count() == 0) return false;
-  // 3D placements, mirrors and obscurations (issue 32) have no backward step: the Jet path.
-  if (lens.geometry.placed() || !lens.geometry.medium_sign.empty() ||
-      !lens.geometry.obscuration_mm.empty())
-    return false;
-  for (double r : lens.semi_diameter_mm)
-    if (r > 0) return false;
   for (std::uint8_t kind : lens.profile)
     if (kind != kProfileSphere && kind != kProfileConic && kind != kProfileAsphere) return false;
   return true;
