@@ -3,6 +3,8 @@
 
 #include <omp.h>
 
+#include <cmath>
+
 #include "lensopt/core/jet_width.h"
 #include "lensopt/core/threads.h"
 
@@ -76,6 +78,25 @@ void SystemAdjoint::add(const SystemAdjoint& other) {
   for (std::size_t i = 0; i < decenter.size(); ++i) decenter[i] += other.decenter[i];
 }
 
+void chain_start_direction(const TraceSystem<double>& sys, int h, int w, BundleAdjoint& bundle,
+                           const PupilSamples* samples) {
+  if (sys.object_at_infinity()) return;
+  thread_local RayBundle<double> start;
+  start_rays(sys, h, w, start, samples);
+  const double y_object = sys.field_object_y_mm.empty() ? 0.0 : sys.field_object_y_mm[h];
+  for (std::size_t i = 0; i < start.size(); ++i) {
+    const double dx = start.x[i];
+    const double dy = start.y[i] - y_object;
+    const double dz = start.z[i] + sys.object_distance_mm;
+    const double inv = 1.0 / std::sqrt(dx * dx + dy * dy + dz * dz);
+    const double al = bundle.l0[i], am = bundle.m0[i], an = bundle.n0[i];
+    const double dot = al * start.l[i] + am * start.m[i] + an * start.n[i];
+    bundle.x0[i] += (al - dot * start.l[i]) * inv;
+    bundle.y0[i] += (am - dot * start.m[i]) * inv;
+    bundle.z0[i] += (an - dot * start.n[i]) * inv;
+  }
+}
+
 bool adjoint_supported(const TraceLens<double>& lens) {
   // Spheres, conics and even aspheres; clear apertures, obscurations, mirrors and 3D placements
   // have their backward steps (trace/adjoint.h).
@@ -142,6 +163,7 @@ SystemAdjoint mean_spot_adjoint(const TraceSystem<double>& sys, int threads) {
         seeds.y_image = seed_y.data();
         bundle.reset(k_count);
         trace_bundle_adjoint(sys.lens, w, rays, tape, seeds, bundle);
+        chain_start_direction(sys, h, w, bundle);
         adj.add_bundle(
             bundle, h, w, wl, sys.pupil,
             h < static_cast<int>(sys.vignetting.size()) ? sys.vignetting[h] : VignettingFactors{});

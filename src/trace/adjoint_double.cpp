@@ -666,13 +666,17 @@ void trace_bundle_adjoint_placed(const TraceLens<double>& lens, int w,
     if (k > 0) out.thickness[k - 1] += a_shift;
   }
   if (rays.turned()) {
-    // The field frame's turn into the lens frame, transposed (the start positions only).
+    // The field frame's turn into the lens frame, transposed.
     const double fc = rays.frame_cos, fsin = rays.frame_sin;
-    for (std::size_t i = 0; i < count; ++i) {
-      const double u = fc * a[0][i] - fsin * a[1][i];
-      const double v = fc * a[1][i] + fsin * a[0][i];
-      a[0][i] = u;
-      a[1][i] = v;
+    for (int v = 0; v < 6; v += 3) {
+      double* __restrict p = a[v];
+      double* __restrict q = a[v + 1];
+      for (std::size_t i = 0; i < count; ++i) {
+        const double u = fc * p[i] - fsin * q[i];
+        const double t = fc * q[i] + fsin * p[i];
+        p[i] = u;
+        q[i] = t;
+      }
     }
   }
 }
@@ -742,12 +746,12 @@ void trace_bundle_adjoint(const TraceLens<double>& lens, int w, const RayBundle<
   out.x0.resize(count);
   out.y0.resize(count);
   out.z0.resize(count);
-  // Adjoints of the state, carried from the image backwards: a_x, a_y, a_z in out.x0/y0/z0,
-  // a_l, a_m, a_n in thread-local scratch.
-  thread_local std::vector<double> scratch;
-  scratch.resize(3 * count);
-  double* const a[6] = {out.x0.data(),  out.y0.data(),          out.z0.data(),
-                        scratch.data(), scratch.data() + count, scratch.data() + 2 * count};
+  out.l0.resize(count);
+  out.m0.resize(count);
+  out.n0.resize(count);
+  // Adjoints of the state, carried from the image backwards in out.x0 .. n0.
+  double* const a[6] = {out.x0.data(), out.y0.data(), out.z0.data(),
+                        out.l0.data(), out.m0.data(), out.n0.data()};
   if (lens.geometry.placed()) {
     trace_bundle_adjoint_placed(lens, w, rays, tape, seeds, a, out);
     return;

@@ -60,6 +60,15 @@ struct SystemAdjoint {
   void add(const SystemAdjoint& other);
 };
 
+// A finite object's rays start in the direction from the object point through their start point
+// (detail::field_ray_direction in trace/system.h), so their start position also moves their
+// direction: adds the direction adjoints (bundle.l0, m0, n0) to the position's (x0, y0, z0),
+//   u = d / |d|,  d = (x0, y0 - y_obj, z0 + D):   a_d = (a_u - (a_u . u) u) / |d|.
+// Nothing for an object at infinity (the direction is the field's constant). `samples` as for
+// start_rays (null: the system's pupil).
+void chain_start_direction(const TraceSystem<double>& sys, int h, int w, BundleAdjoint& bundle,
+                           const PupilSamples* samples = nullptr);
+
 // True when the adjoint kernel traces this lens exactly as the forward kernel does.
 bool adjoint_supported(const TraceLens<double>& lens);
 

@@ -126,7 +126,7 @@ struct AdjointSeeds {
 // t_k (the shift of surface k+1; for k = K-1 the image distance), mu_k at the bundle's
 // wavelength, the conic constant and the asphere terms (0 at spheres), the decenter (x, y) of a
 // placed surface (0 elsewhere; tilts are constants of the backward pass); per ray the start
-// position, in the field's frame (the direction is the field's constant).
+// position and direction, in the field's frame.
 struct BundleAdjoint {
   std::vector<double> curvature;   // K
   std::vector<double> thickness;   // K
@@ -135,6 +135,7 @@ struct BundleAdjoint {
   std::vector<double> asphere;     // K * kAsphereTerms (a2, a4, ..., a16)
   std::vector<double> decenter;    // K * 2: x, y
   std::vector<double> x0, y0, z0;  // per ray (overwritten, not accumulated)
+  std::vector<double> l0, m0, n0;  // per ray, the start direction (overwritten)
 
   void reset(int surface_count) {
     curvature.assign(surface_count, 0.0);
@@ -153,7 +154,7 @@ void trace_bundle_taped(const TraceLens<double>& lens, int w, RayBundle<double>&
 
 // The backward pass of a bundle traced by trace_bundle_taped (`rays` holds its final state and
 // status): accumulates the parameter adjoints of `seeds` into `out` (out.reset first) and sets
-// out.x0, y0, z0 to the adjoints of each ray's start position.
+// out.x0, y0, z0 and l0, m0, n0 to the adjoints of each ray's start position and direction.
 void trace_bundle_adjoint(const TraceLens<double>& lens, int w, const RayBundle<double>& rays,
                           const AdjointTape& tape, const AdjointSeeds& seeds, BundleAdjoint& out);
 
