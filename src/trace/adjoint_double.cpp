@@ -421,7 +421,7 @@ void trace_bundle_taped_placed(const TraceLens<double>& lens, int w, RayBundle<d
   const TraceGeometry<double>& g = lens.geometry;
   if (rays.turned()) detail::turn_about_z(rays.frame_cos, rays.frame_sin, count, x, y, l, m);
   auto check_forward = [&](int k) {
-    if (!detail::any_not_forward(n, count)) return;
+    if (detail::all_forward(n, count)) return;
     for (std::size_t i = 0; i < count; ++i) {
       if (!(n[i] > 0.0)) {
         if (status[i] == kRayOk) {
