@@ -3,6 +3,8 @@
 
 #include <omp.h>
 
+#include <cmath>
+
 #include "lensopt/core/jet_width.h"
 #include "lensopt/core/threads.h"
 
@@ -16,6 +18,7 @@ void SystemAdjoint::reset(int surfaces, int wavelengths, int fields) {
   start.assign(static_cast<std::size_t>(fields) * wavelengths * 4, 0.0);
   conic.assign(surfaces, 0.0);
   asphere.assign(static_cast<std::size_t>(surfaces) * kAsphereTerms, 0.0);
+  decenter.assign(static_cast<std::size_t>(surfaces) * 2, 0.0);
 }
 
 void SystemAdjoint::add_bundle(const BundleAdjoint& bundle, int h, int w, int wavelengths,
@@ -28,6 +31,7 @@ void SystemAdjoint::add_bundle(const BundleAdjoint& bundle, int h, int w, int wa
     conic[k] += bundle.conic[k];
   }
   for (std::size_t i = 0; i < asphere.size(); ++i) asphere[i] += bundle.asphere[i];
+  for (std::size_t i = 0; i < decenter.size(); ++i) decenter[i] += bundle.decenter[i];
   double a_sx = 0.0, a_oy = 0.0, a_sy = 0.0, a_z = 0.0;
   if (!v.any()) {
     for (std::size_t i = 0; i < pupil.size(); ++i) {
@@ -71,18 +75,32 @@ void SystemAdjoint::add(const SystemAdjoint& other) {
   for (std::size_t i = 0; i < start.size(); ++i) start[i] += other.start[i];
   for (std::size_t i = 0; i < conic.size(); ++i) conic[i] += other.conic[i];
   for (std::size_t i = 0; i < asphere.size(); ++i) asphere[i] += other.asphere[i];
+  for (std::size_t i = 0; i < decenter.size(); ++i) decenter[i] += other.decenter[i];
+}
+
+void chain_start_direction(const TraceSystem<double>& sys, int h, int w, BundleAdjoint& bundle,
+                           const PupilSamples* samples) {
+  if (sys.object_at_infinity()) return;
+  thread_local RayBundle<double> start;
+  start_rays(sys, h, w, start, samples);
+  const double y_object = sys.field_object_y_mm.empty() ? 0.0 : sys.field_object_y_mm[h];
+  for (std::size_t i = 0; i < start.size(); ++i) {
+    const double dx = start.x[i];
+    const double dy = start.y[i] - y_object;
+    const double dz = start.z[i] + sys.object_distance_mm;
+    const double inv = 1.0 / std::sqrt(dx * dx + dy * dy + dz * dz);
+    const double al = bundle.l0[i], am = bundle.m0[i], an = bundle.n0[i];
+    const double dot = al * start.l[i] + am * start.m[i] + an * start.n[i];
+    bundle.x0[i] += (al - dot * start.l[i]) * inv;
+    bundle.y0[i] += (am - dot * start.m[i]) * inv;
+    bundle.z0[i] += (an - dot * start.n[i]) * inv;
+  }
 }
 
 bool adjoint_supported(const TraceLens<double>& lens) {
-  // Spheres, conics and even aspheres without clear apertures (clipping apertures, when a lens
-  // has them, take the Jet path: the backward pass has no step for them).
+  // Spheres, conics and even aspheres; clear apertures, obscurations, mirrors and 3D placements
+  // have their backward steps (trace/adjoint.h).
   if (lens.surface_count() == 0) return false;
-  // 3D placements, mirrors and obscurations (issue 32) have no backward step: the Jet path.
-  if (lens.geometry.placed() || !lens.geometry.medium_sign.empty() ||
-      !lens.geometry.obscuration_mm.empty())
-    return false;
-  for (double r : lens.semi_diameter_mm)
-    if (r > 0) return false;
   for (std::uint8_t kind : lens.profile)
     if (kind != kProfileSphere && kind != kProfileConic && kind != kProfileAsphere) return false;
   return true;
@@ -145,6 +163,7 @@ SystemAdjoint mean_spot_adjoint(const TraceSystem<double>& sys, int threads) {
         seeds.y_image = seed_y.data();
         bundle.reset(k_count);
         trace_bundle_adjoint(sys.lens, w, rays, tape, seeds, bundle);
+        chain_start_direction(sys, h, w, bundle);
         adj.add_bundle(
             bundle, h, w, wl, sys.pupil,
             h < static_cast<int>(sys.vignetting.size()) ? sys.vignetting[h] : VignettingFactors{});

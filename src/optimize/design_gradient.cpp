@@ -241,6 +241,7 @@ SystemAdjoint design_adjoint(const TraceSystem<double>& sys, const DesignSamplin
         }
         adjoint.reset(k_count);
         trace_bundle_adjoint(sys.lens, w, bundle, tape, seeds, adjoint);
+        chain_start_direction(sys, hf, w, adjoint, &pupil);
         adj.add_bundle(adjoint, hf, w, wl, pupil,
                        hf < static_cast<int>(sys.vignetting.size()) ? sys.vignetting[hf]
                                                                     : VignettingFactors{});

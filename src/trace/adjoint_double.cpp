@@ -334,8 +334,361 @@ void trace_surface_adjoint_profile_double(double c, double conic, const double* 
 
 }  // namespace detail
 
+namespace {
+
+// Surface k's step 5 (kernel.h): the clear aperture and the obscuration about (cx, cy), as
+// failure masks.
+void aperture_masks(const TraceLens<double>& lens, int k, double cx, double cy, std::size_t count,
+                    const double* x, const double* y, std::int32_t* failure) {
+  if (!lens.semi_diameter_mm.empty() && lens.semi_diameter_mm[k] > 0.0) {
+    const double limit = lens.semi_diameter_mm[k] * lens.semi_diameter_mm[k];
+    for (std::size_t i = 0; i < count; ++i) {
+      const double dx = x[i] - cx, dy = y[i] - cy;
+      const bool outside = dx * dx + dy * dy > limit;
+      failure[i] = (outside && failure[i] == kRayOk) ? std::int32_t{kRayVignetted} : failure[i];
+    }
+  }
+  const TraceGeometry<double>& g = lens.geometry;
+  if (!g.obscuration_mm.empty() && g.obscuration_mm[k] > 0.0)
+    detail::obscure(g.obscuration_mm[k], cx, cy, count, x, y, failure);
+}
+
+// Surface k's steps 2-4 (the sphere or the profile loop), taping the profile's path.
+void intersect_taped(const TraceLens<double>& lens, int k, double c, double shift, double mu,
+                     std::size_t count, double* x, double* y, double* z, double* l, double* m,
+                     double* n, std::int32_t* failure, RayRecord<double>* record,
+                     AdjointTape& tape) {
+  double* travel = record && k > 0 ? record->axial_travel_mm[k - 1].data() : nullptr;
+  double* zeta = record ? record->cos2_incidence[k].data() : nullptr;
+  double* zeta_prime = record ? record->cos2_refraction[k].data() : nullptr;
+  const std::uint8_t profile = lens.has_profiles() ? lens.profile[k] : kProfileSphere;
+  if (profile != kProfileSphere) {
+    detail::trace_surface_profile_double(
+        profile, c, lens.conic[k],
+        lens.asphere.data() + static_cast<std::size_t>(k) * kAsphereTerms, shift, mu, count, x, y,
+        z, l, m, n, failure, travel, zeta, zeta_prime, record != nullptr,
+        tape.path.data() + static_cast<std::size_t>(k) * count);
+  } else {
+    detail::trace_surface_double(c, shift, mu, count, x, y, z, l, m, n, failure, travel, zeta,
+                                 zeta_prime, record != nullptr);
+  }
+}
+
+// The state of every ray before surface k into the tape, z relative to the vertex (the shift
+// applied), so the backward pass needs no shift (a_t = -a_zr there).
+void save_state(AdjointTape& tape, int k, double shift, const RayBundle<double>& rays) {
+  const std::size_t count = rays.size();
+  const std::size_t bytes = count * sizeof(double);
+  double* tz = tape.at(k, 2);
+  const double* z = rays.z.data();
+  for (std::size_t i = 0; i < count; ++i) tz[i] = z[i] - shift;
+  std::memcpy(tape.at(k, 0), rays.x.data(), bytes);
+  std::memcpy(tape.at(k, 1), rays.y.data(), bytes);
+  std::memcpy(tape.at(k, 3), rays.l.data(), bytes);
+  std::memcpy(tape.at(k, 4), rays.m.data(), bytes);
+  std::memcpy(tape.at(k, 5), rays.n.data(), bytes);
+}
+
+// The first failure of a ray wins.
+void take_failures(int k, std::size_t count, const std::int32_t* failure, std::uint8_t* status,
+                   std::int8_t* failed_at) {
+  for (std::size_t i = 0; i < count; ++i) {
+    if (failure[i] != kRayOk && status[i] == kRayOk) {
+      status[i] = static_cast<std::uint8_t>(failure[i]);
+      failed_at[i] = static_cast<std::int8_t>(k);
+    }
+  }
+}
+
+// detail::trace_bundle_placed (kernel.h) in double, taping: the same operations in the same
+// order, so the same bits.
+void trace_bundle_taped_placed(const TraceLens<double>& lens, int w, RayBundle<double>& rays,
+                               RayRecord<double>* record, AdjointTape& tape) {
+  const std::size_t count = rays.size();
+  const int k_count = lens.surface_count();
+  tape.resize(k_count, count, lens.has_profiles());
+  tape.turned_back.assign(count, -1);
+  double* x = rays.x.data();
+  double* y = rays.y.data();
+  double* z = rays.z.data();
+  double* l = rays.l.data();
+  double* m = rays.m.data();
+  double* n = rays.n.data();
+  std::uint8_t* status = rays.status.data();
+  std::int8_t* failed_at = rays.failed_surface.data();
+  rays.failure_scratch.resize(count);
+  std::int32_t* failure = rays.failure_scratch.data();
+  const TraceGeometry<double>& g = lens.geometry;
+  if (rays.turned()) detail::turn_about_z(rays.frame_cos, rays.frame_sin, count, x, y, l, m);
+  auto check_forward = [&](int k) {
+    if (detail::all_forward(n, count)) return;
+    for (std::size_t i = 0; i < count; ++i) {
+      if (!(n[i] > 0.0)) {
+        if (status[i] == kRayOk) {
+          status[i] = kRayBackwards;
+          failed_at[i] = static_cast<std::int8_t>(k);
+          tape.turned_back[i] = static_cast<std::int8_t>(k);
+        }
+        l[i] = 0.0;
+        m[i] = 0.0;
+        n[i] = 1.0;
+      }
+    }
+  };
+  for (int k = 0; k < k_count; ++k) {
+    const std::uint8_t flags = g.flags[k];
+    double shift = k > 0 ? lens.thickness_mm[k - 1] : 0.0;
+    if (flags & kPlacementMoved) {
+      for (std::size_t i = 0; i < count; ++i) z[i] = z[i] - shift;
+      shift = 0.0;
+      detail::to_local(detail::placement_frame(g, k), count, x, y, z, l, m, n);
+    }
+    if (flags & kPlacementCoordinateBreak) {
+      for (std::size_t i = 0; i < count; ++i) z[i] = z[i] - shift;
+      if (record) {
+        if (k > 0)
+          for (double& v : record->axial_travel_mm[k - 1]) v = lens.thickness_mm[k - 1];
+        for (double& v : record->cos2_incidence[k]) v = 1.0;
+        for (double& v : record->cos2_refraction[k]) v = 1.0;
+      }
+      continue;
+    }
+    check_forward(k);
+    const double c = lens.curvature_per_mm[k];
+    const double mu = lens.index(k - 1, w) / lens.index(k, w);
+    save_state(tape, k, shift, rays);
+    intersect_taped(lens, k, c, shift, mu, count, x, y, z, l, m, n, failure, record, tape);
+    aperture_masks(lens, k, g.aperture_center_mm[2 * k], g.aperture_center_mm[2 * k + 1], count, x,
+                   y, failure);
+    take_failures(k, count, failure, status, failed_at);
+    if ((flags & kPlacementMoved) && (flags & kPlacementRestore))
+      detail::to_parent(detail::placement_frame(g, k), count, x, y, z, l, m, n);
+  }
+  // The image plane z = t_{K-1} of the last frame, along the ray's line either way.
+  const int last = k_count - 1;
+  const double t = lens.thickness_mm[last];
+  save_state(tape, k_count, t, rays);
+  double* travel = record ? record->axial_travel_mm[last].data() : nullptr;
+  for (std::size_t i = 0; i < count; ++i) {
+    const double z_rel = z[i] - t;
+    if (travel) travel[i] = -z_rel;
+    if (n[i] == 0.0) {
+      if (status[i] == kRayOk) {
+        status[i] = kRayBackwards;
+        failed_at[i] = static_cast<std::int8_t>(last);
+      }
+      continue;
+    }
+    const double s = -z_rel / n[i];
+    x[i] = x[i] + s * l[i];
+    y[i] = y[i] + s * m[i];
+    z[i] = 0.0;
+  }
+  if (rays.turned()) detail::turn_about_z(rays.frame_cos, -rays.frame_sin, count, x, y, l, m);
+}
+
+// Backward through the rotation of a frame change: a_p <- R a_p, a_d <- R a_d (the transpose of
+// to_local's R^T), or with R^T (the transpose of to_parent's R).
+void rotate_adjoint(const detail::PlacementFrame<double>& f, bool transpose, std::size_t count,
+                    double* const a[6]) {
+  double r[3][3];
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) r[i][j] = transpose ? f.r[j][i] : f.r[i][j];
+  for (int v = 0; v < 6; v += 3) {
+    double* __restrict u = a[v];
+    double* __restrict s = a[v + 1];
+    double* __restrict t = a[v + 2];
+    for (std::size_t i = 0; i < count; ++i) {
+      const double p = u[i], q = s[i], o = t[i];
+      u[i] = r[0][0] * p + r[0][1] * q + r[0][2] * o;
+      s[i] = r[1][0] * p + r[1][1] * q + r[1][2] * o;
+      t[i] = r[2][0] * p + r[2][1] * q + r[2][2] * o;
+    }
+  }
+}
+
+double sum_of(const double* v, std::size_t count) {
+  double s = 0.0;
+  for (std::size_t i = 0; i < count; ++i) s += v[i];
+  return s;
+}
+
+// Backward through to_local at surface k (a: the adjoints in its frame in, in the parent frame
+// out); adds the decenter's adjoint.
+void to_local_adjoint(const detail::PlacementFrame<double>& f, int k, std::size_t count,
+                      double* const a[6], BundleAdjoint& out) {
+  if (f.tilt_first) {
+    out.decenter[2 * k] -= sum_of(a[0], count);
+    out.decenter[2 * k + 1] -= sum_of(a[1], count);
+  }
+  rotate_adjoint(f, false, count, a);
+  if (!f.tilt_first) {
+    out.decenter[2 * k] -= sum_of(a[0], count);
+    out.decenter[2 * k + 1] -= sum_of(a[1], count);
+  }
+}
+
+// Backward through to_parent after surface k (a: the adjoints in the parent frame in, in the
+// surface's frame out); adds the decenter's adjoint.
+void to_parent_adjoint(const detail::PlacementFrame<double>& f, int k, std::size_t count,
+                       double* const a[6], BundleAdjoint& out) {
+  if (!f.tilt_first) {
+    out.decenter[2 * k] += sum_of(a[0], count);
+    out.decenter[2 * k + 1] += sum_of(a[1], count);
+  }
+  rotate_adjoint(f, true, count, a);
+  if (f.tilt_first) {
+    out.decenter[2 * k] += sum_of(a[0], count);
+    out.decenter[2 * k + 1] += sum_of(a[1], count);
+  }
+}
+
+// The image transfer backward: zr = z - T, s = -zr / n, X = x + s l, Y = y + s m, travel = -zr;
+// (a_X, a_Y) the seeds in the lens frame (turned from the field frame by (cos, sin)).
+void image_adjoint(const TraceLens<double>& lens, const RayBundle<double>& rays,
+                   const AdjointTape& tape, const AdjointSeeds& seeds, double* const a[6],
+                   BundleAdjoint& out) {
+  const std::size_t count = rays.size();
+  const int k_count = lens.surface_count();
+  const int last = k_count - 1;
+  const std::uint8_t* status = rays.status.data();
+  const std::int8_t* fs = rays.failed_surface.data();
+  const double* zr = tape.at(k_count, 2);
+  const double* l = tape.at(k_count, 3);
+  const double* m = tape.at(k_count, 4);
+  const double* n = tape.at(k_count, 5);
+  const double* travel_seed = seeds.travel ? (*seeds.travel)[last].data() : nullptr;
+  const bool turned = rays.turned();
+  const double fc = rays.frame_cos, fsin = rays.frame_sin;
+  double sum_t = 0.0;
+  for (std::size_t i = 0; i < count; ++i) {
+    // The last space's travel is recorded for rays live there; the transfer only for traced rays.
+    const bool live = fs[i] < 0 || fs[i] >= last;
+    const bool traced = status[i] == kRayOk;
+    double a_x_img = traced && seeds.x_image ? seeds.x_image[i] : 0.0;
+    double a_y_img = traced && seeds.y_image ? seeds.y_image[i] : 0.0;
+    if (turned) {
+      // The turn back into the field frame, transposed.
+      const double u = fc * a_x_img + fsin * a_y_img;
+      const double v = fc * a_y_img - fsin * a_x_img;
+      a_x_img = u;
+      a_y_img = v;
+    }
+    const double a_travel = live && travel_seed ? travel_seed[i] : 0.0;
+    const double s = -zr[i] / n[i];
+    const double a_s = traced ? a_x_img * l[i] + a_y_img * m[i] : 0.0;
+    const double a_zr = traced ? -a_s / n[i] - a_travel : -a_travel;
+    a[0][i] = a_x_img;
+    a[1][i] = a_y_img;
+    a[2][i] = a_zr;
+    a[3][i] = traced ? a_x_img * s : 0.0;
+    a[4][i] = traced ? a_y_img * s : 0.0;
+    a[5][i] = traced ? -a_s * s / n[i] : 0.0;
+    sum_t -= a_zr;
+  }
+  out.thickness[last] += sum_t;
+}
+
+// The backward pass of surface k's steps 2-4 (sphere or profile kernel). Adds a_c, a_mu and the
+// profile's terms to `out`; returns a_t of the shift applied on the taped z (sums[1]).
+double surface_adjoint(const TraceLens<double>& lens, int w, int k, const AdjointTape& tape,
+                       const AdjointSeeds& seeds, const std::int8_t* fs, std::size_t count,
+                       double* const a[6], BundleAdjoint& out) {
+  const double c = lens.curvature_per_mm[k];
+  const double mu = lens.index(k - 1, w) / lens.index(k, w);
+  const double* const state[6] = {tape.at(k, 0), tape.at(k, 1), tape.at(k, 2),
+                                  tape.at(k, 3), tape.at(k, 4), tape.at(k, 5)};
+  double sums[12] = {};
+  const double* travel_seed = seeds.travel && k > 0 ? (*seeds.travel)[k - 1].data() : nullptr;
+  const double* zeta_seed = seeds.zeta ? (*seeds.zeta)[k].data() : nullptr;
+  const double* zeta_prime_seed = seeds.zeta_prime ? (*seeds.zeta_prime)[k].data() : nullptr;
+  const std::uint8_t profile = lens.has_profiles() ? lens.profile[k] : kProfileSphere;
+  if (profile != kProfileSphere) {
+    detail::trace_surface_adjoint_profile_double(
+        c, lens.conic[k], lens.asphere.data() + static_cast<std::size_t>(k) * kAsphereTerms, mu, k,
+        count, state, tape.path.data() + static_cast<std::size_t>(k) * count, fs, a, travel_seed,
+        zeta_seed, zeta_prime_seed, sums);
+    out.conic[k] += sums[3];
+    for (int j = 0; j < kAsphereTerms; ++j)
+      out.asphere[static_cast<std::size_t>(k) * kAsphereTerms + j] += sums[4 + j];
+  } else {
+    detail::trace_surface_adjoint_double(c, mu, k, count, state, fs, a, travel_seed, zeta_seed,
+                                         zeta_prime_seed, sums);
+  }
+  out.curvature[k] += sums[0];
+  out.mu[k] += sums[2];
+  return sums[1];
+}
+
+// The backward pass of trace_bundle_taped_placed (the equations of the header).
+void trace_bundle_adjoint_placed(const TraceLens<double>& lens, int w,
+                                 const RayBundle<double>& rays, const AdjointTape& tape,
+                                 const AdjointSeeds& seeds, double* const a[6],
+                                 BundleAdjoint& out) {
+  const std::size_t count = rays.size();
+  const int k_count = lens.surface_count();
+  const std::int8_t* fs = rays.failed_surface.data();
+  const TraceGeometry<double>& g = lens.geometry;
+  image_adjoint(lens, rays, tape, seeds, a, out);
+  for (int k = k_count - 1; k >= 0; --k) {
+    const std::uint8_t flags = g.flags[k];
+    const bool moved = (flags & kPlacementMoved) != 0;
+    const detail::PlacementFrame<double> frame =
+        moved ? detail::placement_frame(g, k) : detail::PlacementFrame<double>{};
+    double a_shift = 0.0;  // a_t_{k-1}
+    if (flags & kPlacementCoordinateBreak) {
+      // z -= shift (t_{k-1} unless moved) and the recorded travel t_{k-1} of the rays live here.
+      if (k > 0 && seeds.travel) {
+        const double* seed = (*seeds.travel)[k - 1].data();
+        for (std::size_t i = 0; i < count; ++i)
+          a_shift += (fs[i] < 0 || fs[i] >= k) ? seed[i] : 0.0;
+      }
+      if (!moved) a_shift -= sum_of(a[2], count);
+    } else {
+      if (moved && (flags & kPlacementRestore)) to_parent_adjoint(frame, k, count, a, out);
+      const double a_t = surface_adjoint(lens, w, k, tape, seeds, fs, count, a, out);
+      if (!moved) a_shift += a_t;  // else the shift was applied before the frame change
+      if (!tape.turned_back.empty()) {
+        // Turned to the constant direction (0, 0, 1) before this surface.
+        for (std::size_t i = 0; i < count; ++i) {
+          if (tape.turned_back[i] == k) {
+            a[3][i] = 0.0;
+            a[4][i] = 0.0;
+            a[5][i] = 0.0;
+          }
+        }
+      }
+    }
+    if (moved) {
+      to_local_adjoint(frame, k, count, a, out);
+      a_shift -= sum_of(a[2], count);
+    }
+    if (k > 0) out.thickness[k - 1] += a_shift;
+  }
+  if (rays.turned()) {
+    // The field frame's turn into the lens frame, transposed.
+    const double fc = rays.frame_cos, fsin = rays.frame_sin;
+    for (int v = 0; v < 6; v += 3) {
+      double* __restrict p = a[v];
+      double* __restrict q = a[v + 1];
+      for (std::size_t i = 0; i < count; ++i) {
+        const double u = fc * p[i] - fsin * q[i];
+        const double t = fc * q[i] + fsin * p[i];
+        p[i] = u;
+        q[i] = t;
+      }
+    }
+  }
+}
+
+}  // namespace
+
 void trace_bundle_taped(const TraceLens<double>& lens, int w, RayBundle<double>& rays,
                         RayRecord<double>* record, AdjointTape& tape) {
+  if (lens.geometry.placed()) {
+    trace_bundle_taped_placed(lens, w, rays, record, tape);
+    return;
+  }
   const std::size_t count = rays.size();
   const int k_count = lens.surface_count();
   tape.resize(k_count, count, lens.has_profiles());
@@ -356,47 +709,18 @@ void trace_bundle_taped(const TraceLens<double>& lens, int w, RayBundle<double>&
       n[i] = 1.0;
     }
   }
-  const std::size_t bytes = count * sizeof(double);
-  auto save = [&](int k, double shift) {
-    // The tape holds z relative to the vertex of surface k (the shift applied), so the backward
-    // pass needs no shift; a_t = -a_zr there.
-    double* tz = tape.at(k, 2);
-    for (std::size_t i = 0; i < count; ++i) tz[i] = z[i] - shift;
-    std::memcpy(tape.at(k, 0), x, bytes);
-    std::memcpy(tape.at(k, 1), y, bytes);
-    std::memcpy(tape.at(k, 3), l, bytes);
-    std::memcpy(tape.at(k, 4), m, bytes);
-    std::memcpy(tape.at(k, 5), n, bytes);
-  };
   for (int k = 0; k < k_count; ++k) {
     const double c = lens.curvature_per_mm[k];
     const double shift = k > 0 ? lens.thickness_mm[k - 1] : 0.0;
     const double mu = lens.index(k - 1, w) / lens.index(k, w);
-    save(k, shift);
-    double* travel = record && k > 0 ? record->axial_travel_mm[k - 1].data() : nullptr;
-    double* zeta = record ? record->cos2_incidence[k].data() : nullptr;
-    double* zeta_prime = record ? record->cos2_refraction[k].data() : nullptr;
-    const std::uint8_t profile = lens.has_profiles() ? lens.profile[k] : kProfileSphere;
-    if (profile != kProfileSphere) {
-      detail::trace_surface_profile_double(
-          profile, c, lens.conic[k],
-          lens.asphere.data() + static_cast<std::size_t>(k) * kAsphereTerms, shift, mu, count, x, y,
-          z, l, m, n, failure, travel, zeta, zeta_prime, record != nullptr,
-          tape.path.data() + static_cast<std::size_t>(k) * count);
-    } else {
-      detail::trace_surface_double(c, shift, mu, count, x, y, z, l, m, n, failure, travel, zeta,
-                                   zeta_prime, record != nullptr);
-    }
-    for (std::size_t i = 0; i < count; ++i) {
-      if (failure[i] != kRayOk && status[i] == kRayOk) {
-        status[i] = static_cast<std::uint8_t>(failure[i]);
-        failed_at[i] = static_cast<std::int8_t>(k);
-      }
-    }
+    save_state(tape, k, shift, rays);
+    intersect_taped(lens, k, c, shift, mu, count, x, y, z, l, m, n, failure, record, tape);
+    aperture_masks(lens, k, 0.0, 0.0, count, x, y, failure);
+    take_failures(k, count, failure, status, failed_at);
   }
   const int last = k_count - 1;
   const double t = lens.thickness_mm[last];
-  save(k_count, t);
+  save_state(tape, k_count, t, rays);
   double* travel = record ? record->axial_travel_mm[last].data() : nullptr;
   for (std::size_t i = 0; i < count; ++i) {
     const double z_rel = z[i] - t;
@@ -419,73 +743,24 @@ void trace_bundle_adjoint(const TraceLens<double>& lens, int w, const RayBundle<
                           const AdjointTape& tape, const AdjointSeeds& seeds, BundleAdjoint& out) {
   const std::size_t count = rays.size();
   const int k_count = lens.surface_count();
-  const int last = k_count - 1;
   out.x0.resize(count);
   out.y0.resize(count);
   out.z0.resize(count);
-  // Adjoints of the state, carried from the image backwards: a_x, a_y, a_z in out.x0/y0/z0,
-  // a_l, a_m, a_n in thread-local scratch.
-  thread_local std::vector<double> scratch;
-  scratch.resize(3 * count);
-  double* const a[6] = {out.x0.data(),  out.y0.data(),          out.z0.data(),
-                        scratch.data(), scratch.data() + count, scratch.data() + 2 * count};
-  const std::uint8_t* status = rays.status.data();
-  const std::int8_t* fs = rays.failed_surface.data();
-  // Image transfer: zr = z - T, s = -zr / n, X = x + s l, Y = y + s m, travel = -zr.
-  {
-    const double* x = tape.at(k_count, 0);
-    const double* y = tape.at(k_count, 1);
-    const double* zr = tape.at(k_count, 2);
-    const double* l = tape.at(k_count, 3);
-    const double* m = tape.at(k_count, 4);
-    const double* n = tape.at(k_count, 5);
-    const double* travel_seed = seeds.travel ? (*seeds.travel)[last].data() : nullptr;
-    double sum_t = 0.0;
-    for (std::size_t i = 0; i < count; ++i) {
-      // The last space's travel is recorded for rays live there; the transfer only for traced rays.
-      const bool live = fs[i] < 0 || fs[i] >= last;
-      const bool traced = status[i] == kRayOk;
-      const double a_x_img = traced && seeds.x_image ? seeds.x_image[i] : 0.0;
-      const double a_y_img = traced && seeds.y_image ? seeds.y_image[i] : 0.0;
-      const double a_travel = live && travel_seed ? travel_seed[i] : 0.0;
-      const double s = -zr[i] / n[i];
-      const double a_s = traced ? a_x_img * l[i] + a_y_img * m[i] : 0.0;
-      const double a_zr = traced ? -a_s / n[i] - a_travel : -a_travel;
-      a[0][i] = a_x_img;
-      a[1][i] = a_y_img;
-      a[2][i] = a_zr;
-      a[3][i] = traced ? a_x_img * s : 0.0;
-      a[4][i] = traced ? a_y_img * s : 0.0;
-      a[5][i] = traced ? -a_s * s / n[i] : 0.0;
-      sum_t -= a_zr;
-    }
-    out.thickness[last] += sum_t;
+  out.l0.resize(count);
+  out.m0.resize(count);
+  out.n0.resize(count);
+  // Adjoints of the state, carried from the image backwards in out.x0 .. n0.
+  double* const a[6] = {out.x0.data(), out.y0.data(), out.z0.data(),
+                        out.l0.data(), out.m0.data(), out.n0.data()};
+  if (lens.geometry.placed()) {
+    trace_bundle_adjoint_placed(lens, w, rays, tape, seeds, a, out);
+    return;
   }
-  for (int k = last; k >= 0; --k) {
-    const double c = lens.curvature_per_mm[k];
-    const double mu = lens.index(k - 1, w) / lens.index(k, w);
-    const double* const state[6] = {tape.at(k, 0), tape.at(k, 1), tape.at(k, 2),
-                                    tape.at(k, 3), tape.at(k, 4), tape.at(k, 5)};
-    double sums[12] = {};
-    const double* travel_seed = seeds.travel && k > 0 ? (*seeds.travel)[k - 1].data() : nullptr;
-    const double* zeta_seed = seeds.zeta ? (*seeds.zeta)[k].data() : nullptr;
-    const double* zeta_prime_seed = seeds.zeta_prime ? (*seeds.zeta_prime)[k].data() : nullptr;
-    const std::uint8_t profile = lens.has_profiles() ? lens.profile[k] : kProfileSphere;
-    if (profile != kProfileSphere) {
-      detail::trace_surface_adjoint_profile_double(
-          c, lens.conic[k], lens.asphere.data() + static_cast<std::size_t>(k) * kAsphereTerms, mu,
-          k, count, state, tape.path.data() + static_cast<std::size_t>(k) * count, fs, a,
-          travel_seed, zeta_seed, zeta_prime_seed, sums);
-      out.conic[k] += sums[3];
-      for (int j = 0; j < kAsphereTerms; ++j)
-        out.asphere[static_cast<std::size_t>(k) * kAsphereTerms + j] += sums[4 + j];
-    } else {
-      detail::trace_surface_adjoint_double(c, mu, k, count, state, fs, a, travel_seed, zeta_seed,
-                                           zeta_prime_seed, sums);
-    }
-    out.curvature[k] += sums[0];
-    if (k > 0) out.thickness[k - 1] += sums[1];
-    out.mu[k] += sums[2];
+  const std::int8_t* fs = rays.failed_surface.data();
+  image_adjoint(lens, rays, tape, seeds, a, out);
+  for (int k = k_count - 1; k >= 0; --k) {
+    const double a_t = surface_adjoint(lens, w, k, tape, seeds, fs, count, a, out);
+    if (k > 0) out.thickness[k - 1] += a_t;
   }
 }
 

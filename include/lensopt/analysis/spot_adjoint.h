@@ -22,11 +22,14 @@
 //      sum_i a_y0,i py'_i, a_zEP = sum_i a_z0,i per (field, wavelength). Per-field sums are added
 //      in field order (deterministic).
 //   3. Chain rule with the Jets of step 1: dL/dv_j = sum over parameters P of a_P dP/dv_j.
-// Supported: spherical, conic and even-asphere surfaces without clear apertures (the kernel of
-// trace/kernel.h and the profiles of trace/profile.h; the profile's backward step in
-// trace/adjoint.h); adjoint_supported() says when, and mean_spot_gradient_fast falls back to the
-// Jet path otherwise. The conic constant and the asphere terms are parameters like c_k (their
-// adjoints a_k, a_a2i per surface, chained through their Jets in step 3).
+// Supported: spherical, conic and even-asphere surfaces (the kernel of trace/kernel.h and the
+// profiles of trace/profile.h; the profile's backward step in trace/adjoint.h), with clear
+// apertures, obscurations, mirrors, 3D placements, coordinate breaks and fields off the y axis
+// (the placed path's backward steps in trace/adjoint.h); adjoint_supported() says when, and
+// mean_spot_gradient_fast falls back to the Jet path otherwise. A placed lens's decenters scale
+// with the prescription (spec scaling), so their adjoints are chained like the radii's; the tilts
+// and the aperture centres are constants. The conic constant and the asphere terms are parameters
+// like c_k (their adjoints a_k, a_a2i per surface, chained through their Jets in step 3).
 #pragma once
 
 #include <ceres/jet.h>
@@ -47,6 +50,7 @@ struct SystemAdjoint {
   std::vector<double> start;      // [(h * W + w) * 4 + j]: j = s_x, o_y, s_y, z_EP
   std::vector<double> conic;      // K (0 at spheres)
   std::vector<double> asphere;    // K * kAsphereTerms
+  std::vector<double> decenter;   // K * 2: a placed surface's decenter x, y (0 elsewhere)
 
   void reset(int surfaces, int wavelengths, int fields);
   // Adds the bundle adjoint of field h, wavelength w started from `pupil` samples under the
@@ -55,6 +59,15 @@ struct SystemAdjoint {
                   const PupilSamples& pupil, const VignettingFactors& v = VignettingFactors{});
   void add(const SystemAdjoint& other);
 };
+
+// A finite object's rays start in the direction from the object point through their start point
+// (detail::field_ray_direction in trace/system.h), so their start position also moves their
+// direction: adds the direction adjoints (bundle.l0, m0, n0) to the position's (x0, y0, z0),
+//   u = d / |d|,  d = (x0, y0 - y_obj, z0 + D):   a_d = (a_u - (a_u . u) u) / |d|.
+// Nothing for an object at infinity (the direction is the field's constant). `samples` as for
+// start_rays (null: the system's pupil).
+void chain_start_direction(const TraceSystem<double>& sys, int h, int w, BundleAdjoint& bundle,
+                           const PupilSamples* samples = nullptr);
 
 // True when the adjoint kernel traces this lens exactly as the forward kernel does.
 bool adjoint_supported(const TraceLens<double>& lens);
@@ -93,6 +106,7 @@ TraceSystem<double> system_values(const TraceSystem<J>& in) {
   out.entrance_pupil_z_mm = value_of(in.entrance_pupil_z_mm);
   out.stop_radius_mm = value_of(in.stop_radius_mm);
   out.fields_deg = in.fields_deg;
+  out.field_azimuth_deg = in.field_azimuth_deg;
   out.field_values = in.field_values;
   out.field_type = in.field_type;
   out.field_weights = in.field_weights;
@@ -133,6 +147,13 @@ void chain_system_adjoint(const TraceSystem<J>& sys, const SystemAdjoint& adj, i
         const std::size_t i = static_cast<std::size_t>(k) * kAsphereTerms + j;
         add(sys.lens.asphere[i], adj.asphere[i]);
       }
+    }
+  }
+  // The decenters of a placed lens scale with the prescription (TraceLens::scale_lengths).
+  if (sys.lens.geometry.placed()) {
+    for (int k = 0; k < k_count; ++k) {
+      add(sys.lens.geometry.value(k, 0), adj.decenter[2 * k]);
+      add(sys.lens.geometry.value(k, 1), adj.decenter[2 * k + 1]);
     }
   }
   for (int w = 0; w < wl; ++w)

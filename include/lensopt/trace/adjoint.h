@@ -55,6 +55,23 @@
 //   dS'/drho = (1+k) c^3 / (4 q^3) + P'',  dS'/dc = 1 / (2 q) + (1+k) c^2 rho / (2 q^3),
 //   dS'/dk = c^3 rho / (4 q^3),  dS'/da2i = i rho^(i-1).
 // A ray whose intersection missed (taped path NaN) has s = 0, a constant, as in the Jet trace.
+//
+// Clear apertures and obscurations are masks: a ray outside (inside) fails there
+// (kRayVignetted) and is then live up to that surface, like any failed ray, as in the Jets.
+// Mirrors are refraction with mu = n / (-n) (kernel.h): the equations above unchanged.
+// The placed path (kernel.h, trace_bundle_placed: 3D placements, coordinate breaks, field
+// frames): for fixed tilts every frame change is affine in the ray, so its backward step is the
+// transpose of its linear part. With R the surface's rotation and D its decenter:
+//   to_local   p' = R^T (p - D) or R^T p - D, d' = R^T d:   a_p = R a_p', a_d = R a_d',
+//              a_D -= a_p (decenter first) or a_p' (tilt first), in x and y;
+//   to_parent  p = D + R p' or R (D + p'), d = R d':        a_p' = R^T a_p, a_d' = R^T a_d,
+//              a_D += a_p (decenter first) or a_p' (tilt first);
+//   the field frame's turn about z (an orthogonal map): its transpose is the opposite turn;
+//   the shift z -= t_{k-1} before a moved surface or a coordinate break, in the parent frame:
+//              a_t_{k-1} -= a_z there (the surface's own a_zr then belongs to its frame);
+//   a coordinate break's recorded travel t_{k-1}: a_t_{k-1} += a_travel;
+//   a ray that the kernel turns to (0, 0, 1) travelling backwards (AdjointTape::turned_back):
+//              its direction adjoints are 0 before that surface.
 #pragma once
 
 #include <cstddef>
@@ -75,12 +92,17 @@ struct AdjointTape {
   // The path s from the vertex plane at each conic or asphere surface ([k * count + ray], NaN
   // where the intersection missed); empty for an all-spherical lens.
   std::vector<double> path;
+  // The placed path (3D placements): per ray, the surface before which the kernel found it
+  // travelling backwards and set its direction to the constant (0, 0, 1), the ray's first
+  // failure (kRayBackwards); -1 if none. Empty on the rotationally symmetric path.
+  std::vector<std::int8_t> turned_back;
 
   void resize(int surface_count, std::size_t ray_count, bool profiles = false) {
     surfaces = surface_count;
     count = ray_count;
     state.resize(static_cast<std::size_t>(surface_count + 1) * 6 * ray_count);
     path.resize(profiles ? static_cast<std::size_t>(surface_count) * ray_count : 0);
+    turned_back.clear();
   }
   const double* at(int k, int component) const {
     return state.data() + (static_cast<std::size_t>(k) * 6 + component) * count;
@@ -102,15 +124,18 @@ struct AdjointSeeds {
 
 // Parameter adjoints of one bundle, accumulated (+=): per surface k the curvature, the thickness
 // t_k (the shift of surface k+1; for k = K-1 the image distance), mu_k at the bundle's
-// wavelength, the conic constant and the asphere terms (0 at spheres); per ray the start
-// position (the direction is the field's constant).
+// wavelength, the conic constant and the asphere terms (0 at spheres), the decenter (x, y) of a
+// placed surface (0 elsewhere; tilts are constants of the backward pass); per ray the start
+// position and direction, in the field's frame.
 struct BundleAdjoint {
   std::vector<double> curvature;   // K
   std::vector<double> thickness;   // K
   std::vector<double> mu;          // K
   std::vector<double> conic;       // K
   std::vector<double> asphere;     // K * kAsphereTerms (a2, a4, ..., a16)
+  std::vector<double> decenter;    // K * 2: x, y
   std::vector<double> x0, y0, z0;  // per ray (overwritten, not accumulated)
+  std::vector<double> l0, m0, n0;  // per ray, the start direction (overwritten)
 
   void reset(int surface_count) {
     curvature.assign(surface_count, 0.0);
@@ -118,6 +143,7 @@ struct BundleAdjoint {
     mu.assign(surface_count, 0.0);
     conic.assign(surface_count, 0.0);
     asphere.assign(static_cast<std::size_t>(surface_count) * kAsphereTerms, 0.0);
+    decenter.assign(static_cast<std::size_t>(surface_count) * 2, 0.0);
   }
 };
 
@@ -128,7 +154,7 @@ void trace_bundle_taped(const TraceLens<double>& lens, int w, RayBundle<double>&
 
 // The backward pass of a bundle traced by trace_bundle_taped (`rays` holds its final state and
 // status): accumulates the parameter adjoints of `seeds` into `out` (out.reset first) and sets
-// out.x0, y0, z0 to the adjoints of each ray's start position.
+// out.x0, y0, z0 and l0, m0, n0 to the adjoints of each ray's start position and direction.
 void trace_bundle_adjoint(const TraceLens<double>& lens, int w, const RayBundle<double>& rays,
                           const AdjointTape& tape, const AdjointSeeds& seeds, BundleAdjoint& out);
 
