@@ -509,13 +509,16 @@ TraceSystem<T> prepare_system(const TraceLens<T>& lens_in, const SystemSetup& se
   RayBundle<J> aiming_rays;
   for (int h = 0; h < field_count; ++h) {
     // On axis the pupil of a rotationally symmetric lens is not aberrated by the definition of
-    // R_s (unless R_s is given). A lens with 3D placements (a decentred or tilted element) is
-    // not symmetric on axis: its upper and lower rays meet the stop at different heights, so
-    // its axial field is aimed like any other.
-    if (sys.fields_deg[h] == 0.0 && setup.aperture_type != ApertureType::kFloatByStop &&
-        !sys.lens.geometry.placed())
-      continue;
-    for (int w = 0; w < wl; ++w) {
+    // R_s (unless R_s is given): the map stays the identity at every wavelength. A lens with 3D
+    // placements (a decentred or tilted element) is not symmetric on axis: its upper and lower
+    // rays meet the stop at different heights. Its axial field takes the map aimed at the
+    // reference wavelength, the one R_s is defined at, for every wavelength: with zero
+    // placements that map is the identity (to rounding), so a toleranced lens's merit is
+    // continuous at its nominal, and the chromatic part stays unaimed as on a symmetric lens.
+    const bool axial =
+        sys.fields_deg[h] == 0.0 && setup.aperture_type != ApertureType::kFloatByStop;
+    if (axial && !sys.lens.geometry.placed()) continue;
+    for (int w = axial ? wl - 1 : 0; w < wl; ++w) {
       T coord[3], deriv[3];
       detail::trace_aiming_rays<T>(lens_a, w, sys, h, r_ep, sys.entrance_pupil_z_mm, identity,
                                    coord, deriv, &aiming_rays);
@@ -526,6 +529,17 @@ TraceSystem<T> prepare_system(const TraceLens<T>& lens_in, const SystemSetup& se
       map.scale_x = side;
       map.offset_y = (top + bottom) / K<T>(2.0);
       map.scale_y = (top - bottom) / K<T>(2.0);
+      if (axial) {
+        // The sagittal ray on both sides (-x through the mirrored map): the map has no x
+        // offset, so aiming +x alone would make it odd in an x decenter, and the merit with it.
+        const PupilMap<T> mirrored{K<T>(-1.0), K<T>(0.0), K<T>(1.0)};
+        detail::trace_aiming_rays<T>(lens_a, w, sys, h, r_ep, sys.entrance_pupil_z_mm, mirrored,
+                                     coord, deriv, &aiming_rays);
+        const T side_minus = K<T>(-1.0) + (-r_s - coord[2]) / deriv[2];
+        map.scale_x = (side - side_minus) / K<T>(2.0);
+      }
+      if (axial)
+        for (int v = 0; v + 1 < wl; ++v) sys.pupil_maps[static_cast<std::size_t>(h) * wl + v] = map;
     }
   }
   return sys;
