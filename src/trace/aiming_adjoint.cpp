@@ -185,8 +185,13 @@ void seed_edge(double sign, double r_s, double c, double d, double a_e, const Va
 AimingAdjoint aim_pass(TraceSystem<double>& sys, const SystemSetup& setup,
                        const std::vector<double>* start) {
   aiming_tape::Tape tape;
-  aiming_tape::Tape* const previous = aiming_tape::active;
-  aiming_tape::active = &tape;
+  struct Activate {  // the tape of this thread while the pass runs
+    aiming_tape::Tape* previous;
+    explicit Activate(aiming_tape::Tape* t) : previous(aiming_tape::active) {
+      aiming_tape::active = t;
+    }
+    ~Activate() { aiming_tape::active = previous; }
+  } activate(&tape);
   auto input = [&](double value) {
     tape.nodes.push_back(aiming_tape::Node{});
     return Var(Dual(value), static_cast<int>(tape.nodes.size()) - 1);
@@ -283,7 +288,6 @@ AimingAdjoint aim_pass(TraceSystem<double>& sys, const SystemSetup& setup,
       aiming_tape::sweep(tape, inputs_end, adj);
     }
   }
-  aiming_tape::active = previous;
   auto gradient = [&](const std::vector<Var>& vars) {
     std::vector<double> g(vars.size(), 0.0);
     for (std::size_t i = 0; i < vars.size(); ++i) g[i] = adj[static_cast<std::size_t>(vars[i].idx)].v[0];

@@ -8,7 +8,8 @@
 //      trace/aiming_adjoint.h). It gives every parameter the ray trace reads as a Jet over the
 //      variables: per surface k, c_k and t_k; per surface and wavelength mu_{k,w} = n_{k-1}/n_k;
 //      per field h and wavelength w the ray start x = s_x p_x, y = o_y + s_y p_y, z = z_EP with
-//      s_x = R_EP sx_hw, o_y = R_EP oy_hw, s_y = R_EP sy_hw (system.h's pupil map).
+//      s_x = R_EP sx_hw, o_y = R_EP oy_hw, s_y = R_EP sy_hw (system.h's pupil map: R_EP and z_EP
+//      as Jets, the map entries as doubles with their adjoint from the taped aiming).
 //   2. Every ray in double: field by field, a forward trace of all wavelengths gives the field's
 //      spot S_h, centroid ybar_h and weight sum M_h (analysis/spot.h's weighted definition); then
 //      per wavelength a taped forward trace and the backward pass (trace/adjoint.h) with the
@@ -22,7 +23,9 @@
 //      y0 = o_y + s_y py', start_rays), a_sx = sum_i a_x0,i px'_i, a_oy = sum_i a_y0,i, a_sy =
 //      sum_i a_y0,i py'_i, a_zEP = sum_i a_z0,i per (field, wavelength). Per-field sums are added
 //      in field order (deterministic).
-//   3. Chain rule with the Jets of step 1: dL/dv_j = sum over parameters P of a_P dP/dv_j.
+//   3. Chain rule with the Jets of step 1: dL/dv_j = sum over parameters P of a_P dP/dv_j, the
+//      map entries' a_P passed on by aim_pupil_maps_adjoint to the parameters of the aiming
+//      trace (the scaled lens, R_EP, z_EP, R_s), which are Jets of step 1.
 // Supported: spherical, conic and even-asphere surfaces (the kernel of trace/kernel.h and the
 // profiles of trace/profile.h; the profile's backward step in trace/adjoint.h), with clear
 // apertures, obscurations, mirrors, 3D placements, coordinate breaks and fields off the y axis
