@@ -51,13 +51,10 @@ void accumulate(const LensParameterization& param, const std::vector<double>& x,
 // The constraint-field system of evaluate_design on Jets with x[first, first + N) seeded, prepared
 // with `setup` and `topt` (the caller's: without ray aiming, see design_adjoint_gradient).
 template <int N>
-TraceSystem<ceres::Jet<double, N>> design_system(const LensParameterization& param,
-                                                 const std::vector<double>& x, int first,
-                                                 GlassMode mode,
-                                                 const std::vector<int>& fixed_glasses,
-                                                 const SystemSetup& setup, const TraceOptions& topt,
-                                                 const DesignLossOptions& options,
-                                                 ceres::Jet<double, N>& profile) {
+TraceSystem<ceres::Jet<double, N>> design_system(
+    const LensParameterization& param, const std::vector<double>& x, int first, GlassMode mode,
+    const std::vector<int>& fixed_glasses, const SystemSetup& setup, const TraceOptions& topt,
+    const DesignLossOptions& options, ceres::Jet<double, N>& profile) {
   using J = ceres::Jet<double, N>;
   const int n = param.size();
   std::vector<J> xj(n);
@@ -311,8 +308,8 @@ DesignValueGradient design_adjoint_gradient(const LensParameterization& param,
   AimingAdjoint aiming;
   for (int first = 0; first < n || first == 0; first += N) {
     ceres::Jet<double, N> profile;
-    const auto sys = design_system<N>(param, x, first, mode, fixed_glasses, sampled.setup,
-                                      unaimed, options, profile);
+    const auto sys = design_system<N>(param, x, first, mode, fixed_glasses, sampled.setup, unaimed,
+                                      options, profile);
     for (int j = 0; j < std::min(N, n - first); ++j)
       out.gradient[first + j] += options.weight_profile * profile.v[j];
     out.loss.profile = profile.a;

@@ -31,8 +31,8 @@ LENSOPT_ADJOINT_INLINE Refraction refraction(double mu, double mu2, double zeta,
 
 // The adjoint seeds of ray i after the surface (0 for a ray that failed before it): direction,
 // travel, and the records' zeta and zeta'. Every seed array holds `count` values (the kernels
-// replace a null seed by zeros: or_zeros): loaded unconditionally, so the ray loop has no branch and
-// vectorizes (a load under `live && pointer` kept it scalar, about 8x slower with AVX-512).
+// replace a null seed by zeros: or_zeros): loaded unconditionally, so the ray loop has no branch
+// and vectorizes (a load under `live && pointer` kept it scalar, about 8x slower with AVX-512).
 struct ExitSeeds {
   double l, m, n, travel, zeta, zeta_prime;
 };

@@ -62,18 +62,30 @@ inline Var operator+(const Var& x, const Var& y) {
 inline Var operator-(const Var& x, const Var& y) {
   return node2(x.val - y.val, x, Dual(1.0), y, Dual(-1.0));
 }
-inline Var operator*(const Var& x, const Var& y) { return node2(x.val * y.val, x, y.val, y, x.val); }
+inline Var operator*(const Var& x, const Var& y) {
+  return node2(x.val * y.val, x, y.val, y, x.val);
+}
 // q = x / y:  dq/dx = 1 / y,  dq/dy = -q / y.
 inline Var operator/(const Var& x, const Var& y) {
   const Dual q = x.val / y.val;
   const Dual inv = Dual(1.0) / y.val;
   return node2(q, x, inv, y, -q * inv);
 }
-inline Var operator-(const Var& x) { return node1(-x.val, x, Dual(-1.0)); }
-inline Var& operator+=(Var& x, const Var& y) { return x = x + y; }
-inline Var& operator-=(Var& x, const Var& y) { return x = x - y; }
-inline Var& operator*=(Var& x, const Var& y) { return x = x * y; }
-inline Var& operator/=(Var& x, const Var& y) { return x = x / y; }
+inline Var operator-(const Var& x) {
+  return node1(-x.val, x, Dual(-1.0));
+}
+inline Var& operator+=(Var& x, const Var& y) {
+  return x = x + y;
+}
+inline Var& operator-=(Var& x, const Var& y) {
+  return x = x - y;
+}
+inline Var& operator*=(Var& x, const Var& y) {
+  return x = x * y;
+}
+inline Var& operator/=(Var& x, const Var& y) {
+  return x = x / y;
+}
 // d sqrt(x) = 1 / (2 sqrt(x)), d sin = cos, d cos = -sin.
 inline Var sqrt(const Var& x) {
   using std::sqrt;
@@ -91,12 +103,24 @@ inline Var cos(const Var& x) {
   return node1(cos(x.val), x, -sin(x.val));
 }
 // Comparisons on the value, as Jets compare their scalar parts.
-inline bool operator<(const Var& x, const Var& y) { return x.val.a < y.val.a; }
-inline bool operator>(const Var& x, const Var& y) { return x.val.a > y.val.a; }
-inline bool operator<=(const Var& x, const Var& y) { return x.val.a <= y.val.a; }
-inline bool operator>=(const Var& x, const Var& y) { return x.val.a >= y.val.a; }
-inline bool operator==(const Var& x, const Var& y) { return x.val.a == y.val.a; }
-inline bool operator!=(const Var& x, const Var& y) { return x.val.a != y.val.a; }
+inline bool operator<(const Var& x, const Var& y) {
+  return x.val.a < y.val.a;
+}
+inline bool operator>(const Var& x, const Var& y) {
+  return x.val.a > y.val.a;
+}
+inline bool operator<=(const Var& x, const Var& y) {
+  return x.val.a <= y.val.a;
+}
+inline bool operator>=(const Var& x, const Var& y) {
+  return x.val.a >= y.val.a;
+}
+inline bool operator==(const Var& x, const Var& y) {
+  return x.val.a == y.val.a;
+}
+inline bool operator!=(const Var& x, const Var& y) {
+  return x.val.a != y.val.a;
+}
 
 // The sweep over nodes [first, size): adj (sized to the tape) holds the seeds on entry and the
 // inputs' adjoints (nodes before `first`) accumulate.
@@ -115,9 +139,7 @@ void sweep(const Tape& t, std::size_t first, std::vector<Dual>& adj) {
 
 template <>
 struct ScalarTraits<aiming_tape::Var> {
-  static aiming_tape::Var make(double value) {
-    return aiming_tape::Var(aiming_tape::Dual(value));
-  }
+  static aiming_tape::Var make(double value) { return aiming_tape::Var(aiming_tape::Dual(value)); }
   static double value(const aiming_tape::Var& x) { return x.val.a; }
 };
 
@@ -164,8 +186,12 @@ double aimed_edge(double sign, double r_s, double c, double d) {
   const Dual rs(r_s);
   return (K<Dual>(sign) + ((sign > 0.0 ? rs : -rs) - Dual(c)) / Dual(d)).a;
 }
-double half_sum(double a, double b) { return ((Dual(a) + Dual(b)) / K<Dual>(2.0)).a; }
-double half_difference(double a, double b) { return ((Dual(a) - Dual(b)) / K<Dual>(2.0)).a; }
+double half_sum(double a, double b) {
+  return ((Dual(a) + Dual(b)) / K<Dual>(2.0)).a;
+}
+double half_difference(double a, double b) {
+  return ((Dual(a) - Dual(b)) / K<Dual>(2.0)).a;
+}
 
 // The seeds of one aimed edge e = sign + (sign R_s - c) / d with adjoint a_e:
 // a_c = -a_e / d, a_d = -a_e (sign R_s - c) / d^2, a_Rs += sign a_e / d. The dual seed of the
@@ -232,7 +258,38 @@ AimingAdjoint aim_pass(TraceSystem<double>& sys, const SystemSetup& setup,
   sys.pupil_maps.assign(static_cast<std::size_t>(field_count) * wl, identity);
   const double r_s = sys.stop_radius_mm;
   const double r = sys.epd_mm / 2.0;
+  // The three rays of (h, w) under `map`: their stop coordinates c and derivatives d, on the
+  // tape (out) when there is a backward pass, else as prepare_system on Jet<double, 1> traces
+  // them, on Jet<Jet<double, 1>, 1> (the same values, two Newton steps at an asphere as on the
+  // tape, without the tape's cost).
   RayBundle<Var> rays;
+  using J = ceres::Jet<Dual, 1>;
+  RayBundle<J> plain_rays;
+  const TraceLens<J> lens_a =
+      start ? TraceLens<J>{}
+            : convert_trace_lens<J>(
+                  convert_trace_lens<Dual>(in, {}, 0, 0, [](double v, int) { return K<Dual>(v); }),
+                  {}, 0, 0, [](double v, int) { return K<J>(v); });
+  const Dual r_dual(r), z_dual(sys.entrance_pupil_z_mm);
+  auto trace = [&](int h, int w, const PupilMap<double>& map, Var out[3], double c[3],
+                   double d[3]) {
+    if (!start) {
+      const PupilMap<Dual> map_dual{Dual(map.scale_x), Dual(map.offset_y), Dual(map.scale_y)};
+      Dual cd[3], dd[3];
+      detail::trace_aiming_rays<Dual>(lens_a, w, sys, h, r_dual, z_dual, map_dual, cd, dd,
+                                      &plain_rays);
+      for (int i = 0; i < 3; ++i) {
+        c[i] = cd[i].a;
+        d[i] = dd[i].a;
+      }
+      return;
+    }
+    trace_aiming(lens, w, sys, h, r_ep, z_ep, map, rays, out);
+    for (int i = 0; i < 3; ++i) {
+      c[i] = out[i].val.a;
+      d[i] = out[i].val.v[0];
+    }
+  };
   Var stop[3], stop_minus[3];
   for (int h = 0; h < field_count; ++h) {
     const bool axial =
@@ -240,12 +297,8 @@ AimingAdjoint aim_pass(TraceSystem<double>& sys, const SystemSetup& setup,
     if (axial && !sys.lens.geometry.placed()) continue;
     for (int w = axial ? wl - 1 : 0; w < wl; ++w) {
       tape.nodes.resize(inputs_end);
-      trace_aiming(lens, w, sys, h, r_ep, z_ep, identity, rays, stop);
       double c[3], d[3];
-      for (int i = 0; i < 3; ++i) {
-        c[i] = stop[i].val.a;
-        d[i] = stop[i].val.v[0];
-      }
+      trace(h, w, identity, stop, c, d);
       const double top = aimed_edge(1.0, r_s, c[0], d[0]);
       const double bottom = aimed_edge(-1.0, r_s, c[1], d[1]);
       const double side = aimed_edge(1.0, r_s, c[2], d[2]);
@@ -256,9 +309,10 @@ AimingAdjoint aim_pass(TraceSystem<double>& sys, const SystemSetup& setup,
       double c_minus = 0.0, d_minus = 0.0;
       if (axial) {
         const PupilMap<double> mirrored{-1.0, 0.0, 1.0};
-        trace_aiming(lens, w, sys, h, r_ep, z_ep, mirrored, rays, stop_minus);
-        c_minus = stop_minus[2].val.a;
-        d_minus = stop_minus[2].val.v[0];
+        double cm[3], dm[3];
+        trace(h, w, mirrored, stop_minus, cm, dm);
+        c_minus = cm[2];
+        d_minus = dm[2];
         map.scale_x = half_difference(side, aimed_edge(-1.0, r_s, c_minus, d_minus));
         for (int v = 0; v + 1 < wl; ++v) sys.pupil_maps[static_cast<std::size_t>(h) * wl + v] = map;
       }
@@ -290,7 +344,8 @@ AimingAdjoint aim_pass(TraceSystem<double>& sys, const SystemSetup& setup,
   }
   auto gradient = [&](const std::vector<Var>& vars) {
     std::vector<double> g(vars.size(), 0.0);
-    for (std::size_t i = 0; i < vars.size(); ++i) g[i] = adj[static_cast<std::size_t>(vars[i].idx)].v[0];
+    for (std::size_t i = 0; i < vars.size(); ++i)
+      g[i] = adj[static_cast<std::size_t>(vars[i].idx)].v[0];
     return g;
   };
   out.curvature = gradient(lens.curvature_per_mm);

@@ -5,9 +5,8 @@
 // relative: on the 24-surface Tessar with plates (71 variables, 9 chunks of 8), an asphere
 // (two Newton steps in the aiming), a decentred lens (the axial field aimed on both sides) and a
 // finite object given by object heights, with its stop behind a meniscus.
-#include <doctest/doctest.h>
-
 #include <ceres/jet.h>
+#include <doctest/doctest.h>
 
 #include <algorithm>
 #include <cmath>
@@ -28,7 +27,9 @@ namespace {
 using test::mean_spot;
 using test::worst_relative;
 
-Lens lens_file(const std::string& relative) { return read_lens(test::source_dir() / relative); }
+Lens lens_file(const std::string& relative) {
+  return read_lens(test::source_dir() / relative);
+}
 
 // The AC254-100 at a 300 mm object (object-height fields) with a meniscus and an air gap before
 // its stop: the aiming rays cross the meniscus, and the aimed pupil moves with the variables.
@@ -46,7 +47,9 @@ Lens finite_object_lens() {
 }
 
 // The doublet with two even aspheres, the first before the stop: the aiming traces it.
-Lens asphere_doublet() { return lens_file("lenses/doublet-asphere.toml"); }
+Lens asphere_doublet() {
+  return lens_file("lenses/doublet-asphere.toml");
+}
 
 TraceOptions small_sampling() {
   TraceOptions options;
@@ -69,13 +72,18 @@ void check_maps(const Lens& lens, const TraceOptions& options) {
   TraceOptions unaimed = options;
   unaimed.ray_aiming = false;
   TraceSystem<double> values = system_values(prepare_system(lens_j, setup, unaimed));
+  // The maps of the plain pass and those of the taped one (the backward pass's forward trace).
+  TraceSystem<double> taped = values;
   aim_pupil_maps(values, setup);
+  const std::vector<double> start(values.fields_deg.size() * values.wavelength_count * 4, 1.0);
+  aim_pupil_maps_adjoint(taped, setup, start);
   REQUIRE(values.pupil_maps.size() == aimed.pupil_maps.size());
+  REQUIRE(taped.pupil_maps.size() == aimed.pupil_maps.size());
   int differing = 0, aimed_maps = 0;
   for (std::size_t i = 0; i < aimed.pupil_maps.size(); ++i) {
     const PupilMap<double>& a = aimed.pupil_maps[i];
-    const PupilMap<double>& b = values.pupil_maps[i];
-    differing += a.scale_x != b.scale_x || a.offset_y != b.offset_y || a.scale_y != b.scale_y;
+    for (const PupilMap<double>& b : {values.pupil_maps[i], taped.pupil_maps[i]})
+      differing += a.scale_x != b.scale_x || a.offset_y != b.offset_y || a.scale_y != b.scale_y;
     aimed_maps += a.scale_x != 1.0 || a.offset_y != 0.0 || a.scale_y != 1.0;
   }
   INFO(lens.name, ": ", differing, " of ", aimed.pupil_maps.size(), " maps differ");
@@ -93,8 +101,8 @@ void check_spot(const Lens& lens, const TraceOptions& options) {
       mean_spot_gradient_adjoint<8>(trace_lens, lens.specs, variables, options);
   REQUIRE(adjoint.gradient.size() == variables.size());
   using J = ceres::Jet<double, 8>;
-  const TraceLens<J> lens_j = convert_trace_lens<J>(trace_lens, variables, 0, 0,
-                                                    [](double v, int j) { return J(v, j); });
+  const TraceLens<J> lens_j =
+      convert_trace_lens<J>(trace_lens, variables, 0, 0, [](double v, int j) { return J(v, j); });
   const TraceSystem<double> values = system_values(prepare_system(lens_j, lens.specs, options));
   CHECK(adjoint.mean_rms_spot_mm == mean_spot_adjoint(values, 1).value);
   CHECK(adjoint.mean_rms_spot_mm == doctest::Approx(mean_spot(lens, options)).epsilon(1e-12));
@@ -148,8 +156,7 @@ TEST_CASE("aiming adjoint: the design loss on the 24-surface lens (Jets agree)")
   // aiming's doing, left for a separate look.)
   const DesignLossOptions loss;
   for (GlassMode mode : {GlassMode::kQuantized, GlassMode::kContinuous}) {
-    const DesignValueGradient adjoint =
-        design_loss_gradient(param, x, mode, {}, sampling, loss);
+    const DesignValueGradient adjoint = design_loss_gradient(param, x, mode, {}, sampling, loss);
     const DesignValueGradient jets = design_loss_gradient_jets(param, x, mode, {}, sampling, loss);
     REQUIRE(adjoint.gradient.size() == jets.gradient.size());
     CHECK(adjoint.loss.total == doctest::Approx(jets.loss.total).epsilon(1e-12));

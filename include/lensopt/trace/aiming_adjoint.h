@@ -7,8 +7,8 @@
 // (0, R_EP), (0, -R_EP), (R_EP, 0) at z_EP are traced to the stop, giving their stop
 // coordinates c_i (y, y, x) and the derivatives d_i = dc_i / dp_i with respect to their
 // normalized pupil coordinate p_i; with R_s the stop radius,
-//   top = 1 + (R_s - c_0) / d_0,   bottom = -1 + (-R_s - c_1) / d_1,   side = 1 + (R_s - c_2) / d_2,
-//   s_x = side,   o_y = (top + bottom) / 2,   s_y = (top - bottom) / 2.
+//   top = 1 + (R_s - c_0) / d_0,   bottom = -1 + (-R_s - c_1) / d_1,   side = 1 + (R_s - c_2) /
+//   d_2, s_x = side,   o_y = (top + bottom) / 2,   s_y = (top - bottom) / 2.
 // The bundle's adjoint gives a_j = dL / dS_j of the ray starts S = R_EP (s_x, o_y, s_y), so that
 // A_j = a_j R_EP is the adjoint of the map entry j and
 //   a_top = (A_oy + A_sy) / 2,   a_bottom = (A_oy - A_sy) / 2,   a_side = A_sx,
