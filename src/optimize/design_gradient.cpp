@@ -48,11 +48,12 @@ void accumulate(const LensParameterization& param, const std::vector<double>& x,
   }
 }
 
-// The constraint-field system of evaluate_design on Jets with x[first, first + N) seeded.
+// The constraint-field system of evaluate_design on Jets with x[first, first + N) seeded, prepared
+// with `setup` and `topt` (the caller's: without ray aiming, see design_adjoint_gradient).
 template <int N>
 TraceSystem<ceres::Jet<double, N>> design_system(
     const LensParameterization& param, const std::vector<double>& x, int first, GlassMode mode,
-    const std::vector<int>& fixed_glasses, const TraceOptions& sampling,
+    const std::vector<int>& fixed_glasses, const SystemSetup& setup, const TraceOptions& topt,
     const DesignLossOptions& options, ceres::Jet<double, N>& profile) {
   using J = ceres::Jet<double, N>;
   const int n = param.size();
@@ -64,9 +65,7 @@ TraceSystem<ceres::Jet<double, N>> design_system(
   const TraceLens<J> lens = param.to_trace_lens(xj.data(), mode, fixed_glasses);
   // The profile bounds (no rays: forward mode on these Jets, as evaluate_design).
   profile = profile_bound_loss(lens, param.structure().specs, options.max_surface_slope_deg);
-  TraceOptions topt = sampling;
-  topt.scale_to_spec = false;
-  return prepare_system(lens, design_sampling(param.structure(), topt).setup, topt);
+  return prepare_system(lens, setup, topt);
 }
 
 // Step 2 of the header for the design loss: the loss terms of evaluate_design in double and the
@@ -297,24 +296,33 @@ DesignValueGradient design_adjoint_gradient(const LensParameterization& param,
   DesignValueGradient out;
   const int n = param.size();
   out.gradient.assign(n, 0.0);
+  // evaluate_design's system: unscaled, its sampling's setup; prepared on the Jets without the
+  // ray aiming, whose maps and adjoint come from the taped aiming (trace/aiming_adjoint.h).
+  TraceOptions unscaled = sampling;
+  unscaled.scale_to_spec = false;
+  const DesignSampling sampled = design_sampling(param.structure(), unscaled);
+  TraceOptions unaimed = unscaled;
+  unaimed.ray_aiming = false;
   SystemAdjoint adj;
+  TraceSystem<double> values;
+  AimingAdjoint aiming;
   for (int first = 0; first < n || first == 0; first += N) {
     ceres::Jet<double, N> profile;
-    const auto sys =
-        design_system<N>(param, x, first, mode, fixed_glasses, sampling, options, profile);
+    const auto sys = design_system<N>(param, x, first, mode, fixed_glasses, sampled.setup, unaimed,
+                                      options, profile);
     for (int j = 0; j < std::min(N, n - first); ++j)
       out.gradient[first + j] += options.weight_profile * profile.v[j];
     out.loss.profile = profile.a;
     if (first == 0) {
-      const TraceSystem<double> values = system_values(sys);
+      values = system_values(sys);
       if (!adjoint_supported(values.lens))
         return design_loss_gradient_jets(param, x, mode, fixed_glasses, sampling, options);
-      TraceOptions unscaled = sampling;
-      unscaled.scale_to_spec = false;
-      adj = design_adjoint(values, design_sampling(param.structure(), unscaled), param.structure(),
-                           sampling, options, out.loss);
+      if (sampling.ray_aiming) aim_pupil_maps(values, sampled.setup);
+      adj = design_adjoint(values, sampled, param.structure(), sampling, options, out.loss);
+      if (sampling.ray_aiming) aiming = aim_pupil_maps_adjoint(values, sampled.setup, adj.start);
     }
-    chain_system_adjoint(sys, adj, std::min(N, n - first), out.gradient.data() + first);
+    chain_system_adjoint(sys, values, adj, sampling.ray_aiming ? &aiming : nullptr,
+                         std::min(N, n - first), out.gradient.data() + first);
     if (n == 0) break;
   }
   // The glass-variable loss, direct: l_GV = sum ||g - g*||^2, g* the nearest catalog glass.

@@ -3,11 +3,13 @@
 //
 // Split of the pipeline:
 //   1. Lens level, in Jets (few rays): the prescription seeded with the variables, scaling to the
-//      spec focal length, paraxial pupil, stop radius and ray aiming (prepare_system on
-//      ceres::Jet<double, N>). It gives every parameter the ray trace reads as a Jet over the
+//      spec focal length, paraxial pupil and stop radius (prepare_system on ceres::Jet<double, N>
+//      without the ray aiming, whose maps and adjoint come from one taped trace in double:
+//      trace/aiming_adjoint.h). It gives every parameter the ray trace reads as a Jet over the
 //      variables: per surface k, c_k and t_k; per surface and wavelength mu_{k,w} = n_{k-1}/n_k;
 //      per field h and wavelength w the ray start x = s_x p_x, y = o_y + s_y p_y, z = z_EP with
-//      s_x = R_EP sx_hw, o_y = R_EP oy_hw, s_y = R_EP sy_hw (system.h's pupil map).
+//      s_x = R_EP sx_hw, o_y = R_EP oy_hw, s_y = R_EP sy_hw (system.h's pupil map: R_EP and z_EP
+//      as Jets, the map entries as doubles with their adjoint from the taped aiming).
 //   2. Every ray in double: field by field, a forward trace of all wavelengths gives the field's
 //      spot S_h, centroid ybar_h and weight sum M_h (analysis/spot.h's weighted definition); then
 //      per wavelength a taped forward trace and the backward pass (trace/adjoint.h) with the
@@ -21,7 +23,9 @@
 //      y0 = o_y + s_y py', start_rays), a_sx = sum_i a_x0,i px'_i, a_oy = sum_i a_y0,i, a_sy =
 //      sum_i a_y0,i py'_i, a_zEP = sum_i a_z0,i per (field, wavelength). Per-field sums are added
 //      in field order (deterministic).
-//   3. Chain rule with the Jets of step 1: dL/dv_j = sum over parameters P of a_P dP/dv_j.
+//   3. Chain rule with the Jets of step 1: dL/dv_j = sum over parameters P of a_P dP/dv_j, the
+//      map entries' a_P passed on by aim_pupil_maps_adjoint to the parameters of the aiming
+//      trace (the scaled lens, R_EP, z_EP, R_s), which are Jets of step 1.
 // Supported: spherical, conic and even-asphere surfaces (the kernel of trace/kernel.h and the
 // profiles of trace/profile.h; the profile's backward step in trace/adjoint.h), with clear
 // apertures, obscurations, mirrors, 3D placements, coordinate breaks and fields off the y axis
@@ -38,6 +42,7 @@
 
 #include "lensopt/analysis/gradient.h"
 #include "lensopt/trace/adjoint.h"
+#include "lensopt/trace/aiming_adjoint.h"
 
 namespace lensopt {
 
@@ -125,9 +130,16 @@ TraceSystem<double> system_values(const TraceSystem<J>& in) {
   return out;
 }
 
-// Step 3: gradient[j] += sum_P a_P dP/dv_j for the Jet directions j < count of `sys`.
+// Step 3: gradient[j] += sum_P a_P dP/dv_j for the Jet directions j < count of `sys`, a system
+// prepared without ray aiming (its maps the identity), `values` its double values with the aimed
+// maps (aim_pupil_maps) and `aiming` the adjoint through those maps (aim_pupil_maps_adjoint;
+// null without ray aiming). A ray start S = R_EP m (m a map entry) gives
+//   a_S dS/dv = a_S m dR_EP/dv + (a_S R_EP) dm/dv,
+// the second term the aiming's: sum over its parameters P (the scaled lens, R_EP, z_EP, R_s) of
+// a_P dP/dv.
 template <typename J>
-void chain_system_adjoint(const TraceSystem<J>& sys, const SystemAdjoint& adj, int count,
+void chain_system_adjoint(const TraceSystem<J>& sys, const TraceSystem<double>& values,
+                          const SystemAdjoint& adj, const AimingAdjoint* aiming, int count,
                           double* gradient) {
   const int k_count = sys.lens.surface_count();
   const int wl = sys.wavelength_count;
@@ -135,6 +147,9 @@ void chain_system_adjoint(const TraceSystem<J>& sys, const SystemAdjoint& adj, i
   auto add = [&](const J& p, double a) {
     if (a == 0.0) return;
     for (int j = 0; j < count; ++j) gradient[j] += a * p.v[j];
+  };
+  auto add_all = [&](const std::vector<J>& p, const std::vector<double>& a) {
+    for (std::size_t i = 0; i < p.size() && i < a.size(); ++i) add(p[i], a[i]);
   };
   for (int k = 0; k < k_count; ++k) {
     add(sys.lens.curvature_per_mm[k], adj.curvature[k]);
@@ -160,20 +175,33 @@ void chain_system_adjoint(const TraceSystem<J>& sys, const SystemAdjoint& adj, i
     for (int k = 0; k < k_count; ++k)
       add(sys.lens.index(k - 1, w) / sys.lens.index(k, w),
           adj.mu[static_cast<std::size_t>(w) * k_count + k]);
-  const J r_ep = sys.epd_mm / K<J>(2.0);
+  double a_r_ep = 0.0, a_z_ep = 0.0;
   for (int h = 0; h < fields; ++h)
     for (int w = 0; w < wl; ++w) {
-      const PupilMap<J>& map = sys.pupil_map(h, w);
+      const PupilMap<double>& map = values.pupil_map(h, w);
       const double* a = &adj.start[(static_cast<std::size_t>(h) * wl + w) * 4];
-      add(r_ep * map.scale_x, a[0]);
-      add(r_ep * map.offset_y, a[1]);
-      add(r_ep * map.scale_y, a[2]);
-      add(sys.entrance_pupil_z_mm, a[3]);
+      a_r_ep += a[0] * map.scale_x + a[1] * map.offset_y + a[2] * map.scale_y;
+      a_z_ep += a[3];
     }
+  if (aiming) {
+    add_all(sys.lens.curvature_per_mm, aiming->curvature);
+    add_all(sys.lens.thickness_mm, aiming->thickness);
+    add_all(sys.lens.nd, aiming->nd);
+    add_all(sys.lens.vd, aiming->vd);
+    add_all(sys.lens.conic, aiming->conic);
+    add_all(sys.lens.asphere, aiming->asphere);
+    add_all(sys.lens.geometry.placement, aiming->placement);
+    add(sys.stop_radius_mm, aiming->stop_radius);
+    a_r_ep += aiming->entrance_pupil_radius;
+    a_z_ep += aiming->entrance_pupil_z;
+  }
+  add(sys.epd_mm / K<J>(2.0), a_r_ep);
+  add(sys.entrance_pupil_z_mm, a_z_ep);
 }
 
 // The mean spot and its gradient with respect to `variables` by the adjoint (steps 1-3), the
-// Jet preparation in chunks of N variables.
+// Jet preparation (without the ray aiming, whose derivatives come from aim_pupil_maps_adjoint)
+// in chunks of N variables.
 template <int N = 24>
 SpotGradient mean_spot_gradient_adjoint(const TraceLens<double>& lens_in, const Specs& specs,
                                         const std::vector<PrescriptionVariable>& variables,
@@ -184,17 +212,28 @@ SpotGradient mean_spot_gradient_adjoint(const TraceLens<double>& lens_in, const 
   SpotGradient out;
   out.gradient.assign(variables.size(), 0.0);
   const int count = static_cast<int>(variables.size());
+  // prepare_system(lens, specs, options)'s setup, without the aiming on Jets.
+  const SystemSetup setup = specs_setup(specs, options, !lens.geometry.placed());
+  TraceOptions unaimed = options;
+  unaimed.ray_aiming = false;
   SystemAdjoint adj;
+  TraceSystem<double> values;
+  AimingAdjoint aiming;
   for (int first = 0; first < count || first == 0; first += N) {
     const int chunk = std::min(N, count - first);
     const TraceLens<J> lens_j = convert_trace_lens<J>(lens, variables, first, chunk,
                                                       [](double v, int j) { return J(v, j); });
-    const TraceSystem<J> sys = prepare_system(lens_j, specs, options);
+    const TraceSystem<J> sys = prepare_system(lens_j, setup, unaimed);
     if (first == 0) {
-      adj = mean_spot_adjoint(system_values(sys), options.threads);
+      values = system_values(sys);
+      if (options.ray_aiming) aim_pupil_maps(values, setup);
+      adj = mean_spot_adjoint(values, options.threads);
       out.mean_rms_spot_mm = adj.value;
+      if (options.ray_aiming) aiming = aim_pupil_maps_adjoint(values, setup, adj.start);
     }
-    if (chunk > 0) chain_system_adjoint(sys, adj, chunk, out.gradient.data() + first);
+    if (chunk > 0)
+      chain_system_adjoint(sys, values, adj, options.ray_aiming ? &aiming : nullptr, chunk,
+                           out.gradient.data() + first);
     if (count == 0) break;
   }
   return out;

@@ -2,7 +2,8 @@
 // gradient-descent optimizer (the joint optimization's Adam):
 //   l_lens(x) = w_S l_S + w_RP l_RP + w_RA l_RA + w_GV l_GV,   grad_j = d l_lens / d x_j,
 // by reverse mode (adjoint, the default): the forward map x -> TraceLens and prepare_system run
-// on ceres::Jet<double, N> (few rays: the paraxial solves, stop radius, ray aiming), every ray in
+// on ceres::Jet<double, N> (few rays: the paraxial solves, stop radius; the ray aiming's maps and
+// their adjoint by a taped trace, trace/aiming_adjoint.h), every ray in
 // double with the backward pass of trace/adjoint.h, and the chain rule through the Jets
 // (analysis/spot_adjoint.h). The seeds of the backward pass are the derivatives of the terms of
 // evaluate_design (design_loss.h) with respect to what the rays give:
