@@ -13,23 +13,14 @@
 
 namespace lensopt::test {
 
-// The project's source folder (lenses/, catalogs/).
-inline std::filesystem::path source_dir() {
-  return LENSOPT_SOURCE_DIR;
-}
+// The project's source folder (lenses/, catalogs/). Defined in test_support.cpp, the one file
+// compiled with the source tree's path, so that ccache shares every other test object between
+// work trees and clones.
+std::filesystem::path source_dir();
 
 // ../shared (reference data), or nullopt when it is absent: tests that need it then skip,
-// saying so with MESSAGE.
-inline std::optional<std::filesystem::path> shared_dir() {
-  std::filesystem::path dir;
-  if (const char* env = std::getenv("LENSOPT_SHARED_DIR")) {
-    dir = env;
-  } else {
-    dir = LENSOPT_SHARED_DIR;
-  }
-  if (std::filesystem::is_directory(dir / "data")) return dir;
-  return std::nullopt;
-}
+// saying so with MESSAGE. LENSOPT_SHARED_DIR in the environment takes precedence.
+std::optional<std::filesystem::path> shared_dir();
 
 // This process's own temporary folder, made by mkdtemp on first use and removed at exit: tests
 // put their files under it, never under a fixed name in /tmp, so concurrent runs (ctest -j,
