@@ -216,8 +216,14 @@ SystemAdjoint design_adjoint(const TraceSystem<double>& sys, const DesignSamplin
             const double va = cos2_max - record.cos2_incidence[k][p];
             const double vb = cos2_max - record.cos2_refraction[k][p];
             angle_sum += (va > 0.0 ? va : 0.0) + (vb > 0.0 ? vb : 0.0);
-            zeta_seed[k][p] = va > 0.0 ? -angle_weight : 0.0;
-            zeta_prime_seed[k][p] = vb > 0.0 ? -angle_weight : 0.0;
+            // The slope of a tie (within kHingeTie of the bound) is halved: detail::tied_hinge.
+            const double zi = record.cos2_incidence[k][p], zo = record.cos2_refraction[k][p];
+            zeta_seed[k][p] = zi < cos2_max - detail::kHingeTie   ? -angle_weight
+                              : zi < cos2_max + detail::kHingeTie ? -0.5 * angle_weight
+                                                                  : 0.0;
+            zeta_prime_seed[k][p] = zo < cos2_max - detail::kHingeTie   ? -angle_weight
+                                    : zo < cos2_max + detail::kHingeTie ? -0.5 * angle_weight
+                                                                        : 0.0;
           }
         }
       };

@@ -11,7 +11,8 @@
 //   path   dl/d dz_{k,r} = (w_RP / n_r) ([dz > upper_k] - [dz < lower_k])   (spaces the ray
 //   crossed) angle  dl/d zeta = -(w_RA / n_r) [zeta < cos^2 t_max], the same for zeta' (surfaces
 //   reached) glass  dl/dg = 2 w_GV (g - g*)  (direct, no ray)
-// ([.] = 1 where true; a hinge at exactly its bound has derivative 0, as the Jets have.)
+// ([.] = 1 where true; a path hinge at exactly its bound has derivative 0, as the Jets have;
+// an angle hinge within round-off of its bound, a tie, half: detail::tied_hinge of design_loss.h.)
 // design_loss_gradient_jets is the forward-mode reference: evaluate_design on
 // ceres::Jet<double, N> with x_j seeded as the j-th infinitesimal, in blocks of
 // kDesignGradientWidth variables.

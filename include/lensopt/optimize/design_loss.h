@@ -63,6 +63,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <type_traits>
 #include <vector>
 
 #include "lensopt/analysis/spot.h"
@@ -244,6 +245,25 @@ T smooth_hinge(const T& v) {
   return v < K<T>(d) ? v * v * K<T>(0.5 / d) : v - K<T>(0.5 * d);
 }
 
+// The ray-angle hinge of a ray at its bound to within round-off (kHingeTie, on cos^2): a tie.
+// Where a whole beam meets the bound exactly (a collimated beam on plane plates at a field of
+// exactly the angle limit), the loss has a kink there and round-off, not the optics, puts each
+// ray on one side or the other, differently in double and on Jets (their arithmetic rounds
+// differently, e.g. the multi-versioned double kernel with FMA). A tie adds its value max(v, 0) as
+// any ray, with half of v's slope: the central derivative of the kink, whichever side round-off
+// chose (the adjoint's seeds in design_gradient.cpp do the same).
+inline constexpr double kHingeTie = 1e-12;
+template <typename T>
+T tied_hinge(const T& v) {
+  if constexpr (std::is_same_v<T, double>) {
+    return v > 0.0 ? v : 0.0;
+  } else {
+    T r = K<T>(0.5) * v;
+    r.a = v.a > 0.0 ? v.a : 0.0;
+    return r;
+  }
+}
+
 }  // namespace detail
 
 // Evaluates the design loss of variables x. `residuals` (may be null) receives the least-squares
@@ -392,17 +412,24 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
             const double cos2_out = value_of(rec.cos2_refraction[k][p]);
             field_extremes[hf].min_cos2_angle =
                 std::min({field_extremes[hf].min_cos2_angle, cos2_in, cos2_out});
-            if (cos2_in < cos2_max) {
+            // l_RA's linear hinge (a tie within kHingeTie of the bound: detail::tied_hinge).
+            if (cos2_in < cos2_max + detail::kHingeTie) {
               const T va = K<T>(cos2_max) - rec.cos2_incidence[k][p];
-              angle_sq[2 * k] = angle_sq[2 * k] + va * va;
-              angle_soft[2 * k] = angle_soft[2 * k] + detail::smooth_hinge(va);
-              angle_sum = angle_sum + va;
+              if (cos2_in < cos2_max) {
+                angle_sq[2 * k] = angle_sq[2 * k] + va * va;
+                angle_soft[2 * k] = angle_soft[2 * k] + detail::smooth_hinge(va);
+              }
+              angle_sum = angle_sum +
+                          (cos2_in >= cos2_max - detail::kHingeTie ? detail::tied_hinge(va) : va);
             }
-            if (cos2_out < cos2_max) {
+            if (cos2_out < cos2_max + detail::kHingeTie) {
               const T vb = K<T>(cos2_max) - rec.cos2_refraction[k][p];
-              angle_sq[2 * k + 1] = angle_sq[2 * k + 1] + vb * vb;
-              angle_soft[2 * k + 1] = angle_soft[2 * k + 1] + detail::smooth_hinge(vb);
-              angle_sum = angle_sum + vb;
+              if (cos2_out < cos2_max) {
+                angle_sq[2 * k + 1] = angle_sq[2 * k + 1] + vb * vb;
+                angle_soft[2 * k + 1] = angle_soft[2 * k + 1] + detail::smooth_hinge(vb);
+              }
+              angle_sum = angle_sum +
+                          (cos2_out >= cos2_max - detail::kHingeTie ? detail::tied_hinge(vb) : vb);
             }
           }
         }
