@@ -234,6 +234,11 @@ class OptimizeResult:
     final_field_spot_um: List[float]
     start_wavefront_waves: float  # merit="wavefront" only, else 0
     final_wavefront_waves: float
+    afocal: bool
+    start_angular_spot_mrad: float
+    final_angular_spot_mrad: float
+    start_field_angular_spot_mrad: List[float]
+    final_field_angular_spot_mrad: List[float]
     glasses: List[str]
     iterations: int
     loss_evaluations: int

@@ -189,6 +189,16 @@ void bind_optimize(py::module_& m) {
                     "removed) at full sampling before optimizing; 0 with the spot merit.")
       .def_readonly("final_wavefront_waves", &OptimizeResult::final_wavefront_waves,
                     "The same after optimizing.")
+      .def_readonly("afocal", &OptimizeResult::afocal,
+                    "An afocal lens ([system] afocal = true): the merit is the mean RMS angular "
+                    "spot (mrad, as analyze reports it); the spots in um are then 0 and empty.")
+      .def_readonly("start_angular_spot_mrad", &OptimizeResult::start_angular_spot_mrad,
+                    "An afocal lens: the mean RMS angular spot (mrad) at full sampling before "
+                    "optimizing; 0 otherwise.")
+      .def_readonly("final_angular_spot_mrad", &OptimizeResult::final_angular_spot_mrad,
+                    "The same after optimizing.")
+      .def_readonly("start_field_angular_spot_mrad", &OptimizeResult::start_field_angular_spot_mrad)
+      .def_readonly("final_field_angular_spot_mrad", &OptimizeResult::final_field_angular_spot_mrad)
       .def_readonly("glasses", &OptimizeResult::glasses)
       .def_readonly("iterations", &OptimizeResult::iterations)
       .def_readonly("loss_evaluations", &OptimizeResult::loss_evaluations)
