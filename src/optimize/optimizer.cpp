@@ -1291,8 +1291,14 @@ class LensOptimization {
       result_.final_targets = solved_start_targets;
       result_.kept_start = true;
     }
-    for (const Surface& s : result_.lens.surfaces)
-      if (!s.material.is_air()) result_.glasses.push_back(s.material.label());
+    // One glass per element: a glass element split by a dummy or stop surface
+    // (glass_elements.h) has one glass variable, named once.
+    const std::vector<int> element_first = element_first_spaces(result_.lens);
+    for (std::size_t k = 0; k < result_.lens.surfaces.size(); ++k) {
+      const Surface& s = result_.lens.surfaces[k];
+      if (!s.material.is_air() && element_first[k] == static_cast<int>(k))
+        result_.glasses.push_back(s.material.label());
+    }
     result_.iterations = counters_.iterations;
     result_.loss_evaluations = counters_.evaluations.load();
     result_.jacobian_evaluations = counters_.jacobians;

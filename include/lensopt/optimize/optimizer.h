@@ -98,7 +98,7 @@ struct OptimizeResult {
   // The targets (with the default efl_mm of an as-written lens) on the start as given and on the
   // result, at full sampling.
   TargetReport start_targets, final_targets;
-  std::vector<std::string> glasses;  // per element
+  std::vector<std::string> glasses;  // per element (a split element once)
   int iterations = 0;                // LM iterations, all phases
   int loss_evaluations = 0;          // residual evaluations (with or without Jacobian)
   int jacobian_evaluations = 0;
