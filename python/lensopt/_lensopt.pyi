@@ -264,7 +264,9 @@ def optimize(lens: Lens, *, max_iterations: Optional[int] = None,
              weight_glass: Optional[float] = None, min_air_mm: Optional[float] = None,
              min_glass_mm: Optional[float] = None, max_glass_mm: Optional[float] = None,
              min_image_clearance_mm: Optional[float] = None,
-             max_ray_angle_deg: Optional[float] = None) -> OptimizeResult: ...
+             max_ray_angle_deg: Optional[float] = None, targets: Sequence[str] = ...,
+             focus_only: Optional[bool] = None, min_virtual_image_mm: Optional[float] = None,
+             max_virtual_image_mm: Optional[float] = None) -> OptimizeResult: ...
 
 class ToleranceReport:
     lens_name: str

@@ -47,7 +47,7 @@ struct OptimizeCommand {
   int rings = -1, fields = -1, max_iterations = -1, neighbours = -1, threads = -1;
   double weight_ray_path = NAN, weight_ray_angle = NAN, weight_glass = NAN;
   double min_air_mm = NAN, min_glass_mm = NAN, max_glass_mm = NAN, min_image_clearance_mm = NAN,
-         max_ray_angle_deg = NAN;
+         max_ray_angle_deg = NAN, min_virtual_image_mm = NAN, max_virtual_image_mm = NAN;
 };
 
 std::string format_constraints(const ConstraintReport& c) {
@@ -175,6 +175,8 @@ void run_optimize(const OptimizeCommand& cmd) {
   given(cmd.max_glass_mm, overrides.max_glass_mm);
   given(cmd.min_image_clearance_mm, overrides.min_image_clearance_mm);
   given(cmd.max_ray_angle_deg, overrides.max_ray_angle_deg);
+  given(cmd.min_virtual_image_mm, overrides.min_virtual_image_mm);
+  given(cmd.max_virtual_image_mm, overrides.max_virtual_image_mm);
   overrides.verbose = !cmd.quiet;
   const ResolvedOptimizeOptions resolved = resolve_optimize_options(lens, overrides);
   OptimizeOptions options = resolved.options;
@@ -429,6 +431,14 @@ void setup_optimize(CLI::App& app) {
   sub->add_option("--max-glass-mm", cmd->max_glass_mm, "thickest glass (paper: 3)")->check(kFinite);
   sub->add_option("--min-image-clearance-mm", cmd->min_image_clearance_mm,
                   "image clearance (paper: 12)")
+      ->check(kFinite);
+  sub->add_option("--min-virtual-image-mm", cmd->min_virtual_image_mm,
+                  "a diverging lens: nearest distance of its virtual image before the last "
+                  "surface (default: half the start's)")
+      ->check(kFinite);
+  sub->add_option("--max-virtual-image-mm", cmd->max_virtual_image_mm,
+                  "a diverging lens: farthest distance of its virtual image before the last "
+                  "surface (default: twice the start's)")
       ->check(kFinite);
   sub->add_option("--max-ray-angle-deg", cmd->max_ray_angle_deg, "largest ray angle (paper: 60)")
       ->check(kFinite);

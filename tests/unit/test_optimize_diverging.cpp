@@ -121,6 +121,38 @@ TEST_CASE("optimize diverging: efl_mm of the lens's own sign scales it; the othe
   CHECK(defaults[0].value == paraxial_efl(lens));
 }
 
+TEST_CASE("optimize diverging: the virtual-image bounds as overrides (CLI and Python)") {
+  const Lens lens = diverging();
+  OptimizeOverrides both;
+  both.verbose = false;
+  both.min_virtual_image_mm = 20.0;
+  both.max_virtual_image_mm = 90.0;
+  const OptimizeOptions given = resolve_optimize_options(lens, both).options;
+  CHECK(given.loss.min_virtual_image_mm == 20.0);
+  CHECK(given.loss.max_virtual_image_mm == 90.0);
+  // One of them: the other stays the start's derived bound.
+  OptimizeOverrides none;
+  none.verbose = false;
+  const OptimizeOptions derived = resolve_optimize_options(lens, none).options;
+  REQUIRE(derived.loss.virtual_image());
+  OptimizeOverrides one;
+  one.verbose = false;
+  one.max_virtual_image_mm = 90.0;
+  const OptimizeOptions partly = resolve_optimize_options(lens, one).options;
+  CHECK(partly.loss.max_virtual_image_mm == 90.0);
+  CHECK(partly.loss.min_virtual_image_mm == derived.loss.min_virtual_image_mm);
+  // Bounds that cross are refused (validate), and so is a lens without a virtual image.
+  OptimizeOverrides crossed = both;
+  crossed.min_virtual_image_mm = 100.0;
+  check_contains(error_of([&] { resolve_optimize_options(lens, crossed); }),
+                 "below min_virtual_image_mm");
+  const Lens doublet = read_lens(test::source_dir() / "lenses" / "doublet.toml");
+  check_contains(error_of([&] { resolve_optimize_options(doublet, one); }), "real image");
+  const Lens keplerian =
+      read_lens(test::source_dir() / "tests" / "data" / "afocal" / "keplerian_telescope.zmx");
+  check_contains(error_of([&] { resolve_optimize_options(keplerian, one); }), "afocal");
+}
+
 TEST_CASE("optimize diverging: the virtual image's bounds come from the start") {
   const Lens lens = diverging();
   const DesignLossOptions paper;

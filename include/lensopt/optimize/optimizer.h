@@ -201,6 +201,9 @@ struct OptimizeOverrides {
   std::optional<double> weight_ray_path, weight_ray_angle, weight_glass;
   std::optional<double> min_air_mm, min_glass_mm, max_glass_mm, min_image_clearance_mm,
       max_ray_angle_deg;
+  // A diverging lens's virtual-image distance bounds (design_loss.h; --min-virtual-image-mm,
+  // --max-virtual-image-mm): Error on a lens without a virtual image (EFL > 0, afocal).
+  std::optional<double> min_virtual_image_mm, max_virtual_image_mm;
   std::optional<bool> verbose;
 };
 
