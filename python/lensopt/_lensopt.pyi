@@ -234,6 +234,11 @@ class OptimizeResult:
     final_field_spot_um: List[float]
     start_wavefront_waves: float  # merit="wavefront" only, else 0
     final_wavefront_waves: float
+    afocal: bool
+    start_angular_spot_mrad: float
+    final_angular_spot_mrad: float
+    start_field_angular_spot_mrad: List[float]
+    final_field_angular_spot_mrad: List[float]
     glasses: List[str]
     iterations: int
     loss_evaluations: int
@@ -259,7 +264,9 @@ def optimize(lens: Lens, *, max_iterations: Optional[int] = None,
              weight_glass: Optional[float] = None, min_air_mm: Optional[float] = None,
              min_glass_mm: Optional[float] = None, max_glass_mm: Optional[float] = None,
              min_image_clearance_mm: Optional[float] = None,
-             max_ray_angle_deg: Optional[float] = None) -> OptimizeResult: ...
+             max_ray_angle_deg: Optional[float] = None, targets: Sequence[str] = ...,
+             focus_only: Optional[bool] = None, min_virtual_image_mm: Optional[float] = None,
+             max_virtual_image_mm: Optional[float] = None) -> OptimizeResult: ...
 
 class ToleranceReport:
     lens_name: str

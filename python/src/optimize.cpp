@@ -189,6 +189,16 @@ void bind_optimize(py::module_& m) {
                     "removed) at full sampling before optimizing; 0 with the spot merit.")
       .def_readonly("final_wavefront_waves", &OptimizeResult::final_wavefront_waves,
                     "The same after optimizing.")
+      .def_readonly("afocal", &OptimizeResult::afocal,
+                    "An afocal lens ([system] afocal = true): the merit is the mean RMS angular "
+                    "spot (mrad, as analyze reports it); the spots in um are then 0 and empty.")
+      .def_readonly("start_angular_spot_mrad", &OptimizeResult::start_angular_spot_mrad,
+                    "An afocal lens: the mean RMS angular spot (mrad) at full sampling before "
+                    "optimizing; 0 otherwise.")
+      .def_readonly("final_angular_spot_mrad", &OptimizeResult::final_angular_spot_mrad,
+                    "The same after optimizing.")
+      .def_readonly("start_field_angular_spot_mrad", &OptimizeResult::start_field_angular_spot_mrad)
+      .def_readonly("final_field_angular_spot_mrad", &OptimizeResult::final_field_angular_spot_mrad)
       .def_readonly("glasses", &OptimizeResult::glasses)
       .def_readonly("iterations", &OptimizeResult::iterations)
       .def_readonly("loss_evaluations", &OptimizeResult::loss_evaluations)
@@ -250,7 +260,8 @@ void bind_optimize(py::module_& m) {
          std::optional<double> weight_glass, std::optional<double> min_air_mm,
          std::optional<double> min_glass_mm, std::optional<double> max_glass_mm,
          std::optional<double> min_image_clearance_mm, std::optional<double> max_ray_angle_deg,
-         const std::vector<std::string>& targets, std::optional<bool> focus_only) {
+         const std::vector<std::string>& targets, std::optional<bool> focus_only,
+         std::optional<double> min_virtual_image_mm, std::optional<double> max_virtual_image_mm) {
         // The CLI's resolution (optimizer.h): defaults, bounds for the lens, its [optimize]
         // table, then the arguments given (None: not given).
         OptimizeOverrides v;
@@ -277,6 +288,8 @@ void bind_optimize(py::module_& m) {
         v.max_glass_mm = max_glass_mm;
         v.min_image_clearance_mm = min_image_clearance_mm;
         v.max_ray_angle_deg = max_ray_angle_deg;
+        v.min_virtual_image_mm = min_virtual_image_mm;
+        v.max_virtual_image_mm = max_virtual_image_mm;
         v.verbose = verbose;
         for (const std::string& t : targets)
           v.targets.push_back(parse_target(t, SourceLocation{"targets"}));
@@ -310,6 +323,7 @@ void bind_optimize(py::module_& m) {
       py::arg("min_glass_mm") = py::none(), py::arg("max_glass_mm") = py::none(),
       py::arg("min_image_clearance_mm") = py::none(), py::arg("max_ray_angle_deg") = py::none(),
       py::arg("targets") = std::vector<std::string>{}, py::arg("focus_only") = py::none(),
+      py::arg("min_virtual_image_mm") = py::none(), py::arg("max_virtual_image_mm") = py::none(),
       "`lensopt optimize`: Levenberg-Marquardt on the paper's design loss, with the options "
       "resolved as the CLI resolves them (one function, optimize/optimizer.h "
       "resolve_optimize_options): the defaults, the bounds `bounds` selects ('auto': the "
@@ -320,7 +334,9 @@ void bind_optimize(py::module_& m) {
       "wavefront error, piston and tilt removed, on a wavefront_pupil_samples grid). targets: "
       "design targets as `--target` writes them ('efl_mm=100', 'distortion_percent<=1', "
       "'rms_spot_um<=5,field=2,weight=3'), replacing the lens's [[optimize.targets]] entry of "
-      "the same quantity and field; focus_only=True is `--focus-only`. freeze= and vary= are "
+      "the same quantity and field; focus_only=True is `--focus-only`; min_virtual_image_mm= and "
+      "max_virtual_image_mm= are `--min-virtual-image-mm` and `--max-virtual-image-mm` (a "
+      "diverging lens's virtual image). freeze= and vary= are "
       "`--freeze` and `--vary`: they override the lens's per-surface vary flags (Surface.vary); "
       "pickups and solves (Surface.pickup_curvature, pickup_thickness, solve) are never "
       "free; OptimizeResult.log says which variables were free and why. Ctrl-C stops it "

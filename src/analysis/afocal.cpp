@@ -8,10 +8,12 @@
 #include <nlohmann/json.hpp>
 
 #include "core/json_number.h"
+#include "lensopt/analysis/angular_spot.h"
 #include "lensopt/analysis/field_optics.h"
 #include "lensopt/analysis/wave.h"
 #include "lensopt/core/constants.h"
 #include "lensopt/core/error.h"
+#include "lensopt/paraxial/afocal.h"
 #include "lensopt/paraxial/paraxial.h"
 
 namespace lensopt {
@@ -46,7 +48,8 @@ AfocalFirstOrder afocal_first_order(const TraceSystem<double>& sys) {
   const ParaxialRay<double> chief =
       paraxial_trace(lens, ParaxialRay<double>{-sys.entrance_pupil_z_mm, 1.0}, k_count, nm);
   const double u_chief = chief.w / out.image_space_index;
-  out.angular_magnification = u_chief;
+  // M (paraxial/afocal.h, the optimizer's solve and target use the same function).
+  out.angular_magnification = paraxial_angular_magnification(lens, nm);
   out.exit_pupil_z_mm = -chief.y / u_chief;
   // The axial marginal ray through the entrance pupil's rim.
   const double r_ep = 0.5 * sys.epd_mm;
@@ -87,55 +90,25 @@ AngularSpot angular_spot(const TraceSystem<double>& sys, const AfocalRayDirectio
   if (count == 0) return out;
   const SpotWeights weights = spot_weights(sys);
   const bool mirror = !sys.full_pupil;  // each ray stands for itself and (-l, m, n)
-  // Centroid direction: the weighted mean of the unit vectors (a mirror cancels l).
-  double sl = 0, sm = 0, sn = 0;
-  for (std::size_t i = 0; i < count; ++i) {
-    const double a = weights.wavelength[rays.wavelength[i]];
-    if (!mirror) sl += a * rays.l[i];
-    sm += a * rays.m[i];
-    sn += a * rays.n[i];
-  }
-  const double norm = std::sqrt(sl * sl + sm * sm + sn * sn);
-  if (!(norm > 0.0)) return out;
-  const double d0[3] = {sl / norm, sm / norm, sn / norm};
-  out.centroid_l = d0[0];
-  out.centroid_m = d0[1];
-  out.centroid_n = d0[2];
-  // e1: the x axis made normal to d0; e2 = d0 x e1 (+y for d0 = +z).
-  double e1[3] = {1.0 - d0[0] * d0[0], -d0[0] * d0[1], -d0[0] * d0[2]};
-  const double e1n = std::sqrt(e1[0] * e1[0] + e1[1] * e1[1] + e1[2] * e1[2]);
-  for (double& v : e1) v /= e1n;
-  const double e2[3] = {d0[1] * e1[2] - d0[2] * e1[1], d0[2] * e1[0] - d0[0] * e1[2],
-                        d0[0] * e1[1] - d0[1] * e1[0]};
-  std::vector<double> ax(count), ay(count);
-  double sum_a = 0, mean_x = 0, mean_y = 0;
-  for (std::size_t i = 0; i < count; ++i) {
-    const double d[3] = {rays.l[i], rays.m[i], rays.n[i]};
-    const double c = d[0] * d0[0] + d[1] * d0[1] + d[2] * d0[2];
-    ax[i] = (d[0] * e1[0] + d[1] * e1[1] + d[2] * e1[2]) / c;
-    ay[i] = (d[0] * e2[0] + d[1] * e2[1] + d[2] * e2[2]) / c;
-    const double a = weights.wavelength[rays.wavelength[i]];
-    sum_a += a;
-    if (!mirror) mean_x += a * ax[i];  // the mirror's x is -ax: a mean of 0
-    mean_y += a * ay[i];
-  }
-  mean_x /= sum_a;
-  mean_y /= sum_a;
-  double sum_sq = 0;
-  for (std::size_t i = 0; i < count; ++i) {
-    const double a = weights.wavelength[rays.wavelength[i]];
-    const double dx = ax[i] - mean_x, dy = ay[i] - mean_y;
-    sum_sq += a * (dx * dx + dy * dy);
-  }
-  out.rms_mrad = 1e3 * std::sqrt(sum_sq / sum_a);
+  std::vector<double> omega(count), ax(count), ay(count);
+  for (std::size_t i = 0; i < count; ++i) omega[i] = weights.wavelength[rays.wavelength[i]];
+  // The one implementation of the angular spot (analysis/angular_spot.h), as the optimizer's.
+  const AngularSpotMoments<double> s =
+      angular_spot_moments<double>(count, rays.l.data(), rays.m.data(), rays.n.data(), omega.data(),
+                                   nullptr, mirror, ax.data(), ay.data());
+  if (!s.ok) return out;
+  out.centroid_l = s.d0[0];
+  out.centroid_m = s.d0[1];
+  out.centroid_n = s.d0[2];
+  out.rms_mrad = 1e3 * std::sqrt(s.variance);
   if (keep_points) {
     for (std::size_t i = 0; i < count; ++i) {
-      out.x_mrad.push_back(1e3 * (ax[i] - mean_x));
-      out.y_mrad.push_back(1e3 * (ay[i] - mean_y));
+      out.x_mrad.push_back(1e3 * (ax[i] - s.mean_x));
+      out.y_mrad.push_back(1e3 * (ay[i] - s.mean_y));
       out.wavelength.push_back(rays.wavelength[i]);
       if (mirror) {
         out.x_mrad.push_back(-1e3 * ax[i]);
-        out.y_mrad.push_back(1e3 * (ay[i] - mean_y));
+        out.y_mrad.push_back(1e3 * (ay[i] - s.mean_y));
         out.wavelength.push_back(rays.wavelength[i]);
       }
     }

@@ -47,7 +47,7 @@ struct OptimizeCommand {
   int rings = -1, fields = -1, max_iterations = -1, neighbours = -1, threads = -1;
   double weight_ray_path = NAN, weight_ray_angle = NAN, weight_glass = NAN;
   double min_air_mm = NAN, min_glass_mm = NAN, max_glass_mm = NAN, min_image_clearance_mm = NAN,
-         max_ray_angle_deg = NAN;
+         max_ray_angle_deg = NAN, min_virtual_image_mm = NAN, max_virtual_image_mm = NAN;
 };
 
 std::string format_constraints(const ConstraintReport& c) {
@@ -175,6 +175,8 @@ void run_optimize(const OptimizeCommand& cmd) {
   given(cmd.max_glass_mm, overrides.max_glass_mm);
   given(cmd.min_image_clearance_mm, overrides.min_image_clearance_mm);
   given(cmd.max_ray_angle_deg, overrides.max_ray_angle_deg);
+  given(cmd.min_virtual_image_mm, overrides.min_virtual_image_mm);
+  given(cmd.max_virtual_image_mm, overrides.max_virtual_image_mm);
   overrides.verbose = !cmd.quiet;
   const ResolvedOptimizeOptions resolved = resolve_optimize_options(lens, overrides);
   OptimizeOptions options = resolved.options;
@@ -188,7 +190,8 @@ void run_optimize(const OptimizeCommand& cmd) {
         "angle <= {:.4g} deg\n",
         paper_bounds ? "the paper's" : "lens-derived", options.loss.min_air_mm,
         options.loss.min_glass_mm, options.loss.max_glass_mm,
-        options.loss.virtual_image()
+        lens.specs.afocal ? std::string("no image plane (afocal: image at infinity)")
+        : options.loss.virtual_image()
             ? fmt::format("virtual image {:.4g}..{:.4g} mm before the last surface",
                           options.loss.min_virtual_image_mm, options.loss.max_virtual_image_mm)
             : fmt::format("image clearance >= {:.4g} mm", options.loss.min_image_clearance_mm),
@@ -209,14 +212,19 @@ void run_optimize(const OptimizeCommand& cmd) {
     j["lens"] = lens.name;
     j["output"] = out_path.string();
     add_summary_json(j, summarize(result));  // the keys search's results use too
-    j["start_rms_spot_um"] = result.start_field_spot_um;
-    j["merit"] = wavefront ? "wavefront" : "spot";
+    if (result.afocal) {
+      j["start_rms_angular_spot_mrad"] = result.start_field_angular_spot_mrad;
+      j["final_rms_angular_spot_mrad"] = result.final_field_angular_spot_mrad;
+    } else {
+      j["start_rms_spot_um"] = result.start_field_spot_um;
+      j["final_rms_spot_um"] = result.final_field_spot_um;
+    }
+    j["merit"] = result.afocal ? "angular_spot" : wavefront ? "wavefront" : "spot";
     if (wavefront) {
       j["start_mean_rms_wavefront_waves"] = result.start_wavefront_waves;
       j["final_mean_rms_wavefront_waves"] = result.final_wavefront_waves;
       j["wavefront_pupil_samples"] = options.loss.wavefront_pupil_samples;
     }
-    j["final_rms_spot_um"] = result.final_field_spot_um;
     j["targets"] = targets_json(result.start_targets, result.final_targets);
     j["targets_met"] = result.final_targets.all_pass();
     j["start_constraints"] = constraints_json(result.start_constraints);
@@ -228,8 +236,8 @@ void run_optimize(const OptimizeCommand& cmd) {
                    {"min_air_mm", options.loss.min_air_mm},
                    {"min_glass_mm", options.loss.min_glass_mm},
                    {"max_glass_mm", options.loss.max_glass_mm},
-                   {"min_image_clearance_mm", options.loss.min_image_clearance_mm},
                    {"max_ray_angle_deg", options.loss.max_ray_angle_deg}};
+    if (!result.afocal) j["bounds"]["min_image_clearance_mm"] = options.loss.min_image_clearance_mm;
     if (options.loss.virtual_image()) {
       j["bounds"]["min_virtual_image_mm"] = options.loss.min_virtual_image_mm;
       j["bounds"]["max_virtual_image_mm"] = options.loss.max_virtual_image_mm;
@@ -244,14 +252,28 @@ void run_optimize(const OptimizeCommand& cmd) {
           "  mean RMS wavefront (full sampling, piston and tilt removed): {:.5f} -> {:.5f} "
           "waves (the merit)\n",
           result.start_wavefront_waves, result.final_wavefront_waves);
-    fmt::print("  mean RMS spot (full sampling): {:.3f} um -> {:.3f} um{}\n", result.start_spot_um,
-               result.final_spot_um,
-               result.kept_start ? "  (no improvement found: start kept)" : "");
-    fmt::print("  field (deg index)   before (um)   after (um)\n");
-    for (std::size_t h = 0; h < result.final_field_spot_um.size(); ++h)
-      fmt::print("  {:17d}   {:11.3f}   {:10.3f}\n", h,
-                 h < result.start_field_spot_um.size() ? result.start_field_spot_um[h] : 0.0,
-                 result.final_field_spot_um[h]);
+    if (result.afocal) {
+      // An afocal lens: the merit in angle, as `analyze` reports it (analysis/afocal.h).
+      fmt::print("  mean RMS angular spot (full sampling, afocal): {:.6f} mrad -> {:.6f} mrad{}\n",
+                 result.start_angular_spot_mrad, result.final_angular_spot_mrad,
+                 result.kept_start ? "  (no improvement found: start kept)" : "");
+      fmt::print("  field (index)       before (mrad) after (mrad)\n");
+      for (std::size_t h = 0; h < result.final_field_angular_spot_mrad.size(); ++h)
+        fmt::print("  {:17d}   {:13.6f} {:12.6f}\n", h,
+                   h < result.start_field_angular_spot_mrad.size()
+                       ? result.start_field_angular_spot_mrad[h]
+                       : 0.0,
+                   result.final_field_angular_spot_mrad[h]);
+    } else {
+      fmt::print("  mean RMS spot (full sampling): {:.3f} um -> {:.3f} um{}\n",
+                 result.start_spot_um, result.final_spot_um,
+                 result.kept_start ? "  (no improvement found: start kept)" : "");
+      fmt::print("  field (deg index)   before (um)   after (um)\n");
+      for (std::size_t h = 0; h < result.final_field_spot_um.size(); ++h)
+        fmt::print("  {:17d}   {:11.3f}   {:10.3f}\n", h,
+                   h < result.start_field_spot_um.size() ? result.start_field_spot_um[h] : 0.0,
+                   result.final_field_spot_um[h]);
+    }
     if (!result.final_targets.rows.empty())
       fmt::print("  targets (full sampling)                         before          after\n{}",
                  format_targets(result.start_targets, result.final_targets));
@@ -284,10 +306,15 @@ void run_optimize(const OptimizeCommand& cmd) {
     if (result.final_constraints.ray_failures > 0)
       failing += fmt::format("{}{} failing rays", failing.empty() ? "" : "; ",
                              result.final_constraints.ray_failures);
-    fmt::print(stderr,
-               "lensopt optimize: warning: the result does not meet its constraints: {}. The "
-               "specs (f/{}, {} deg) may be out of reach for this lens.\n",
-               failing, lens.specs.f_number, lens.specs.half_field_deg);
+    if (lens.specs.afocal)
+      fmt::print(stderr,
+                 "lensopt optimize: warning: the result does not meet its constraints: {}.\n",
+                 failing);
+    else
+      fmt::print(stderr,
+                 "lensopt optimize: warning: the result does not meet its constraints: {}. The "
+                 "specs (f/{}, {} deg) may be out of reach for this lens.\n",
+                 failing, lens.specs.f_number, lens.specs.half_field_deg);
   }
   if (cmd.compare_adam) {
     // Same loss, sampling and code path: LM (glasses fixed) vs a plain Adam loop.
@@ -355,8 +382,9 @@ void setup_optimize(CLI::App& app) {
                   "strict (default: every bound held) or paper (the paper's soft penalties)")
       ->check(CLI::IsMember({"strict", "paper"}));
   sub->add_option("--merit", cmd->merit,
-                  "spot (default: the paper's mean RMS spot) or wavefront (the mean RMS "
-                  "wavefront error, piston and tilt removed, exact Jacobian)")
+                  "spot (default: the paper's mean RMS spot; an afocal lens's mean RMS "
+                  "angular spot) or wavefront (the mean RMS wavefront error, piston and tilt "
+                  "removed, exact Jacobian)")
       ->check(CLI::IsMember({"spot", "wavefront"}));
   sub->add_option("--wavefront-pupil-samples", cmd->wavefront_pupil_samples,
                   "pupil samples across the diameter for --merit wavefront: a polar Gauss "
@@ -377,8 +405,8 @@ void setup_optimize(CLI::App& app) {
                   ",field=N optional (efl_mm, f_number, total_track_mm, bfl_mm, "
                   "distortion_percent, relative_illumination, rms_spot_um, rms_wavefront_waves, "
                   "mtf with ,freq=NU in cycles/mm and ,orientation=tangential|sagittal|average: "
-                  "the geometric MTF); replaces the [[optimize.targets]] entry of the same "
-                  "quantity and field")
+                  "the geometric MTF; an afocal lens: angular_magnification, total_track_mm); "
+                  "replaces the [[optimize.targets]] entry of the same quantity and field")
       ->allow_extra_args(false)
       ->multi_option_policy(CLI::MultiOptionPolicy::TakeAll);
   sub->add_flag("--focus-only", cmd->focus_only,
@@ -403,6 +431,14 @@ void setup_optimize(CLI::App& app) {
   sub->add_option("--max-glass-mm", cmd->max_glass_mm, "thickest glass (paper: 3)")->check(kFinite);
   sub->add_option("--min-image-clearance-mm", cmd->min_image_clearance_mm,
                   "image clearance (paper: 12)")
+      ->check(kFinite);
+  sub->add_option("--min-virtual-image-mm", cmd->min_virtual_image_mm,
+                  "a diverging lens: nearest distance of its virtual image before the last "
+                  "surface (default: half the start's)")
+      ->check(kFinite);
+  sub->add_option("--max-virtual-image-mm", cmd->max_virtual_image_mm,
+                  "a diverging lens: farthest distance of its virtual image before the last "
+                  "surface (default: twice the start's)")
       ->check(kFinite);
   sub->add_option("--max-ray-angle-deg", cmd->max_ray_angle_deg, "largest ray angle (paper: 60)")
       ->check(kFinite);

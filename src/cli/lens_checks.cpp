@@ -12,16 +12,14 @@
 namespace lensopt::cli {
 
 void check_lens_warnings(const Lens& lens, const char* command, bool strict) {
-  // An afocal lens is measured in angle (analysis/afocal.h): analyze, plot (its spot in angle)
-  // and convert take it; the commands that measure an image plane refuse it, saying why.
+  // An afocal lens is measured in angle (analysis/afocal.h): analyze, plot (its spot in angle),
+  // convert and optimize (its angular spot, optimize/design_loss.h) take it; the commands that
+  // measure an image plane refuse it, saying why.
   const std::string name(command);
-  if (lens.specs.afocal && name != "analyze" && name != "plot" && name != "convert") {
+  if (lens.specs.afocal && name != "analyze" && name != "plot" && name != "convert" &&
+      name != "optimize") {
     const std::string why =
-        name == "optimize"
-            ? "its merits (RMS spot, wavefront, design targets) are measured on an image plane; "
-              "an afocal merit (angular spot, plane-wave wavefront, angular magnification) is "
-              "not implemented"
-        : name == "tolerance"
+        name == "tolerance"
             ? "tolerancing measures the change of the image-plane spot and MTF, and an afocal "
               "tolerance criterion (angular spot, plane-wave wavefront) is not implemented"
             : "it needs an image plane with a sensor on it";

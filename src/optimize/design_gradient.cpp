@@ -43,6 +43,11 @@ void accumulate(const LensParameterization& param, const std::vector<double>& x,
     out.loss.wavefront_waves = loss.wavefront_waves.a;
     out.loss.field_wavefront_waves.clear();
     for (const J& f : loss.field_wavefront_waves) out.loss.field_wavefront_waves.push_back(f.a);
+    out.loss.afocal = loss.afocal;
+    out.loss.angular_spot_rad = loss.angular_spot_rad.a;
+    out.loss.field_angular_spot_rad.clear();
+    for (const J& f : loss.field_angular_spot_rad) out.loss.field_angular_spot_rad.push_back(f.a);
+    out.loss.angular_unit_mm = loss.angular_unit_mm;
     out.loss.failed_rays = loss.failed_rays;
     out.loss.rays = loss.rays;
   }
@@ -360,7 +365,8 @@ DesignValueGradient design_loss_gradient(const LensParameterization& param,
                                          const TraceOptions& sampling,
                                          const DesignLossOptions& options) {
   // The adjoint covers the spot merit; the wavefront merit takes the forward-mode Jets.
-  if (options.merit == DesignMerit::kWavefront)
+  // So does an afocal lens's angular spot (design_loss.h): its seeds are not written here.
+  if (options.merit == DesignMerit::kWavefront || param.afocal())
     return design_loss_gradient_jets(param, x, mode, fixed_glasses, sampling, options);
   const int n = param.size();
   return with_jet_width(n, [&](auto width) {

@@ -348,6 +348,23 @@ ResolvedOptimizeOptions resolve_optimize_options(const Lens& lens,
   set(overrides.max_glass_mm, o.loss.max_glass_mm);
   set(overrides.min_image_clearance_mm, o.loss.min_image_clearance_mm);
   set(overrides.max_ray_angle_deg, o.loss.max_ray_angle_deg);
+  if (overrides.min_virtual_image_mm || overrides.max_virtual_image_mm) {
+    // Bounds of a virtual image (a diverging lens, virtual_image.h): the derived ones are set
+    // (bounds_for); a lens with a real image, or none, has no virtual image to bound.
+    const std::string where = lens.source_path.empty() ? lens.name : lens.source_path;
+    if (lens.specs.afocal || !o.loss.virtual_image())
+      throw Error(SourceLocation{where},
+                  lens.specs.afocal
+                      ? std::string("min/max_virtual_image_mm: the lens is afocal (image at "
+                                    "infinity); it has no virtual image to bound")
+                      : fmt::format("min/max_virtual_image_mm: the lens forms a real image "
+                                    "(EFL {:.6g} mm); the virtual-image bounds apply to a "
+                                    "diverging lens (its image before the last surface); bound "
+                                    "a real image with min_image_clearance_mm",
+                                    design_focal_length_mm(lens)));
+    set(overrides.min_virtual_image_mm, o.loss.min_virtual_image_mm);
+    set(overrides.max_virtual_image_mm, o.loss.max_virtual_image_mm);
+  }
   set(overrides.verbose, o.verbose);
   set(overrides.focus_only, o.focus_only);
   o.targets = targets;

@@ -12,6 +12,7 @@
 #include <limits>
 #include <memory>
 
+#include "lensopt/analysis/afocal.h"
 #include "lensopt/analysis/analyze.h"
 #include "lensopt/analysis/wavefront.h"
 #include "lensopt/core/adam.h"
@@ -354,8 +355,10 @@ int residual_count(const LensParameterization& param, const TraceOptions& sampli
                                full_pupil);
 }
 
-// "mean spot 12.3456 um" (and the mean RMS wavefront with the wavefront merit).
+// "mean spot 12.3456 um" (and the mean RMS wavefront with the wavefront merit; an afocal lens's
+// mean RMS angular spot).
 std::string merit_text(const DesignLoss<double>& l) {
+  if (l.afocal) return fmt::format("mean RMS angular spot {:.6f} mrad", 1e3 * l.angular_spot_rad);
   std::string out = fmt::format("mean spot {:.4f} um", l.spot_mm * 1000);
   if (l.merit == DesignMerit::kWavefront)
     out = fmt::format("mean RMS wavefront {:.5f} waves, ", l.wavefront_waves) + out;
@@ -702,6 +705,8 @@ ConstraintReport check_constraints(const Lens& lens, const DesignLossOptions& lo
                              nearest >= loss.min_virtual_image_mm});
       report.rows.push_back({"virtual image distance max", farthest, loss.max_virtual_image_mm,
                              false, farthest <= loss.max_virtual_image_mm});
+    } else if (last && lens.specs.afocal) {
+      continue;  // an image at infinity: no image plane to clear (design_loss.h)
     } else if (last) {
       report.rows.push_back({"image clearance", ext.min_travel_mm[k], loss.min_image_clearance_mm,
                              true, ext.min_travel_mm[k] >= loss.min_image_clearance_mm});
@@ -737,6 +742,7 @@ ConstraintReport check_constraints(const Lens& lens, const DesignLossOptions& lo
   if (apertures) {
     int vignetted = 0;
     try {
+      // (measure_fields without its maps: the rays alone, which an afocal lens traces too.)
       const FieldOptics<double> f =
           measure_fields(prepare_lens_system(lens, sampling), FieldOpticsOptions{false, 0});
       for (int v : f.spots.vignetted_rays) vignetted += v;
@@ -762,7 +768,8 @@ bool is_paper_lens_impl(const Lens& lens) {
 
 DesignLossOptions lens_derived_bounds(const Lens& lens, const DesignLossOptions& paper) {
   DesignLossOptions out = paper;
-  const double f = std::abs(design_focal_length_mm(lens));
+  // The lens's length unit: |f|, or an afocal lens's vertex length (variables.h).
+  const double f = design_length_unit_mm(lens);
   const double s = std::isfinite(f) && f > 0.0 ? f / 50.0 : 1.0;
   out.min_air_mm = s * paper.min_air_mm;
   out.min_glass_mm = s * paper.min_glass_mm;
@@ -843,6 +850,7 @@ class LensOptimization {
         param_(start, glass_space_for(start), options.vary),
         x_(param_.from_lens(start)),
         wavefront_(options.loss.merit == DesignMerit::kWavefront),
+        afocal_(start.specs.afocal),
         soft_(options.loss.paper_penalties) {
     // Which variables are free and why (variables.h choose_variables: pickups and solves,
     // the explicit freeze / vary lists, the file's vary flags); the report says so.
@@ -956,16 +964,34 @@ class LensOptimization {
     }
   }
 
+  // An afocal lens's mean RMS angular spot (mrad, +inf when a field has no ray) and its fields at
+  // full sampling, as `analyze` reports them (analysis/afocal.h, without the wavefront).
+  void measure_afocal(const Lens& lens, double& mean_mrad, std::vector<double>& field_mrad) const {
+    AfocalOptions afocal;
+    afocal.wavefront = false;
+    const AfocalReport r = analyze_afocal_lens(lens, full_.trace, afocal);
+    mean_mrad = r.mean_rms_angular_spot_mrad.value_or(std::numeric_limits<double>::infinity());
+    field_mrad.clear();
+    for (const AfocalField& f : r.fields)
+      field_mrad.push_back(f.rms_angular_spot_mrad.value_or(0.0));
+  }
+
   // The start at full sampling.
   void measure_start() {
     if (options_.verbose)
       fmt::print(stderr, "lensopt optimize: {}\n",
                  describe_design_sampling(param_.structure(), options_.sampling));
-    const AnalysisReport start_report = analyze_lens(start_, full_);
-    result_.start_spot_um =
-        start_report.mean_rms_spot_um.value_or(std::numeric_limits<double>::infinity());
-    for (const FieldReport& f : start_report.fields)
-      result_.start_field_spot_um.push_back(f.rms_spot_um.value_or(0.0));
+    result_.afocal = afocal_;
+    if (afocal_) {
+      measure_afocal(start_, result_.start_angular_spot_mrad,
+                     result_.start_field_angular_spot_mrad);
+    } else {
+      const AnalysisReport start_report = analyze_lens(start_, full_);
+      result_.start_spot_um =
+          start_report.mean_rms_spot_um.value_or(std::numeric_limits<double>::infinity());
+      for (const FieldReport& f : start_report.fields)
+        result_.start_field_spot_um.push_back(f.rms_spot_um.value_or(0.0));
+    }
     result_.start_constraints = check_constraints(start_, options_.loss, full_.trace);
     add_edge_rows(result_.start_constraints, start_);
     if (wavefront_) result_.start_wavefront_waves = full_wavefront_waves(start_, full_.trace);
@@ -1204,17 +1230,22 @@ class LensOptimization {
       add_edge_rows(final_constraints, result_lens(x_));
       result_.lens = result_lens(x_);
       result_.lens.validate();
-      const AnalysisReport final_report = analyze_lens(result_.lens, full_);
-      result_.final_spot_um =
-          final_report.mean_rms_spot_um.value_or(std::numeric_limits<double>::infinity());
-      for (const FieldReport& f : final_report.fields)
-        result_.final_field_spot_um.push_back(f.rms_spot_um.value_or(0.0));
+      if (afocal_) {
+        measure_afocal(result_.lens, result_.final_angular_spot_mrad,
+                       result_.final_field_angular_spot_mrad);
+      } else {
+        const AnalysisReport final_report = analyze_lens(result_.lens, full_);
+        result_.final_spot_um =
+            final_report.mean_rms_spot_um.value_or(std::numeric_limits<double>::infinity());
+        for (const FieldReport& f : final_report.fields)
+          result_.final_field_spot_um.push_back(f.rms_spot_um.value_or(0.0));
+      }
       result_.final_constraints = std::move(final_constraints);
       result_.final_targets = check_targets(result_.lens, options_.targets, full_.trace);
       if (wavefront_)
         result_.final_wavefront_waves = full_wavefront_waves(result_.lens, full_.trace);
     } catch (const Error& e) {
-      result_.final_spot_um = result_.final_wavefront_waves =
+      result_.final_spot_um = result_.final_wavefront_waves = result_.final_angular_spot_mrad =
           std::numeric_limits<double>::infinity();
       result_.log.push_back(
           fmt::format("the final design is not a valid lens ({}); the start is kept", e.what()));
@@ -1229,8 +1260,12 @@ class LensOptimization {
     const TargetReport solved_start_targets = check_targets(start_, options_.targets, full_.trace);
     const bool start_ok = result_.start_constraints.all_pass() && solved_start_targets.all_pass();
     const bool final_ok = result_.final_constraints.all_pass() && result_.final_targets.all_pass();
-    const double start_merit = wavefront_ ? result_.start_wavefront_waves : result_.start_spot_um;
-    const double final_merit = wavefront_ ? result_.final_wavefront_waves : result_.final_spot_um;
+    const double start_merit = afocal_      ? result_.start_angular_spot_mrad
+                               : wavefront_ ? result_.start_wavefront_waves
+                                            : result_.start_spot_um;
+    const double final_merit = afocal_      ? result_.final_angular_spot_mrad
+                               : wavefront_ ? result_.final_wavefront_waves
+                                            : result_.final_spot_um;
     const bool start_not_behind =
         (start_ok && !final_ok) || (start_ok == final_ok && !(final_merit < start_merit));
     if (start_not_behind || !std::isfinite(final_merit)) {
@@ -1250,12 +1285,20 @@ class LensOptimization {
       result_.final_spot_um = result_.start_spot_um;
       result_.final_field_spot_um = result_.start_field_spot_um;
       result_.final_wavefront_waves = result_.start_wavefront_waves;
+      result_.final_angular_spot_mrad = result_.start_angular_spot_mrad;
+      result_.final_field_angular_spot_mrad = result_.start_field_angular_spot_mrad;
       result_.final_constraints = result_.start_constraints;
       result_.final_targets = solved_start_targets;
       result_.kept_start = true;
     }
-    for (const Surface& s : result_.lens.surfaces)
-      if (!s.material.is_air()) result_.glasses.push_back(s.material.label());
+    // One glass per element: a glass element split by a dummy or stop surface
+    // (glass_elements.h) has one glass variable, named once.
+    const std::vector<int> element_first = element_first_spaces(result_.lens);
+    for (std::size_t k = 0; k < result_.lens.surfaces.size(); ++k) {
+      const Surface& s = result_.lens.surfaces[k];
+      if (!s.material.is_air() && element_first[k] == static_cast<int>(k))
+        result_.glasses.push_back(s.material.label());
+    }
     result_.iterations = counters_.iterations;
     result_.loss_evaluations = counters_.evaluations.load();
     result_.jacobian_evaluations = counters_.jacobians;
@@ -1269,6 +1312,7 @@ class LensOptimization {
   const LensParameterization param_;
   std::vector<double> x_;
   const bool wavefront_;
+  const bool afocal_;  // Specs::afocal: the merit is the angular spot (design_loss.h)
   const bool soft_;
   AnalyzeOptions full_;
   std::vector<int> frozen_user_, glass_indices_, frozen_all_;
@@ -1292,6 +1336,19 @@ void check_clear_apertures(const Lens& start, const AnalyzeOptions& full) {
   bool any = false;
   for (const Surface& s : start.surfaces) any = any || s.semi_diameter_mm > 0.0;
   if (!any) return;
+  if (start.specs.afocal) {
+    AfocalOptions afocal;
+    afocal.wavefront = false;
+    const int vignetted = analyze_afocal_lens(start, full.trace, afocal).vignetted_rays;
+    if (vignetted == 0) return;
+    throw Error(SourceLocation{start.source_path},
+                fmt::format("the clear apertures vignet {} rays of the start (analyze lists "
+                            "them); the optimizer traces unclipped pupils and would optimize "
+                            "rays that analyze drops. Remove semi_diameter_mm from those surfaces "
+                            "(or enlarge it), or describe the vignetted pupil with [system] "
+                            "vignetting factors (vdy, vcy), and run again",
+                            vignetted));
+  }
   const AnalysisReport report = analyze_lens(start, full);
   if (report.vignetted_rays == 0) return;
   std::string where;
@@ -1315,6 +1372,20 @@ OptimizeResult optimize_lens(const Lens& given_start, const OptimizeOptions& giv
   given_options.validate();
   // The targets: the caller's, the default efl_mm of an as-written lens; the solved ones
   // (efl_mm, f_number) applied to the start (targets.h).
+  if (given_start.specs.afocal) {
+    // An afocal lens (design_loss.h): the angular spot merit, no image plane.
+    const std::string where =
+        given_start.source_path.empty() ? given_start.name : given_start.source_path;
+    if (given_options.loss.merit == DesignMerit::kWavefront)
+      throw Error(SourceLocation{where},
+                  "the wavefront merit of an afocal lens (against a plane wave) is not "
+                  "implemented in the optimizer; its merit is the RMS angular spot (--merit "
+                  "spot); analyze --wave measures its plane-wave wavefront");
+    if (given_options.loss.virtual_image())
+      throw Error(SourceLocation{where},
+                  "virtual-image bounds (min/max_virtual_image_mm) do not apply to an afocal "
+                  "lens: its image is at infinity");
+  }
   check_target_fields(given_start, given_options.targets);
   OptimizeOptions options = given_options;
   options.targets = targets_with_defaults(given_start, given_options.targets);
@@ -1324,8 +1395,23 @@ OptimizeResult optimize_lens(const Lens& given_start, const OptimizeOptions& giv
   check_clear_apertures(start, full);
   const TargetReport start_targets = check_targets(given_start, options.targets, full.trace);
   std::vector<std::string> solve_log;
+  if (start.specs.afocal) {
+    const auto magnification = [](const Lens& lens) {
+      const TraceLens<double> traced = make_trace_lens(lens);
+      return paraxial_angular_magnification(traced, traced.reference_nm());
+    };
+    const double m0 = magnification(given_start), m1 = magnification(start);
+    solve_log.push_back(
+        m0 != m1 ? fmt::format("afocal: the merit is the RMS angular spot (image at infinity); the "
+                               "start's last curvature is solved from angular magnification {:.9g} "
+                               "to the target {:.9g}, then held",
+                               m0, m1)
+                 : fmt::format("afocal: the merit is the RMS angular spot (image at infinity); the "
+                               "angular magnification {:.9g} is held by the last curvature",
+                               m1));
+  }
   const double f0 = design_focal_length_mm(given_start), f1 = design_focal_length_mm(start);
-  if (f0 != f1)
+  if (!start.specs.afocal && f0 != f1)
     solve_log.push_back(fmt::format(
         "focal length: the start is scaled from {:.6g} mm to the target {:.6g} mm", f0, f1));
   if (start.specs.f_number != given_start.specs.f_number ||

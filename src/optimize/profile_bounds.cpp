@@ -4,13 +4,41 @@
 #include <algorithm>
 #include <cmath>
 
+#include "lensopt/core/constants.h"
+#include "lensopt/paraxial/afocal.h"
 #include "lensopt/paraxial/paraxial.h"
 
 namespace lensopt {
 
 std::vector<double> paraxial_clear_semi_apertures_mm(const TraceLens<double>& lens,
                                                      const Specs& specs) {
-  return paraxial_clear_semi_apertures(lens, specs);
+  if (!specs.afocal) return paraxial_clear_semi_apertures(lens, specs);
+  // An afocal lens has no EFL for r_EP = f / (2 N): the marginal ray from the written entrance
+  // pupil's rim (collimated, or from the axial object point), the chief ray through the pupil's
+  // centre at the largest field angle (paraxial/afocal.h's entrance pupil). 0 where the lens does
+  // not give them (an aperture by object NA or stop, fields by object height).
+  const int k_count = lens.surface_count();
+  std::vector<double> out(k_count, 0.0);
+  if (specs.aperture_type != ApertureType::kEntrancePupilDiameter ||
+      specs.field_type != FieldType::kAngle || !(specs.aperture_value > 0.0))
+    return out;
+  const double nm = lens.reference_nm();
+  const double r_ep = 0.5 * specs.aperture_value;
+  const double z_ep = paraxial_entrance_pupil_z_mm(lens, nm);
+  const double tan_field = std::tan(specs.max_field_value() * kPi / 180.0);
+  ParaxialRay<double> marginal{r_ep, 0.0};
+  if (!specs.object_at_infinity()) {
+    const double u0 = r_ep / (specs.object_distance_mm + z_ep);
+    marginal = ParaxialRay<double>{u0 * specs.object_distance_mm, u0};
+  }
+  for (int k = 0; k < k_count; ++k) {
+    const double h =
+        std::abs(paraxial_trace(lens, marginal, k + 1, nm).y) +
+        std::abs(
+            paraxial_trace(lens, ParaxialRay<double>{-z_ep * tan_field, tan_field}, k + 1, nm).y);
+    out[k] = std::isfinite(h) ? h : 0.0;
+  }
+  return out;
 }
 
 void profile_extremes(const TraceLens<double>& lens, const std::vector<double>& heights_mm,

@@ -38,7 +38,11 @@ OptimizeSummary summarize(const OptimizeResult& result) {
   OptimizeSummary s;
   s.start_spot_um = finite_or_inf(result.start_spot_um);
   s.final_spot_um = finite_or_inf(result.final_spot_um);
-  s.constraints_met = result.final_constraints.all_pass() && std::isfinite(s.final_spot_um);
+  s.afocal = result.afocal;
+  s.start_angular_spot_mrad = finite_or_inf(result.start_angular_spot_mrad);
+  s.final_angular_spot_mrad = finite_or_inf(result.final_angular_spot_mrad);
+  s.constraints_met = result.final_constraints.all_pass() &&
+                      std::isfinite(s.afocal ? s.final_angular_spot_mrad : s.final_spot_um);
   s.failing = failing_constraints(result.final_constraints);
   s.glasses = result.glasses;
   s.iterations = result.iterations;
@@ -49,8 +53,15 @@ OptimizeSummary summarize(const OptimizeResult& result) {
 }
 
 void add_summary_json(nlohmann::json& j, const OptimizeSummary& s) {
-  j["start_mean_rms_spot_um"] = finite_or_null(s.start_spot_um);
-  j["final_mean_rms_spot_um"] = finite_or_null(s.final_spot_um);
+  if (s.afocal) {
+    // No image plane: the merit in angle (analysis/afocal.h).
+    j["afocal"] = true;
+    j["start_mean_rms_angular_spot_mrad"] = finite_or_null(s.start_angular_spot_mrad);
+    j["final_mean_rms_angular_spot_mrad"] = finite_or_null(s.final_angular_spot_mrad);
+  } else {
+    j["start_mean_rms_spot_um"] = finite_or_null(s.start_spot_um);
+    j["final_mean_rms_spot_um"] = finite_or_null(s.final_spot_um);
+  }
   j["constraints_met"] = s.constraints_met;
   j["failing_constraints"] = s.failing;
   j["glasses"] = s.glasses;
@@ -62,8 +73,15 @@ void add_summary_json(nlohmann::json& j, const OptimizeSummary& s) {
 
 OptimizeSummary summary_from_json(const nlohmann::json& j) {
   OptimizeSummary s;
-  s.start_spot_um = spot_from_json(j.at("start_mean_rms_spot_um"));
-  s.final_spot_um = spot_from_json(j.at("final_mean_rms_spot_um"));
+  s.afocal = j.contains("afocal") && j.at("afocal").get<bool>();
+  if (s.afocal) {
+    s.start_spot_um = s.final_spot_um = kInf;
+    s.start_angular_spot_mrad = spot_from_json(j.at("start_mean_rms_angular_spot_mrad"));
+    s.final_angular_spot_mrad = spot_from_json(j.at("final_mean_rms_angular_spot_mrad"));
+  } else {
+    s.start_spot_um = spot_from_json(j.at("start_mean_rms_spot_um"));
+    s.final_spot_um = spot_from_json(j.at("final_mean_rms_spot_um"));
+  }
   s.constraints_met = j.at("constraints_met").get<bool>();
   s.failing = j.at("failing_constraints").get<std::string>();
   s.glasses = j.at("glasses").get<std::vector<std::string>>();

@@ -4,7 +4,8 @@
 //
 // Keys: start_mean_rms_spot_um, final_mean_rms_spot_um (um, null when rays fail),
 // constraints_met, failing_constraints, glasses, iterations, loss_evaluations, kept_start,
-// seconds (wall time, the one non-deterministic field).
+// seconds (wall time, the one non-deterministic field); for an afocal lens afocal = true and
+// start_mean_rms_angular_spot_mrad, final_mean_rms_angular_spot_mrad in place of the spots.
 #pragma once
 
 #include <nlohmann/json.hpp>

@@ -26,6 +26,7 @@ constexpr QuantityName kQuantityNames[] = {
     {TargetQuantity::kRmsSpotUm, "rms_spot_um"},
     {TargetQuantity::kRmsWavefrontWaves, "rms_wavefront_waves"},
     {TargetQuantity::kMtf, "mtf"},
+    {TargetQuantity::kAngularMagnification, "angular_magnification"},
 };
 
 std::string trimmed(const std::string& s) {
@@ -71,7 +72,7 @@ const char* target_quantity_name(TargetQuantity q) {
 
 const char* target_quantity_names() {
   return "efl_mm, f_number, total_track_mm, bfl_mm, distortion_percent, relative_illumination, "
-         "rms_spot_um, rms_wavefront_waves, mtf";
+         "rms_spot_um, rms_wavefront_waves, mtf, angular_magnification (afocal lenses)";
 }
 
 const char* mtf_orientation_name(MtfOrientation o) {
@@ -151,6 +152,10 @@ void validate_target(const DesignTarget& t, const SourceLocation& where) {
     throw Error(where, fmt::format("target {} = 0: a focal length must be nonzero (negative: a "
                                    "diverging lens)",
                                    name));
+  if (t.quantity == TargetQuantity::kAngularMagnification && t.value == 0.0)
+    throw Error(where, fmt::format("target {} = 0: an afocal lens's angular magnification must be "
+                                   "nonzero (negative: an inverted image, a Keplerian telescope)",
+                                   name));
   if (t.quantity == TargetQuantity::kFNumber && !(t.value > 0.0))
     throw Error(where, fmt::format("target {} = {:g}: must be > 0", name, t.value));
   if (t.quantity == TargetQuantity::kFNumber && t.value < 0.5)
@@ -228,6 +233,55 @@ DesignTarget parse_target(const std::string& text, const SourceLocation& where, 
 std::vector<DesignTarget> targets_with_defaults(const Lens& lens,
                                                 const std::vector<DesignTarget>& given) {
   std::vector<DesignTarget> out = given;
+  if (lens.specs.afocal) {
+    // An afocal lens (analysis/afocal.h): no focal length and no image plane; its angular
+    // magnification is held (by default its own) and its merit is the angular spot.
+    const std::string where = lens.source_path.empty() ? lens.name : lens.source_path;
+    bool has_magnification = false;
+    for (const DesignTarget& t : given) {
+      switch (t.quantity) {
+        case TargetQuantity::kAngularMagnification:
+          has_magnification = true;
+          break;
+        case TargetQuantity::kTotalTrackMm:
+          break;
+        case TargetQuantity::kEflMm:
+        case TargetQuantity::kFNumber:
+        case TargetQuantity::kBflMm:
+          throw Error(SourceLocation{t.where},
+                      fmt::format("target {}: {} is afocal (image at infinity) and has no focal "
+                                  "length, F-number or back focal distance; hold its "
+                                  "angular_magnification instead",
+                                  target_text(t), where));
+        default:
+          throw Error(SourceLocation{t.where},
+                      fmt::format("target {}: it is measured on an image plane, and {} is afocal "
+                                  "(image at infinity, measured in angle: its merit is the RMS "
+                                  "angular spot); the targets of an afocal lens are "
+                                  "angular_magnification and total_track_mm",
+                                  target_text(t), where));
+      }
+    }
+    if (!has_magnification) {
+      const TraceLens<double> traced = make_trace_lens(lens);
+      const double m = paraxial_angular_magnification(traced, traced.reference_nm());
+      if (std::isfinite(m) && m != 0.0) {
+        DesignTarget t;
+        t.quantity = TargetQuantity::kAngularMagnification;
+        t.value = m;
+        t.is_default = true;
+        t.where = "the lens's own angular magnification";
+        out.insert(out.begin(), t);
+      }
+    }
+    return out;
+  }
+  for (const DesignTarget& t : given)
+    if (t.quantity == TargetQuantity::kAngularMagnification)
+      throw Error(SourceLocation{t.where},
+                  fmt::format("target {}: the angular magnification is a target of an afocal "
+                              "lens ([system] afocal = true); a focusing lens holds its efl_mm",
+                              target_text(t)));
   bool has_efl = false;
   for (const DesignTarget& t : given) has_efl = has_efl || t.quantity == TargetQuantity::kEflMm;
   if (!has_efl && lens.specs.mode == SpecMode::kAsWritten) {
@@ -271,6 +325,35 @@ void check_target_fields(const Lens& lens, const std::vector<DesignTarget>& targ
 
 Lens apply_target_solves(const Lens& lens, const std::vector<DesignTarget>& targets) {
   Lens out = lens;
+  // An afocal lens's angular magnification: the last curvature solved for it on the start (the
+  // optimizer then holds it, optimize/variables.h); a bound moves it to the nearest bound.
+  for (const DesignTarget& t : targets) {
+    if (t.quantity != TargetQuantity::kAngularMagnification || t.is_default) continue;
+    if (!out.specs.afocal)
+      throw Error(SourceLocation{t.where},
+                  fmt::format("target {}: the lens is not afocal", target_text(t)));
+    const TraceLens<double> traced = make_trace_lens(out);
+    const double nm = traced.reference_nm();
+    const double m = paraxial_angular_magnification(traced, nm);
+    double goal = m;
+    if (t.relation == TargetRelation::kEqual) goal = t.value;
+    if (t.relation == TargetRelation::kAtMost) goal = std::min(m, t.value);
+    if (t.relation == TargetRelation::kAtLeast) goal = std::max(m, t.value);
+    if (goal == m) continue;
+    const int last = traced.surface_count() - 1;
+    if (last < 1 || out.surfaces[last - 1].material.is_air())
+      throw Error(SourceLocation{t.where},
+                  fmt::format("target {}: the last surface must end a glass element (its "
+                              "curvature is solved for the angular magnification)",
+                              target_text(t)));
+    const double c = solve_last_curvature_for_angular_magnification(traced, goal, nm);
+    if (!std::isfinite(c))
+      throw Error(SourceLocation{t.where},
+                  fmt::format("target {}: the last curvature cannot give it (the paraxial chief "
+                              "ray crosses the axis at the last surface)",
+                              target_text(t)));
+    out.surfaces[last].curvature_per_mm = c;
+  }
   // efl_mm first (the F-number's EPD follows the focal length).
   for (const DesignTarget& t : targets) {
     if (t.quantity != TargetQuantity::kEflMm || t.is_default) continue;
@@ -345,6 +428,7 @@ double target_unit_mm(TargetQuantity q, double signed_focal_length_mm, double wa
     case TargetQuantity::kEflMm:
     case TargetQuantity::kTotalTrackMm:
     case TargetQuantity::kBflMm:
+    case TargetQuantity::kAngularMagnification:  // solved: no residual
       return 1.0;
     case TargetQuantity::kFNumber:
       return focal_length_mm / 100.0;

@@ -76,30 +76,40 @@ double design_focal_length_mm(const Lens& lens) {
   return paraxial_data(trace, trace.reference_nm()).efl_mm;
 }
 
+double design_length_unit_mm(const Lens& lens) {
+  if (!lens.specs.afocal) return std::abs(design_focal_length_mm(lens));
+  double length = 0.0;
+  for (std::size_t k = 0; k + 1 < lens.surfaces.size(); ++k)
+    length += std::abs(lens.surfaces[k].thickness_mm);
+  return length;
+}
+
 LensParameterization::LensParameterization(const Lens& lens, GlassSpace glasses,
                                            const std::vector<std::string>& profile_variables)
     : structure_(lens), glasses_(std::move(glasses)) {
   lens.validate();
   const std::string where = lens.source_path.empty() ? lens.name : lens.source_path;
-  // An afocal lens is measured in angle (analysis/afocal.h): no image-plane merit applies.
-  if (lens.specs.afocal)
-    throw Error(SourceLocation{where},
-                "optimize cannot optimize an afocal lens (image at infinity): its merits (RMS "
-                "spot, wavefront, design targets) are measured on an image plane, and an afocal "
-                "merit (angular spot, plane-wave wavefront, angular magnification) is not "
-                "implemented; analyze and plot measure it in angle");
-  focal_length_mm_ = design_focal_length_mm(lens);
+  // An afocal lens (analysis/afocal.h) has no focal length: its lengths are normalized by
+  // design_length_unit_mm (its vertex length) and its last curvature is solved for its angular
+  // magnification (header).
+  afocal_ = lens.specs.afocal;
+  focal_length_mm_ = afocal_ ? design_length_unit_mm(lens) : design_focal_length_mm(lens);
   // Any sign of power: a diverging lens (EFL < 0, a virtual image) is normalized by |f| and its
-  // last curvature solved for EFL = -1 (header); an afocal one (no focal length) is refused.
-  if (lens.specs.mode == SpecMode::kAsWritten && lens.specs.half_field_deg != 0.0 &&
+  // last curvature solved for EFL = -1 (header); a lens without a focal length must say afocal.
+  if (!afocal_ && lens.specs.mode == SpecMode::kAsWritten && lens.specs.half_field_deg != 0.0 &&
       !(std::isfinite(focal_length_mm_) && focal_length_mm_ != 0.0))
     throw Error(SourceLocation{where},
                 fmt::format("the lens's paraxial focal length is {:.6g} mm: the lens has no "
-                            "finite focal length (afocal: set [system] afocal = true and analyze "
-                            "it in angle)",
+                            "finite focal length (afocal: set [system] afocal = true, and it is "
+                            "analysed and optimized in angle)",
                             focal_length_mm_));
-  if (!std::isfinite(focal_length_mm_) || focal_length_mm_ == 0.0 ||
-      (lens.specs.mode != SpecMode::kAsWritten && !(focal_length_mm_ > 0.0))) {
+  if (afocal_ && !(std::isfinite(focal_length_mm_) && focal_length_mm_ > 0.0))
+    throw Error(SourceLocation{where},
+                fmt::format("the afocal lens's vertex length (first to last surface) is {:.6g} mm; "
+                            "the optimizer needs a lens of positive length",
+                            focal_length_mm_));
+  if (!afocal_ && (!std::isfinite(focal_length_mm_) || focal_length_mm_ == 0.0 ||
+                   (lens.specs.mode != SpecMode::kAsWritten && !(focal_length_mm_ > 0.0)))) {
     // A lens traced as written has no sensor diagonal of its own (16 mm is a default): on axis
     // only, the message names what to add, not d / (2 tan 0).
     if (lens.specs.mode == SpecMode::kAsWritten && lens.specs.half_field_deg == 0.0)
@@ -122,6 +132,26 @@ LensParameterization::LensParameterization(const Lens& lens, GlassSpace glasses,
     throw Error(SourceLocation{lens.source_path},
                 "the last surface must end a glass element: its curvature is solved for the focal "
                 "length");
+  }
+  if (afocal_) {
+    // The angular magnification the last curvature holds (paraxial/afocal.h), the lens's own as
+    // traced (optimize applies an angular_magnification target to the start first, targets.h).
+    const TraceLens<double> traced = make_trace_lens(lens);
+    const double nm = traced.reference_nm();
+    angular_magnification_ = paraxial_angular_magnification(traced, nm);
+    const ParaxialRay<double> chief = afocal_chief_at_last_vertex(traced, nm);
+    if (!(std::isfinite(angular_magnification_) && angular_magnification_ != 0.0))
+      throw Error(SourceLocation{where},
+                  fmt::format("the afocal lens's paraxial angular magnification is {:.6g}; the "
+                              "optimizer holds it and needs it finite and not 0",
+                              angular_magnification_));
+    if (!(std::abs(chief.y) > 1e-9 * norm_mm_))
+      throw Error(SourceLocation{where},
+                  fmt::format("the paraxial chief ray crosses the axis at the last surface "
+                              "(height {:.3g} mm there): its curvature, which the optimizer "
+                              "solves for the angular magnification, has no lever on it; add a "
+                              "surface or move the stop",
+                              chief.y));
   }
   using Kind = LensVariable::Kind;
   for (int k = 0; k < k_count; ++k) {
@@ -291,7 +321,9 @@ std::vector<double> LensParameterization::from_lens(const Lens& lens_in) const {
         x[i] = s.thickness_mm / f;
         break;
       case LensVariable::Kind::kDefocus:
-        x[i] = paraxial_image_solve_ ? (s.thickness_mm - sys.bfl_mm) / f : s.thickness_mm / f;
+        // An afocal lens: the last thickness as it is (no image solve, header).
+        x[i] = paraxial_image_solve_ && !afocal_ ? (s.thickness_mm - sys.bfl_mm) / f
+                                                 : s.thickness_mm / f;
         break;
       case LensVariable::Kind::kGlass0: {
         const Eigen::Vector2d g = glasses_.whiten(s.material.nd, s.material.vd);
@@ -418,6 +450,11 @@ std::string LensParameterization::dependent_reason(int i) const {
       return {};
     case LensVariable::Kind::kSpacing:
     case LensVariable::Kind::kDefocus: {
+      if (v.kind == LensVariable::Kind::kDefocus && afocal_)
+        return fmt::format(
+            "afocal: t{} (to the image plane) does not change the exit directions "
+            "of an image at infinity",
+            v.surface + 1);
       const std::string t = v.kind == LensVariable::Kind::kDefocus
                                 ? fmt::format("t{} (defocus)", v.surface + 1)
                                 : fmt::format("t{}", v.surface + 1);
@@ -487,6 +524,11 @@ VariableChoice choose_variables(const LensParameterization& param,
                               "from the lens file to vary it",
                               param.variables()[i].name, dependent));
   }
+  if (focus_only && param.afocal())
+    throw Error(SourceLocation{where},
+                "--focus-only: an afocal lens has no image distance to refocus (its image is at "
+                "infinity); hold the variables you want held with --freeze (e.g. --freeze "
+                "curvatures,glasses to adjust its spacings only)");
   if (focus_only)
     for (int i = 0; i < n; ++i)
       if (param.variables()[i].kind == LensVariable::Kind::kDefocus &&
@@ -545,8 +587,13 @@ VariableChoice choose_variables(const LensParameterization& param,
   line("held (named in freeze: --freeze / [optimize] freeze)", held_freeze, ", ");
   line("held (--focus-only)", held_focus, ", ");
   line("not variables (pickups and solves of the lens file)", dependent, "; ");
-  out.report.push_back(fmt::format("variables: c{} is solved for the focal length {:.6g} mm",
-                                   lens.surfaces.size(), param.focal_length_mm()));
+  if (param.afocal())
+    out.report.push_back(
+        fmt::format("variables: c{} is solved for the angular magnification {:.9g}",
+                    lens.surfaces.size(), param.angular_magnification()));
+  else
+    out.report.push_back(fmt::format("variables: c{} is solved for the focal length {:.6g} mm",
+                                     lens.surfaces.size(), param.focal_length_mm()));
   return out;
 }
 

@@ -42,4 +42,19 @@ print("LD1464-A at efl_mm=-50: spot", o["start_mean_rms_spot_um"], "->",
       o["final_mean_rms_spot_um"], "um; virtual image", -a["image_distance_mm"],
       "mm before the last surface; bounds", b["min_virtual_image_mm"], b["max_virtual_image_mm"])
 PY
+# The virtual image's bounds from the command line (they were [optimize] keys only): the run's
+# bounds are the ones given; on a converging lens they are refused with the reason.
+"$lensopt" optimize "$tmp/ld.toml" -o "$tmp/vb.toml" --target efl_mm=-50 --json --rings 6 \
+  --fields 3 --glass-search none --max-iterations 5 -q --min-virtual-image-mm 30 \
+  --max-virtual-image-mm 80 > "$tmp/vb.json" || fail "optimize --min/--max-virtual-image-mm"
+python3 - "$tmp/vb.json" <<'PY' || fail "virtual-image bounds from the command line"
+import json, sys
+b = json.load(open(sys.argv[1]))["bounds"]
+assert (b["min_virtual_image_mm"], b["max_virtual_image_mm"]) == (30, 80), b
+PY
+if "$lensopt" optimize lenses/doublet.toml -o "$tmp/d.toml" -q --max-virtual-image-mm 80 \
+  > /dev/null 2> "$tmp/d.err"; then
+  fail "--max-virtual-image-mm accepted on a converging lens"
+fi
+grep -q "real image" "$tmp/d.err" || fail "converging refusal: $(cat "$tmp/d.err")"
 echo "optimize_diverging: ok"

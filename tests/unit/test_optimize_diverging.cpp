@@ -3,8 +3,8 @@
 // curvature solved for EFL = -|f|, the merit measured on the image plane before the last surface
 // (rays traced back to it), the image bounded as a virtual one; its exact gradients (Jets and the
 // adjoint) against central finite differences; real Thorlabs negative lenses optimized with
-// efl_mm = -50, and analyze of the result gives optimize's figures. What optimize cannot do (an
-// afocal lens) is refused, saying why, and render refuses an afocal lens.
+// efl_mm = -50, and analyze of the result gives optimize's figures. render refuses an afocal lens
+// (optimize measures it in angle: test_optimize_afocal.cpp).
 #include <ceres/jet.h>
 #include <doctest/doctest.h>
 #include <fmt/format.h>
@@ -119,6 +119,38 @@ TEST_CASE("optimize diverging: efl_mm of the lens's own sign scales it; the othe
   REQUIRE(defaults.size() == 1);
   CHECK(defaults[0].is_default);
   CHECK(defaults[0].value == paraxial_efl(lens));
+}
+
+TEST_CASE("optimize diverging: the virtual-image bounds as overrides (CLI and Python)") {
+  const Lens lens = diverging();
+  OptimizeOverrides both;
+  both.verbose = false;
+  both.min_virtual_image_mm = 20.0;
+  both.max_virtual_image_mm = 90.0;
+  const OptimizeOptions given = resolve_optimize_options(lens, both).options;
+  CHECK(given.loss.min_virtual_image_mm == 20.0);
+  CHECK(given.loss.max_virtual_image_mm == 90.0);
+  // One of them: the other stays the start's derived bound.
+  OptimizeOverrides none;
+  none.verbose = false;
+  const OptimizeOptions derived = resolve_optimize_options(lens, none).options;
+  REQUIRE(derived.loss.virtual_image());
+  OptimizeOverrides one;
+  one.verbose = false;
+  one.max_virtual_image_mm = 90.0;
+  const OptimizeOptions partly = resolve_optimize_options(lens, one).options;
+  CHECK(partly.loss.max_virtual_image_mm == 90.0);
+  CHECK(partly.loss.min_virtual_image_mm == derived.loss.min_virtual_image_mm);
+  // Bounds that cross are refused (validate), and so is a lens without a virtual image.
+  OptimizeOverrides crossed = both;
+  crossed.min_virtual_image_mm = 100.0;
+  check_contains(error_of([&] { resolve_optimize_options(lens, crossed); }),
+                 "below min_virtual_image_mm");
+  const Lens doublet = read_lens(test::source_dir() / "lenses" / "doublet.toml");
+  check_contains(error_of([&] { resolve_optimize_options(doublet, one); }), "real image");
+  const Lens keplerian =
+      read_lens(test::source_dir() / "tests" / "data" / "afocal" / "keplerian_telescope.zmx");
+  check_contains(error_of([&] { resolve_optimize_options(keplerian, one); }), "afocal");
 }
 
 TEST_CASE("optimize diverging: the virtual image's bounds come from the start") {
@@ -327,7 +359,7 @@ TEST_CASE("optimize diverging: Thorlabs negative lenses optimized at efl_mm = -5
   }
 }
 
-TEST_CASE("optimize and render: an afocal lens is refused, naming what measures it") {
+TEST_CASE("render refuses an afocal lens, naming what measures it; optimize takes it") {
   const double n = 1.5168;
   const Lens lens = parse_lens_toml(
       fmt::format("[lens]\nname = \"keplerian\"\n[system]\nmode = \"as-written\"\nafocal = true\n"
@@ -342,10 +374,11 @@ TEST_CASE("optimize and render: an afocal lens is refused, naming what measures 
                   "[[surfaces]]\ncurvature_per_mm = {:.17g}\nthickness_mm = 40\n",
                   1.0 / ((n - 1.0) * 100.0), 125.0 - 8.0 / n, -1.0 / ((n - 1.0) * 25.0)),
       "keplerian.toml");
-  const std::string param =
-      error_of([&] { LensParameterization(lens, GlassSpace(*load_catalog("schott"))); });
-  check_contains(param, "keplerian.toml");
-  check_contains(param, "cannot optimize an afocal lens");
+  // optimize measures it in angle (test_optimize_afocal.cpp): its parameterization holds its
+  // angular magnification M = -f1 / f2 = -4.
+  const LensParameterization param(lens, GlassSpace(*load_catalog("schott")));
+  CHECK(param.afocal());
+  CHECK(param.angular_magnification() == doctest::Approx(-4.0).epsilon(1e-9));
   const std::string render = error_of([&] { build_imaging_model(lens, TraceOptions{}, {}); });
   check_contains(render, "cannot render an afocal lens");
   check_contains(render, "plot --kind spot");

@@ -173,3 +173,28 @@ TEST_CASE("split glass: a glass search keeps both halves of the flint one glass"
     CHECK(r.final_spot_um < r.start_spot_um);
   }
 }
+
+TEST_CASE("split glass: OptimizeResult.glasses names a split element's glass once") {
+  // The Cooke triplet's flint is split by the stop at its curved face's vertex: 4 glass spaces,
+  // 3 elements, 3 glasses (it listed the flint twice).
+  const Lens lens = cooke_50();
+  OptimizeOptions o;
+  o.verbose = false;
+  o.max_iterations = 2;
+  o.max_rounds = 1;
+  o.soft_start = false;
+  o.loss = bounds_for(lens, o.loss, BoundsMode::kAuto);
+  const OptimizeResult r = optimize_lens(lens, o);
+  const std::vector<int> first = element_first_spaces(r.lens);
+  std::vector<std::string> expected;
+  int glass_spaces = 0;
+  for (std::size_t k = 0; k < r.lens.surfaces.size(); ++k) {
+    if (r.lens.surfaces[k].material.is_air()) continue;
+    ++glass_spaces;
+    if (first[k] == static_cast<int>(k)) expected.push_back(r.lens.surfaces[k].material.label());
+  }
+  CHECK(glass_spaces == 4);
+  CHECK(expected.size() == 3);
+  CHECK(r.glasses == expected);
+  CHECK(summarize(r).glasses == expected);
+}

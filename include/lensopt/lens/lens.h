@@ -303,8 +303,10 @@ struct Lens {
 };
 
 // Uniformly scales a lens: curvatures / s, thicknesses, semi-diameters, obscurations and
-// decenters * s (tilts unchanged), a_{2i} * s^(1-2i)
-// (k unchanged), so every sag scales by s.
+// decenters * s (tilts unchanged), a_{2i} * s^(1-2i) (k unchanged), so every sag scales by s;
+// the lengths of pickups and solves too: a thickness pickup's offset and a marginal-ray-height
+// solve's height * s (pickup scales are ratios, unchanged), so a scaled lens's pickups and solves
+// give the scaled values.
 Lens scaled(const Lens& lens, double scale);
 
 }  // namespace lensopt

@@ -13,6 +13,8 @@
 //   reached) glass  dl/dg = 2 w_GV (g - g*)  (direct, no ray)
 // ([.] = 1 where true; a path hinge at exactly its bound has derivative 0, as the Jets have;
 // an angle hinge within round-off of its bound, a tie, half: detail::tied_hinge of design_loss.h.)
+// The wavefront merit and an afocal lens's angular spot (design_loss.h) have no adjoint seeds:
+// design_loss_gradient takes the forward-mode Jets for them (as optimize's LM always does).
 // design_loss_gradient_jets is the forward-mode reference: evaluate_design on
 // ceres::Jet<double, N> with x_j seeded as the j-th infinitesimal, in blocks of
 // kDesignGradientWidth variables.

@@ -35,6 +35,21 @@
 // coarse ring pattern misses; they enter the penalties and extremes, not the spot.
 // Failed rays: spot residuals 0; their zeta/zeta' up to the failing surface do enter the angle
 // penalty (a miss has zeta < 0), so the penalties pull failing rays back.
+// Afocal merit (Specs::afocal: image at infinity, analysis/afocal.h; OpticStudio's "Afocal
+// Image Space" merit): l_S is replaced by
+//   l_A  = L sum_h phi_h A_h / sum_h phi_h                                       (mm)
+// A_h the RMS angular spot of field h (analysis/angular_spot.h, the code `analyze` runs: the exit
+// directions about their omega-weighted centroid direction, gnomonic projection, rad) and L the
+// parameterization's length unit (the lens's vertex length, variables.h): the angular spot seen
+// through an ideal lens of focal length L, a spot in mm, so the penalties' weights (set against
+// a spot in mm) weigh as they do for a focusing lens. Its residuals take the place of the spot's,
+// r = L sqrt(w_S a_h omega_w / (sum_w omega_w P)) (a - abar) per ray and component (tangential,
+// sagittal; abar_x = 0 on the mirrored half pupil), so sum of squares = a_h (L A_h)^2 with the
+// reweighting above. The last space (to an image plane at infinity) has no bound. No constraint
+// holds the lens afocal: a residual power P spreads the on-axis beam of radius r over exit angles
+// of about P r, which the on-axis angular spot measures, so the merit collimates (the residual
+// power it leaves balances the spherical aberration, as a focusing lens's best focus does).
+// The afocal lens has no wavefront merit here (Error): the plane-wave wavefront is analysed only.
 // Wavefront merit (DesignMerit::kWavefront, `optimize --merit wavefront`): l_S is replaced by
 //   l_W  = mean_h W_h,  W_h = sqrt(sum_w omega_w RMS_{h,w}^2 / sum_w omega_w)     (waves)
 // the RMS wavefront with piston and tilt removed (analysis/wavefront.h, the same code as
@@ -66,8 +81,10 @@
 #include <type_traits>
 #include <vector>
 
+#include "lensopt/analysis/angular_spot.h"
 #include "lensopt/analysis/spot.h"
 #include "lensopt/analysis/wavefront.h"
+#include "lensopt/core/error.h"
 #include "lensopt/core/jet_width.h"
 #include "lensopt/core/threads.h"
 #include "lensopt/optimize/design_sampling.h"
@@ -129,7 +146,7 @@ struct DesignLossOptions {
 // The paper's loss terms (double values; also the Jet values when evaluated on Jets).
 template <typename T>
 struct DesignLoss {
-  T spot_mm;              // l_S
+  T spot_mm;              // l_S (afocal: L A, header)
   T ray_path_mm;          // l_RP (linear hinge, as the paper)
   T ray_angle;            // l_RA
   T glass;                // l_GV
@@ -141,6 +158,12 @@ struct DesignLoss {
   T wavefront_waves = K<T>(0.0);
   std::vector<T> field_wavefront_waves;
   DesignMerit merit = DesignMerit::kSpot;
+  // An afocal lens (header): the mean RMS angular spot and its per-field values (rad); spot_mm
+  // and field_rms_mm then hold them times angular_unit_mm (the merit in mm).
+  bool afocal = false;
+  T angular_spot_rad = K<T>(0.0);
+  std::vector<T> field_angular_spot_rad;
+  double angular_unit_mm = 1.0;
   int failed_rays = 0;
   int rays = 0;
   // The optimized merit: l_S (mm) or l_W (waves), and its per-field values.
@@ -289,6 +312,15 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
   const int field_count = sampled.spot_fields;
   const int wl = sys.wavelength_count;
   const bool wavefront = options.merit == DesignMerit::kWavefront;
+  // An afocal lens (Specs::afocal): the angular spot in place of the spot (header).
+  const bool afocal = param.afocal();
+  if (afocal && wavefront)
+    throw Error(
+        SourceLocation{param.structure().source_path.empty() ? param.structure().name
+                                                             : param.structure().source_path},
+        "the wavefront merit of an afocal lens (against a plane wave) is not implemented "
+        "in the optimizer; use the angular spot merit (--merit spot)");
+  const double angle_unit = afocal ? param.length_unit_mm() : 1.0;
   const double wave_unit = options.wavefront_unit_mm > 0.0 ? options.wavefront_unit_mm : 1.0;
   // The half pupil: the lens is symmetric about the meridional plane (as the half-pupil spot);
   // the full pupil when a field's vignetting is not (sys.full_pupil).
@@ -332,6 +364,9 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
     if (!element_last_space(element_first, k)) {
       lower[k] = 0.0;  // a part of a split element: no ray travels backwards
       upper[k] = std::numeric_limits<double>::infinity();
+    } else if (k == k_count - 1 && afocal) {
+      lower[k] = -std::numeric_limits<double>::infinity();  // image at infinity: no plane
+      upper[k] = std::numeric_limits<double>::infinity();
     } else if (k == k_count - 1) {
       image_space_bounds(options, lower[k], upper[k]);
     } else if (stop_at_vertex_space(param.structure(), k)) {
@@ -347,6 +382,7 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
   }
 
   std::vector<T> field_rms(field_count, K<T>(0.0));
+  std::vector<T> field_angle(afocal ? field_count : 0, K<T>(0.0));
   std::vector<T> field_wave(wavefront ? field_count : 0, K<T>(0.0));
   std::vector<T> path_linear(all_fields, K<T>(0.0)), angle_linear(all_fields, K<T>(0.0));
   std::vector<int> failed(all_fields, 0);
@@ -366,6 +402,8 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
     RayBundle<T> bundle, edge_bundle;
     RayRecord<T> record, edge_record;
     std::vector<T> ys, xs;
+    std::vector<T> ls, ms, ns, ax, ay;  // afocal: exit directions and their projections
+    std::vector<double> omega_ray;
     std::vector<char> ok;
     std::vector<T> path_sq(k_count), angle_sq(k_count * 2);
     std::vector<T> path_soft(k_count), angle_soft(k_count * 2);
@@ -377,6 +415,11 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
       ys.assign(static_cast<std::size_t>(wl) * rays, K<T>(0.0));
       xs.assign(static_cast<std::size_t>(wl) * rays, K<T>(0.0));
       ok.assign(static_cast<std::size_t>(wl) * rays, 0);
+      if (afocal) {
+        ls.assign(static_cast<std::size_t>(wl) * rays, K<T>(0.0));
+        ms = ls;
+        ns = ls;
+      }
       for (auto& v : path_sq) v = K<T>(0.0);
       for (auto& v : angle_sq) v = K<T>(0.0);
       for (auto& v : path_soft) v = K<T>(0.0);
@@ -443,6 +486,11 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
           if (traced) {
             ys[i] = bundle.y[p];
             xs[i] = bundle.x[p];
+            if (afocal) {
+              ls[i] = bundle.l[p];
+              ms[i] = bundle.m[p];
+              ns[i] = bundle.n[p];
+            }
           } else {
             ++failed[hf];
           }
@@ -499,6 +547,39 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
         }
       }
       if (!spot_field) continue;
+      if (afocal) {
+        // The angular spot of field h (analysis/angular_spot.h, the code analyze runs): the exit
+        // directions about their centroid direction, omega_w weighted, in rad.
+        const std::size_t n_rays = ys.size();
+        omega_ray.resize(n_rays);
+        for (std::size_t i = 0; i < n_rays; ++i) omega_ray[i] = spot_w.wavelength[i / rays];
+        ax.assign(n_rays, K<T>(0.0));
+        ay.assign(n_rays, K<T>(0.0));
+        const AngularSpotMoments<T> a =
+            angular_spot_moments<T>(n_rays, ls.data(), ms.data(), ns.data(), omega_ray.data(),
+                                    ok.data(), !sys.full_pupil, ax.data(), ay.data());
+        field_angle[h] = a.ok ? detail::safe_norm(a.variance) : K<T>(0.0);
+        field_rms[h] = K<T>(angle_unit) * field_angle[h];
+        if (residuals) {
+          const double a_h = field_weights ? (*field_weights)[h]
+                                           : (equal_fields ? 1.0 / field_count : phi[h] / phi_sum);
+          // r = L sqrt(w_S a_h omega_w / (sum_w omega_w P)) (a - abar): sum of squares
+          // a_h (L A_h)^2 when no ray fails (header).
+          const double denominator = spot_omega_sum * rays;
+          T* r = residuals + static_cast<std::size_t>(h) * spot_block;
+          for (int w = 0; w < wl; ++w) {
+            const T scale = K<T>(angle_unit * std::sqrt(options.weight_spot * a_h *
+                                                        spot_w.wavelength[w] / denominator));
+            for (int p = 0; p < rays; ++p) {
+              const std::size_t i = static_cast<std::size_t>(w) * rays + p;
+              const bool use = ok[i] && a.ok;
+              r[2 * i] = use ? scale * (ay[i] - a.mean_y) : K<T>(0.0);
+              r[2 * i + 1] = use ? scale * (ax[i] - a.mean_x) : K<T>(0.0);
+            }
+          }
+        }
+        continue;
+      }
       // Spot of field h about its polychromatic centroid, weighted by omega_w (spot.h; a weight
       // of exactly 1 takes the unweighted sums).
       int count = 0;
@@ -579,6 +660,10 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
   // sum_h phi_h S_h / sum_h phi_h (spot.h; the plain mean with equal weights).
   for (int h = 0; h < field_count; ++h)
     spot = phi[h] == 1.0 ? spot + field_rms[h] : spot + K<T>(phi[h]) * field_rms[h];
+  T angular = K<T>(0.0);
+  for (int h = 0; h < static_cast<int>(field_angle.size()); ++h)
+    angular = phi[h] == 1.0 ? angular + field_angle[h] : angular + K<T>(phi[h]) * field_angle[h];
+  angular = angular / K<T>(phi_sum);
   for (int h = 0; h < static_cast<int>(field_wave.size()); ++h)
     wave = phi[h] == 1.0 ? wave + field_wave[h] : wave + K<T>(phi[h]) * field_wave[h];
   wave = wave / K<T>(phi_sum);
@@ -618,6 +703,10 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
     loss->merit = options.merit;
     loss->wavefront_waves = wave;
     loss->field_wavefront_waves = field_wave;
+    loss->afocal = afocal;
+    loss->angular_spot_rad = angular;
+    loss->field_angular_spot_rad = field_angle;
+    loss->angular_unit_mm = angle_unit;
     loss->failed_rays = failed_total;
     loss->rays = static_cast<int>(n_r);
   }

@@ -88,11 +88,17 @@ struct OptimizeResult {
   // With the wavefront merit: the mean RMS wavefront (waves, piston and tilt removed) at full
   // sampling (the lens's spec mode, 32 x 32 pupil grid); 0 with the spot merit.
   double start_wavefront_waves = 0, final_wavefront_waves = 0;
+  // An afocal lens (Specs::afocal; design_loss.h): the merit is the mean RMS angular spot (mrad)
+  // at full sampling, as `analyze` reports it (analysis/afocal.h), and per field; the spots above
+  // (an image plane's) are then 0 and empty.
+  bool afocal = false;
+  double start_angular_spot_mrad = 0, final_angular_spot_mrad = 0;
+  std::vector<double> start_field_angular_spot_mrad, final_field_angular_spot_mrad;
   ConstraintReport start_constraints, final_constraints;
   // The targets (with the default efl_mm of an as-written lens) on the start as given and on the
   // result, at full sampling.
   TargetReport start_targets, final_targets;
-  std::vector<std::string> glasses;  // per element
+  std::vector<std::string> glasses;  // per element (a split element once)
   int iterations = 0;                // LM iterations, all phases
   int loss_evaluations = 0;          // residual evaluations (with or without Jacobian)
   int jacobian_evaluations = 0;
@@ -110,8 +116,12 @@ struct OptimizeResult {
 // candidate report it (one set of names: optimize/summary_json.h writes and reads them).
 // Spots are at full sampling; +inf when rays fail (JSON null).
 struct OptimizeSummary {
-  double start_spot_um = 0;      // JSON start_mean_rms_spot_um
-  double final_spot_um = 0;      // JSON final_mean_rms_spot_um
+  double start_spot_um = 0;  // JSON start_mean_rms_spot_um (not written for an afocal lens)
+  double final_spot_um = 0;  // JSON final_mean_rms_spot_um
+  // An afocal lens: JSON afocal = true, start_ / final_mean_rms_angular_spot_mrad in place of
+  // the spots (+inf when rays fail: JSON null).
+  bool afocal = false;
+  double start_angular_spot_mrad = 0, final_angular_spot_mrad = 0;
   bool constraints_met = false;  // every constraint met at full sampling and the spot finite
   std::string failing;           // JSON failing_constraints: "ray angle = 61.2 (<= 60); ..."
   std::vector<std::string> glasses;
@@ -191,6 +201,9 @@ struct OptimizeOverrides {
   std::optional<double> weight_ray_path, weight_ray_angle, weight_glass;
   std::optional<double> min_air_mm, min_glass_mm, max_glass_mm, min_image_clearance_mm,
       max_ray_angle_deg;
+  // A diverging lens's virtual-image distance bounds (design_loss.h; --min-virtual-image-mm,
+  // --max-virtual-image-mm): Error on a lens without a virtual image (EFL > 0, afocal).
+  std::optional<double> min_virtual_image_mm, max_virtual_image_mm;
   std::optional<bool> verbose;
 };
 

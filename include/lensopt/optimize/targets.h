@@ -22,6 +22,10 @@
 //                         wavelengths weighted as the lens's, complex OTFs summed before the
 //                         modulus. Geometric: no diffraction (it reaches 1 as the spot shrinks;
 //                         analyze --wave prints it beside the diffraction MTF).
+//   angular_magnification an afocal lens's paraxial angular magnification M = u'_c / u_c
+//                         (paraxial/afocal.h; OpticStudio's AMAG); the targets of an afocal lens
+//                         are this and total_track_mm (the others measure an image plane or a
+//                         focal length, which it lacks: Error)
 // Per-field quantities without a field: a bound holds at every field (distortion as |D_h|, so
 // "distortion_percent <= 1" is |D| <= 1 % everywhere); an equality holds at the largest field.
 // With a field: the value of that field (signed for distortion).
@@ -33,7 +37,10 @@
 // sets the aperture EPD = F / N (a pickup on the entrance pupil; the paper's spec f_number in its
 // spec mode). In the as-written mode a lens without an efl_mm target gets the default target
 // efl_mm = its own paraxial EFL (design_focal_length_mm), so its focal length never changes
-// silently. Their weights are unused.
+// silently. angular_magnification = M (an afocal lens) is solved the same way: the start's last
+// curvature is solved for M (a bound: the nearest bound) and the optimizer holds it there
+// (optimize/variables.h); an afocal lens without one gets the default target of its own M.
+// Their weights are unused.
 //
 // Residual targets enter Levenberg-Marquardt as a residual block of their own, one residual per
 // (target, field) for a per-field bound and one otherwise:
@@ -78,6 +85,7 @@ enum class TargetQuantity {
   kRmsSpotUm,
   kRmsWavefrontWaves,
   kMtf,
+  kAngularMagnification,
 };
 // The direction of an MTF target (OpticStudio's GMTT, GMTS, GMTA).
 enum class MtfOrientation { kTangential, kSagittal, kAverage };
@@ -121,7 +129,8 @@ DesignTarget parse_target(const std::string& text, const SourceLocation& where,
 void validate_target(const DesignTarget& target, const SourceLocation& where);
 
 inline bool target_is_solved(TargetQuantity q) {
-  return q == TargetQuantity::kEflMm || q == TargetQuantity::kFNumber;
+  return q == TargetQuantity::kEflMm || q == TargetQuantity::kFNumber ||
+         q == TargetQuantity::kAngularMagnification;
 }
 inline bool target_per_field(TargetQuantity q) {
   return q == TargetQuantity::kDistortionPercent || q == TargetQuantity::kRelativeIllumination ||
@@ -301,6 +310,9 @@ TargetValues<T> measure_targets(const TraceSystem<T>& sys, const std::vector<Des
       case TargetQuantity::kMtf:
         per_field = mtf[index];
         known = mtf_known[index];
+        break;
+      case TargetQuantity::kAngularMagnification:
+        whole = paraxial_angular_magnification(sys.lens, sys.lens.reference_nm());
         break;
     }
     if (!target_per_field(t.quantity)) {

@@ -20,6 +20,16 @@
 //      the paraxial focal length at 587.6 nm is exactly sign(f) = +-1 (solve_last_curvature);
 //   3. the paraxial image solve: s_{K-1} = BFL' + s'_{K-1} (or, without it, s_{K-1} = s'_{K-1});
 //   4. scale: c = c' / |f|, t = s' |f|, a_{2i} = a'_{2i} / |f|^(2i-1).
+// An afocal lens (Specs::afocal, analysis/afocal.h: image at infinity, no focal length): its
+// lengths are normalized by its vertex length L = sum_{k<K-1} |t_k| (design_length_unit_mm) in
+// place of |f|; step 2 solves the last curvature for the lens's own paraxial angular
+// magnification M (paraxial/afocal.h; OpticStudio's AMAG), so M is held exactly as the focal
+// length of a focusing lens is (a requested M is applied to the start first: optimize/targets.h);
+// step 3 does not apply: the last thickness (to an image plane at infinity) is the variable
+// s'_{K-1} = t_{K-1} / L as it is, and it is held (it does not change the exit directions).
+// Whether the lens stays afocal (no residual power) is left to the merit: the angular spot of
+// the on-axis field is the spread of its exit directions, and a residual power P spreads a beam
+// of radius r over angles of P r, so the merit itself collimates (design_loss.h).
 // Surface profiles (optional variables, named in the constructor's `profile_variables`):
 //   k_k  = the conic constant of surface k as it is (dimensionless, O(1));
 //   x    = a'_{2i} rho^(2i) for an asphere term, rho = 1 / (2 N) the normalized entrance-pupil
@@ -57,6 +67,7 @@
 #include "lensopt/lens/lens.h"
 #include "lensopt/lens/trace_lens.h"
 #include "lensopt/optimize/glass_elements.h"
+#include "lensopt/paraxial/afocal.h"
 #include "lensopt/paraxial/paraxial.h"
 #include "lensopt/paraxial/solves.h"
 
@@ -124,6 +135,10 @@ enum class GlassMode {
 // lens with every field on axis has no field to design over: the spec value (refused below).
 double design_focal_length_mm(const Lens& lens);
 
+// The optimizer's length unit for `lens` (mm): |design_focal_length_mm|, or for an afocal lens
+// (no focal length) its vertex length, the sum of |t_k| from the first to the last surface.
+double design_length_unit_mm(const Lens& lens);
+
 // The mapping lens <-> variables.
 class LensParameterization {
  public:
@@ -137,7 +152,15 @@ class LensParameterization {
 
   const std::vector<LensVariable>& variables() const { return variables_; }
   int size() const { return static_cast<int>(variables_.size()); }
+  // The focal length held (the length unit |f| of the normalized lens); for an afocal lens its
+  // length unit, design_length_unit_mm (it has no focal length).
   double focal_length_mm() const { return focal_length_mm_; }
+  // An afocal lens (Specs::afocal, header): the angular magnification its last curvature holds.
+  bool afocal() const { return afocal_; }
+  double angular_magnification() const { return angular_magnification_; }
+  // The length unit of the normalized lens (mm): |f|, or an afocal lens's vertex length. The
+  // afocal merit (design_loss.h) weighs its angles (rad) by it, as a spot in mm.
+  double length_unit_mm() const { return norm_mm_; }
   const GlassSpace& glass_space() const { return glasses_; }
   const Lens& structure() const { return structure_; }
 
@@ -269,12 +292,20 @@ class LensParameterization {
     // Pickups and solves before the last surface (header), in the normalized lens's unit.
     const double unit = solve_unit_;
     if (has_solves_) apply_pickups_and_solves(lens, solves_, unit, 0, last);
-    lens.curvature_per_mm[last] = solve_last_curvature(lens, K<T>(power_sign_), reference_nm);
-    if (paraxial_image_solve_) {
-      const ParaxialData<T> par = paraxial_data(lens, reference_nm);
-      lens.thickness_mm[last] = image_distance_for_defocus_mm(par, x[defocus_index_]);
+    if (afocal_) {
+      // An afocal lens: the last curvature holds the angular magnification (paraxial/afocal.h),
+      // the last thickness is the variable as it is (header).
+      lens.curvature_per_mm[last] = solve_last_curvature_for_angular_magnification(
+          lens, K<T>(angular_magnification_), reference_nm);
+      lens.thickness_mm[last] = x[defocus_index_];
     } else {
-      lens.thickness_mm[last] = x[defocus_index_];  // ablation: s_{K-1} = s'_{K-1} f
+      lens.curvature_per_mm[last] = solve_last_curvature(lens, K<T>(power_sign_), reference_nm);
+      if (paraxial_image_solve_) {
+        const ParaxialData<T> par = paraxial_data(lens, reference_nm);
+        lens.thickness_mm[last] = image_distance_for_defocus_mm(par, x[defocus_index_]);
+      } else {
+        lens.thickness_mm[last] = x[defocus_index_];  // ablation: s_{K-1} = s'_{K-1} f
+      }
     }
     if (has_solves_) apply_pickups_and_solves(lens, solves_, unit, last, k_count);
     lens.scale_lengths(K<T>(norm_mm_));
@@ -341,6 +372,8 @@ class LensParameterization {
   double geometry_scale_ = 1.0;
   double norm_mm_ = 1.0;     // |f|, the length unit of the normalized lens
   double power_sign_ = 1.0;  // the normalized lens's EFL: +1, or -1 for a diverging lens
+  bool afocal_ = false;      // Specs::afocal: the last curvature holds angular_magnification_
+  double angular_magnification_ = 0.0;
   int defocus_index_ = -1;
   // Profiles of the normalized (f = 1) structure: kind per surface, k and a'_{2i} constants.
   bool has_profiles_ = false;
