@@ -380,7 +380,7 @@ TEST_CASE("render refuses an afocal lens, naming what measures it; optimize take
   CHECK(param.afocal());
   CHECK(param.angular_magnification() == doctest::Approx(-4.0).epsilon(1e-9));
   const std::string render = error_of([&] { build_imaging_model(lens, TraceOptions{}, {}); });
-  check_contains(render, "cannot render an afocal lens");
+  check_contains(render, "render cannot take an afocal lens");
   check_contains(render, "plot --kind spot");
 }
 
