@@ -8,7 +8,8 @@ Lenses
     (lens.surfaces[1].thickness_mm = 2.0; lens.specs.f_number = 2.8).
 Analysis
     analyze(lens) -> AnalysisReport (report.to_dict() equals `lensopt analyze --json`;
-    analyze(lens, wave=True, zernike_terms=J): report.wave, report.zernike_waves),
+    analyze(lens, wave=True, zernike_terms=J): report.wave, report.zernike_waves; an afocal
+    lens gives an AfocalReport, measured in angle as the CLI measures it),
     trace_rays / trace_pupil (numpy in and out), spots, psfs, field_data.
 Rendering
     Renderer(lens).render(image) (H x W x C float32), Renderer.maps(width, height) (per-pixel
@@ -57,6 +58,9 @@ if not _user_wait_policy and _gomp_already_loaded():
     )
 
 from ._lensopt import (  # noqa: F401,E402
+    AfocalField,
+    AfocalFirstOrder,
+    AfocalReport,
     AnalysisReport,
     FieldPoint,
     FieldReport,

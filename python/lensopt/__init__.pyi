@@ -4,6 +4,9 @@ import numpy as np
 import numpy.typing as npt
 
 from ._lensopt import (
+    AfocalField as AfocalField,
+    AfocalFirstOrder as AfocalFirstOrder,
+    AfocalReport as AfocalReport,
     AnalysisReport as AnalysisReport,
     FieldReport as FieldReport,
     Imaging as Imaging,

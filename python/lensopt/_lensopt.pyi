@@ -147,6 +147,51 @@ class AnalysisReport:
     def to_text(self) -> str: ...
     def to_dict(self) -> Dict[str, Any]: ...
 
+class AfocalFirstOrder:
+    angular_magnification: float
+    entrance_pupil_diameter_mm: float
+    entrance_pupil_z_mm: float
+    exit_pupil_diameter_mm: float
+    exit_pupil_z_mm: float
+    residual_power_diopters: float
+    marginal_output_slope: float
+    image_space_index: float
+
+class AfocalField:
+    field_deg: float
+    field_value: float
+    weight: float
+    traced_rays: int
+    failed_rays: int
+    vignetted_rays: int
+    chief_ok: bool
+    output_chief_angle_deg: float
+    paraxial_output_angle_deg: float
+    angular_distortion_percent: float
+    rms_angular_spot_mrad: Optional[float]
+    rms_wavefront_waves: Optional[float]
+    pv_wavefront_waves: Optional[float]
+    strehl: Optional[float]
+    zernike_waves: List[float]
+
+class AfocalReport:
+    lens_name: str
+    source_path: str
+    first_order: AfocalFirstOrder
+    angular_magnification: float
+    fields: List[AfocalField]
+    mean_rms_angular_spot_mrad: Optional[float]
+    object_distance_mm: float
+    primary_wavelength_nm: float
+    wavelength_count: int
+    rays_per_field_wavelength: int
+    rings: int
+    ray_failures: int
+    vignetted_rays: int
+    def to_json(self) -> str: ...
+    def to_text(self) -> str: ...
+    def to_dict(self) -> Dict[str, Any]: ...
+
 # None: `lensopt analyze`'s default (32 rings, 21 fields, all threads, MTF at 10, 30, 50
 # cycles/mm, 128 pupil samples).
 def analyze(lens: Lens, *, rings: Optional[int] = None, fields: Optional[int] = None,
@@ -155,7 +200,7 @@ def analyze(lens: Lens, *, rings: Optional[int] = None, fields: Optional[int] = 
             mtf_frequencies: Optional[Sequence[float]] = None,
             pupil_samples: Optional[int] = None, wavelength_weights: Sequence[float] = (),
             zernike_terms: int = 0, zernike_order: str = "fringe",
-            mode: str = "") -> AnalysisReport: ...
+            mode: str = "") -> Union[AnalysisReport, AfocalReport]: ...
 def trace_rays(lens: Lens, positions: npt.ArrayLike, directions: npt.ArrayLike, *,
                wavelength: int = -1, scale_to_spec: bool = True,
                dispersion: str = "") -> Dict[str, np.ndarray]: ...

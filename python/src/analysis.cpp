@@ -5,11 +5,13 @@
 #include <vector>
 
 #include "bindings.h"
+#include "lensopt/analysis/afocal.h"
 #include "lensopt/analysis/analyze.h"
 #include "lensopt/analysis/chromatic.h"
 #include "lensopt/analysis/encircled_energy.h"
 #include "lensopt/analysis/field_optics.h"
 #include "lensopt/analysis/field_sweep.h"
+#include "lensopt/analysis/forms_image.h"
 #include "lensopt/analysis/seidel.h"
 #include "lensopt/analysis/spot.h"
 #include "lensopt/analysis/zernike.h"
@@ -70,7 +72,11 @@ py::dict traced_arrays(RayBundle<double>& rays) {
 }
 
 // A lens as `lensopt analyze` would trace it with --mode and --dispersion.
-Lens report_lens(const Lens& lens_in, const std::string& mode, const std::string& dispersion) {
+// `what` names the function for the refusal of an afocal lens (each of these measures an image
+// plane).
+Lens report_lens(const Lens& lens_in, const std::string& mode, const std::string& dispersion,
+                 std::string_view what) {
+  refuse_afocal(lens_in, what);
   Lens lens = lens_in;
   if (mode == "paper")
     lens.specs.mode = SpecMode::kPaper;
@@ -175,6 +181,70 @@ void bind_analysis(py::module_& m) {
            })
       .def("__str__", &format_report_text);
 
+  py::class_<AfocalFirstOrder>(m, "AfocalFirstOrder",
+                               "The paraxial first-order data of an afocal lens "
+                               "(analysis/afocal.h).")
+      .def_readonly("angular_magnification", &AfocalFirstOrder::angular_magnification,
+                    "M = u'_c / u_c of the paraxial chief ray")
+      .def_readonly("entrance_pupil_diameter_mm", &AfocalFirstOrder::entrance_pupil_diameter_mm)
+      .def_readonly("entrance_pupil_z_mm", &AfocalFirstOrder::entrance_pupil_z_mm,
+                    "from the first vertex")
+      .def_readonly("exit_pupil_diameter_mm", &AfocalFirstOrder::exit_pupil_diameter_mm)
+      .def_readonly("exit_pupil_z_mm", &AfocalFirstOrder::exit_pupil_z_mm,
+                    "from the last vertex (positive: after it)")
+      .def_readonly("residual_power_diopters", &AfocalFirstOrder::residual_power_diopters,
+                    "1000 / EFL (0: exactly afocal)")
+      .def_readonly("marginal_output_slope", &AfocalFirstOrder::marginal_output_slope)
+      .def_readonly("image_space_index", &AfocalFirstOrder::image_space_index);
+
+  py::class_<AfocalField>(m, "AfocalField", "One field of an afocal analysis.")
+      .def_readonly("field_deg", &AfocalField::field_deg)
+      .def_readonly("field_value", &AfocalField::field_value)
+      .def_readonly("weight", &AfocalField::weight)
+      .def_readonly("traced_rays", &AfocalField::traced_rays)
+      .def_readonly("failed_rays", &AfocalField::failed_rays)
+      .def_readonly("vignetted_rays", &AfocalField::vignetted_rays)
+      .def_readonly("chief_ok", &AfocalField::chief_ok)
+      .def_readonly("output_chief_angle_deg", &AfocalField::output_chief_angle_deg)
+      .def_readonly("paraxial_output_angle_deg", &AfocalField::paraxial_output_angle_deg)
+      .def_readonly("angular_distortion_percent", &AfocalField::angular_distortion_percent)
+      .def_readonly("rms_angular_spot_mrad", &AfocalField::rms_angular_spot_mrad,
+                    "None if no ray arrived")
+      .def_readonly("rms_wavefront_waves", &AfocalField::rms_wavefront_waves)
+      .def_readonly("pv_wavefront_waves", &AfocalField::pv_wavefront_waves)
+      .def_readonly("strehl", &AfocalField::strehl)
+      .def_readonly("zernike_waves", &AfocalField::zernike_waves);
+
+  py::class_<AfocalReport>(
+      m, "AfocalReport",
+      "What analyze() returns for an afocal lens (image space in angle, analysis/afocal.h): "
+      "angular magnification, pupils, per field the output chief-ray angle, angular distortion, "
+      "RMS angular spot and plane-wave wavefront. to_json() is the text `lensopt analyze --json` "
+      "prints for the lens (the same serializer); to_dict() parses it.")
+      .def_readonly("lens_name", &AfocalReport::lens_name)
+      .def_readonly("source_path", &AfocalReport::source_path)
+      .def_readonly("first_order", &AfocalReport::first_order)
+      .def_property_readonly(
+          "angular_magnification",
+          [](const AfocalReport& r) { return r.first_order.angular_magnification; })
+      .def_readonly("fields", &AfocalReport::fields)
+      .def_readonly("mean_rms_angular_spot_mrad", &AfocalReport::mean_rms_angular_spot_mrad,
+                    "field-weighted; None if a field has no ray")
+      .def_readonly("object_distance_mm", &AfocalReport::object_distance_mm, "0: at infinity")
+      .def_readonly("primary_wavelength_nm", &AfocalReport::primary_wavelength_nm)
+      .def_readonly("wavelength_count", &AfocalReport::wavelength_count)
+      .def_readonly("rays_per_field_wavelength", &AfocalReport::rays_per_field_wavelength)
+      .def_readonly("rings", &AfocalReport::rings)
+      .def_readonly("ray_failures", &AfocalReport::ray_failures)
+      .def_readonly("vignetted_rays", &AfocalReport::vignetted_rays)
+      .def("to_json", &format_afocal_json, "The JSON text of `lensopt analyze --json`.")
+      .def("to_text", &format_afocal_text, "The table `lensopt analyze` prints.")
+      .def("to_dict",
+           [](const AfocalReport& r) {
+             return py::module_::import("json").attr("loads")(format_afocal_json(r));
+           })
+      .def("__str__", &format_afocal_text);
+
   m.def(
       "analyze",
       [](const Lens& lens_in, std::optional<int> rings, std::optional<int> fields, bool ray_aiming,
@@ -211,8 +281,35 @@ void bind_analysis(py::module_& m) {
           lens.specs.mode = SpecMode::kAsWritten;
         else if (!mode.empty())
           throw Error("mode must be 'paper' or 'as-written', not '" + mode + "'");
-        py::gil_scoped_release release;
-        return analyze_lens(lens, o);
+        if (lens.specs.afocal) {
+          // As `lensopt analyze` (cmd_analyze.cpp run_afocal): measured in angle, with the
+          // plane-wave wavefront; an image-plane MTF does not exist for it.
+          if (mtf_frequencies)
+            throw Error(SourceLocation{lens.source_path.empty() ? lens.name : lens.source_path},
+                        "mtf_frequencies does not apply to an afocal lens (image space in angle: "
+                        "no image-plane MTF); analyze reports its plane-wave wavefront and "
+                        "Strehl ratio");
+          AfocalOptions afocal;
+          afocal.pupil_samples = o.wave_options.pupil_samples;
+          afocal.wavelength_weights = o.wave_options.wavelength_weights;
+          afocal.zernike_terms = o.wave_options.zernike_terms;
+          afocal.zernike_ordering = o.wave_options.zernike_ordering;
+          if (o.dispersion) lens.specs.dispersion = *o.dispersion;
+          AfocalReport report;
+          {
+            py::gil_scoped_release release;
+            report = analyze_afocal_lens(lens, o.trace, afocal);
+          }
+          return py::cast(std::move(report));
+        }
+        AnalysisReport report;
+        {
+          py::gil_scoped_release release;
+          report = analyze_lens(lens, o);
+        }
+        // As the CLI: a lens that forms no image is an error, not a report of nulls.
+        check_forms_image(report);
+        return py::cast(std::move(report));
       },
       py::arg("lens"), py::kw_only(), py::arg("rings") = py::none(), py::arg("fields") = py::none(),
       py::arg("ray_aiming") = true, py::arg("scale_to_spec") = true, py::arg("dispersion") = "",
@@ -230,7 +327,9 @@ void bind_analysis(py::module_& m) {
       "per spec wavelength; empty: the lens's own, else equal). zernike_terms = J > 0 "
       "(`--zernike`, implies wave) fits each wavefront with J Zernike terms in zernike_order "
       "'fringe' (unnormalized, J <= 37) or 'standard' (Noll, unit RMS) "
-      "(AnalysisReport.zernike_waves).");
+      "(AnalysisReport.zernike_waves). An afocal lens (its image at infinity: [system] afocal = "
+      "true, a .zmx afocal flag) returns an AfocalReport, measured in angle as `lensopt "
+      "analyze` measures it; a lens that forms no image raises LensoptError.");
 
   m.def(
       "trace_rays",
@@ -320,6 +419,7 @@ void bind_analysis(py::module_& m) {
       "spots",
       [](const Lens& lens, int rings, int fields, bool ray_aiming, bool scale_to_spec,
          const std::string& dispersion, int threads) {
+        refuse_afocal(lens, "lensopt.spots");
         const TraceOptions o = trace_options(rings, fields, ray_aiming, scale_to_spec, threads);
         const TraceSystem<double> sys = system_of(lens, o, dispersion);
         SpotResult<double> s;
@@ -361,6 +461,7 @@ void bind_analysis(py::module_& m) {
       "psfs",
       [](const Lens& lens, int rings, int fields, int grid_size, double bin_um, double sigma_bins,
          int support_bins, bool ray_aiming, int threads) {
+        refuse_afocal(lens, "lensopt.psfs");
         const TraceOptions o = trace_options(rings, fields, ray_aiming, true, threads);
         PsfOptions po;
         po.grid_size = grid_size;
@@ -401,6 +502,7 @@ void bind_analysis(py::module_& m) {
   m.def(
       "field_data",
       [](const Lens& lens, int rings, int fields, bool ray_aiming, int threads) {
+        refuse_afocal(lens, "lensopt.field_data");
         const TraceOptions o = trace_options(rings, fields, ray_aiming, true, threads);
         const TraceSystem<double> sys = system_of(lens, o, "");
         FieldOpticsOptions fo;
@@ -441,7 +543,7 @@ void bind_analysis(py::module_& m) {
   m.def(
       "prescription",
       [json_loads](const Lens& lens_in, const std::string& mode, const std::string& dispersion) {
-        const Lens lens = report_lens(lens_in, mode, dispersion);
+        const Lens lens = report_lens(lens_in, mode, dispersion, "lensopt.prescription");
         std::string text;
         {
           py::gil_scoped_release release;
@@ -457,7 +559,7 @@ void bind_analysis(py::module_& m) {
       "chromatic_focal_shift",
       [json_loads](const Lens& lens_in, std::optional<std::vector<double>> band, int samples,
                    const std::string& mode, const std::string& dispersion) {
-        const Lens lens = report_lens(lens_in, mode, dispersion);
+        const Lens lens = report_lens(lens_in, mode, dispersion, "lensopt.chromatic_focal_shift");
         if (band && band->size() != 2) throw Error("band must be (lo_nm, hi_nm)");
         std::string text;
         {
@@ -478,7 +580,7 @@ void bind_analysis(py::module_& m) {
   m.def(
       "lateral_colour",
       [json_loads](const Lens& lens_in, const std::string& mode, const std::string& dispersion) {
-        const Lens lens = report_lens(lens_in, mode, dispersion);
+        const Lens lens = report_lens(lens_in, mode, dispersion, "lensopt.lateral_colour");
         std::string text;
         {
           py::gil_scoped_release release;
@@ -494,7 +596,7 @@ void bind_analysis(py::module_& m) {
       [json_loads](const Lens& lens_in, std::vector<int> fields, int radii, double max_radius_um,
                    bool diffraction, int pupil_samples, const std::string& mode,
                    const std::string& dispersion, std::optional<int> threads) {
-        const Lens lens = report_lens(lens_in, mode, dispersion);
+        const Lens lens = report_lens(lens_in, mode, dispersion, "lensopt.encircled_energy");
         EncircledEnergyOptions o;
         o.field_indices = std::move(fields);
         o.radii = radii;
@@ -525,7 +627,7 @@ void bind_analysis(py::module_& m) {
       [json_loads](const Lens& lens_in, int fields, std::vector<double> frequencies, bool mtf,
                    int pupil_samples, const std::string& mode, const std::string& dispersion,
                    std::optional<int> threads) {
-        const Lens lens = report_lens(lens_in, mode, dispersion);
+        const Lens lens = report_lens(lens_in, mode, dispersion, "lensopt.field_sweep");
         TraceOptions t;
         WaveOptions wave;
         wave.pupil_samples = pupil_samples;

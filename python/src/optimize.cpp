@@ -6,6 +6,7 @@
 #include <optional>
 
 #include "bindings.h"
+#include "lensopt/analysis/afocal.h"
 #include "lensopt/core/error.h"
 #include "lensopt/optimize/design_gradient.h"
 #include "lensopt/optimize/optimizer.h"
@@ -371,6 +372,10 @@ void bind_optimize(py::module_& m) {
          bool sensitivity, std::optional<double> max_spot_um, std::optional<int> threads,
          std::optional<int> jobs, std::optional<std::map<std::string, double>> tolerances,
          std::optional<double> inverse_drop_um, std::optional<std::string> spot_reference) {
+        refuse_afocal(lens, "lensopt.tolerance",
+                      "tolerancing measures the change of the image-plane spot and MTF, and an "
+                      "afocal tolerance criterion (angular spot, plane-wave wavefront) is not "
+                      "implemented");
         // The CLI's start (tolerance.h): the defaults and the lens's [tolerance] table, then the
         // arguments given (None: not given).
         ToleranceOptions o = tolerance_options_for(lens);

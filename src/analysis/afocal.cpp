@@ -272,6 +272,16 @@ AfocalReport analyze_afocal_lens(const Lens& lens, const TraceOptions& trace,
   return r;
 }
 
+void refuse_afocal(const Lens& lens, std::string_view what, std::string_view why) {
+  if (!lens.specs.afocal) return;
+  throw Error(SourceLocation{lens.source_path.empty() ? lens.name : lens.source_path},
+              fmt::format("{} cannot take an afocal lens (image at infinity, image space in "
+                          "angle): {}; analyze reports its angular magnification, pupils, "
+                          "angular spot and plane-wave wavefront, and plot --kind spot draws "
+                          "its spot in angle",
+                          what, why.empty() ? "it needs an image plane with a sensor on it" : why));
+}
+
 std::string format_afocal_text(const AfocalReport& r) {
   std::string out;
   auto line = [&](const std::string& s) { out += s + "\n"; };

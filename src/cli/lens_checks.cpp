@@ -5,6 +5,7 @@
 
 #include <string>
 
+#include "lensopt/analysis/afocal.h"
 #include "lensopt/analysis/apertures.h"
 #include "lensopt/core/error.h"
 #include "lensopt/lens/validate.h"
@@ -16,20 +17,13 @@ void check_lens_warnings(const Lens& lens, const char* command, bool strict) {
   // convert and optimize (its angular spot, optimize/design_loss.h) take it; the commands that
   // measure an image plane refuse it, saying why.
   const std::string name(command);
-  if (lens.specs.afocal && name != "analyze" && name != "plot" && name != "convert" &&
-      name != "optimize") {
-    const std::string why =
-        name == "tolerance"
-            ? "tolerancing measures the change of the image-plane spot and MTF, and an afocal "
-              "tolerance criterion (angular spot, plane-wave wavefront) is not implemented"
-            : "it needs an image plane with a sensor on it";
-    throw Error(SourceLocation{lens.source_path.empty() ? lens.name : lens.source_path},
-                fmt::format("{} cannot take an afocal lens (image at infinity, image space in "
-                            "angle): {}; analyze reports its angular magnification, pupils, "
-                            "angular spot and plane-wave wavefront, and plot --kind spot draws "
-                            "its spot in angle",
-                            name, why));
-  }
+  if (name != "analyze" && name != "plot" && name != "convert" && name != "optimize")
+    refuse_afocal(lens, name,
+                  name == "tolerance"
+                      ? "tolerancing measures the change of the image-plane spot and MTF, and an "
+                        "afocal tolerance criterion (angular spot, plane-wave wavefront) is not "
+                        "implemented"
+                      : "");
   const std::vector<std::string> glass = glass_range_warnings(lens);
   if (strict && !glass.empty())
     throw Error(SourceLocation{lens.source_path}, glass.front() + " (refused with --strict)");

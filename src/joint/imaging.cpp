@@ -38,6 +38,7 @@
 #include <limits>
 
 #include "imaging_detail.h"
+#include "lensopt/analysis/afocal.h"
 #include "lensopt/core/error.h"
 #include "lensopt/core/interpolate.h"
 #include "lensopt/core/threads.h"
@@ -253,6 +254,10 @@ DifferentiableImaging::DifferentiableImaging(const LensParameterization& param, 
                                              DifferentiableImagingOptions options)
     : state_(new State(param, mode, std::move(fixed_glasses), std::move(options))) {
   state_->options.validate();
+  // A render of the image plane (the one policy for afocal lenses, analysis/afocal.h).
+  refuse_afocal(param.structure(),
+                "joint image formation (optimize --joint, lensopt.Imaging, "
+                "lensopt.torch.ImageFormation)");
   const Specs& specs = param.structure().specs;
   validate_wavelength_channels(specs.wavelength_channels,
                                static_cast<int>(specs.wavelengths_nm.size()));

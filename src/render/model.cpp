@@ -5,6 +5,7 @@
 #include <cmath>
 #include <memory>
 
+#include "lensopt/analysis/afocal.h"
 #include "lensopt/analysis/field_optics.h"
 #include "lensopt/core/error.h"
 #include "lensopt/core/interpolate.h"
@@ -30,14 +31,9 @@ ImagingModel build_imaging_model(const Lens& lens, const TraceOptions& trace,
   validate_wavelength_channels(lens.specs.wavelength_channels,
                                static_cast<int>(lens.specs.wavelengths_nm.size()));
   // An afocal lens (Specs::afocal) has no image plane: its image is at infinity, measured in
-  // angle (analysis/afocal.h). A render puts a sensor at the image: refused, saying what does
-  // measure the lens.
-  if (lens.specs.afocal)
-    throw Error(SourceLocation{lens.source_path.empty() ? lens.name : lens.source_path},
-                "cannot render an afocal lens: its image is at infinity (image space in angle), "
-                "and a render needs an image plane with a sensor on it; analyze reports its "
-                "angular magnification, angular spot and plane-wave wavefront, and plot --kind "
-                "spot draws its spot in angle");
+  // angle (analysis/afocal.h). A render puts a sensor at the image: refused (the one policy,
+  // refuse_afocal), saying what does measure the lens.
+  refuse_afocal(lens, "render");
   // One prepared system and one trace: the spot, centroids, distortion and relative illumination
   // (analysis/field_optics.h, the numbers `lensopt analyze` prints) and the geometric PSFs come
   // from the same rays.

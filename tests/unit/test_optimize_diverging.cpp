@@ -17,6 +17,7 @@
 #include "lensopt/formats/lens_file.h"
 #include "lensopt/formats/zmx.h"
 #include "lensopt/glass/glass.h"
+#include "lensopt/joint/imaging.h"
 #include "lensopt/lens/lens_io.h"
 #include "lensopt/optimize/design_gradient.h"
 #include "lensopt/optimize/optimizer.h"
@@ -380,8 +381,15 @@ TEST_CASE("render refuses an afocal lens, naming what measures it; optimize take
   CHECK(param.afocal());
   CHECK(param.angular_magnification() == doctest::Approx(-4.0).epsilon(1e-9));
   const std::string render = error_of([&] { build_imaging_model(lens, TraceOptions{}, {}); });
-  check_contains(render, "cannot render an afocal lens");
+  check_contains(render, "render cannot take an afocal lens");
   check_contains(render, "plot --kind spot");
+  // Joint image formation renders the image plane too (it used to fail later with "the paraxial
+  // image heights do not increase with the field").
+  const std::string joint = error_of([&] {
+    DifferentiableImaging imaging(param, GlassMode::kQuantized, {}, DifferentiableImagingOptions{});
+  });
+  check_contains(joint, "joint image formation");
+  check_contains(joint, "cannot take an afocal lens");
 }
 
 }  // namespace

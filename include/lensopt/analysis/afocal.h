@@ -38,6 +38,7 @@
 
 #include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "lensopt/analysis/spot.h"
@@ -157,6 +158,13 @@ AfocalReport analyze_afocal(const TraceSystem<double>& sys, const AfocalOptions&
 // its name and file. Throws Error naming the file for a lens that is not afocal.
 AfocalReport analyze_afocal_lens(const Lens& lens, const TraceOptions& trace,
                                  AfocalOptions options);
+
+// The one policy for what an afocal lens (Specs::afocal) cannot take: `what` (a command such as
+// "render", or a Python function such as "lensopt.spots") measures an image plane, which the lens
+// does not have. Throws Error naming the lens file, `what` and `why` (default: "it needs an image
+// plane with a sensor on it"), and what measures the lens instead (analyze in angle, plot --kind
+// spot). Does nothing for a lens with an image plane.
+void refuse_afocal(const Lens& lens, std::string_view what, std::string_view why = {});
 
 // The plane-wave reference of field h (ReferenceSphere::plane; wavefront.h), primary wavelength.
 ReferenceSphere<double> afocal_reference_plane(const TraceSystem<double>& sys, int h);
