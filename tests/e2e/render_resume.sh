@@ -58,56 +58,79 @@ ref_rows, ref_json = metrics(ref)
 if [r["path"] for r in ref_rows] != names + ["mean"]:
     fail(f"reference rows {[r['path'] for r in ref_rows]}")
 
-# Interrupted runs: SIGKILL and SIGINT in turn, each once k images are finished.
-out = os.path.join(tmp, "out")
-signalled = {signal.SIGKILL: 0, signal.SIGINT: 0}
-runs = 0
-for round_ in range(9):
-    done = finished_images(out) if os.path.isdir(out) else 0
-    if done >= n_images - 1:
-        break
-    sig = signal.SIGKILL if round_ % 2 == 0 else signal.SIGINT
-    # The last round stops the run with one image to go, so the resume renders one image alone
-    # (an image must not depend on how many are left, e.g. through its thread count).
-    last = round_ == 8 or done >= n_images - 3
-    if last:
-        sig = signal.SIGKILL
-    k = n_images - 1 if last else rng.randrange(done + 1, min(done + 8, n_images - 2))
-    proc = subprocess.Popen(command(out), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    runs += 1
-    while proc.poll() is None and (not os.path.isdir(out) or finished_images(out) < k):
-        time.sleep(0.001)
-    if proc.poll() is not None:
-        fail(f"run {runs} ended ({proc.returncode}) before it had {k} images: the dataset is too "
-             f"fast for this test")
-    proc.send_signal(sig)
-    _, err = proc.communicate()
-    if sig == signal.SIGKILL:
-        if proc.returncode != -signal.SIGKILL:
-            fail(f"SIGKILL: exit {proc.returncode}")
+# Interrupted runs: SIGKILL and SIGINT in turn, each once k images are finished. On a loaded
+# machine a SIGINT can arrive after the run's last image (the images are small): the run then
+# rightly exits 0 with every image done, which leaves nothing to resume; the phase starts again
+# in a new folder (at most 3 times). Exit 0 with an image missing is still a failure.
+class TooLate(Exception):
+    pass
+
+
+def interrupted_runs(out):
+    signalled = {signal.SIGKILL: 0, signal.SIGINT: 0}
+    runs = 0
+    for round_ in range(9):
+        done = finished_images(out) if os.path.isdir(out) else 0
+        if done >= n_images - 1:
+            break
+        sig = signal.SIGKILL if round_ % 2 == 0 else signal.SIGINT
+        # The last round stops the run with one image to go, so the resume renders one image alone
+        # (an image must not depend on how many are left, e.g. through its thread count).
+        last = round_ == 8 or done >= n_images - 3
+        if last:
+            sig = signal.SIGKILL
+        k = n_images - 1 if last else rng.randrange(done + 1, min(done + 8, n_images - 2))
+        proc = subprocess.Popen(command(out), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+        runs += 1
+        while proc.poll() is None and (not os.path.isdir(out) or finished_images(out) < k):
+            time.sleep(0.001)
+        if proc.poll() is not None:
+            if proc.returncode == 0 and finished_images(out) == n_images:
+                raise TooLate(f"run {runs} finished before its signal")
+            fail(f"run {runs} ended ({proc.returncode}) before it had {k} images: the dataset is too "
+                 f"fast for this test")
+        proc.send_signal(sig)
+        _, err = proc.communicate()
+        if sig == signal.SIGKILL:
+            if proc.returncode != -signal.SIGKILL:
+                fail(f"SIGKILL: exit {proc.returncode}")
+            signalled[sig] += 1
+            continue
+        if proc.returncode == 0 and finished_images(out) == n_images:
+            raise TooLate(f"run {runs}'s SIGINT came after its last image (exit 0, all done)")
+        if proc.returncode != 130:
+            fail(f"SIGINT: exit {proc.returncode}, expected 130: {err.decode()}")
         signalled[sig] += 1
-        continue
-    if proc.returncode != 130:
-        fail(f"SIGINT: exit {proc.returncode}, expected 130: {err.decode()}")
-    signalled[sig] += 1
-    # The metrics of a run stopped by SIGINT hold every finished image with its values.
-    rows, j = metrics(out)
-    by_path = {r["path"]: r for r in rows}
-    ref_by_path = {r["path"]: r for r in ref_rows}
-    if set(by_path) != set(names) | {"mean"}:
-        fail(f"SIGINT metrics rows: {sorted(by_path)}")
-    for n in names:
-        r = by_path[n]
-        if r["status"] in ("rendered", "skipped"):
-            for key in ("width", "height", "psnr_db", "ssim"):
-                if r[key] != ref_by_path[n][key]:
-                    fail(f"SIGINT metrics {n} {key}: {r[key]} vs {ref_by_path[n][key]}")
-            if not os.path.exists(os.path.join(out, n)):
-                fail(f"SIGINT metrics list {n} as done but it is not there")
-        elif r["status"] != "interrupted":
-            fail(f"SIGINT metrics {n}: status {r['status']}")
-    if j["interrupted"] == 0 and finished_images(out) < n_images:
-        fail("SIGINT metrics: no image marked interrupted")
+        # The metrics of a run stopped by SIGINT hold every finished image with its values.
+        rows, j = metrics(out)
+        by_path = {r["path"]: r for r in rows}
+        ref_by_path = {r["path"]: r for r in ref_rows}
+        if set(by_path) != set(names) | {"mean"}:
+            fail(f"SIGINT metrics rows: {sorted(by_path)}")
+        for n in names:
+            r = by_path[n]
+            if r["status"] in ("rendered", "skipped"):
+                for key in ("width", "height", "psnr_db", "ssim"):
+                    if r[key] != ref_by_path[n][key]:
+                        fail(f"SIGINT metrics {n} {key}: {r[key]} vs {ref_by_path[n][key]}")
+                if not os.path.exists(os.path.join(out, n)):
+                    fail(f"SIGINT metrics list {n} as done but it is not there")
+            elif r["status"] != "interrupted":
+                fail(f"SIGINT metrics {n}: status {r['status']}")
+        if j["interrupted"] == 0 and finished_images(out) < n_images:
+            fail("SIGINT metrics: no image marked interrupted")
+    return signalled, runs
+
+
+for attempt in range(3):
+    out = os.path.join(tmp, f"out{attempt}")
+    try:
+        signalled, runs = interrupted_runs(out)
+        break
+    except TooLate as e:
+        print(f"note: {e}; the interrupted phase starts again", file=sys.stderr)
+else:
+    fail("every attempt's SIGINT came after the last image")
 if signalled[signal.SIGKILL] < 2 or signalled[signal.SIGINT] < 2:
     fail(f"too few interruptions: {signalled}")
 
