@@ -188,8 +188,9 @@ void check_surface_level(int level) {
     z[i] = seeded(0.3 * t, i + 9, 0.1);
     l[i] = seeded(0.1 * std::sin(angle), i + 11, 0.05);
     m[i] = seeded(std::sin(angle), i + 13, 0.05);
-    n[i] = seeded(std::sqrt(1.0 - std::pow(std::sin(angle), 2) - 0.01 * std::pow(std::sin(angle), 2)),
-                  i + 17, 0.05);
+    n[i] =
+        seeded(std::sqrt(1.0 - std::pow(std::sin(angle), 2) - 0.01 * std::pow(std::sin(angle), 2)),
+               i + 17, 0.05);
   }
   for (const bool record : {false, true}) {
     std::vector<J> xc = x, yc = y, zc = z, lc = l, mc = m, nc = n;
@@ -197,19 +198,18 @@ void check_surface_level(int level) {
     std::vector<std::int32_t> fc(count), fg(count);
     std::vector<J> travel_c(count), zeta_c(count), zeta_prime_c(count);
     std::vector<J> travel_g(count), zeta_g(count), zeta_prime_g(count);
-    detail::trace_surface_jet_at(level, c, shift, mu, count, xc.data(), yc.data(), zc.data(),
-                                 lc.data(), mc.data(), nc.data(), fc.data(),
-                                 record ? travel_c.data() : nullptr,
-                                 record ? zeta_c.data() : nullptr,
-                                 record ? zeta_prime_c.data() : nullptr, record);
+    detail::trace_surface_jet_at(
+        level, c, shift, mu, count, xc.data(), yc.data(), zc.data(), lc.data(), mc.data(),
+        nc.data(), fc.data(), record ? travel_c.data() : nullptr, record ? zeta_c.data() : nullptr,
+        record ? zeta_prime_c.data() : nullptr, record);
     if (record)
       detail::trace_surface<J, true>(c, shift, mu, count, xg.data(), yg.data(), zg.data(),
                                      lg.data(), mg.data(), ng.data(), fg.data(), travel_g.data(),
                                      zeta_g.data(), zeta_prime_g.data());
     else
       detail::trace_surface<J, false>(c, shift, mu, count, xg.data(), yg.data(), zg.data(),
-                                      lg.data(), mg.data(), ng.data(), fg.data(), nullptr,
-                                      nullptr, nullptr);
+                                      lg.data(), mg.data(), ng.data(), fg.data(), nullptr, nullptr,
+                                      nullptr);
     CAPTURE(N);
     CAPTURE(level);
     CAPTURE(record);
@@ -239,7 +239,8 @@ void check_surface_level(int level) {
 
 }  // namespace
 
-TEST_CASE("trace: the Jet sphere loop of every x86-64 level this CPU runs gives the template's bits") {
+TEST_CASE(
+    "trace: the Jet sphere loop of every x86-64 level this CPU runs gives the template's bits") {
   // Level 0 (baseline) always; 3 and 4 where the CPU has them (the copy the trace uses is
   // detail::jet_trace_level()'s).
   std::vector<int> levels{0};

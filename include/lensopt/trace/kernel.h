@@ -191,15 +191,14 @@ void trace_surface_double(double c, double shift, double mu, std::size_t count, 
 // several x86-64 levels with the Jets' derivative arithmetic vectorized at each level's width
 // (src/trace/kernel_jet.cpp.in, trace/dual.h): the bits of trace_surface<Jet, kRecord>. Used by
 // the compiled Jet trace (trace_bundle_jet); `record`: whether the zeta records are written.
-#define LENSOPT_DECLARE_JET_SURFACE(N)                                                           \
-  void trace_surface_jet(const ceres::Jet<double, N>& c, const ceres::Jet<double, N>& shift,    \
-                         const ceres::Jet<double, N>& mu, std::size_t count,                    \
-                         ceres::Jet<double, N>* x, ceres::Jet<double, N>* y,                    \
-                         ceres::Jet<double, N>* z, ceres::Jet<double, N>* l,                    \
-                         ceres::Jet<double, N>* m, ceres::Jet<double, N>* n,                    \
-                         std::int32_t* failure, ceres::Jet<double, N>* travel,                  \
-                         ceres::Jet<double, N>* zeta_out, ceres::Jet<double, N>* zeta_prime_out, \
-                         bool record);
+#define LENSOPT_DECLARE_JET_SURFACE(N)                                              \
+  void trace_surface_jet(                                                           \
+      const ceres::Jet<double, N>& c, const ceres::Jet<double, N>& shift,           \
+      const ceres::Jet<double, N>& mu, std::size_t count, ceres::Jet<double, N>* x, \
+      ceres::Jet<double, N>* y, ceres::Jet<double, N>* z, ceres::Jet<double, N>* l, \
+      ceres::Jet<double, N>* m, ceres::Jet<double, N>* n, std::int32_t* failure,    \
+      ceres::Jet<double, N>* travel, ceres::Jet<double, N>* zeta_out,               \
+      ceres::Jet<double, N>* zeta_prime_out, bool record);
 LENSOPT_FOR_EACH_JET_WIDTH(LENSOPT_DECLARE_JET_SURFACE)
 #undef LENSOPT_DECLARE_JET_SURFACE
 
@@ -694,8 +693,8 @@ void trace_bundle(const TraceLens<T>& lens, int w, int end, bool to_image, RayBu
         start_n[i] = n[i] > zero ? n[i] : one;  // a backwards ray is flagged; keep it finite
       }
     }
-    detail::intersect_surface<T, kCompiled>(lens, k, c, shift, mu, count, x, y, z, l, m, n,
-                                            failure, record);
+    detail::intersect_surface<T, kCompiled>(lens, k, c, shift, mu, count, x, y, z, l, m, n, failure,
+                                            record);
     // Step 5: the clear aperture of surface k, if it has one.
     if (!lens.semi_diameter_mm.empty() && lens.semi_diameter_mm[k] > 0.0) {
       const T limit = K<T>(lens.semi_diameter_mm[k] * lens.semi_diameter_mm[k]);
