@@ -120,7 +120,8 @@ bool dual_matches_jet() {
 }
 
 // The x86-64 level of the compiled Jet sphere loop on this CPU: 4 (x86-64-v4, AVX-512), 3
-// (x86-64-v3, AVX2) or 0 (the baseline level, SSE2).
+// (x86-64-v3, AVX2) or 0 (the baseline level, SSE2: there the loop is the Jet template itself,
+// Eigen's 128-bit packets being faster than these loops at that width).
 int jet_trace_level();
 
 // detail::trace_surface_jet (kernel.h) with the copy compiled for `level` (4, 3, else the baseline
