@@ -187,6 +187,21 @@ void trace_surface_double(double c, double shift, double mu, std::size_t count, 
                           std::int32_t* failure, double* travel, double* zeta_out,
                           double* zeta_prime_out, bool record);
 
+// The sphere loop (trace_surface) on ceres::Jet<double, N> of the listed widths, compiled for
+// several x86-64 levels with the Jets' derivative arithmetic vectorized at each level's width
+// (src/trace/kernel_jet.cpp.in, trace/dual.h): the bits of trace_surface<Jet, kRecord>. Used by
+// the compiled Jet trace (trace_bundle_jet); `record`: whether the zeta records are written.
+#define LENSOPT_DECLARE_JET_SURFACE(N)                                              \
+  void trace_surface_jet(                                                           \
+      const ceres::Jet<double, N>& c, const ceres::Jet<double, N>& shift,           \
+      const ceres::Jet<double, N>& mu, std::size_t count, ceres::Jet<double, N>* x, \
+      ceres::Jet<double, N>* y, ceres::Jet<double, N>* z, ceres::Jet<double, N>* l, \
+      ceres::Jet<double, N>* m, ceres::Jet<double, N>* n, std::int32_t* failure,    \
+      ceres::Jet<double, N>* travel, ceres::Jet<double, N>* zeta_out,               \
+      ceres::Jet<double, N>* zeta_prime_out, bool record);
+LENSOPT_FOR_EACH_JET_WIDTH(LENSOPT_DECLARE_JET_SURFACE)
+#undef LENSOPT_DECLARE_JET_SURFACE
+
 }  // namespace detail
 
 namespace detail {
@@ -213,8 +228,9 @@ namespace detail {
 // Steps 1-4 at surface k (the sphere loop, or the profile loops of trace/profile.h). Always
 // inlined, so that the symmetric driver compiles to the code it had with the dispatch written in
 // it (not inlined, the Jet loops ran 3x slower: c, shift and mu became references the compiler
-// could not keep in registers).
-template <typename T>
+// could not keep in registers). kCompiled (the compiled Jet trace, trace_bundle_jet): the sphere
+// loop of a Jet of a listed width runs trace_surface_jet, the same bits.
+template <typename T, bool kCompiled = false>
 inline __attribute__((always_inline)) void intersect_surface(
     const TraceLens<T>& lens, int k, const T& c, const T& shift, const T& mu, std::size_t count,
     T* x, T* y, T* z, T* l, T* m, T* n, std::int32_t* failure, RayRecord<T>* record) {
@@ -250,6 +266,12 @@ inline __attribute__((always_inline)) void intersect_surface(
                                  record ? record->cos2_incidence[k].data() : nullptr,
                                  record ? record->cos2_refraction[k].data() : nullptr,
                                  record != nullptr);
+  } else if constexpr (kCompiled) {
+    detail::trace_surface_jet(c, shift, mu, count, x, y, z, l, m, n, failure,
+                              record && k > 0 ? record->axial_travel_mm[k - 1].data() : nullptr,
+                              record ? record->cos2_incidence[k].data() : nullptr,
+                              record ? record->cos2_refraction[k].data() : nullptr,
+                              record != nullptr);
   } else if (record) {
     detail::trace_surface<T, true>(c, shift, mu, count, x, y, z, l, m, n, failure,
                                    k > 0 ? record->axial_travel_mm[k - 1].data() : nullptr,
@@ -620,8 +642,8 @@ requires(is_jet_width(N)) void trace_bundle(const TraceLens<ceres::Jet<double, N
 // Traces every ray of `rays` through surfaces [0, end) at wavelength number w (end = K for the
 // whole lens), leaving positions relative to vertex end-1 on that surface. If `to_image`, rays
 // continue to the image plane (end must be K) and end with z = 0 relative to the image plane.
-// `record` may be null.
-template <typename T>
+// `record` may be null. kCompiled: see detail::intersect_surface (only trace_bundle_jet sets it).
+template <typename T, bool kCompiled = false>
 void trace_bundle(const TraceLens<T>& lens, int w, int end, bool to_image, RayBundle<T>& rays,
                   RayRecord<T>* record) {
   if (lens.geometry.placed()) {
@@ -671,7 +693,8 @@ void trace_bundle(const TraceLens<T>& lens, int w, int end, bool to_image, RayBu
         start_n[i] = n[i] > zero ? n[i] : one;  // a backwards ray is flagged; keep it finite
       }
     }
-    detail::intersect_surface(lens, k, c, shift, mu, count, x, y, z, l, m, n, failure, record);
+    detail::intersect_surface<T, kCompiled>(lens, k, c, shift, mu, count, x, y, z, l, m, n, failure,
+                                            record);
     // Step 5: the clear aperture of surface k, if it has one.
     if (!lens.semi_diameter_mm.empty() && lens.semi_diameter_mm[k] > 0.0) {
       const T limit = K<T>(lens.semi_diameter_mm[k] * lens.semi_diameter_mm[k]);
