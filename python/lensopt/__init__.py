@@ -28,9 +28,12 @@ Long calls release the GIL; optimize() stops on Ctrl-C (KeyboardInterrupt).
 
 import os as _os
 
-# OpenMP threads that wait passively (sleep) between parallel regions instead of spinning:
-# libgomp reads this once, when it is loaded, so it only takes effect if nothing loaded it
-# before (torch does); the user's own setting wins (include/lensopt/core/passive_threads.h).
+# OpenMP threads that wait passively (sleep) between parallel regions instead of spinning; the
+# user's own setting wins (include/lensopt/core/passive_threads.h). The extension's loops run in
+# LLVM's OpenMP runtime when it was built with it (_lensopt.openmp_runtime == "libomp",
+# python/CMakeLists.txt): a runtime of its own, initialized after this line, so passive even when
+# torch was imported first. Built with GCC's libgomp only, the setting takes effect only if nothing
+# loaded libgomp before (torch does), and the package warns.
 _user_wait_policy = "OMP_WAIT_POLICY" in _os.environ
 _os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
@@ -44,14 +47,19 @@ def _gomp_already_loaded():
         return False
 
 
-if not _user_wait_policy and _gomp_already_loaded():
+_gomp_before = not _user_wait_policy and _gomp_already_loaded()
+
+from . import _lensopt  # noqa: E402
+
+if _gomp_before and _lensopt.openmp_runtime == "libgomp":
     import warnings as _warnings
 
     _warnings.warn(
         "lensopt: OpenMP (libgomp) was loaded before lensopt (usually by `import torch`), so "
         "its threads spin between parallel regions and burn the other cores (3.8-12.7x the CPU "
         "of a joint step with 2 threads): set OMP_WAIT_POLICY=PASSIVE in the environment, or "
-        "import lensopt before torch",
+        "import lensopt before torch (or build the extension with LLVM's OpenMP runtime, "
+        "libomp5-14: python/CMakeLists.txt)",
         RuntimeWarning,
         stacklevel=2,
     )

@@ -58,4 +58,11 @@ PYBIND11_MODULE(_lensopt, m) {
   bind_render(m);
   bind_optimize(m);
   bind_imaging(m);
+#ifndef LENSOPT_OPENMP_RUNTIME
+#define LENSOPT_OPENMP_RUNTIME "libgomp"
+#endif
+  // Which OpenMP runtime runs lensopt's parallel loops (python/CMakeLists.txt): "libomp" (LLVM's,
+  // private to the extension, passive whatever was imported before) or "libgomp" (shared with
+  // torch: its wait policy is fixed by whoever loads it first).
+  m.attr("openmp_runtime") = LENSOPT_OPENMP_RUNTIME;
 }
