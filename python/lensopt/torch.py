@@ -25,12 +25,22 @@ samples are black) are fixed from the optics' values, as the C++ renderer fixes 
 copied to the CPU, so a network on a GPU keeps its images there. The blur works one patch row at
 a time and the warp (its own autograd Function) in chunks, so the temporaries stay small.
 
+float32 images on the CPU (image_ops="auto", the default) take lensopt's own image formation
+instead, the same code as the joint optimization and `lensopt bench --joint-imaging`: one
+autograd.Function whose forward is Imaging.render_images (the C++ blur, RI and warp of each crop,
+reading only the window of the images the crop needs) and whose backward is its adjoint
+Imaging.backward_images (dL/dx through the Jets, dL/dimages). Its data path is the CLI's: within
+1.1x of the CLI's joint step (BENCHMARKS.md "lensopt.torch against the CLI step, torch first"),
+where the torch operations on the CPU took 2.5-3x. It agrees with the torch operations to float32
+rounding (tests/python/test_torch.py); image_ops="torch" keeps the latter.
+
 On the CPU, glibc's malloc by default returns the memory a training step frees to the system, and
 the next step faults it in again (a quarter to a third of the CPU time of four 256 x 256 crops of
 a 1280 x 720 image, BENCHMARKS.md); MALLOC_MMAP_THRESHOLD_=67108864
-MALLOC_TRIM_THRESHOLD_=268435456 in the environment (both: either alone is worse) avoids that. On
-a machine with more threads than free cores, OMP_WAIT_POLICY=PASSIVE keeps OpenMP's idle threads
-from spinning.
+MALLOC_TRIM_THRESHOLD_=268435456 in the environment (both: either alone is worse) avoids that
+(for the torch operations). lensopt's own threads wait passively (the package's setting, in LLVM's
+OpenMP runtime when the extension was built with it: even when torch was imported first); torch's
+own threads follow OMP_WAIT_POLICY as libgomp read it when torch loaded it.
 
 Glasses (glass_mode="quantized", the paper's): the forward pass uses the nearest catalog glass
 and the gradient passes straight through to the continuous g; l_GV pulls g towards its glass.

@@ -220,6 +220,17 @@ void bind_imaging(py::module_& m) {
           "B x C x h x w float32 (crop = (x0, y0, w, h); None: the whole images). Reads only the "
           "pixels each crop needs. lensopt.torch's forward on float32 CPU images.")
       .def(
+          "scene_window",
+          [](const PyImaging& p, int width, int height, int channels,
+             std::optional<std::array<int, 4>> crop) {
+            const CropWindow w =
+                p.imaging->scene_window(width, height, channels, crop_or_whole(crop, width, height));
+            return std::array<int, 4>{w.x0, w.y0, w.width, w.height};
+          },
+          py::arg("width"), py::arg("height"), py::arg("channels"), py::arg("crop") = py::none(),
+          "(x0, y0, w, h): the pixels of a width x height image that render_images() and "
+          "backward_images() of the crop read (its blurred region plus the kernels' reach).")
+      .def(
           "backward_images",
           [](const PyImaging& p, const ImageArray& images, std::optional<std::array<int, 4>> crop,
              const ImageArray& grad, bool lens_gradient, bool image_gradient) {

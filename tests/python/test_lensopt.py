@@ -337,7 +337,10 @@ class PassiveOpenMpThreads(unittest.TestCase):
         env = {k: v for k, v in os.environ.items() if k != "OMP_WAIT_POLICY"}
         run = subprocess.run([sys.executable, "-c", code, *paths], env=env, capture_output=True,
                              text=True, check=True)
-        self.assertIn("OpenMP (libgomp) was loaded before lensopt", run.stderr)
+        if lensopt._lensopt.openmp_runtime == "libgomp":
+            self.assertIn("OpenMP (libgomp) was loaded before lensopt", run.stderr)
+        else:  # lensopt's loops run in LLVM's runtime, passive: nothing to warn about
+            self.assertNotIn("was loaded before lensopt", run.stderr)
         env["OMP_WAIT_POLICY"] = "PASSIVE"
         run = subprocess.run([sys.executable, "-c", code, *paths], env=env, capture_output=True,
                              text=True, check=True)
@@ -348,3 +351,30 @@ class PassiveOpenMpThreads(unittest.TestCase):
         run = subprocess.run([sys.executable, "-W", "always", "-c", code_first, *paths], env=env,
                              capture_output=True, text=True, check=True)
         self.assertNotIn("was loaded before lensopt", run.stderr)
+
+    def test_loops_passive_when_libgomp_was_loaded_first(self):
+        # torch loads libgomp into the global scope before lensopt can set OMP_WAIT_POLICY. An
+        # extension built with LLVM's OpenMP runtime (python/CMakeLists.txt) binds its GOMP_* calls
+        # to libomp.so.5 all the same (the symbols carry libomp's version), and libomp, initialized
+        # after the package set the policy, waits passively (KMP_BLOCKTIME 0). Fails with the
+        # extension linked to libgomp only: its loops then bind to the spinning libgomp.
+        if lensopt._lensopt.openmp_runtime != "libomp":
+            self.skipTest("the extension was built with libgomp (LENSOPT_PYTHON_OPENMP)")
+        code = ("import ctypes, ctypes.util, os, sys; sys.path[:0] = sys.argv[1:]; "
+                "ctypes.CDLL(ctypes.util.find_library('gomp') or 'libgomp.so.1', "
+                "mode=os.RTLD_GLOBAL); import lensopt; "
+                "lensopt.spots(lensopt.load_lens(sys.argv[-1]), threads=2)")
+        paths = [str(Path(lensopt.__file__).resolve().parents[1])]
+        lens = str(Path(__file__).resolve().parents[2] / "lenses" / "doublet.toml")
+        env = {k: v for k, v in os.environ.items() if k != "OMP_WAIT_POLICY"}
+        env["OMP_DISPLAY_ENV"] = "verbose"
+        env["LD_DEBUG"] = "bindings"
+        run = subprocess.run([sys.executable, "-c", code, *paths, lens], env=env,
+                             capture_output=True, text=True, check=True)
+        bound = [line for line in run.stderr.splitlines()
+                 if "_lensopt" in line.split("binding file")[-1].split(" to ")[0]
+                 and "`GOMP_parallel'" in line]
+        self.assertTrue(bound, "no binding of GOMP_parallel from _lensopt reported")
+        for line in bound:
+            self.assertIn("libomp.so.5", line)
+        self.assertIn("KMP_BLOCKTIME='0'", run.stderr)
