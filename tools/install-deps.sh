@@ -12,7 +12,6 @@ packages=(
   libtorch-dev
   python3
   python3-dev pybind11-dev python3-numpy python3-torch python3-pytest
-  libomp5-14
   ccache
 )
 missing=()

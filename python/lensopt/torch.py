@@ -38,9 +38,8 @@ On the CPU, glibc's malloc by default returns the memory a training step frees t
 the next step faults it in again (a quarter to a third of the CPU time of four 256 x 256 crops of
 a 1280 x 720 image, BENCHMARKS.md); MALLOC_MMAP_THRESHOLD_=67108864
 MALLOC_TRIM_THRESHOLD_=268435456 in the environment (both: either alone is worse) avoids that
-(for the torch operations). lensopt's own threads wait passively (the package's setting, in LLVM's
-OpenMP runtime when the extension was built with it: even when torch was imported first); torch's
-own threads follow OMP_WAIT_POLICY as libgomp read it when torch loaded it.
+(for the torch operations). OpenMP's threads (lensopt's and torch's) wait passively, also when
+torch was imported first (lensopt/__init__.py says how), unless OMP_WAIT_POLICY says otherwise.
 
 Glasses (glass_mode="quantized", the paper's): the forward pass uses the nearest catalog glass
 and the gradient passes straight through to the continuous g; l_GV pulls g towards its glass.
