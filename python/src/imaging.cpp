@@ -223,8 +223,8 @@ void bind_imaging(py::module_& m) {
           "scene_window",
           [](const PyImaging& p, int width, int height, int channels,
              std::optional<std::array<int, 4>> crop) {
-            const CropWindow w =
-                p.imaging->scene_window(width, height, channels, crop_or_whole(crop, width, height));
+            const CropWindow w = p.imaging->scene_window(width, height, channels,
+                                                         crop_or_whole(crop, width, height));
             return std::array<int, 4>{w.x0, w.y0, w.width, w.height};
           },
           py::arg("width"), py::arg("height"), py::arg("channels"), py::arg("crop") = py::none(),
@@ -249,9 +249,9 @@ void bind_imaging(py::module_& m) {
             py::array_t<float> g_images;
             float* gi = nullptr;
             if (image_gradient) {
-              g_images = py::array_t<float>(
-                  {batch, static_cast<py::ssize_t>(channels), static_cast<py::ssize_t>(height),
-                   static_cast<py::ssize_t>(width)});
+              g_images = py::array_t<float>({batch, static_cast<py::ssize_t>(channels),
+                                             static_cast<py::ssize_t>(height),
+                                             static_cast<py::ssize_t>(width)});
               gi = g_images.mutable_data();
             }
             {

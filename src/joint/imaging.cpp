@@ -217,8 +217,7 @@ CropPlan DifferentiableImaging::State::make_plan(int channels, const CropWindow&
   return p;
 }
 
-std::uint64_t DifferentiableImaging::State::scene_hash(const SceneWindow& scene,
-                                                       const CropPlan& p,
+std::uint64_t DifferentiableImaging::State::scene_hash(const SceneWindow& scene, const CropPlan& p,
                                                        const Geometry& g) const {
   const CropWindow w = read_window(p, g);
   const FloatImage& px = scene.pixels;
@@ -264,8 +263,8 @@ void DifferentiableImaging::State::blur_region(
     // [x0 - r, x1 + r) x [y0 - r, y1 + r), reflected at the borders, and its spectrum.
     std::vector<std::complex<double>> kernel;
     if (blurred) kernel_spectrum(task_kernel(g, p, t).data(), r, buffers, kernel);
-    load_reflected_block(scene.pixels, scene.x0, scene.y0, scene.width, scene.height, t.c,
-                         t.x0 - r, t.y0 - r, t.x1 - t.x0 + 2 * r, t.y1 - t.y0 + 2 * r, buffers);
+    load_reflected_block(scene.pixels, scene.x0, scene.y0, scene.width, scene.height, t.c, t.x0 - r,
+                         t.y0 - r, t.x1 - t.x0 + 2 * r, t.y1 - t.y0 + 2 * r, buffers);
     if (spectra) {
       const std::complex<double>* s = buffers.complex_spectrum();
       (*spectra)[ti].assign(s, s + buffers.spectrum_size());

@@ -31,7 +31,7 @@ struct Adjoint {
   const CropPlan& p;
   const SceneWindow& scene;
   const CropWindow& crop;
-  bool lens = true;  // the lens gradient wanted (else dL/dscene only)
+  bool lens = true;       // the lens gradient wanted (else dL/dscene only)
   std::size_t plane = 0;  // pixels of the region
   int channels = 0, fields = 0;
   std::vector<double> ri;  // R per region pixel (1 without relative illumination)

@@ -345,8 +345,8 @@ TEST_CASE("joint imaging: a window of the scene renders and differentiates as th
       for (int i = 0; i < scene.width; ++i)
         for (int c = 0; c < channels; ++c)
           scene.at(i, j, c) = c < 3 ? rgb.at(i, j, c) : 0.25f + 0.5f * rgb.at(i, j, 0);
-    for (const CropWindow crop : {CropWindow{0, 0, 40, 30}, CropWindow{150, 85, 50, 35},
-                                  CropWindow{80, 40, 36, 28}}) {
+    for (const CropWindow crop :
+         {CropWindow{0, 0, 40, 30}, CropWindow{150, 85, 50, 35}, CropWindow{80, 40, 36, 28}}) {
       CAPTURE(channels);
       CAPTURE(crop.x0);
       const CropWindow w = imaging.scene_window(scene.width, scene.height, channels, crop);
