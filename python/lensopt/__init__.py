@@ -29,23 +29,50 @@ Long calls release the GIL; optimize() stops on Ctrl-C (KeyboardInterrupt).
 
 import os as _os
 
-# OpenMP threads that wait passively (sleep) between parallel regions instead of spinning:
-# libgomp reads this once, when it is loaded, so it only takes effect if nothing loaded it
-# before (torch does); the user's own setting wins (include/lensopt/core/passive_threads.h).
-_user_wait_policy = "OMP_WAIT_POLICY" in _os.environ
+# OpenMP threads that wait passively (sleep) between parallel regions instead of spinning; the
+# user's own setting wins (include/lensopt/core/passive_threads.h). libgomp reads the variable only
+# when it is loaded: if something (torch) loaded it before lensopt, the package keeps CPUs + 1 of
+# its threads idle instead, which makes libgomp spin only 100 iterations before its threads sleep
+# (its documented throttling when it manages more threads than there are CPUs; GOMP_SPINCOUNT in
+# the libgomp manual; _lensopt._park_gomp_threads): lensopt's threads and torch's then wait as
+# good as passively (BENCHMARKS.md "lensopt.torch against the CLI step, torch first").
+_user_wait_policy = "OMP_WAIT_POLICY" in _os.environ or "GOMP_SPINCOUNT" in _os.environ
 _os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 
-def _gomp_already_loaded():
-    """Whether libgomp is mapped in this process already (torch, numpy's BLAS, ... loaded it)."""
+def _loaded_gomp():
+    """The paths of the libgomp copies mapped in this process (torch, numpy's BLAS, ... loaded
+    them; a torch wheel's own copy is named libgomp-<hash>.so.1)."""
     try:
-        with open("/proc/self/maps", encoding="ascii", errors="replace") as maps:
-            return any("libgomp" in line for line in maps)
+        with open("/proc/self/maps", encoding="utf-8", errors="replace") as maps:
+            return sorted({line.split(None, 5)[5].strip() for line in maps
+                           if len(line.split(None, 5)) == 6 and "libgomp" in line.split(None, 5)[5]
+                           and line.split(None, 5)[5].strip().startswith("/")})
     except OSError:
-        return False
+        return []
 
 
-if not _user_wait_policy and _gomp_already_loaded():
+_gomp_before = [] if _user_wait_policy else _loaded_gomp()
+
+from . import _lensopt  # noqa: E402
+
+
+def _throttle_gomp(paths):
+    """Parks CPUs + 1 threads of each libgomp in `paths` (see above); the ones it could not."""
+    try:
+        cpus = len(_os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        cpus = _os.cpu_count() or 1
+    failed = []
+    for path in paths:
+        try:
+            _lensopt._park_gomp_threads(path, cpus + 1)
+        except (ValueError, RuntimeError):
+            failed.append(path)
+    return failed
+
+
+if _gomp_before and _throttle_gomp(_gomp_before):
     import warnings as _warnings
 
     _warnings.warn(

@@ -25,12 +25,21 @@ samples are black) are fixed from the optics' values, as the C++ renderer fixes 
 copied to the CPU, so a network on a GPU keeps its images there. The blur works one patch row at
 a time and the warp (its own autograd Function) in chunks, so the temporaries stay small.
 
+float32 images on the CPU (image_ops="auto", the default) take lensopt's own image formation
+instead, the same code as the joint optimization and `lensopt bench --joint-imaging`: one
+autograd.Function whose forward is Imaging.render_images (the C++ blur, RI and warp of each crop,
+reading only the window of the images the crop needs) and whose backward is its adjoint
+Imaging.backward_images (dL/dx through the Jets, dL/dimages). Its data path is the CLI's: within
+1.1x of the CLI's joint step (BENCHMARKS.md "lensopt.torch against the CLI step, torch first"),
+where the torch operations on the CPU took 2.5-3x. It agrees with the torch operations to float32
+rounding (tests/python/test_torch.py); image_ops="torch" keeps the latter.
+
 On the CPU, glibc's malloc by default returns the memory a training step frees to the system, and
 the next step faults it in again (a quarter to a third of the CPU time of four 256 x 256 crops of
 a 1280 x 720 image, BENCHMARKS.md); MALLOC_MMAP_THRESHOLD_=67108864
-MALLOC_TRIM_THRESHOLD_=268435456 in the environment (both: either alone is worse) avoids that. On
-a machine with more threads than free cores, OMP_WAIT_POLICY=PASSIVE keeps OpenMP's idle threads
-from spinning.
+MALLOC_TRIM_THRESHOLD_=268435456 in the environment (both: either alone is worse) avoids that
+(for the torch operations). OpenMP's threads (lensopt's and torch's) wait passively, also when
+torch was imported first (lensopt/__init__.py says how), unless OMP_WAIT_POLICY says otherwise.
 
 Glasses (glass_mode="quantized", the paper's): the forward pass uses the nearest catalog glass
 and the gradient passes straight through to the continuous g; l_GV pulls g towards its glass.
@@ -51,6 +60,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 from torch import nn
+from torch.autograd.function import once_differentiable
 
 from . import _lensopt
 
@@ -254,6 +264,38 @@ class _OpticsFunction(torch.autograd.Function):
         return torch.from_numpy(gx).to(device=ctx.x.device, dtype=ctx.x.dtype), None, None, None
 
 
+class _LensoptImagingFunction(torch.autograd.Function):
+    """(x, float32 CPU images B x C x H x W) -> their crops, by lensopt's own image formation
+    (Imaging.render_images: the renderer's blur, RI and warp in C++, the joint optimization's and
+    `lensopt bench --joint-imaging`'s code), and the backward by its adjoint
+    (Imaging.backward_images: dL/dx through the Jets' derivative parts, dL/dimages). Only the
+    pixels a crop reads are copied out of the images; no optics cross into torch."""
+
+    @staticmethod
+    def forward(ctx, x, images, module, crop, derivatives):
+        module._prepare(x, derivatives=derivatives)
+        ctx.module, ctx.crop = module, crop
+        ctx.x = x.detach().clone()
+        ctx.save_for_backward(images)
+        return torch.from_numpy(module.imaging.render_images(images.detach().numpy(), crop))
+
+    @staticmethod
+    @once_differentiable
+    def backward(ctx, grad):
+        (images,) = ctx.saved_tensors
+        need_x, need_images = ctx.needs_input_grad[:2]
+        module = ctx.module
+        module._prepare(ctx.x, derivatives=need_x)
+        gx, g_images = module.imaging.backward_images(
+            images.detach().numpy(), ctx.crop, grad.detach().to(torch.float32).numpy(),
+            lens_gradient=need_x, image_gradient=need_images)
+        if gx is not None:
+            gx = torch.from_numpy(gx).to(device=ctx.x.device, dtype=ctx.x.dtype)
+        if g_images is not None:
+            g_images = torch.from_numpy(g_images)
+        return gx, g_images, None, None, None
+
+
 class _Plan:
     """The constants of one image operation (full size W x H, crop, channel count) under one
     prepare(): the blur's patch tasks, gather and scatter indices, windows and PSF resampling;
@@ -347,7 +389,14 @@ class ImageFormation(nn.Module):
         relative_illumination, distortion: apply (and differentiate) them.
         freeze: variable names or groups ("curvatures", "spacings", "glasses", "c3") whose
             gradient is zeroed.
-        threads: threads of the C++ optics (0: all cores); the image operations use torch's.
+        threads: threads of the C++ optics and image formation (0: all cores); the torch image
+            operations use torch's.
+        image_ops: "auto": float32 images on the CPU are formed by lensopt's C++ image formation
+            and its adjoint (`Imaging.render_images` / `backward_images`: the joint
+            optimization's code, `lensopt bench --joint-imaging`'s; only the pixels a crop reads
+            are copied), other images (float64, other devices) by the torch operations below;
+            "torch": the torch operations always. The two agree to float32 rounding
+            (tests/python/test_torch.py).
 
     forward(images, crop=None): B x C x H x W -> B x C x H x W (or the crop's h x w), on the
     images' device, in their dtype (computed in float64 for float64 images, else float32).
@@ -357,17 +406,22 @@ class ImageFormation(nn.Module):
                  fields: int = 21, grid_size: int = 65, bin_um: float = 4.0,
                  sigma_bins: float = 0.5, support_bins: int = 3,
                  relative_illumination: bool = True, distortion: bool = True,
-                 paraxial_image_solve: bool = True, freeze=(), threads: int = 0):
+                 paraxial_image_solve: bool = True, freeze=(), threads: int = 0,
+                 image_ops: str = "auto"):
         super().__init__()
         if fields < 2:
             raise ValueError(f"fields = {fields}: the image formation needs at least 2 fields")
+        if image_ops not in ("auto", "torch"):
+            raise ValueError(f"image_ops = {image_ops!r}: 'auto' or 'torch'")
+        self.image_ops = image_ops
         # What it was made from, for copy.deepcopy and pickle (__getstate__).
         self._lens = lens.copy()
         self._init_kwargs = dict(
             catalog=catalog, glass_mode=glass_mode, rings=rings, fields=fields,
             grid_size=grid_size, bin_um=bin_um, sigma_bins=sigma_bins, support_bins=support_bins,
             relative_illumination=relative_illumination, distortion=distortion,
-            paraxial_image_solve=paraxial_image_solve, freeze=tuple(freeze), threads=threads)
+            paraxial_image_solve=paraxial_image_solve, freeze=tuple(freeze), threads=threads,
+            image_ops=image_ops)
         self.param = _lensopt.Parameterization(lens, catalog=catalog,
                                                paraxial_image_solve=paraxial_image_solve)
         self.glass_mode = glass_mode
@@ -419,13 +473,18 @@ class ImageFormation(nn.Module):
         self.imaging.prepare(v, derivatives)
         self._prepared = (v, derivatives)
         self._generation += 1
-        self._values = self.imaging.optics(jacobians=False)
+        self._values = None  # fetched by _optics_values() when the torch image operations run
         self._cache = {}
+
+    def _optics_values(self):
+        if self._values is None:
+            self._values = self.imaging.optics(jacobians=False)
+        return self._values
 
     def _optics_tensors(self, device):
         key = ("optics", str(device))
         if key not in self._cache:
-            o = self._values
+            o = self._optics_values()
             self._cache[key] = tuple(
                 torch.from_numpy(np.ascontiguousarray(o[name])).to(device)
                 for name in ("psf", "reference_y_mm", "centroid_y_mm", "relative_illumination"))
@@ -470,7 +529,7 @@ class ImageFormation(nn.Module):
         if key in self._cache:
             return self._cache[key]
         L = self._layout(width, height)
-        o = self._values
+        o = self._optics_values()
         yref, ybar = o["reference_y_mm"], o["centroid_y_mm"]
         cx0, cy0, cw, ch = crop
         p = _Plan()
@@ -666,6 +725,9 @@ class ImageFormation(nn.Module):
         device = images.device
         cdtype = torch.float64 if images.dtype == torch.float64 else torch.float32
         derivatives = torch.is_grad_enabled() and x.requires_grad
+        if (self.image_ops == "auto" and device.type == "cpu" and images.dtype == torch.float32
+                and x.device.type == "cpu"):
+            return _LensoptImagingFunction.apply(x, images, self, crop, derivatives)
         psf, yref, ybar, ri_nodes = _OpticsFunction.apply(x, self, derivatives, device)
         p = self._plan(W, H, crop, C, device)
         out = self._blur(images, psf, p, cdtype)

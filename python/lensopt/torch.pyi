@@ -20,12 +20,13 @@ class ImageFormation(nn.Module):
     glass_mode: str
     relative_illumination: bool
     distortion: bool
+    image_ops: str
     def __init__(self, lens: Lens, *, catalog: str = "", glass_mode: str = "quantized",
                  rings: int = 8, fields: int = 21, grid_size: int = 65, bin_um: float = 4.0,
                  sigma_bins: float = 0.5, support_bins: int = 3,
                  relative_illumination: bool = True, distortion: bool = True,
                  paraxial_image_solve: bool = True, freeze: Sequence[str] = ...,
-                 threads: int = 0) -> None: ...
+                 threads: int = 0, image_ops: str = "auto") -> None: ...
     @property
     def names(self) -> List[str]: ...
     def forward(self, images: torch.Tensor, crop: Optional[Tuple[int, int, int, int]] = None) -> torch.Tensor: ...

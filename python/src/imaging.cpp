@@ -47,6 +47,33 @@ CropWindow crop_of(const std::optional<std::array<int, 4>>& crop, const SplitSce
   return CropWindow{(*crop)[0], (*crop)[1], (*crop)[2], (*crop)[3]};
 }
 
+// B x C x H x W float32 images (numpy views of torch tensors: any strides), read without
+// conversion; the windows of them a crop reads are copied into FloatImages.
+using ImageArray = py::array_t<float, 0>;
+
+CropWindow crop_or_whole(const std::optional<std::array<int, 4>>& crop, int width, int height) {
+  if (!crop) return CropWindow{0, 0, width, height};
+  return CropWindow{(*crop)[0], (*crop)[1], (*crop)[2], (*crop)[3]};
+}
+
+// Item b's pixels of window w (full-image coordinates) into `out` (interleaved, resized).
+void copy_window(const py::detail::unchecked_reference<float, 4>& in, py::ssize_t b,
+                 const CropWindow& w, FloatImage& out) {
+  const int channels = static_cast<int>(in.shape(1));
+  if (out.width != w.width || out.height != w.height || out.channels != channels)
+    out = FloatImage(w.width, w.height, channels);
+  float* dst = out.pixels.data();
+  for (int j = 0; j < w.height; ++j)
+    for (int i = 0; i < w.width; ++i)
+      for (int c = 0; c < channels; ++c) *dst++ = in(b, c, w.y0 + j, w.x0 + i);
+}
+
+void check_images(const ImageArray& images) {
+  if (images.ndim() != 4) throw Error("the images must be B x C x H x W");
+  if (images.shape(0) < 1 || images.shape(1) < 1 || images.shape(2) < 1 || images.shape(3) < 1)
+    throw Error("the images must not be empty");
+}
+
 struct PyImaging {
   py::object param_ref;  // keeps the Parameterization alive
   std::unique_ptr<DifferentiableImaging> imaging;
@@ -157,6 +184,114 @@ void bind_imaging(py::module_& m) {
           py::arg("scene"), py::arg("crop"), py::arg("grad"), py::arg("scene_gradient") = true,
           "(dL/dx, dL/dscene) for dL/d(rendered crop) = grad (h x w x C; used in float32 "
           "precision). dL/dscene is None unless scene_gradient.")
+      .def(
+          "render_images",
+          [](const PyImaging& p, const ImageArray& images, std::optional<std::array<int, 4>> crop) {
+            check_images(images);
+            const auto in = images.unchecked<4>();
+            const py::ssize_t batch = images.shape(0);
+            const int channels = static_cast<int>(images.shape(1)),
+                      height = static_cast<int>(images.shape(2)),
+                      width = static_cast<int>(images.shape(3));
+            const CropWindow c = crop_or_whole(crop, width, height);
+            py::array_t<float> out({batch, static_cast<py::ssize_t>(channels),
+                                    static_cast<py::ssize_t>(c.height),
+                                    static_cast<py::ssize_t>(c.width)});
+            float* o = out.mutable_data();
+            {
+              py::gil_scoped_release release;
+              const CropWindow w = p.imaging->scene_window(width, height, channels, c);
+              FloatImage window;
+              const std::size_t pixels = static_cast<std::size_t>(c.width) * c.height;
+              for (py::ssize_t b = 0; b < batch; ++b) {
+                copy_window(in, b, w, window);
+                const std::vector<double> v =
+                    p.imaging->render_values(SceneWindow{window, w.x0, w.y0, width, height}, c);
+                float* ob = o + static_cast<std::size_t>(b) * channels * pixels;
+                for (int ch = 0; ch < channels; ++ch)
+                  for (std::size_t k = 0; k < pixels; ++k)
+                    ob[ch * pixels + k] = static_cast<float>(v[k * channels + ch]);
+              }
+            }
+            return out;
+          },
+          py::arg("images"), py::arg("crop") = py::none(),
+          "render() of a batch: B x C x H x W float32 images (any strides) -> their crops "
+          "B x C x h x w float32 (crop = (x0, y0, w, h); None: the whole images). Reads only the "
+          "pixels each crop needs. lensopt.torch's forward on float32 CPU images.")
+      .def(
+          "scene_window",
+          [](const PyImaging& p, int width, int height, int channels,
+             std::optional<std::array<int, 4>> crop) {
+            const CropWindow w = p.imaging->scene_window(width, height, channels,
+                                                         crop_or_whole(crop, width, height));
+            return std::array<int, 4>{w.x0, w.y0, w.width, w.height};
+          },
+          py::arg("width"), py::arg("height"), py::arg("channels"), py::arg("crop") = py::none(),
+          "(x0, y0, w, h): the pixels of a width x height image that render_images() and "
+          "backward_images() of the crop read (its blurred region plus the kernels' reach).")
+      .def(
+          "backward_images",
+          [](const PyImaging& p, const ImageArray& images, std::optional<std::array<int, 4>> crop,
+             const ImageArray& grad, bool lens_gradient, bool image_gradient) {
+            check_images(images);
+            const auto in = images.unchecked<4>();
+            const py::ssize_t batch = images.shape(0);
+            const int channels = static_cast<int>(images.shape(1)),
+                      height = static_cast<int>(images.shape(2)),
+                      width = static_cast<int>(images.shape(3));
+            const CropWindow c = crop_or_whole(crop, width, height);
+            if (grad.ndim() != 4 || grad.shape(0) != batch || grad.shape(1) != channels ||
+                grad.shape(2) != c.height || grad.shape(3) != c.width)
+              throw Error("the gradient must have the rendered crops' shape B x C x h x w");
+            const auto gin = grad.unchecked<4>();
+            std::vector<double> gx;
+            py::array_t<float> g_images;
+            float* gi = nullptr;
+            if (image_gradient) {
+              g_images = py::array_t<float>({batch, static_cast<py::ssize_t>(channels),
+                                             static_cast<py::ssize_t>(height),
+                                             static_cast<py::ssize_t>(width)});
+              gi = g_images.mutable_data();
+            }
+            {
+              py::gil_scoped_release release;
+              const std::size_t plane = static_cast<std::size_t>(width) * height;
+              if (gi) std::fill(gi, gi + static_cast<std::size_t>(batch) * channels * plane, 0.0f);
+              const CropWindow w = p.imaging->scene_window(width, height, channels, c);
+              FloatImage window, g(c.width, c.height, channels);
+              std::vector<double> g_window;
+              for (py::ssize_t b = 0; b < batch; ++b) {
+                copy_window(in, b, w, window);
+                float* dst = g.pixels.data();
+                for (int j = 0; j < c.height; ++j)
+                  for (int i = 0; i < c.width; ++i)
+                    for (int ch = 0; ch < channels; ++ch) *dst++ = gin(b, ch, j, i);
+                g_window.clear();
+                p.imaging->backward(SceneWindow{window, w.x0, w.y0, width, height}, c, g,
+                                    lens_gradient ? &gx : nullptr, gi ? &g_window : nullptr);
+                if (!gi) continue;
+                float* gb = gi + static_cast<std::size_t>(b) * channels * plane;
+                const double* src = g_window.data();
+                for (int j = 0; j < w.height; ++j)
+                  for (int i = 0; i < w.width; ++i)
+                    for (int ch = 0; ch < channels; ++ch)
+                      gb[ch * plane + static_cast<std::size_t>(w.y0 + j) * width + (w.x0 + i)] =
+                          static_cast<float>(*src++);
+              }
+              if (lens_gradient && gx.empty()) gx.assign(p.variables, 0.0);
+            }
+            py::object gx_out = py::none(), gi_out = py::none();
+            if (lens_gradient) gx_out = to_numpy(std::move(gx), {p.variables});
+            if (image_gradient) gi_out = g_images;
+            return py::make_tuple(gx_out, gi_out);
+          },
+          py::arg("images"), py::arg("crop"), py::arg("grad"), py::kw_only(),
+          py::arg("lens_gradient") = true, py::arg("image_gradient") = true,
+          "backward() of a batch: (dL/dx summed over the batch or None, dL/dimages B x C x H x W "
+          "float32 or None) for dL/d(the crops) = grad (B x C x h x w float32, any strides). "
+          "Without lens_gradient the optics need no derivatives. lensopt.torch's backward on "
+          "float32 CPU images.")
       .def(
           "optics",
           [](const PyImaging& p, bool jacobians) {

@@ -58,12 +58,34 @@ void DifferentiableImagingOptions::validate() const {
 
 namespace imaging_detail {
 
-void check_inputs(const FloatImage& scene, const CropWindow& crop) {
-  if (scene.empty()) throw Error("joint imaging: empty scene image");
+void check_inputs(const SceneWindow& scene, const CropWindow& crop) {
+  if (scene.pixels.empty() || scene.width <= 0 || scene.height <= 0)
+    throw Error("joint imaging: empty scene image");
   if (crop.width <= 0 || crop.height <= 0 || crop.x0 < 0 || crop.y0 < 0 ||
       crop.x0 + crop.width > scene.width || crop.y0 + crop.height > scene.height) {
     throw Error(fmt::format("crop {}x{} at ({}, {}) is not inside the {}x{} scene", crop.width,
                             crop.height, crop.x0, crop.y0, scene.width, scene.height));
+  }
+}
+
+CropWindow read_window(const CropPlan& p, const Geometry& g) {
+  const int x0 = std::max(0, p.rx0 - g.max_radius),
+            x1 = std::min(g.width, p.rx0 + p.rw + g.max_radius);
+  const int y0 = std::max(0, p.ry0 - g.max_radius),
+            y1 = std::min(g.height, p.ry0 + p.rh + g.max_radius);
+  return CropWindow{x0, y0, x1 - x0, y1 - y0};
+}
+
+void check_window(const SceneWindow& scene, const CropPlan& p, const Geometry& g) {
+  const CropWindow w = read_window(p, g);
+  const FloatImage& px = scene.pixels;
+  if (w.x0 < scene.x0 || w.y0 < scene.y0 || w.x0 + w.width > scene.x0 + px.width ||
+      w.y0 + w.height > scene.y0 + px.height) {
+    throw Error(fmt::format(
+        "joint imaging: the scene window {}x{} at ({}, {}) does not hold the pixels {}x{} at "
+        "({}, {}) that crop {}x{} at ({}, {}) reads",
+        px.width, px.height, scene.x0, scene.y0, w.width, w.height, w.x0, w.y0, p.crop.width,
+        p.crop.height, p.crop.x0, p.crop.y0));
   }
 }
 
@@ -95,11 +117,32 @@ const std::vector<double>& task_kernel(const Geometry& g, const CropPlan& p, con
 
 using namespace imaging_detail;
 
-CropPlan DifferentiableImaging::State::plan(const FloatImage& scene, const CropWindow& crop,
-                                            const Geometry& g) const {
+std::shared_ptr<const CropPlan> DifferentiableImaging::State::plan(int channels,
+                                                                   const CropWindow& crop,
+                                                                   const Geometry& g) const {
+  const int colours = colour_channel_count(channels);
+  auto same = [&](const PlanEntry& e) {
+    return e.width == g.width && e.height == g.height && e.colours == colours &&
+           e.crop.x0 == crop.x0 && e.crop.y0 == crop.y0 && e.crop.width == crop.width &&
+           e.crop.height == crop.height;
+  };
+  {
+    std::lock_guard<std::mutex> lock(plan_mutex);
+    for (const PlanEntry& e : plan_cache)
+      if (same(e)) return e.plan;
+  }
+  auto made = std::make_shared<const CropPlan>(make_plan(channels, crop, g));
+  std::lock_guard<std::mutex> lock(plan_mutex);
+  if (plan_cache.size() >= kPlanEntries) plan_cache.erase(plan_cache.begin());
+  plan_cache.push_back(PlanEntry{g.width, g.height, colours, crop, made});
+  return made;
+}
+
+CropPlan DifferentiableImaging::State::make_plan(int channels, const CropWindow& crop,
+                                                 const Geometry& g) const {
   CropPlan p;
   p.crop = crop;
-  p.colours = colour_channel_count(scene.channels);
+  p.colours = colour_channel_count(channels);
   p.warp = options.distortion;
   const int width = g.width, height = g.height;
   const SensorGeometry& geo = g.layout.geometry;
@@ -175,16 +218,14 @@ CropPlan DifferentiableImaging::State::plan(const FloatImage& scene, const CropW
   return p;
 }
 
-std::uint64_t DifferentiableImaging::State::scene_hash(const FloatImage& scene, const CropPlan& p,
+std::uint64_t DifferentiableImaging::State::scene_hash(const SceneWindow& scene, const CropPlan& p,
                                                        const Geometry& g) const {
-  const int x0 = std::max(0, p.rx0 - g.max_radius),
-            x1 = std::min(scene.width, p.rx0 + p.rw + g.max_radius);
-  const int y0 = std::max(0, p.ry0 - g.max_radius),
-            y1 = std::min(scene.height, p.ry0 + p.rh + g.max_radius);
+  const CropWindow w = read_window(p, g);
+  const FloatImage& px = scene.pixels;
   std::uint64_t h = 1469598103934665603ull;
-  for (int j = y0; j < y1; ++j) {
-    const float* row = scene.pixels.data() + scene.index(x0, j, 0);
-    const std::size_t count = static_cast<std::size_t>(x1 - x0) * scene.channels;
+  for (int j = w.y0; j < w.y0 + w.height; ++j) {
+    const float* row = px.pixels.data() + px.index(w.x0 - scene.x0, j - scene.y0, 0);
+    const std::size_t count = static_cast<std::size_t>(w.width) * px.channels;
     for (std::size_t i = 0; i < count; ++i) {
       std::uint32_t bits;
       std::memcpy(&bits, row + i, sizeof bits);
@@ -195,10 +236,10 @@ std::uint64_t DifferentiableImaging::State::scene_hash(const FloatImage& scene, 
 }
 
 void DifferentiableImaging::State::blur_region(
-    const FloatImage& scene, const CropPlan& p, const Geometry& g, std::vector<double>* blurred,
+    const SceneWindow& scene, const CropPlan& p, const Geometry& g, std::vector<double>* blurred,
     std::vector<std::vector<std::complex<double>>>* spectra) const {
   const std::size_t plane = static_cast<std::size_t>(p.rw) * p.rh;
-  const int channels = scene.channels;
+  const int channels = scene.pixels.channels;
   if (blurred) {
     blurred->assign(plane * channels, 0.0);
     // Channels that are not blurred (alpha): copied.
@@ -206,7 +247,7 @@ void DifferentiableImaging::State::blur_region(
       for (int j = 0; j < p.rh; ++j)
         for (int i = 0; i < p.rw; ++i)
           (*blurred)[plane * c + static_cast<std::size_t>(j) * p.rw + i] =
-              scene.at(p.rx0 + i, p.ry0 + j, c);
+              scene.pixels.at(p.rx0 - scene.x0 + i, p.ry0 - scene.y0 + j, c);
   }
   const int tasks = static_cast<int>(p.tasks.size());
   if (spectra) spectra->assign(tasks, {});
@@ -223,8 +264,8 @@ void DifferentiableImaging::State::blur_region(
     // [x0 - r, x1 + r) x [y0 - r, y1 + r), reflected at the borders, and its spectrum.
     std::vector<std::complex<double>> kernel;
     if (blurred) kernel_spectrum(task_kernel(g, p, t).data(), r, buffers, kernel);
-    load_reflected_block(scene, t.c, t.x0 - r, t.y0 - r, t.x1 - t.x0 + 2 * r, t.y1 - t.y0 + 2 * r,
-                         buffers);
+    load_reflected_block(scene.pixels, scene.x0, scene.y0, scene.width, scene.height, t.c, t.x0 - r,
+                         t.y0 - r, t.x1 - t.x0 + 2 * r, t.y1 - t.y0 + 2 * r, buffers);
     if (spectra) {
       const std::complex<double>* s = buffers.complex_spectrum();
       (*spectra)[ti].assign(s, s + buffers.spectrum_size());
@@ -294,6 +335,8 @@ void DifferentiableImaging::prepare(const std::vector<double>& x, bool derivativ
   ++s.generation;
   std::lock_guard<std::mutex> forward_lock(s.forward_mutex);
   s.forward_cache.clear();
+  std::lock_guard<std::mutex> plan_lock(s.plan_mutex);
+  s.plan_cache.clear();
 }
 
 FloatImage DifferentiableImaging::render(const FloatImage& scene, const CropWindow& crop) const {
@@ -305,11 +348,27 @@ FloatImage DifferentiableImaging::render(const FloatImage& scene, const CropWind
 
 std::vector<double> DifferentiableImaging::render_values(const FloatImage& scene,
                                                          const CropWindow& crop) const {
+  return render_values(whole(scene), crop);
+}
+
+CropWindow DifferentiableImaging::scene_window(int width, int height, int channels,
+                                               const CropWindow& crop) const {
+  if (channels <= 0) throw Error(fmt::format("joint imaging: {} channels", channels));
+  check_inputs(SceneWindow{FloatImage(1, 1, channels), 0, 0, width, height}, crop);
+  const State& s = *state_;
+  const std::shared_ptr<Geometry> g = s.geometry(width, height);
+  return read_window(*s.plan(channels, crop, *g), *g);
+}
+
+std::vector<double> DifferentiableImaging::render_values(const SceneWindow& scene,
+                                                         const CropWindow& crop) const {
   const auto start = Clock::now();
   check_inputs(scene, crop);
   const State& s = *state_;
   const std::shared_ptr<Geometry> g = s.geometry(scene.width, scene.height);
-  const CropPlan p = s.plan(scene, crop, *g);
+  const std::shared_ptr<const CropPlan> plan = s.plan(scene.pixels.channels, crop, *g);
+  const CropPlan& p = *plan;
+  check_window(scene, p, *g);
   std::vector<double> b;
   s.blur_region(scene, p, *g, &b, nullptr);
   {
@@ -318,7 +377,7 @@ std::vector<double> DifferentiableImaging::render_values(const FloatImage& scene
     e.scene_hash = s.scene_hash(scene, p, *g);
     e.width = scene.width;
     e.height = scene.height;
-    e.channels = scene.channels;
+    e.channels = scene.pixels.channels;
     e.crop = crop;
     e.blurred = std::make_shared<const std::vector<double>>(b);
     std::lock_guard<std::mutex> lock(s.forward_mutex);
@@ -339,7 +398,7 @@ std::vector<double> DifferentiableImaging::render_values(const FloatImage& scene
       }
     }
   }
-  const int channels = scene.channels;
+  const int channels = scene.pixels.channels;
   std::vector<double> out(static_cast<std::size_t>(crop.width) * crop.height * channels, 0.0);
   auto at = [&](int i, int j, int c) -> double& {
     return out[(static_cast<std::size_t>(j) * crop.width + i) * channels + c];

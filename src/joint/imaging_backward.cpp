@@ -29,8 +29,9 @@ struct Adjoint {
   const Optics& o;
   const Geometry& g;
   const CropPlan& p;
-  const FloatImage& scene;
+  const SceneWindow& scene;
   const CropWindow& crop;
+  bool lens = true;       // the lens gradient wanted (else dL/dscene only)
   std::size_t plane = 0;  // pixels of the region
   int channels = 0, fields = 0;
   std::vector<double> ri;  // R per region pixel (1 without relative illumination)
@@ -76,12 +77,17 @@ std::vector<double> warp_adjoint(Adjoint& a, const FloatImage& grad_image,
       for (int i = 0; i < crop.width; ++i) {
         const std::size_t k = static_cast<std::size_t>(j) * crop.width + i;
         if (std::isnan(p.u[k])) continue;
-        const WarpTaps w = warp_taps(p, g, k, true);
+        const WarpTaps w = warp_taps(p, g, k, a.lens);
         double du = 0, dv = 0;
         for (int c = 0; c < channels; ++c) {
           const double gv = grad_image.at(i, j, c);
           if (gv == 0.0) continue;
           double* gc = gbp.data() + plane * c;
+          if (!a.lens) {
+            for (int m = 0; m < 4; ++m)
+              for (int t = 0; t < 4; ++t) gc[w.index[m][t]] += w.wy[m] * w.wx[t] * gv;
+            continue;
+          }
           const double* bc = bp.data() + plane * c;
           for (int m = 0; m < 4; ++m) {
             for (int t = 0; t < 4; ++t) {
@@ -92,6 +98,7 @@ std::vector<double> warp_adjoint(Adjoint& a, const FloatImage& grad_image,
             }
           }
         }
+        if (!a.lens) continue;
         // u = a_x + dx rho(r') / r' - 1/2 (pixels), rho in mm.
         const double dx = crop.x0 + i + 0.5 - geo.axis_x, dy = crop.y0 + j + 0.5 - geo.axis_y;
         const double r_out = geo.pitch_mm * std::sqrt(dx * dx + dy * dy);
@@ -127,7 +134,8 @@ void illumination_adjoint(Adjoint& a, const std::vector<double>& b, std::vector<
       for (int i = 0; i < p.rw; ++i) {
         const std::size_t k = static_cast<std::size_t>(j) * p.rw + i;
         double g_r = 0;
-        for (int c = 0; c < p.colours; ++c) g_r += gbp[plane * c + k] * b[plane * c + k];
+        if (a.lens)
+          for (int c = 0; c < p.colours; ++c) g_r += gbp[plane * c + k] * b[plane * c + k];
         for (int c = 0; c < p.colours; ++c) gb[plane * c + k] *= ri[k];
         if (g_r == 0.0) continue;
         const LinearPiece piece = linear_piece(o.reference_y_mm, o.illumination,
@@ -205,6 +213,7 @@ std::vector<std::vector<double>> blur_adjoint(
             block[static_cast<std::size_t>(j) * cols + i] =
                 work.data[static_cast<std::size_t>(j) * nx + i];
       }
+      if (!a.lens) continue;
       const std::vector<std::complex<double>>& scene_spectrum = spectra[ti];
       const double scale = 1.0 / (static_cast<double>(nx) * ny);
       for (std::size_t i = 0; i < spectrum_size; ++i) {
@@ -247,14 +256,15 @@ std::vector<std::vector<double>> blur_adjoint(
 void fold_scene_gradient(const Adjoint& a, const std::vector<std::vector<double>>& g_blocks,
                          const std::vector<double>& gb, std::vector<double>* grad_scene) {
   const CropPlan& p = a.p;
-  const FloatImage& scene = a.scene;
+  const SceneWindow& scene = a.scene;
+  const FloatImage& window = scene.pixels;
   const std::size_t plane = a.plane;
   const int channels = a.channels;
   const int tasks = static_cast<int>(p.tasks.size());
   if (grad_scene) {
     std::vector<double>& gs = *grad_scene;
-    if (gs.empty()) gs.assign(scene.pixels.size(), 0.0);
-    if (gs.size() != scene.pixels.size())
+    if (gs.empty()) gs.assign(window.pixels.size(), 0.0);
+    if (gs.size() != window.pixels.size())
       throw Error("joint imaging: grad_scene does not have the scene's size");
     // In task order (reproducible): each block folded back through the border reflection.
     for (int ti = 0; ti < tasks; ++ti) {
@@ -262,9 +272,9 @@ void fold_scene_gradient(const Adjoint& a, const std::vector<std::vector<double>
       const int r = t.radius, cols = t.x1 - t.x0 + 2 * r, rows = t.y1 - t.y0 + 2 * r;
       const std::vector<double>& block = g_blocks[ti];
       for (int j = 0; j < rows; ++j) {
-        const int sy = reflect_index(t.y0 - r + j, scene.height);
+        const int sy = reflect_index(t.y0 - r + j, scene.height) - scene.y0;
         for (int i = 0; i < cols; ++i)
-          gs[scene.index(reflect_index(t.x0 - r + i, scene.width), sy, t.c)] +=
+          gs[window.index(reflect_index(t.x0 - r + i, scene.width) - scene.x0, sy, t.c)] +=
               block[static_cast<std::size_t>(j) * cols + i];
       }
     }
@@ -272,7 +282,7 @@ void fold_scene_gradient(const Adjoint& a, const std::vector<std::vector<double>
     for (int c = p.colours; c < channels; ++c)
       for (int j = 0; j < p.rh; ++j)
         for (int i = 0; i < p.rw; ++i)
-          gs[scene.index(p.rx0 + i, p.ry0 + j, c)] +=
+          gs[window.index(p.rx0 - scene.x0 + i, p.ry0 - scene.y0 + j, c)] +=
               gb[plane * c + static_cast<std::size_t>(j) * p.rw + i];
   }
 }
@@ -341,41 +351,52 @@ void DifferentiableImaging::backward(const FloatImage& scene, const CropWindow& 
 void DifferentiableImaging::backward(const FloatImage& scene, const CropWindow& crop,
                                      const FloatImage& grad_image, std::vector<double>& grad_x,
                                      std::vector<double>* grad_scene) const {
+  backward(whole(scene), crop, grad_image, &grad_x, grad_scene);
+}
+
+void DifferentiableImaging::backward(const SceneWindow& scene, const CropWindow& crop,
+                                     const FloatImage& grad_image, std::vector<double>* grad_x,
+                                     std::vector<double>* grad_scene) const {
   const auto start = Clock::now();
   check_inputs(scene, crop);
   const State& s = *state_;
   const int n = s.param.size();
-  if (grad_x.empty()) grad_x.assign(n, 0.0);
-  if (static_cast<int>(grad_x.size()) != n) {
+  const int channels = scene.pixels.channels;
+  const bool lens = grad_x != nullptr;
+  if (lens && grad_x->empty()) grad_x->assign(n, 0.0);
+  if (lens && static_cast<int>(grad_x->size()) != n) {
     throw Error(fmt::format("joint imaging: grad_x has {} entries, the lens has {} variables",
-                            grad_x.size(), n));
+                            grad_x->size(), n));
   }
   if (grad_image.width != crop.width || grad_image.height != crop.height ||
-      grad_image.channels != scene.channels) {
+      grad_image.channels != channels) {
     throw Error(fmt::format("joint imaging: the gradient image is {}x{}x{}, the crop {}x{}x{}",
                             grad_image.width, grad_image.height, grad_image.channels, crop.width,
-                            crop.height, scene.channels));
+                            crop.height, channels));
   }
-  if (s.prepared && s.optics.variables != n) {
+  if (lens && s.prepared && s.optics.variables != n) {
     throw Error("joint imaging: backward() needs prepare(x) with derivatives");
   }
   const std::shared_ptr<Geometry> g = s.geometry(scene.width, scene.height);
-  const CropPlan p = s.plan(scene, crop, *g);
-  // B from render() of the same scene and crop if it is cached, else computed here.
+  const std::shared_ptr<const CropPlan> plan = s.plan(channels, crop, *g);
+  const CropPlan& p = *plan;
+  check_window(scene, p, *g);
+  // B from render() of the same scene and crop if it is cached, else computed here (the lens
+  // gradient only: dL/dscene = A^T G does not depend on the scene).
   std::shared_ptr<const std::vector<double>> cached;
-  {
+  if (lens) {
     const std::uint64_t hash = s.scene_hash(scene, p, *g);
     std::lock_guard<std::mutex> lock(s.forward_mutex);
     for (const State::ForwardEntry& e : s.forward_cache) {
       if (e.generation == s.generation && e.scene_hash == hash && e.width == scene.width &&
-          e.height == scene.height && e.channels == scene.channels && e.crop.x0 == crop.x0 &&
+          e.height == scene.height && e.channels == channels && e.crop.x0 == crop.x0 &&
           e.crop.y0 == crop.y0 && e.crop.width == crop.width && e.crop.height == crop.height)
         cached = e.blurred;
     }
   }
   std::vector<double> computed;
   std::vector<std::vector<std::complex<double>>> spectra;
-  s.blur_region(scene, p, *g, cached ? nullptr : &computed, &spectra);
+  if (lens) s.blur_region(scene, p, *g, cached ? nullptr : &computed, &spectra);
   const std::vector<double>& b = cached ? *cached : computed;
   const int fields = static_cast<int>(s.optics.reference_y_mm.size());
   Adjoint a{s.options,
@@ -384,25 +405,31 @@ void DifferentiableImaging::backward(const FloatImage& scene, const CropWindow& 
             p,
             scene,
             crop,
+            lens,
             static_cast<std::size_t>(p.rw) * p.rh,
-            scene.channels,
+            channels,
             fields,
             {},
             std::vector<double>(fields, 0.0),
             std::vector<double>(fields, 0.0),
             std::vector<double>(fields, 0.0)};
   illumination_factors(a);
-  std::vector<double> bp = b;  // B' = R B
-  for (int c = 0; c < p.colours; ++c)
-    for (std::size_t k = 0; k < a.plane; ++k) bp[a.plane * c + k] *= a.ri[k];
+  std::vector<double> bp;  // B' = R B
+  if (lens) {
+    bp = b;
+    for (int c = 0; c < p.colours; ++c)
+      for (std::size_t k = 0; k < a.plane; ++k) bp[a.plane * c + k] *= a.ri[k];
+  }
   std::vector<double> gb = warp_adjoint(a, grad_image, bp);  // dL/dB'
   illumination_adjoint(a, b, gb);                            // now dL/dB
   std::vector<std::vector<double>> g_blocks;
   const std::vector<std::vector<double>> g_mixed =
       blur_adjoint(a, gb, spectra, grad_scene ? &g_blocks : nullptr);
   fold_scene_gradient(a, g_blocks, gb, grad_scene);
-  const std::vector<double> gx = lens_gradient(a, g_mixed, n);
-  for (int j = 0; j < n; ++j) grad_x[j] += gx[j];
+  if (lens) {
+    const std::vector<double> gx = lens_gradient(a, g_mixed, n);
+    for (int j = 0; j < n; ++j) (*grad_x)[j] += gx[j];
+  }
   s.timings.adjoint_s.store(seconds_since(start));
 }
 

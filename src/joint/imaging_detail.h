@@ -100,7 +100,19 @@ WarpTaps warp_taps(const CropPlan& p, const Geometry& g, std::size_t k, bool der
 const std::vector<double>& task_kernel(const Geometry& g, const CropPlan& p, const BlurTask& t);
 
 // Throws Error unless the crop lies inside the (non-empty) scene.
-void check_inputs(const FloatImage& scene, const CropWindow& crop);
+void check_inputs(const SceneWindow& scene, const CropWindow& crop);
+
+// The whole image as a window of itself.
+inline SceneWindow whole(const FloatImage& scene) {
+  return SceneWindow{scene, 0, 0, scene.width, scene.height};
+}
+
+// The scene pixels the blur of plan `p` reads: its region plus the largest kernel radius,
+// clamped to the image (reflected indices fall inside).
+CropWindow read_window(const CropPlan& p, const Geometry& g);
+
+// Throws Error unless the window holds read_window(p, g).
+void check_window(const SceneWindow& scene, const CropPlan& p, const Geometry& g);
 
 }  // namespace imaging_detail
 
@@ -151,15 +163,27 @@ struct DifferentiableImaging::State {
   mutable std::mutex forward_mutex;
   mutable std::vector<ForwardEntry> forward_cache;
 
-  CropPlan plan(const FloatImage& scene, const CropWindow& crop, const Geometry& g) const;
+  // The plan of a crop of a scene with `channels` channels on geometry g: made once per
+  // prepare(), crop and colour count (a few kept: render() and backward() of a batch of crops,
+  // and scene_window(), share them).
+  std::shared_ptr<const CropPlan> plan(int channels, const CropWindow& crop,
+                                       const Geometry& g) const;
+  CropPlan make_plan(int channels, const CropWindow& crop, const Geometry& g) const;
+  struct PlanEntry {
+    int width = 0, height = 0, colours = 0;
+    CropWindow crop;
+    std::shared_ptr<const CropPlan> plan;
+  };
+  static constexpr std::size_t kPlanEntries = 16;
+  mutable std::mutex plan_mutex;
+  mutable std::vector<PlanEntry> plan_cache;  // cleared by prepare()
   // B of the plan's region (channels planar, [c][pixel]; the colour channels blurred, further
   // ones copied) into `blurred` if given, and each task's scene spectrum into `spectra` if given.
-  void blur_region(const FloatImage& scene, const CropPlan& p, const Geometry& g,
+  void blur_region(const SceneWindow& scene, const CropPlan& p, const Geometry& g,
                    std::vector<double>* blurred,
                    std::vector<std::vector<std::complex<double>>>* spectra) const;
-  // FNV-1a of the scene pixels the blur of plan `p` reads (its region plus the largest kernel
-  // radius, clamped to the image: reflected indices fall inside).
-  std::uint64_t scene_hash(const FloatImage& scene, const CropPlan& p, const Geometry& g) const;
+  // FNV-1a of the scene pixels the blur of plan `p` reads (read_window).
+  std::uint64_t scene_hash(const SceneWindow& scene, const CropPlan& p, const Geometry& g) const;
 };
 
 }  // namespace lensopt

@@ -14,14 +14,20 @@ OverlapAddBuffers::OverlapAddBuffers(int ny_, int nx_)
 
 void load_reflected_block(const FloatImage& image, int c, int x_first, int y_first, int cols,
                           int rows, OverlapAddBuffers& b) {
-  const int nx = b.nx, ny = b.ny, channels = image.channels;
+  load_reflected_block(image, 0, 0, image.width, image.height, c, x_first, y_first, cols, rows, b);
+}
+
+void load_reflected_block(const FloatImage& window, int origin_x, int origin_y, int full_width,
+                          int full_height, int c, int x_first, int y_first, int cols, int rows,
+                          OverlapAddBuffers& b) {
+  const int nx = b.nx, ny = b.ny, channels = window.channels;
   b.reflect_x.resize(cols);
   for (int i = 0; i < cols; ++i)
-    b.reflect_x[i] = reflect_index(x_first + i, image.width) * channels;
+    b.reflect_x[i] = (reflect_index(x_first + i, full_width) - origin_x) * channels;
   for (int j = 0; j < rows; ++j) {
-    const int sy = reflect_index(y_first + j, image.height);
+    const int sy = reflect_index(y_first + j, full_height) - origin_y;
     const float* src =
-        image.pixels.data() + static_cast<std::size_t>(sy) * image.width * channels + c;
+        window.pixels.data() + static_cast<std::size_t>(sy) * window.width * channels + c;
     double* row = b.real.data + static_cast<std::size_t>(j) * nx;
     for (int i = 0; i < cols; ++i) row[i] = src[b.reflect_x[i]];
     std::fill(row + cols, row + nx, 0.0);

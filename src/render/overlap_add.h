@@ -84,6 +84,12 @@ void kernel_spectrum(const V* kernel, int radius, OverlapAddBuffers& b,
 // b.spectrum.
 void load_reflected_block(const FloatImage& image, int c, int x_first, int y_first, int cols,
                           int rows, OverlapAddBuffers& b);
+// The same from a window of the image: `window` holds the pixels from (origin_x, origin_y) of a
+// full_width x full_height image; coordinates and the reflection are the full image's, and every
+// pixel read must lie in the window.
+void load_reflected_block(const FloatImage& window, int origin_x, int origin_y, int full_width,
+                          int full_height, int c, int x_first, int y_first, int cols, int rows,
+                          OverlapAddBuffers& b);
 
 // b.spectrum *= K^ element-wise, and the blurred block back into b.real (c2r).
 void convolve_loaded_block(const std::complex<double>* kernel_spectrum, OverlapAddBuffers& b);

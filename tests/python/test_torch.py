@@ -189,6 +189,109 @@ class ImageOperationsInTorch(unittest.TestCase):
 
 
 @unittest.skipUnless(HAVE_TORCH, "python3-torch is not installed: the torch tests are skipped")
+class Float32ImagesByLensoptsImageFormation(unittest.TestCase):
+    """float32 images on the CPU are formed by lensopt's C++ image formation and its adjoint
+    (Imaging.render_images / backward_images, image_ops="auto"): the joint optimization's code,
+    reading only the window of the images a crop needs. It must agree with the torch operations
+    (image_ops="torch", which the tests above hold to the C++ renderer) run in float64, to float32
+    rounding, forward and backward (wrt x and the images), for crops at the corners and inside."""
+
+    CROPS = (None, (0, 0, 20, 16), (35, 20, 25, 20), (22, 12, 16, 14))
+
+    def modules(self, **options):
+        kw = dict(glass_mode="continuous", rings=4, fields=5, grid_size=33, threads=2, **options)
+        return lt.ImageFormation(doublet(), **kw), lt.ImageFormation(doublet(), image_ops="torch",
+                                                                     **kw)
+
+    def check(self, channels, **options):
+        torch.manual_seed(3)
+        ours, ref = self.modules(**options)
+        images = torch.rand(2, channels, 40, 60)
+        for crop in self.CROPS:
+            with self.subTest(crop=crop):
+                a = images.clone().requires_grad_(True)
+                b = images.double().requires_grad_(True)
+                out_a, out_b = ours(a, crop), ref(b, crop)
+                self.assertEqual((out_a.dtype, out_a.shape), (torch.float32, out_b.shape))
+                weights = torch.randn(out_b.shape, dtype=torch.float64)
+                (out_a.double() * weights).sum().backward()
+                (out_b * weights).sum().backward()
+                np.testing.assert_allclose(out_a.detach().double().numpy(), out_b.detach().numpy(),
+                                           rtol=0, atol=2e-6)
+                scale = ref.x.grad.abs().max().item()
+                self.assertGreater(scale, 0)
+                np.testing.assert_allclose(ours.x.grad.numpy(), ref.x.grad.numpy(), rtol=0,
+                                           atol=1e-5 * scale)
+                scale = b.grad.abs().max().item()
+                np.testing.assert_allclose(a.grad.double().numpy(), b.grad.numpy(), rtol=0,
+                                           atol=1e-5 * scale)
+                ours.x.grad = ref.x.grad = None
+        # The torch operations never ran for `ours`: it never fetched the optics' values.
+        self.assertIsNone(ours._values)
+
+    def test_rgb(self):
+        self.check(3)
+
+    def test_rgba(self):
+        self.check(4)
+
+    def test_grey_alpha(self):
+        self.check(2)
+
+    def test_without_maps(self):
+        self.check(3, relative_illumination=False, distortion=False)
+
+    def test_reads_only_the_window_a_crop_needs(self):
+        # Every pixel outside Imaging.scene_window is NaN: the crop and its gradients are the
+        # same (finite) values as with the clean images.
+        module, _ = self.modules()
+        images = torch.rand(1, 3, 40, 60)
+        crop = (22, 12, 16, 14)
+        module._prepare(module.x, derivatives=True)
+        x0, y0, w, h = module.imaging.scene_window(60, 40, 3, crop)
+        self.assertLess(w * h, 60 * 40)
+        poisoned = torch.full_like(images, float("nan"))
+        poisoned[..., y0:y0 + h, x0:x0 + w] = images[..., y0:y0 + h, x0:x0 + w]
+        outs, grads = [], []
+        for im in (images, poisoned):
+            im = im.clone().requires_grad_(True)
+            out = module(im, crop)
+            (out * out).sum().backward()
+            outs.append(out.detach())
+            grads.append((module.x.grad.clone(), im.grad))
+            module.x.grad = None
+        self.assertTrue(torch.isfinite(outs[1]).all())
+        self.assertTrue(torch.equal(outs[0], outs[1]))
+        self.assertTrue(torch.equal(grads[0][0], grads[1][0]))
+        self.assertTrue(torch.equal(grads[0][1], grads[1][1]))
+
+    def test_image_gradient_without_lens_derivatives(self):
+        # x frozen (requires_grad False): the optics are sampled without Jets and the backward
+        # gives the images' gradient alone, the same as with the lens gradient.
+        images = torch.rand(2, 3, 40, 60)
+        weights = torch.randn(2, 3, 14, 16)
+        grads = []
+        for frozen in (False, True):
+            module, _ = self.modules()
+            module.x.requires_grad_(not frozen)
+            im = images.clone().requires_grad_(True)
+            (module(im, (22, 12, 16, 14)) * weights).sum().backward()
+            self.assertEqual(module._prepared[1], not frozen)  # Jets only for the lens gradient
+            self.assertEqual(module.x.grad is None, frozen)
+            grads.append(im.grad)
+        # The same up to the optics' last bits (values-only sampling is in double, not Jets).
+        scale = grads[0].abs().max().item()
+        self.assertGreater(scale, 0)
+        np.testing.assert_allclose(grads[1].numpy(), grads[0].numpy(), rtol=0, atol=1e-6 * scale)
+
+    def test_image_ops_option(self):
+        ours, ref = self.modules()
+        self.assertEqual((ours.image_ops, ref.image_ops), ("auto", "torch"))
+        with self.assertRaisesRegex(ValueError, "image_ops"):
+            lt.ImageFormation(doublet(), image_ops="gpu")
+
+
+@unittest.skipUnless(HAVE_TORCH, "python3-torch is not installed: the torch tests are skipped")
 class ImageFormationMatchesCli(unittest.TestCase):
     @unittest.skipUnless(FULL, FULL_REASON)
     def test_forward_equals_lensopt_render(self):

@@ -327,3 +327,93 @@ TEST_CASE("joint imaging: the scene gradient is the rendering's adjoint") {
     for (std::size_t j = 0; j < plain.size(); ++j) CHECK(grad_x[j] == doctest::Approx(plain[j]));
   }
 }
+
+// A window of the scene that holds scene_window() renders a crop exactly as the whole scene (the
+// same bits), its backward gives the same lens gradient and the scene gradient restricted to the
+// window (zero outside it), the scene gradient alone needs no derivatives, and a window that
+// misses a pixel the crop reads is an error. Crops at a corner (the reflection folds back into
+// the window) and inside; RGB and RGBA.
+TEST_CASE("joint imaging: a window of the scene renders and differentiates as the whole") {
+  Setup s("doublet");
+  DifferentiableImaging imaging(s.param, GlassMode::kQuantized, s.glasses,
+                                joint_options(true, true));
+  imaging.prepare(s.x, true);
+  for (const int channels : {3, 4}) {
+    FloatImage rgb = random_scene(200, 120, 21);
+    FloatImage scene(rgb.width, rgb.height, channels);
+    for (int j = 0; j < scene.height; ++j)
+      for (int i = 0; i < scene.width; ++i)
+        for (int c = 0; c < channels; ++c)
+          scene.at(i, j, c) = c < 3 ? rgb.at(i, j, c) : 0.25f + 0.5f * rgb.at(i, j, 0);
+    for (const CropWindow crop :
+         {CropWindow{0, 0, 40, 30}, CropWindow{150, 85, 50, 35}, CropWindow{80, 40, 36, 28}}) {
+      CAPTURE(channels);
+      CAPTURE(crop.x0);
+      const CropWindow w = imaging.scene_window(scene.width, scene.height, channels, crop);
+      CHECK(w.x0 <= crop.x0);
+      CHECK(w.y0 <= crop.y0);
+      CHECK(w.x0 + w.width >= crop.x0 + crop.width);
+      CHECK(w.y0 + w.height >= crop.y0 + crop.height);
+      FloatImage window(w.width, w.height, channels);
+      for (int j = 0; j < w.height; ++j)
+        for (int i = 0; i < w.width; ++i)
+          for (int c = 0; c < channels; ++c) window.at(i, j, c) = scene.at(w.x0 + i, w.y0 + j, c);
+      const SceneWindow view{window, w.x0, w.y0, scene.width, scene.height};
+      const std::vector<double> whole = imaging.render_values(scene, crop);
+      CHECK(imaging.render_values(view, crop) == whole);
+      FloatImage grad(crop.width, crop.height, channels);
+      std::mt19937 rng(7);
+      std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+      for (float& v : grad.pixels) v = u(rng);
+      std::vector<double> gx_whole, gs_whole, gx_window, gs_window, gs_only;
+      imaging.backward(scene, crop, grad, gx_whole, &gs_whole);
+      imaging.backward(view, crop, grad, &gx_window, &gs_window);
+      CHECK(gx_window == gx_whole);
+      REQUIRE(gs_window.size() == window.pixels.size());
+      double outside = 0;
+      for (int j = 0; j < scene.height; ++j)
+        for (int i = 0; i < scene.width; ++i)
+          for (int c = 0; c < channels; ++c) {
+            const double v = gs_whole[scene.index(i, j, c)];
+            if (i < w.x0 || j < w.y0 || i >= w.x0 + w.width || j >= w.y0 + w.height)
+              outside = std::max(outside, std::abs(v));
+            else
+              CHECK(gs_window[window.index(i - w.x0, j - w.y0, c)] == v);
+          }
+      CHECK(outside == 0.0);
+      imaging.backward(view, crop, grad, nullptr, &gs_only);
+      CHECK(gs_only == gs_window);
+      // One column short on the right (or the left): an error naming the window.
+      if (w.x0 + w.width < scene.width || w.x0 > 0) {
+        const int x0 = w.x0 > 0 ? w.x0 + 1 : w.x0;
+        FloatImage narrow(w.width - 1, w.height, channels);
+        const SceneWindow short_view{narrow, x0, w.y0, scene.width, scene.height};
+        CHECK_THROWS_WITH_AS(imaging.render_values(short_view, crop),
+                             doctest::Contains("does not hold the pixels"), Error);
+      }
+    }
+  }
+  // The scene gradient alone after a values-only prepare: the same as with derivatives (to the
+  // last bits of the optics, which the values-only sampling computes in double, not as Jets).
+  const FloatImage scene = random_scene(200, 120, 22);
+  const CropWindow crop{60, 30, 40, 30};
+  FloatImage grad(crop.width, crop.height, 3);
+  for (std::size_t i = 0; i < grad.pixels.size(); ++i)
+    grad.pixels[i] = static_cast<float>(std::sin(0.3 * static_cast<double>(i)));
+  const SceneWindow view{scene, 0, 0, scene.width, scene.height};
+  std::vector<double> with_jets, values_only;
+  imaging.backward(view, crop, grad, nullptr, &with_jets);
+  imaging.prepare(s.x, false);
+  imaging.backward(view, crop, grad, nullptr, &values_only);
+  REQUIRE(values_only.size() == with_jets.size());
+  double worst = 0, scale = 0;
+  for (std::size_t i = 0; i < with_jets.size(); ++i) {
+    worst = std::max(worst, std::abs(values_only[i] - with_jets[i]));
+    scale = std::max(scale, std::abs(with_jets[i]));
+  }
+  INFO("max |difference| ", worst, " of ", scale);
+  CHECK(scale > 0);
+  CHECK(worst <= 1e-12 * scale);
+  std::vector<double> gx;
+  CHECK_THROWS_AS(imaging.backward(view, crop, grad, &gx, &values_only), Error);
+}

@@ -62,6 +62,18 @@ inline TraceOptions joint_trace_options() {
   return o;
 }
 
+// A window of a full scene image: `pixels` holds the pixels [x0, x0 + pixels.width) x
+// [y0, y0 + pixels.height) of a width x height scene (whose size fixes the sensor geometry and
+// where the blur reflects). render() and backward() of a crop read only the pixels of
+// DifferentiableImaging::scene_window(), so a window that holds them renders the crop exactly as
+// the whole scene does, without the rest of the scene converted or copied (lensopt.torch passes
+// each crop's window of its B x C x H x W tensors).
+struct SceneWindow {
+  const FloatImage& pixels;
+  int x0 = 0, y0 = 0;
+  int width = 0, height = 0;
+};
+
 struct DifferentiableImagingOptions {
   TraceOptions sampling = joint_trace_options();  // PSF ray sampling (fields: the PSF fields)
   PsfOptions psf = joint_psf_options();           // PSF grid and kernel
@@ -154,6 +166,18 @@ class DifferentiableImaging {
   // the correlation of (w_q . dL/dB) with K_q, folded back through the border reflection.
   void backward(const FloatImage& scene, const CropWindow& crop, const FloatImage& grad_image,
                 std::vector<double>& grad_x, std::vector<double>* grad_scene) const;
+
+  // The pixels of a width x height scene with `channels` channels that render() and backward()
+  // of `crop` read: its blurred region plus the largest kernel radius, clamped to the scene (the
+  // reflection at the borders folds back inside). Throws Error as render() does.
+  CropWindow scene_window(int width, int height, int channels, const CropWindow& crop) const;
+  // render_values() and backward() of a window of the scene (it must hold scene_window()). With
+  // grad_x null, backward() computes dL/dwindow only (no lens gradient: the optics need no
+  // derivatives, and neither the blurred image nor the scene's spectra are made); grad_window,
+  // if given, is resized to the window's pixel count if empty and receives dL/d(window).
+  std::vector<double> render_values(const SceneWindow& scene, const CropWindow& crop) const;
+  void backward(const SceneWindow& scene, const CropWindow& crop, const FloatImage& grad_image,
+                std::vector<double>* grad_x, std::vector<double>* grad_window) const;
 
   // The optics of the last prepare() (throws Error before the first).
   const ImagingOptics& optics() const;
