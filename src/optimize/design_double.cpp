@@ -10,8 +10,8 @@ namespace lensopt {
 
 template bool evaluate_design<double>(const LensParameterization&, const double*, GlassMode,
                                       const std::vector<int>&, const TraceOptions&,
-                                      const DesignLossOptions&, const std::vector<double>*,
-                                      double*, DesignLoss<double>*, DesignExtremes*);
+                                      const DesignLossOptions&, const std::vector<double>*, double*,
+                                      DesignLoss<double>*, DesignExtremes*);
 template TargetValues<double> measure_targets<double>(const TraceSystem<double>&,
                                                       const std::vector<DesignTarget>&,
                                                       const TargetSampling&);
