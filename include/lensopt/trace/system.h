@@ -634,7 +634,5 @@ LENSOPT_FOR_EACH_JET_WIDTH(LENSOPT_PREPARE_SYSTEM_JET)
 // src/trace/system_double.cpp, not in each of the 40-odd objects that prepare a system.
 extern template TraceSystem<double> prepare_system<double>(const TraceLens<double>&,
                                                            const SystemSetup&, const TraceOptions&);
-extern template void start_rays<double>(const TraceSystem<double>&, int, int, RayBundle<double>&,
-                                        const PupilSamples*);
 
 }  // namespace lensopt
