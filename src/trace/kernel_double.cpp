@@ -80,3 +80,11 @@ void trace_surface_profile_double(std::uint8_t profile, double c, double conic, 
 }
 
 }  // namespace lensopt::detail
+
+namespace lensopt {
+
+// trace_bundle on double, declared extern in trace/kernel.h: compiled here only.
+template void trace_bundle<double>(const TraceLens<double>&, int, int, bool, RayBundle<double>&,
+                                   RayRecord<double>*);
+
+}  // namespace lensopt

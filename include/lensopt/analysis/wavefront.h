@@ -425,4 +425,11 @@ T mean_rms_wavefront(const TraceSystem<T>& sys, const PupilGrid& grid,
   return total / K<T>(field_count);
 }
 
+// compute_wavefront on double is compiled once, in src/analysis/wavefront_double.cpp, not in each
+// object that measures a wavefront (BENCHMARKS.md "Build time, third round").
+extern template Wavefront<double> compute_wavefront<double>(const TraceSystem<double>&, int, int,
+                                                            const PupilGrid&,
+                                                            const ReferenceSphere<double>&, double,
+                                                            RayBundle<double>&, RayRecord<double>&);
+
 }  // namespace lensopt

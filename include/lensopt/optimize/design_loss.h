@@ -725,5 +725,11 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
       DesignExtremes*);
 LENSOPT_FOR_EACH_JET_WIDTH(LENSOPT_DESIGN_LOSS_JET)
 #undef LENSOPT_DESIGN_LOSS_JET
+// evaluate_design on double (the LM residuals and the reports' loss) is compiled once, in
+// src/optimize/design_double.cpp (BENCHMARKS.md "Build time, third round").
+extern template bool evaluate_design<double>(const LensParameterization&, const double*, GlassMode,
+                                             const std::vector<int>&, const TraceOptions&,
+                                             const DesignLossOptions&, const std::vector<double>*,
+                                             double*, DesignLoss<double>*, DesignExtremes*);
 
 }  // namespace lensopt

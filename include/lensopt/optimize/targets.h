@@ -451,4 +451,9 @@ TargetReport check_targets(const Lens& lens, const std::vector<DesignTarget>& ta
 // Whether a measured value passes (header).
 bool target_passes(const DesignTarget& target, double value);
 
+// measure_targets on double is compiled once, in src/optimize/design_double.cpp.
+extern template TargetValues<double> measure_targets<double>(const TraceSystem<double>&,
+                                                             const std::vector<DesignTarget>&,
+                                                             const TargetSampling&);
+
 }  // namespace lensopt

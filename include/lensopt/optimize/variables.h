@@ -399,4 +399,8 @@ VariableChoice choose_variables(const LensParameterization& param,
                                 const std::vector<std::string>& freeze,
                                 const std::vector<std::string>& vary, bool focus_only);
 
+// to_trace_lens on double is compiled once, in src/optimize/design_double.cpp.
+extern template TraceLens<double> LensParameterization::to_trace_lens<double>(
+    const double*, GlassMode, const std::vector<int>&) const;
+
 }  // namespace lensopt

@@ -757,4 +757,10 @@ void trace_bundle(const TraceLens<T>& lens, int w, int end, bool to_image, RayBu
   }
 }
 
+// trace_bundle on double (with its placed path) is compiled once, in src/trace/kernel_double.cpp,
+// not in each of the 50-odd objects that trace (as the Jet widths above; BENCHMARKS.md "Build
+// time, third round"). The same code at the same flags: the same bits.
+extern template void trace_bundle<double>(const TraceLens<double>&, int, int, bool,
+                                          RayBundle<double>&, RayRecord<double>*);
+
 }  // namespace lensopt

@@ -630,5 +630,9 @@ double lens_spec_scale(const Lens& lens);
       const TraceLens<ceres::Jet<double, N>>&, const SystemSetup&, const TraceOptions&);
 LENSOPT_FOR_EACH_JET_WIDTH(LENSOPT_PREPARE_SYSTEM_JET)
 #undef LENSOPT_PREPARE_SYSTEM_JET
+// prepare_system on double (with its ray aiming and field solves) is compiled once, in
+// src/trace/system_double.cpp, not in each of the 40-odd objects that prepare a system.
+extern template TraceSystem<double> prepare_system<double>(const TraceLens<double>&,
+                                                           const SystemSetup&, const TraceOptions&);
 
 }  // namespace lensopt
