@@ -68,10 +68,18 @@ void copy_window(const py::detail::unchecked_reference<float, 4>& in, py::ssize_
       for (int c = 0; c < channels; ++c) *dst++ = in(b, c, w.y0 + j, w.x0 + i);
 }
 
-void check_images(const ImageArray& images) {
+// The shape of a B x C x H x W batch of images, checked (4 dimensions, none empty).
+struct BatchShape {
+  py::ssize_t batch = 0;
+  int channels = 0, height = 0, width = 0;
+};
+
+BatchShape batch_shape(const ImageArray& images) {
   if (images.ndim() != 4) throw Error("the images must be B x C x H x W");
   if (images.shape(0) < 1 || images.shape(1) < 1 || images.shape(2) < 1 || images.shape(3) < 1)
     throw Error("the images must not be empty");
+  return BatchShape{images.shape(0), static_cast<int>(images.shape(1)),
+                    static_cast<int>(images.shape(2)), static_cast<int>(images.shape(3))};
 }
 
 struct PyImaging {
@@ -187,12 +195,8 @@ void bind_imaging(py::module_& m) {
       .def(
           "render_images",
           [](const PyImaging& p, const ImageArray& images, std::optional<std::array<int, 4>> crop) {
-            check_images(images);
+            const auto [batch, channels, height, width] = batch_shape(images);
             const auto in = images.unchecked<4>();
-            const py::ssize_t batch = images.shape(0);
-            const int channels = static_cast<int>(images.shape(1)),
-                      height = static_cast<int>(images.shape(2)),
-                      width = static_cast<int>(images.shape(3));
             const CropWindow c = crop_or_whole(crop, width, height);
             py::array_t<float> out({batch, static_cast<py::ssize_t>(channels),
                                     static_cast<py::ssize_t>(c.height),
@@ -234,12 +238,8 @@ void bind_imaging(py::module_& m) {
           "backward_images",
           [](const PyImaging& p, const ImageArray& images, std::optional<std::array<int, 4>> crop,
              const ImageArray& grad, bool lens_gradient, bool image_gradient) {
-            check_images(images);
+            const auto [batch, channels, height, width] = batch_shape(images);
             const auto in = images.unchecked<4>();
-            const py::ssize_t batch = images.shape(0);
-            const int channels = static_cast<int>(images.shape(1)),
-                      height = static_cast<int>(images.shape(2)),
-                      width = static_cast<int>(images.shape(3));
             const CropWindow c = crop_or_whole(crop, width, height);
             if (grad.ndim() != 4 || grad.shape(0) != batch || grad.shape(1) != channels ||
                 grad.shape(2) != c.height || grad.shape(3) != c.width)
