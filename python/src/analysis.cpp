@@ -289,16 +289,10 @@ void bind_analysis(py::module_& m) {
                         "mtf_frequencies does not apply to an afocal lens (image space in angle: "
                         "no image-plane MTF); analyze reports its plane-wave wavefront and "
                         "Strehl ratio");
-          AfocalOptions afocal;
-          afocal.pupil_samples = o.wave_options.pupil_samples;
-          afocal.wavelength_weights = o.wave_options.wavelength_weights;
-          afocal.zernike_terms = o.wave_options.zernike_terms;
-          afocal.zernike_ordering = o.wave_options.zernike_ordering;
-          if (o.dispersion) lens.specs.dispersion = *o.dispersion;
           AfocalReport report;
           {
             py::gil_scoped_release release;
-            report = analyze_afocal_lens(lens, o.trace, afocal);
+            report = analyze_afocal_lens(lens, o);  // the CLI's call (cmd_analyze.cpp)
           }
           return py::cast(std::move(report));
         }

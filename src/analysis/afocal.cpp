@@ -272,6 +272,17 @@ AfocalReport analyze_afocal_lens(const Lens& lens, const TraceOptions& trace,
   return r;
 }
 
+AfocalReport analyze_afocal_lens(const Lens& lens, const AnalyzeOptions& options) {
+  AfocalOptions afocal;
+  afocal.pupil_samples = options.wave_options.pupil_samples;
+  afocal.wavelength_weights = options.wave_options.wavelength_weights;
+  afocal.zernike_terms = options.wave_options.zernike_terms;
+  afocal.zernike_ordering = options.wave_options.zernike_ordering;
+  Lens traced = lens;
+  if (options.dispersion) traced.specs.dispersion = *options.dispersion;
+  return analyze_afocal_lens(traced, options.trace, afocal);
+}
+
 void refuse_afocal(const Lens& lens, std::string_view what, std::string_view why) {
   if (!lens.specs.afocal) return;
   throw Error(SourceLocation{lens.source_path.empty() ? lens.name : lens.source_path},

@@ -48,14 +48,7 @@ void run_afocal(const AnalyzeCommand& cmd, const Lens& lens, const AnalyzeOption
                             cmd.prescription           ? "--prescription"
                             : !cmd.colour_band.empty() ? "--colour-band"
                                                        : "--encircled-energy"));
-  AfocalOptions afocal;
-  afocal.pupil_samples = options.wave_options.pupil_samples;
-  afocal.wavelength_weights = options.wave_options.wavelength_weights;
-  afocal.zernike_terms = options.wave_options.zernike_terms;
-  afocal.zernike_ordering = options.wave_options.zernike_ordering;
-  Lens traced = lens;
-  if (options.dispersion) traced.specs.dispersion = *options.dispersion;
-  const AfocalReport report = analyze_afocal_lens(traced, options.trace, afocal);
+  const AfocalReport report = analyze_afocal_lens(lens, options);
   if (cmd.json)
     fmt::print("{}\n", format_afocal_json(report));
   else

@@ -62,6 +62,17 @@ const char* relation_text(TargetRelation r) {
   return "?";
 }
 
+// A default target (DesignTarget::is_default) that holds the lens's own `value`, put first.
+void hold_as_written(std::vector<DesignTarget>& out, TargetQuantity quantity, double value,
+                     const char* where) {
+  DesignTarget t;
+  t.quantity = quantity;
+  t.value = value;
+  t.is_default = true;
+  t.where = where;
+  out.insert(out.begin(), t);
+}
+
 }  // namespace
 
 const char* target_quantity_name(TargetQuantity q) {
@@ -265,14 +276,9 @@ std::vector<DesignTarget> targets_with_defaults(const Lens& lens,
     if (!has_magnification) {
       const TraceLens<double> traced = make_trace_lens(lens);
       const double m = paraxial_angular_magnification(traced, traced.reference_nm());
-      if (std::isfinite(m) && m != 0.0) {
-        DesignTarget t;
-        t.quantity = TargetQuantity::kAngularMagnification;
-        t.value = m;
-        t.is_default = true;
-        t.where = "the lens's own angular magnification";
-        out.insert(out.begin(), t);
-      }
+      if (std::isfinite(m) && m != 0.0)
+        hold_as_written(out, TargetQuantity::kAngularMagnification, m,
+                        "the lens's own angular magnification");
     }
     return out;
   }
@@ -286,14 +292,8 @@ std::vector<DesignTarget> targets_with_defaults(const Lens& lens,
   for (const DesignTarget& t : given) has_efl = has_efl || t.quantity == TargetQuantity::kEflMm;
   if (!has_efl && lens.specs.mode == SpecMode::kAsWritten) {
     const double f = design_focal_length_mm(lens);
-    if (std::isfinite(f) && f != 0.0) {  // either sign (a diverging lens's is negative)
-      DesignTarget t;
-      t.quantity = TargetQuantity::kEflMm;
-      t.value = f;
-      t.is_default = true;
-      t.where = "the lens's own focal length";
-      out.insert(out.begin(), t);
-    }
+    if (std::isfinite(f) && f != 0.0)  // either sign (a diverging lens's is negative)
+      hold_as_written(out, TargetQuantity::kEflMm, f, "the lens's own focal length");
   }
   return out;
 }

@@ -41,6 +41,7 @@
 #include <string_view>
 #include <vector>
 
+#include "lensopt/analysis/analyze.h"
 #include "lensopt/analysis/spot.h"
 #include "lensopt/analysis/wavefront.h"
 #include "lensopt/analysis/zernike.h"
@@ -158,6 +159,9 @@ AfocalReport analyze_afocal(const TraceSystem<double>& sys, const AfocalOptions&
 // its name and file. Throws Error naming the file for a lens that is not afocal.
 AfocalReport analyze_afocal_lens(const Lens& lens, const TraceOptions& trace,
                                  AfocalOptions options);
+// `lensopt analyze`'s options (CLI and Python): its trace, dispersion override, pupil samples,
+// wavelength weights and Zernike fit; the plane-wave wavefront is always on.
+AfocalReport analyze_afocal_lens(const Lens& lens, const AnalyzeOptions& options);
 
 // The one policy for what an afocal lens (Specs::afocal) cannot take: `what` (a command such as
 // "render", or a Python function such as "lensopt.spots") measures an image plane, which the lens
