@@ -2,7 +2,9 @@
 // untrained one's), and a TorchScript detector defined here by the contract of joint/detector.h
 // trains and returns its detections.
 // libtorch first (test_torch.h): glog's CHECK gives way to doctest's.
+// clang-format off
 #include "test_torch.h"
+// clang-format on
 
 #include <doctest/doctest.h>
 #include <unistd.h>

@@ -3,7 +3,9 @@
 // TorchScript task defined here from TorchScript source. One of the two test files with libtorch
 // headers (test_torch.h).
 // libtorch first (test_torch.h): glog's CHECK gives way to doctest's.
+// clang-format off
 #include "test_torch.h"
+// clang-format on
 
 #include <doctest/doctest.h>
 
