@@ -18,6 +18,15 @@ function(lensopt_add_module folder)
       PRIVATE ${PROJECT_SOURCE_DIR}/src)
     target_compile_options(${target} PRIVATE -Wall -Wextra)
     target_link_libraries(${target} PUBLIC ${ARG_PUBLIC} PRIVATE ${ARG_PRIVATE})
+    # One precompiled header for all modules (CMakeLists.txt LENSOPT_PCH): made by the first,
+    # core, reused by the others.
+    if(LENSOPT_PCH)
+      if(folder STREQUAL "core")
+        target_precompile_headers(${target} PRIVATE ${LENSOPT_PCH_HEADERS})
+      else()
+        target_precompile_headers(${target} REUSE_FROM lensopt_core)
+      endif()
+    endif()
     # The #include layering is checked before any module compiles.
     if(TARGET lensopt_layering)
       add_dependencies(${target} lensopt_layering)

@@ -133,7 +133,10 @@ class AgfReader {
       std::string_view text = line.substr(std::min(start, line.size()));
       while (!text.empty() && (text.front() == ' ' || text.front() == '\t')) text.remove_prefix(1);
       while (!text.empty() && (text.back() == ' ' || text.back() == '\r')) text.remove_suffix(1);
-      if (!text.empty()) comment += (comment.empty() ? "" : " ") + std::string(text);
+      if (!text.empty()) {
+        if (!comment.empty()) comment += ' ';
+        comment += text;
+      }
     }
     // CC, ED, TD, OD and keys this reader does not know carry nothing the catalog keeps.
   }

@@ -113,7 +113,7 @@ PlotSummary write_afocal_plot(const Lens& lens, const Lens* compare, const PlotO
   summary.spot_box_um = box;
   summary.spot_box_unit = "urad";
   if (options.kind == PlotKind::kReport)
-    summary.warnings.push_back(
+    summary.warnings.emplace_back(
         "an afocal lens's report page is its spot diagram in angle (the layout, fans, field "
         "curves, PSF and MTF measure an image plane)");
   return summary;

@@ -346,7 +346,7 @@ RasterCanvas::RasterCanvas(double width, double height, int supersample)
   int box[4];
   if (!oiio().text_size("M", 12, kFontRegular, box)) {
     impl_->font_ok = false;
-    impl_->warnings.push_back(
+    impl_->warnings.emplace_back(
         "OpenImageIO found no DejaVu Sans font (install fonts-dejavu-core): PNG text left out");
   }
   if (impl_->font_ok && !oiio().text_size("M", 12, kFontBold, box)) impl_->bold_ok = false;

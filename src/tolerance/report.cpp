@@ -72,13 +72,19 @@ std::string format_trials_csv(const ToleranceReport& report) {
       out += fmt::format(",{},{},{},{},{},{},{}", exact(r.mean_spot_um), exact(r.efl_mm),
                          exact(r.max_abs_distortion_pct), r.ray_failures,
                          exact(r.image_distance_mm), r.collision ? 1 : 0, exact(r.min_edge_gap_mm));
-      for (double s : r.rms_spot_um) out += "," + exact(s);
+      for (double s : r.rms_spot_um) {
+        out += ',';
+        out += exact(s);
+      }
     } else {
       out += fmt::format(",,,,{},,{},{}", r.ray_failures, r.collision ? 1 : 0,
                          exact(r.min_edge_gap_mm));
       for (std::size_t h = 0; h < r.rms_spot_um.size(); ++h) out += ",";
     }
-    for (double d : r.perturbations) out += "," + exact(d);
+    for (double d : r.perturbations) {
+      out += ',';
+      out += exact(d);
+    }
     for (std::size_t i = 0; i < report.compensation_names.size(); ++i) {
       out += ',';
       if (r.valid && i < r.compensation.size()) out += exact(r.compensation[i]);

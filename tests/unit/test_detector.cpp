@@ -1,17 +1,10 @@
 // The detection tasks: the built-in detector learns the generated scenes (its AP rises from the
 // untrained one's), and a TorchScript detector defined here by the contract of joint/detector.h
 // trains and returns its detections.
-#ifdef LENSOPT_WITH_TORCH
-#include <torch/script.h>
-#include <torch/torch.h>
-#undef CHECK
-#undef CHECK_EQ
-#undef CHECK_NE
-#undef CHECK_LT
-#undef CHECK_LE
-#undef CHECK_GT
-#undef CHECK_GE
-#endif
+// libtorch first (test_torch.h): glog's CHECK gives way to doctest's.
+// clang-format off
+#include "test_torch.h"
+// clang-format on
 
 #include <doctest/doctest.h>
 #include <unistd.h>

@@ -1,18 +1,11 @@
 // The joint optimization's libtorch tasks: the restoration network (identity when untrained, its
 // image gradient against finite differences, exact save/load of weights and Adam state) and a
-// TorchScript task defined here from TorchScript source. The one test file with libtorch headers.
-// libtorch first: it brings glog's CHECK macros, which must give way to doctest's.
-#ifdef LENSOPT_WITH_TORCH
-#include <torch/script.h>
-#include <torch/torch.h>
-#undef CHECK
-#undef CHECK_EQ
-#undef CHECK_NE
-#undef CHECK_LT
-#undef CHECK_LE
-#undef CHECK_GT
-#undef CHECK_GE
-#endif
+// TorchScript task defined here from TorchScript source. One of the two test files with libtorch
+// headers (test_torch.h).
+// libtorch first (test_torch.h): glog's CHECK gives way to doctest's.
+// clang-format off
+#include "test_torch.h"
+// clang-format on
 
 #include <doctest/doctest.h>
 
