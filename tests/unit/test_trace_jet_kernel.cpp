@@ -166,11 +166,14 @@ namespace {
 // The compiled sphere loop (detail::trace_surface_jet_at, trace/dual.h) at x86-64 level `level`
 // against the template on Jets (Eigen's arithmetic) at one surface: rays with derivatives in
 // every direction, some missing the sphere, some totally reflected, with and without records.
+// `count` rays out of a pool of 997: the v4 and v3 copies run packs of 8 and 4 rays and the
+// count % 8 (4) rays left over one by one, so counts below, at and between multiples of the pack
+// widths, and 0, are checked.
 template <int N>
-void check_surface_level(int level) {
+void check_surface_level(int level, int count) {
   using J = ceres::Jet<double, N>;
   CHECK(detail::dual_matches_jet<N, J>());
-  const int count = 997;  // not a multiple of any vector width
+  const int pool = 997;  // not a multiple of any vector width
   auto seeded = [](double value, int i, double scale) {
     J j(value);
     for (int d = 0; d < N; ++d) j.v[d] = scale * std::sin(0.37 * (i + 1) * (d + 2) + scale);
@@ -180,39 +183,46 @@ void check_surface_level(int level) {
   // totally reflected.
   const J c = seeded(0.08, 1, 0.01), shift = seeded(2.5, 2, 0.3), mu = seeded(1.6, 3, 0.02);
   std::vector<J> x(count), y(count), z(count), l(count), m(count), n(count);
-  for (int i = 0; i < count; ++i) {
-    const double t = static_cast<double>(i) / (count - 1);
+  for (int k = 0; k < count; ++k) {
+    // The whole pool in order; a smaller count takes rays spread over the pool.
+    const int i = count == pool ? k : (k * 131) % pool;
+    const double t = static_cast<double>(i) / (pool - 1);
     const double angle = 0.6 * (t - 0.5);
-    x[i] = seeded(14.0 * std::cos(7.0 * t) * t, i, 0.5);
-    y[i] = seeded(14.0 * std::sin(9.0 * t) * t, i + 5, 0.5);
-    z[i] = seeded(0.3 * t, i + 9, 0.1);
-    l[i] = seeded(0.1 * std::sin(angle), i + 11, 0.05);
-    m[i] = seeded(std::sin(angle), i + 13, 0.05);
-    n[i] =
+    x[k] = seeded(14.0 * std::cos(7.0 * t) * t, i, 0.5);
+    y[k] = seeded(14.0 * std::sin(9.0 * t) * t, i + 5, 0.5);
+    z[k] = seeded(0.3 * t, i + 9, 0.1);
+    l[k] = seeded(0.1 * std::sin(angle), i + 11, 0.05);
+    m[k] = seeded(std::sin(angle), i + 13, 0.05);
+    n[k] =
         seeded(std::sqrt(1.0 - std::pow(std::sin(angle), 2) - 0.01 * std::pow(std::sin(angle), 2)),
                i + 17, 0.05);
   }
-  for (const bool record : {false, true}) {
+  // 0: no record; 1: the records; 2: the zeta records without the axial travel.
+  for (const int mode : {0, 1, 2}) {
+    const bool record = mode > 0, with_travel = mode == 1;
     std::vector<J> xc = x, yc = y, zc = z, lc = l, mc = m, nc = n;
     std::vector<J> xg = x, yg = y, zg = z, lg = l, mg = m, ng = n;
-    std::vector<std::int32_t> fc(count), fg(count);
-    std::vector<J> travel_c(count), zeta_c(count), zeta_prime_c(count);
-    std::vector<J> travel_g(count), zeta_g(count), zeta_prime_g(count);
-    detail::trace_surface_jet_at(
-        level, c, shift, mu, count, xc.data(), yc.data(), zc.data(), lc.data(), mc.data(),
-        nc.data(), fc.data(), record ? travel_c.data() : nullptr, record ? zeta_c.data() : nullptr,
-        record ? zeta_prime_c.data() : nullptr, record);
+    std::vector<std::int32_t> fc(count, -7), fg(count, -7);
+    std::vector<J> travel_c(count, J(-3.0)), zeta_c(count), zeta_prime_c(count);
+    std::vector<J> travel_g(count, J(-3.0)), zeta_g(count), zeta_prime_g(count);
+    detail::trace_surface_jet_at(level, c, shift, mu, count, xc.data(), yc.data(), zc.data(),
+                                 lc.data(), mc.data(), nc.data(), fc.data(),
+                                 with_travel ? travel_c.data() : nullptr,
+                                 record ? zeta_c.data() : nullptr,
+                                 record ? zeta_prime_c.data() : nullptr, record);
     if (record)
       detail::trace_surface<J, true>(c, shift, mu, count, xg.data(), yg.data(), zg.data(),
-                                     lg.data(), mg.data(), ng.data(), fg.data(), travel_g.data(),
-                                     zeta_g.data(), zeta_prime_g.data());
+                                     lg.data(), mg.data(), ng.data(), fg.data(),
+                                     with_travel ? travel_g.data() : nullptr, zeta_g.data(),
+                                     zeta_prime_g.data());
     else
       detail::trace_surface<J, false>(c, shift, mu, count, xg.data(), yg.data(), zg.data(),
                                       lg.data(), mg.data(), ng.data(), fg.data(), nullptr, nullptr,
                                       nullptr);
     CAPTURE(N);
     CAPTURE(level);
-    CAPTURE(record);
+    CAPTURE(count);
+    CAPTURE(mode);
     CHECK(differing(xc, xg) == 0);
     CHECK(differing(yc, yg) == 0);
     CHECK(differing(zc, zg) == 0);
@@ -226,11 +236,15 @@ void check_surface_level(int level) {
       reflected += f == kRayTotalInternalReflection;
       traced += f == kRayOk;
     }
-    CHECK(missed > 0);  // the sample reaches both failure paths of the loop
-    CHECK(reflected > 0);
-    CHECK(traced > count / 4);
+    CHECK(missed + reflected + traced == count);  // every ray's code written
+    if (count == pool) {
+      CHECK(missed > 0);  // the sample reaches both failure paths of the loop
+      CHECK(reflected > 0);
+      CHECK(traced > count / 4);
+    }
+    // The travel record untouched without its array, written with it.
+    CHECK(differing(travel_c, travel_g) == 0);
     if (record) {
-      CHECK(differing(travel_c, travel_g) == 0);
       CHECK(differing(zeta_c, zeta_g) == 0);
       CHECK(differing(zeta_prime_c, zeta_prime_g) == 0);
     }
@@ -249,8 +263,11 @@ TEST_CASE(
   if (cpu >= 4) levels.push_back(4);
   if (cpu < 4) MESSAGE("this CPU has no x86-64-v4: its AVX-512 copy is not checked here");
   for (int level : levels) {
-#define LENSOPT_CHECK_SURFACE(N) check_surface_level<N>(level);
-    LENSOPT_FOR_EACH_JET_WIDTH(LENSOPT_CHECK_SURFACE)
+    // Counts below, at and between the pack widths (8 for v4, 4 for v3), none, and the pool.
+    for (int count : {0, 1, 3, 4, 5, 7, 8, 9, 12, 15, 16, 17, 997}) {
+#define LENSOPT_CHECK_SURFACE(N) check_surface_level<N>(level, count);
+      LENSOPT_FOR_EACH_JET_WIDTH(LENSOPT_CHECK_SURFACE)
 #undef LENSOPT_CHECK_SURFACE
+    }
   }
 }

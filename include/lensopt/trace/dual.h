@@ -24,6 +24,7 @@
 #include <cstdint>
 
 #include "lensopt/core/jet_width.h"
+#include "lensopt/trace/kernel.h"  // RayStatus, sphere_failure
 
 namespace lensopt::detail {
 
@@ -101,6 +102,141 @@ LENSOPT_DUAL_INLINE Dual<N> sqrt(const Dual<N>& f) {
 template <int N>
 LENSOPT_DUAL_INLINE bool operator<(const Dual<N>& f, const Dual<N>& g) {
   return f.a < g.a;
+}
+
+// W rays' dual numbers, structure of arrays: the values a[w] and derivative j of every ray
+// v[j][w], so that each operation below runs on vectors of W lanes (W = 8 doubles for
+// AVX-512, 4 for AVX2) for the value and for each derivative. Every lane computes exactly the
+// operation of Dual<N> (and so of the Jet) on its ray, the same formula in the same order: the
+// sphere step (kernel.h, sphere_step) on a pack gives each ray the bits of trace_surface<Jet>.
+// Used only by the compiled Jet sphere loop (src/trace/kernel_jet.cpp.in).
+template <int N, int W>
+struct alignas(64) DualPack {
+  double a[W];
+  double v[N][W];
+};
+
+// A per-lane mask (the comparisons) and per-lane failure codes.
+template <int W>
+struct PackMask {
+  bool m[W];
+};
+template <int W>
+struct PackFailure {
+  std::int32_t f[W];
+};
+
+template <int N, int W>
+LENSOPT_DUAL_INLINE DualPack<N, W> operator-(const DualPack<N, W>& f) {
+  DualPack<N, W> r;
+  for (int w = 0; w < W; ++w) r.a[w] = -f.a[w];
+  for (int j = 0; j < N; ++j)
+    for (int w = 0; w < W; ++w) r.v[j][w] = -f.v[j][w];
+  return r;
+}
+
+template <int N, int W>
+LENSOPT_DUAL_INLINE DualPack<N, W> operator+(const DualPack<N, W>& f, const DualPack<N, W>& g) {
+  DualPack<N, W> r;
+  for (int w = 0; w < W; ++w) r.a[w] = f.a[w] + g.a[w];
+  for (int j = 0; j < N; ++j)
+    for (int w = 0; w < W; ++w) r.v[j][w] = f.v[j][w] + g.v[j][w];
+  return r;
+}
+
+template <int N, int W>
+LENSOPT_DUAL_INLINE DualPack<N, W> operator-(const DualPack<N, W>& f, const DualPack<N, W>& g) {
+  DualPack<N, W> r;
+  for (int w = 0; w < W; ++w) r.a[w] = f.a[w] - g.a[w];
+  for (int j = 0; j < N; ++j)
+    for (int w = 0; w < W; ++w) r.v[j][w] = f.v[j][w] - g.v[j][w];
+  return r;
+}
+
+template <int N, int W>
+LENSOPT_DUAL_INLINE DualPack<N, W> operator*(const DualPack<N, W>& f, const DualPack<N, W>& g) {
+  DualPack<N, W> r;
+  for (int w = 0; w < W; ++w) r.a[w] = f.a[w] * g.a[w];
+  for (int j = 0; j < N; ++j)
+    for (int w = 0; w < W; ++w) r.v[j][w] = f.a[w] * g.v[j][w] + f.v[j][w] * g.a[w];
+  return r;
+}
+
+template <int N, int W>
+LENSOPT_DUAL_INLINE DualPack<N, W> operator/(const DualPack<N, W>& f, const DualPack<N, W>& g) {
+  double g_a_inverse[W], f_a_by_g_a[W];
+  for (int w = 0; w < W; ++w) g_a_inverse[w] = 1.0 / g.a[w];
+  for (int w = 0; w < W; ++w) f_a_by_g_a[w] = f.a[w] * g_a_inverse[w];
+  DualPack<N, W> r;
+  for (int w = 0; w < W; ++w) r.a[w] = f_a_by_g_a[w];
+  for (int j = 0; j < N; ++j)
+    for (int w = 0; w < W; ++w)
+      r.v[j][w] = (f.v[j][w] - f_a_by_g_a[w] * g.v[j][w]) * g_a_inverse[w];
+  return r;
+}
+
+template <int N, int W>
+LENSOPT_DUAL_INLINE DualPack<N, W> sqrt(const DualPack<N, W>& f) {
+  double tmp[W], two_a_inverse[W];
+  for (int w = 0; w < W; ++w) tmp[w] = std::sqrt(f.a[w]);
+  for (int w = 0; w < W; ++w) two_a_inverse[w] = 1.0 / (2.0 * tmp[w]);
+  DualPack<N, W> r;
+  for (int w = 0; w < W; ++w) r.a[w] = tmp[w];
+  for (int j = 0; j < N; ++j)
+    for (int w = 0; w < W; ++w) r.v[j][w] = f.v[j][w] * two_a_inverse[w];
+  return r;
+}
+
+template <int N, int W>
+LENSOPT_DUAL_INLINE PackMask<W> operator<(const DualPack<N, W>& f, const DualPack<N, W>& g) {
+  PackMask<W> r;
+  for (int w = 0; w < W; ++w) r.m[w] = f.a[w] < g.a[w];
+  return r;
+}
+
+// kernel.h's sphere_select and sphere_failure, lane by lane.
+template <int N, int W>
+LENSOPT_DUAL_INLINE DualPack<N, W> sphere_select(const PackMask<W>& mask, const DualPack<N, W>& a,
+                                                 const DualPack<N, W>& b) {
+  DualPack<N, W> r;
+  for (int w = 0; w < W; ++w) r.a[w] = mask.m[w] ? a.a[w] : b.a[w];
+  for (int j = 0; j < N; ++j)
+    for (int w = 0; w < W; ++w) r.v[j][w] = mask.m[w] ? a.v[j][w] : b.v[j][w];
+  return r;
+}
+
+template <int W>
+LENSOPT_DUAL_INLINE PackFailure<W> sphere_failure(const PackMask<W>& miss,
+                                                  const PackMask<W>& tir) {
+  PackFailure<W> r;
+  for (int w = 0; w < W; ++w)
+    r.f[w] = sphere_failure(miss.m[w], tir.m[w]);
+  return r;
+}
+
+// One Dual<N> in every lane (the surface's constants).
+template <int W, int N>
+LENSOPT_DUAL_INLINE DualPack<N, W> broadcast(const Dual<N>& d) {
+  DualPack<N, W> r;
+  for (int w = 0; w < W; ++w) r.a[w] = d.a;
+  for (int j = 0; j < N; ++j)
+    for (int w = 0; w < W; ++w) r.v[j][w] = d.v[j];
+  return r;
+}
+
+// Rays p[0 .. W-1] into a pack and back (a transpose of W x (N + 1) doubles).
+template <int W, int N>
+LENSOPT_DUAL_INLINE void load_pack(const Dual<N>* p, DualPack<N, W>& r) {
+  for (int w = 0; w < W; ++w) r.a[w] = p[w].a;
+  for (int j = 0; j < N; ++j)
+    for (int w = 0; w < W; ++w) r.v[j][w] = p[w].v[j];
+}
+
+template <int W, int N>
+LENSOPT_DUAL_INLINE void store_pack(const DualPack<N, W>& r, Dual<N>* p) {
+  for (int w = 0; w < W; ++w) p[w].a = r.a[w];
+  for (int j = 0; j < N; ++j)
+    for (int w = 0; w < W; ++w) p[w].v[j] = r.v[j][w];
 }
 
 #undef LENSOPT_DUAL_INLINE
