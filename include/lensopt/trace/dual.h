@@ -116,10 +116,11 @@ struct alignas(64) DualPack {
   double v[N][W];
 };
 
-// A per-lane mask (the comparisons) and per-lane failure codes.
+// A per-lane mask (a comparison lhs < rhs, kept as its operands so that the selects compare
+// and blend in one vectorized loop) and per-lane failure codes.
 template <int W>
 struct PackMask {
-  bool m[W];
+  double lhs[W], rhs[W];
 };
 template <int W>
 struct PackFailure {
@@ -190,7 +191,8 @@ LENSOPT_DUAL_INLINE DualPack<N, W> sqrt(const DualPack<N, W>& f) {
 template <int N, int W>
 LENSOPT_DUAL_INLINE PackMask<W> operator<(const DualPack<N, W>& f, const DualPack<N, W>& g) {
   PackMask<W> r;
-  for (int w = 0; w < W; ++w) r.m[w] = f.a[w] < g.a[w];
+  for (int w = 0; w < W; ++w) r.lhs[w] = f.a[w];
+  for (int w = 0; w < W; ++w) r.rhs[w] = g.a[w];
   return r;
 }
 
@@ -199,9 +201,9 @@ template <int N, int W>
 LENSOPT_DUAL_INLINE DualPack<N, W> sphere_select(const PackMask<W>& mask, const DualPack<N, W>& a,
                                                  const DualPack<N, W>& b) {
   DualPack<N, W> r;
-  for (int w = 0; w < W; ++w) r.a[w] = mask.m[w] ? a.a[w] : b.a[w];
+  for (int w = 0; w < W; ++w) r.a[w] = mask.lhs[w] < mask.rhs[w] ? a.a[w] : b.a[w];
   for (int j = 0; j < N; ++j)
-    for (int w = 0; w < W; ++w) r.v[j][w] = mask.m[w] ? a.v[j][w] : b.v[j][w];
+    for (int w = 0; w < W; ++w) r.v[j][w] = mask.lhs[w] < mask.rhs[w] ? a.v[j][w] : b.v[j][w];
   return r;
 }
 
@@ -210,7 +212,7 @@ LENSOPT_DUAL_INLINE PackFailure<W> sphere_failure(const PackMask<W>& miss,
                                                   const PackMask<W>& tir) {
   PackFailure<W> r;
   for (int w = 0; w < W; ++w)
-    r.f[w] = sphere_failure(miss.m[w], tir.m[w]);
+    r.f[w] = sphere_failure(miss.lhs[w] < miss.rhs[w], tir.lhs[w] < tir.rhs[w]);
   return r;
 }
 
