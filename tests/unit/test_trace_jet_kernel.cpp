@@ -166,9 +166,9 @@ namespace {
 // The compiled sphere loop (detail::trace_surface_jet_at, trace/dual.h) at x86-64 level `level`
 // against the template on Jets (Eigen's arithmetic) at one surface: rays with derivatives in
 // every direction, some missing the sphere, some totally reflected, with and without records.
-// `count` rays out of a pool of 997: the v4 and v3 copies run packs of 8 and 4 rays and the
-// count % 8 (4) rays left over one by one, so counts below, at and between multiples of the pack
-// widths, and 0, are checked.
+// `count` rays out of a pool of 997: counts below, at and between multiples of the vector widths
+// (8 doubles for AVX-512, 4 for AVX2), and 0, so that a copy working on several rays at once
+// (the pack experiment of BENCHMARKS.md "LM, fourth round") is checked on its remainders too.
 template <int N>
 void check_surface_level(int level, int count) {
   using J = ceres::Jet<double, N>;
@@ -263,7 +263,7 @@ TEST_CASE(
   if (cpu >= 4) levels.push_back(4);
   if (cpu < 4) MESSAGE("this CPU has no x86-64-v4: its AVX-512 copy is not checked here");
   for (int level : levels) {
-    // Counts below, at and between the pack widths (8 for v4, 4 for v3), none, and the pool.
+    // Counts below, at and between multiples of the vector widths, none, and the pool.
     for (int count : {0, 1, 3, 4, 5, 7, 8, 9, 12, 15, 16, 17, 997}) {
 #define LENSOPT_CHECK_SURFACE(N) check_surface_level<N>(level, count);
       LENSOPT_FOR_EACH_JET_WIDTH(LENSOPT_CHECK_SURFACE)
