@@ -205,16 +205,14 @@ void check_surface_level(int level, int count) {
     std::vector<std::int32_t> fc(count, -7), fg(count, -7);
     std::vector<J> travel_c(count, J(-3.0)), zeta_c(count), zeta_prime_c(count);
     std::vector<J> travel_g(count, J(-3.0)), zeta_g(count), zeta_prime_g(count);
-    detail::trace_surface_jet_at(level, c, shift, mu, count, xc.data(), yc.data(), zc.data(),
-                                 lc.data(), mc.data(), nc.data(), fc.data(),
-                                 with_travel ? travel_c.data() : nullptr,
-                                 record ? zeta_c.data() : nullptr,
-                                 record ? zeta_prime_c.data() : nullptr, record);
+    detail::trace_surface_jet_at(
+        level, c, shift, mu, count, xc.data(), yc.data(), zc.data(), lc.data(), mc.data(),
+        nc.data(), fc.data(), with_travel ? travel_c.data() : nullptr,
+        record ? zeta_c.data() : nullptr, record ? zeta_prime_c.data() : nullptr, record);
     if (record)
-      detail::trace_surface<J, true>(c, shift, mu, count, xg.data(), yg.data(), zg.data(),
-                                     lg.data(), mg.data(), ng.data(), fg.data(),
-                                     with_travel ? travel_g.data() : nullptr, zeta_g.data(),
-                                     zeta_prime_g.data());
+      detail::trace_surface<J, true>(
+          c, shift, mu, count, xg.data(), yg.data(), zg.data(), lg.data(), mg.data(), ng.data(),
+          fg.data(), with_travel ? travel_g.data() : nullptr, zeta_g.data(), zeta_prime_g.data());
     else
       detail::trace_surface<J, false>(c, shift, mu, count, xg.data(), yg.data(), zg.data(),
                                       lg.data(), mg.data(), ng.data(), fg.data(), nullptr, nullptr,
