@@ -130,6 +130,63 @@ struct RayRecord {
 
 namespace detail {
 
+// The selects of the sphere step on one ray (a scalar T, a bool mask). A pack of rays
+// (trace/dual.h, DualPack) overloads them lane by lane, found by argument-dependent lookup.
+template <typename T>
+inline __attribute__((always_inline)) T sphere_select(bool mask, const T& a, const T& b) {
+  return mask ? a : b;
+}
+inline __attribute__((always_inline)) std::int32_t sphere_failure(bool miss, bool tir) {
+  return miss ? kRayMissedSurface : (tir ? kRayTotalInternalReflection : kRayOk);
+}
+
+// Steps 1-4 of the header for one ray (or one pack of rays, trace/dual.h) at one surface, in
+// place: the one implementation of the sphere's physics, shared by trace_surface below and the
+// compiled Jet loop (src/trace/kernel_jet.cpp.in). mu2 = mu * mu, one and zero are the constants
+// K<T>(1.0) and K<T>(0.0). With kRecord, *travel (when travel is not null), *zeta_out and
+// *zeta_prime_out receive the loss records.
+template <typename T, bool kRecord, typename Failure>
+inline __attribute__((always_inline)) void sphere_step(const T& c, const T& shift, const T& mu,
+                                                       const T& mu2, const T& one, const T& zero,
+                                                       T& x, T& y, T& z, T& l, T& m, T& n,
+                                                       Failure& failure, T* travel, T* zeta_out,
+                                                       T* zeta_prime_out) {
+  using std::sqrt;
+  // Shift to vertex k and transfer to its tangent plane.
+  const T z_rel = z - shift;
+  const T s0 = -z_rel / n;
+  const T x1 = x + s0 * l;
+  const T y1 = y + s0 * m;
+  // Intersect the sphere.
+  const T f = c * (x1 * x1 + y1 * y1);
+  const T g = n - c * (x1 * l + y1 * m);
+  const T zeta_raw = g * g - c * f;
+  const auto miss = zeta_raw < zero;
+  const T zeta = sphere_select(miss, one, zeta_raw);  // keep numbers finite; the ray is flagged
+  const T cos_i = sqrt(zeta);
+  const T s1 = f / (g + cos_i);
+  const T x2 = x1 + s1 * l;
+  const T y2 = y1 + s1 * m;
+  const T z2 = s1 * n;
+  // Refract.
+  const T zeta_prime_raw = one - mu2 * (one - zeta);
+  const auto tir = zeta_prime_raw < zero;
+  const T zeta_prime = sphere_select(tir, zeta, zeta_prime_raw);
+  if constexpr (kRecord) {
+    if (travel) *travel = z2 - z_rel;
+    *zeta_out = zeta_raw;              // before clamping: a miss shows as zeta < 0
+    *zeta_prime_out = zeta_prime_raw;  // before clamping: TIR shows as zeta' < 0
+  }
+  failure = sphere_failure(miss, tir);
+  const T gamma = sqrt(zeta_prime) - mu * cos_i;
+  l = mu * l - gamma * c * x2;
+  m = mu * m - gamma * c * y2;
+  n = mu * n + gamma * (one - c * z2);
+  x = x2;
+  y = y2;
+  z = z2;
+}
+
 // Steps 1-4 of the header for every ray at one surface. Branch-free in the ray loop (selects,
 // not jumps) so that the double instantiation vectorizes; kRecord adds the loss records.
 template <typename T, bool kRecord>
@@ -138,44 +195,17 @@ inline __attribute__((always_inline)) void trace_surface(
     T* __restrict z, T* __restrict l, T* __restrict m, T* __restrict n,
     std::int32_t* __restrict failure, T* __restrict travel, T* __restrict zeta_out,
     T* __restrict zeta_prime_out) {
-  using std::sqrt;
   const T one = K<T>(1.0);
   const T zero = K<T>(0.0);
   const T mu2 = mu * mu;
   for (std::size_t i = 0; i < count; ++i) {
-    // Shift to vertex k and transfer to its tangent plane.
-    const T z_rel = z[i] - shift;
-    const T s0 = -z_rel / n[i];
-    const T x1 = x[i] + s0 * l[i];
-    const T y1 = y[i] + s0 * m[i];
-    // Intersect the sphere.
-    const T f = c * (x1 * x1 + y1 * y1);
-    const T g = n[i] - c * (x1 * l[i] + y1 * m[i]);
-    const T zeta_raw = g * g - c * f;
-    const bool miss = zeta_raw < zero;
-    const T zeta = miss ? one : zeta_raw;  // keep numbers finite; the ray is flagged
-    const T cos_i = sqrt(zeta);
-    const T s1 = f / (g + cos_i);
-    const T x2 = x1 + s1 * l[i];
-    const T y2 = y1 + s1 * m[i];
-    const T z2 = s1 * n[i];
-    // Refract.
-    const T zeta_prime_raw = one - mu2 * (one - zeta);
-    const bool tir = zeta_prime_raw < zero;
-    const T zeta_prime = tir ? zeta : zeta_prime_raw;
-    if constexpr (kRecord) {
-      if (travel) travel[i] = z2 - z_rel;
-      zeta_out[i] = zeta_raw;              // before clamping: a miss shows as zeta < 0
-      zeta_prime_out[i] = zeta_prime_raw;  // before clamping: TIR shows as zeta' < 0
-    }
-    failure[i] = miss ? kRayMissedSurface : (tir ? kRayTotalInternalReflection : kRayOk);
-    const T gamma = sqrt(zeta_prime) - mu * cos_i;
-    l[i] = mu * l[i] - gamma * c * x2;
-    m[i] = mu * m[i] - gamma * c * y2;
-    n[i] = mu * n[i] + gamma * (one - c * z2);
-    x[i] = x2;
-    y[i] = y2;
-    z[i] = z2;
+    if constexpr (kRecord)
+      sphere_step<T, true>(c, shift, mu, mu2, one, zero, x[i], y[i], z[i], l[i], m[i], n[i],
+                           failure[i], travel ? travel + i : nullptr, zeta_out + i,
+                           zeta_prime_out + i);
+    else
+      sphere_step<T, false>(c, shift, mu, mu2, one, zero, x[i], y[i], z[i], l[i], m[i], n[i],
+                            failure[i], nullptr, nullptr, nullptr);
   }
 }
 
