@@ -191,7 +191,7 @@ TEST_CASE("trace: the compiled Jet trace of every listed width gives the templat
 
 namespace {
 
-// The compiled sphere loop (detail::trace_surface_jet_at, trace/dual.h) at x86-64 level `level`
+// The compiled sphere loop (detail::trace_surface_jet_at, trace/kernel.h) at x86-64 level `level`
 // against the template on Jets (Eigen's arithmetic) at one surface: rays with derivatives in
 // every direction, some missing the sphere, some totally reflected, with and without records.
 // `count` rays out of a pool of 997: counts below, at and between multiples of the vector widths

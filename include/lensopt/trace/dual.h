@@ -124,17 +124,4 @@ bool dual_matches_jet() {
 // Eigen's 128-bit packets being faster than these loops at that width).
 int jet_trace_level();
 
-// detail::trace_surface_jet (kernel.h) with the copy compiled for `level` (4, 3, else the baseline
-// level), for the tests: a level the CPU lacks must not be asked for.
-#define LENSOPT_DECLARE_JET_SURFACE_AT(N)                                            \
-  void trace_surface_jet_at(                                                         \
-      int level, const ceres::Jet<double, N>& c, const ceres::Jet<double, N>& shift, \
-      const ceres::Jet<double, N>& mu, std::size_t count, ceres::Jet<double, N>* x,  \
-      ceres::Jet<double, N>* y, ceres::Jet<double, N>* z, ceres::Jet<double, N>* l,  \
-      ceres::Jet<double, N>* m, ceres::Jet<double, N>* n, std::int32_t* failure,     \
-      ceres::Jet<double, N>* travel, ceres::Jet<double, N>* zeta_out,                \
-      ceres::Jet<double, N>* zeta_prime_out, bool record);
-LENSOPT_FOR_EACH_JET_WIDTH(LENSOPT_DECLARE_JET_SURFACE_AT)
-#undef LENSOPT_DECLARE_JET_SURFACE_AT
-
 }  // namespace lensopt::detail

@@ -221,16 +221,24 @@ void trace_surface_double(double c, double shift, double mu, std::size_t count, 
 // several x86-64 levels with the Jets' derivative arithmetic vectorized at each level's width
 // (src/trace/kernel_jet.cpp.in, trace/dual.h): the bits of trace_surface<Jet, kRecord>. Used by
 // the compiled Jet trace (trace_bundle_jet); `record`: whether the zeta records are written.
-#define LENSOPT_DECLARE_JET_SURFACE(N)                                              \
-  void trace_surface_jet(                                                           \
-      const ceres::Jet<double, N>& c, const ceres::Jet<double, N>& shift,           \
-      const ceres::Jet<double, N>& mu, std::size_t count, ceres::Jet<double, N>* x, \
-      ceres::Jet<double, N>* y, ceres::Jet<double, N>* z, ceres::Jet<double, N>* l, \
-      ceres::Jet<double, N>* m, ceres::Jet<double, N>* n, std::int32_t* failure,    \
-      ceres::Jet<double, N>* travel, ceres::Jet<double, N>* zeta_out,               \
-      ceres::Jet<double, N>* zeta_prime_out, bool record);
+// trace_surface_jet_at runs the copy compiled for `level` (4, 3, else the baseline level;
+// jet_trace_level() in trace/dual.h gives this CPU's), for the tests: a level the CPU lacks must
+// not be asked for.
+// clang-format off
+#define LENSOPT_JET_SURFACE_PARAMETERS(N)                                          \
+  const ceres::Jet<double, N>& c, const ceres::Jet<double, N>& shift,              \
+  const ceres::Jet<double, N>& mu, std::size_t count, ceres::Jet<double, N>* x,    \
+  ceres::Jet<double, N>* y, ceres::Jet<double, N>* z, ceres::Jet<double, N>* l,    \
+  ceres::Jet<double, N>* m, ceres::Jet<double, N>* n, std::int32_t* failure,       \
+  ceres::Jet<double, N>* travel, ceres::Jet<double, N>* zeta_out,                  \
+  ceres::Jet<double, N>* zeta_prime_out, bool record
+// clang-format on
+#define LENSOPT_DECLARE_JET_SURFACE(N)                       \
+  void trace_surface_jet(LENSOPT_JET_SURFACE_PARAMETERS(N)); \
+  void trace_surface_jet_at(int level, LENSOPT_JET_SURFACE_PARAMETERS(N));
 LENSOPT_FOR_EACH_JET_WIDTH(LENSOPT_DECLARE_JET_SURFACE)
 #undef LENSOPT_DECLARE_JET_SURFACE
+#undef LENSOPT_JET_SURFACE_PARAMETERS
 
 }  // namespace detail
 
@@ -505,6 +513,87 @@ void turn_about_z(double cos_a, double sin_a, std::size_t count, T* x, T* y, T* 
 // The general path of trace_bundle for a lens with 3D placements (TraceGeometry::placed()); see
 // the header. Rays are held in the frame of the last surface traced (its frame after placement,
 // or the parent frame for a restore_frame surface).
+// Before surface 0: a ray with n <= 0 (or NaN) cannot travel forwards; it is flagged
+// kRayBackwards at surface 0 and its n set to 1 to keep it finite.
+template <typename T>
+void flag_backwards_at_start(std::size_t count, T* n, std::uint8_t* status,
+                             std::int8_t* failed_at) {
+  if (!any_not_forward(n, count)) return;
+  const T zero = K<T>(0.0);
+  const T one = K<T>(1.0);
+  for (std::size_t i = 0; i < count; ++i) {
+    if (!(n[i] > zero) && status[i] == kRayOk) {
+      status[i] = kRayBackwards;
+      failed_at[i] = 0;
+      n[i] = one;
+    }
+  }
+}
+
+// After the last surface of an unplaced lens: the transfer to the image plane z = t_{K-1}, s =
+// -(z - t) / n along the ray; a ray with n <= 0 is flagged kRayBackwards at the last surface.
+// `opl`: the optical paths to extend by n_image s, or null.
+template <typename T>
+void transfer_to_image(const TraceLens<T>& lens, int w, RayBundle<T>& rays, RayRecord<T>* record,
+                       T* opl) {
+  const std::size_t count = rays.size();
+  const T zero = K<T>(0.0);
+  T* x = rays.x.data();
+  T* y = rays.y.data();
+  T* z = rays.z.data();
+  T* l = rays.l.data();
+  T* m = rays.m.data();
+  T* n = rays.n.data();
+  const int last = lens.surface_count() - 1;
+  const T t = lens.thickness_mm[last];
+  T* travel = record ? record->axial_travel_mm[last].data() : nullptr;
+  if (!travel && !opl && !any_not_forward(n, count)) {
+    // Every ray travels forwards: the same transfer without the per-ray branch.
+    for (std::size_t i = 0; i < count; ++i) {
+      const T s = -(z[i] - t) / n[i];
+      x[i] = x[i] + s * l[i];
+      y[i] = y[i] + s * m[i];
+      z[i] = zero;
+    }
+    return;
+  }
+  const T n_image = opl ? lens.index(last, w) : K<T>(1.0);
+  std::uint8_t* status = rays.status.data();
+  std::int8_t* failed_at = rays.failed_surface.data();
+  for (std::size_t i = 0; i < count; ++i) {
+    const T z_rel = z[i] - t;
+    if (travel) travel[i] = -z_rel;
+    if (!(n[i] > zero)) {
+      if (status[i] == kRayOk) {
+        status[i] = kRayBackwards;
+        failed_at[i] = static_cast<std::int8_t>(last);
+      }
+      continue;
+    }
+    const T s = -z_rel / n[i];
+    if (opl) opl[i] = opl[i] + n_image * s;
+    x[i] = x[i] + s * l[i];
+    y[i] = y[i] + s * m[i];
+    z[i] = zero;
+  }
+}
+
+// The failures of surface k (trace_surface's codes, the aperture's, the obscuration's) into the
+// rays' status: the first failure of a ray wins. A bundle without failures, the usual case, skips
+// the per-ray loop after one reduction that vectorizes.
+inline void record_failures(std::size_t count, const std::int32_t* failure, int k,
+                            std::uint8_t* status, std::int8_t* failed_at) {
+  std::int32_t any_failure = 0;
+  for (std::size_t i = 0; i < count; ++i) any_failure |= failure[i];
+  if (any_failure == 0) return;
+  for (std::size_t i = 0; i < count; ++i) {
+    if (failure[i] != kRayOk && status[i] == kRayOk) {
+      status[i] = static_cast<std::uint8_t>(failure[i]);
+      failed_at[i] = static_cast<std::int8_t>(k);
+    }
+  }
+}
+
 template <typename T>
 void trace_bundle_placed(const TraceLens<T>& lens, int w, int end, bool to_image,
                          RayBundle<T>& rays, RayRecord<T>* record) {
@@ -593,16 +682,7 @@ void trace_bundle_placed(const TraceLens<T>& lens, int w, int end, bool to_image
       for (std::size_t i = 0; i < count; ++i)
         opl[i] = opl[i] + n_before * (z[i] - start_z[i]) / start_n[i];
     }
-    std::int32_t any_failure = 0;
-    for (std::size_t i = 0; i < count; ++i) any_failure |= failure[i];
-    if (any_failure != 0) {
-      for (std::size_t i = 0; i < count; ++i) {
-        if (failure[i] != kRayOk && status[i] == kRayOk) {
-          status[i] = static_cast<std::uint8_t>(failure[i]);
-          failed_at[i] = static_cast<std::int8_t>(k);
-        }
-      }
-    }
+    record_failures(count, failure, k, status, failed_at);
     if ((flags & kPlacementMoved) && (flags & kPlacementRestore))
       to_parent(frame, count, x, y, z, l, m, n);
   }
@@ -700,18 +780,10 @@ void trace_bundle(const TraceLens<T>& lens, int w, int end, bool to_image, RayBu
   T* start_z = path ? record->path_start_z.data() : nullptr;
   T* start_n = path ? record->path_start_n.data() : nullptr;
 
-  // A ray must travel forwards. The checks below first ask whether any ray needs the
-  // bookkeeping (a reduction that vectorizes), so a bundle without failures, the usual case,
-  // skips the per-ray status loops.
-  if (detail::any_not_forward(n, count)) {
-    for (std::size_t i = 0; i < count; ++i) {
-      if (!(n[i] > zero) && status[i] == kRayOk) {
-        status[i] = kRayBackwards;
-        failed_at[i] = 0;
-        n[i] = one;
-      }
-    }
-  }
+  // A ray must travel forwards. The checks first ask whether any ray needs the bookkeeping (a
+  // reduction that vectorizes), so a bundle without failures, the usual case, skips the per-ray
+  // status loops.
+  detail::flag_backwards_at_start(count, n, status, failed_at);
 
   for (int k = 0; k < end; ++k) {
     const T c = lens.curvature_per_mm[k];
@@ -740,51 +812,10 @@ void trace_bundle(const TraceLens<T>& lens, int w, int end, bool to_image, RayBu
       for (std::size_t i = 0; i < count; ++i)
         opl[i] = opl[i] + n_before * (z[i] - start_z[i]) / start_n[i];
     }
-    // The first failure of a ray wins.
-    std::int32_t any_failure = 0;
-    for (std::size_t i = 0; i < count; ++i) any_failure |= failure[i];
-    if (any_failure != 0) {
-      for (std::size_t i = 0; i < count; ++i) {
-        if (failure[i] != kRayOk && status[i] == kRayOk) {
-          status[i] = static_cast<std::uint8_t>(failure[i]);
-          failed_at[i] = static_cast<std::int8_t>(k);
-        }
-      }
-    }
+    detail::record_failures(count, failure, k, status, failed_at);
   }
 
-  if (to_image) {
-    const int last = lens.surface_count() - 1;
-    const T t = lens.thickness_mm[last];
-    T* travel = record ? record->axial_travel_mm[last].data() : nullptr;
-    const T n_image = path ? lens.index(last, w) : one;
-    if (!travel && !path && !detail::any_not_forward(n, count)) {
-      // Every ray travels forwards: the same transfer without the per-ray branch.
-      for (std::size_t i = 0; i < count; ++i) {
-        const T s = -(z[i] - t) / n[i];
-        x[i] = x[i] + s * l[i];
-        y[i] = y[i] + s * m[i];
-        z[i] = zero;
-      }
-      return;
-    }
-    for (std::size_t i = 0; i < count; ++i) {
-      const T z_rel = z[i] - t;
-      if (travel) travel[i] = -z_rel;
-      if (!(n[i] > zero)) {
-        if (status[i] == kRayOk) {
-          status[i] = kRayBackwards;
-          failed_at[i] = static_cast<std::int8_t>(last);
-        }
-        continue;
-      }
-      const T s = -z_rel / n[i];
-      if (path) opl[i] = opl[i] + n_image * s;
-      x[i] = x[i] + s * l[i];
-      y[i] = y[i] + s * m[i];
-      z[i] = zero;
-    }
-  }
+  if (to_image) detail::transfer_to_image(lens, w, rays, record, opl);
 }
 
 // trace_bundle on double (with its placed path) is compiled once, in src/trace/kernel_double.cpp,
