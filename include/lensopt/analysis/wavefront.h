@@ -435,10 +435,10 @@ extern template Wavefront<double> compute_wavefront<double>(const TraceSystem<do
 // compute_wavefront on the Jets of core/jet_width.h (the wavefront merit's and the wavefront
 // targets' Jacobians) is compiled once per width, in src/analysis/spot_jet.cpp.in (it was compiled
 // in every file that differentiates a wavefront: the optimizer, five Jet files, six test files).
-#define LENSOPT_COMPUTE_WAVEFRONT_JET(N)                                                           \
-  extern template Wavefront<ceres::Jet<double, N>> compute_wavefront<ceres::Jet<double, N>>(      \
-      const TraceSystem<ceres::Jet<double, N>>&, int, int, const PupilGrid&,                       \
-      const ReferenceSphere<ceres::Jet<double, N>>&, double, RayBundle<ceres::Jet<double, N>>&,    \
+#define LENSOPT_COMPUTE_WAVEFRONT_JET(N)                                                        \
+  extern template Wavefront<ceres::Jet<double, N>> compute_wavefront<ceres::Jet<double, N>>(    \
+      const TraceSystem<ceres::Jet<double, N>>&, int, int, const PupilGrid&,                    \
+      const ReferenceSphere<ceres::Jet<double, N>>&, double, RayBundle<ceres::Jet<double, N>>&, \
       RayRecord<ceres::Jet<double, N>>&);
 LENSOPT_FOR_EACH_JET_WIDTH(LENSOPT_COMPUTE_WAVEFRONT_JET)
 #undef LENSOPT_COMPUTE_WAVEFRONT_JET
