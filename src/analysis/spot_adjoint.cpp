@@ -182,6 +182,17 @@ SystemAdjoint mean_spot_adjoint(const TraceSystem<double>& sys, int threads) {
   return out;
 }
 
+// The gradients on every width (declared extern in analysis/gradient.h and spot_adjoint.h).
+#define LENSOPT_SPOT_GRADIENTS_JET(N)                                                           \
+  template SpotGradient mean_spot_gradient<N>(const TraceLens<double>&, const Specs&,           \
+                                              const std::vector<PrescriptionVariable>&,         \
+                                              const TraceOptions&);                             \
+  template SpotGradient mean_spot_gradient_adjoint<N>(const TraceLens<double>&, const Specs&,   \
+                                                      const std::vector<PrescriptionVariable>&, \
+                                                      const TraceOptions&);
+LENSOPT_FOR_EACH_JET_WIDTH(LENSOPT_SPOT_GRADIENTS_JET)
+#undef LENSOPT_SPOT_GRADIENTS_JET
+
 SpotGradient mean_spot_gradient_fast(const TraceLens<double>& lens, const Specs& specs,
                                      const std::vector<PrescriptionVariable>& variables,
                                      const TraceOptions& options) {

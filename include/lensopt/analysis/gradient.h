@@ -65,6 +65,15 @@ SpotGradient mean_spot_gradient(const TraceLens<double>& lens_in, const Specs& s
   return out;
 }
 
+// mean_spot_gradient on the widths of core/jet_width.h is compiled once, in
+// src/analysis/spot_adjoint.cpp (a file calling mean_spot_gradient_auto, below, compiled all five).
+#define LENSOPT_MEAN_SPOT_GRADIENT_JET(N)                                                      \
+  extern template SpotGradient mean_spot_gradient<N>(const TraceLens<double>&, const Specs&,   \
+                                                     const std::vector<PrescriptionVariable>&, \
+                                                     const TraceOptions&);
+LENSOPT_FOR_EACH_JET_WIDTH(LENSOPT_MEAN_SPOT_GRADIENT_JET)
+#undef LENSOPT_MEAN_SPOT_GRADIENT_JET
+
 }  // namespace lensopt
 
 namespace lensopt {

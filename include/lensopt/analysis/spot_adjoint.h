@@ -239,6 +239,15 @@ SpotGradient mean_spot_gradient_adjoint(const TraceLens<double>& lens_in, const 
   return out;
 }
 
+// mean_spot_gradient_adjoint on the widths of core/jet_width.h is compiled once, in
+// src/analysis/spot_adjoint.cpp.
+#define LENSOPT_MEAN_SPOT_GRADIENT_ADJOINT_JET(N)                                       \
+  extern template SpotGradient mean_spot_gradient_adjoint<N>(                           \
+      const TraceLens<double>&, const Specs&, const std::vector<PrescriptionVariable>&, \
+      const TraceOptions&);
+LENSOPT_FOR_EACH_JET_WIDTH(LENSOPT_MEAN_SPOT_GRADIENT_ADJOINT_JET)
+#undef LENSOPT_MEAN_SPOT_GRADIENT_ADJOINT_JET
+
 // The fastest exact gradient: the adjoint where supported, else the Jet path.
 SpotGradient mean_spot_gradient_fast(const TraceLens<double>& lens, const Specs& specs,
                                      const std::vector<PrescriptionVariable>& variables,

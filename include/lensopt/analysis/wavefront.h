@@ -54,6 +54,7 @@
 #include <vector>
 
 #include "lensopt/core/error.h"
+#include "lensopt/core/jet_width.h"
 #include "lensopt/core/scalar.h"
 #include "lensopt/paraxial/paraxial.h"
 #include "lensopt/trace/system.h"
@@ -431,5 +432,15 @@ extern template Wavefront<double> compute_wavefront<double>(const TraceSystem<do
                                                             const PupilGrid&,
                                                             const ReferenceSphere<double>&, double,
                                                             RayBundle<double>&, RayRecord<double>&);
+// compute_wavefront on the Jets of core/jet_width.h (the wavefront merit's and the wavefront
+// targets' Jacobians) is compiled once per width, in src/analysis/spot_jet.cpp.in (it was compiled
+// in every file that differentiates a wavefront: the optimizer, five Jet files, six test files).
+#define LENSOPT_COMPUTE_WAVEFRONT_JET(N)                                                        \
+  extern template Wavefront<ceres::Jet<double, N>> compute_wavefront<ceres::Jet<double, N>>(    \
+      const TraceSystem<ceres::Jet<double, N>>&, int, int, const PupilGrid&,                    \
+      const ReferenceSphere<ceres::Jet<double, N>>&, double, RayBundle<ceres::Jet<double, N>>&, \
+      RayRecord<ceres::Jet<double, N>>&);
+LENSOPT_FOR_EACH_JET_WIDTH(LENSOPT_COMPUTE_WAVEFRONT_JET)
+#undef LENSOPT_COMPUTE_WAVEFRONT_JET
 
 }  // namespace lensopt
