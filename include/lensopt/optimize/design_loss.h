@@ -321,7 +321,7 @@ struct DesignScratch {
   RayRecord<T> record, edge_record;
   std::vector<T> ys, xs, ls, ms, ns, ax, ay;
   std::vector<double> omega_ray;
-  std::vector<char> ok;
+  std::vector<char> ok, active;
   std::vector<T> path_sq, angle_sq, path_soft, angle_soft;
 };
 
@@ -424,6 +424,7 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
   std::vector<T> field_wave(wavefront ? field_count : 0, K<T>(0.0));
   std::vector<T> path_linear(all_fields, K<T>(0.0)), angle_linear(all_fields, K<T>(0.0));
   std::vector<int> failed(all_fields, 0);
+  const bool any_split = std::find(split.begin(), split.end(), 1) != split.end();
   std::vector<DesignExtremes> field_extremes(all_fields);
   for (DesignExtremes& e : field_extremes) {
     e.min_travel_mm.assign(k_count, std::numeric_limits<double>::infinity());
@@ -455,6 +456,7 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
     std::vector<T>& ay = scratch.ay;
     std::vector<double>& omega_ray = scratch.omega_ray;
     std::vector<char>& ok = scratch.ok;
+    std::vector<char>& active = scratch.active;  // add_constraints: rays to visit
     std::vector<T>& path_sq = scratch.path_sq;
     std::vector<T>& angle_sq = scratch.angle_sq;
     std::vector<T>& path_soft = scratch.path_soft;
@@ -483,7 +485,31 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
       T path_sum = K<T>(0.0), angle_sum = K<T>(0.0);
       // Adds the path and angle penalties of the traced rays of `b` (records in `rec`).
       auto add_constraints = [&](const RayBundle<T>& b, const RayRecord<T>& rec) {
-        for (std::size_t p = 0; p < b.size(); ++p) {
+        const std::size_t count = b.size();
+        // Without extremes to report (the LM's evaluations), a ray whose every hinge is inactive
+        // adds nothing. A first pass over the records, surface by surface and branch-free, marks
+        // the rays with an entry past a bound or within kHingeTie of the angle bound, and only
+        // those are visited below, in ray order as before (the same sums, the same bits). The
+        // pass also reads a failed ray's entries past its failure, which the visit does not:
+        // they can only mark more rays. With a split element the travel is summed along the ray:
+        // every ray is visited.
+        const bool screen = !extremes && !any_split;
+        if (screen) {
+          active.assign(count, 0);
+          const double angle_limit = cos2_max + detail::kHingeTie;
+          for (int k = 0; k < k_count; ++k) {
+            const T* travel = rec.axial_travel_mm[k].data();
+            const T* in = rec.cos2_incidence[k].data();
+            const T* out = rec.cos2_refraction[k].data();
+            const double lo = lower[k], hi = upper[k];
+            for (std::size_t p = 0; p < count; ++p)
+              active[p] |= static_cast<char>(
+                  (value_of(travel[p]) < lo) | (value_of(travel[p]) > hi) |
+                  (value_of(in[p]) < angle_limit) | (value_of(out[p]) < angle_limit));
+          }
+        }
+        for (std::size_t p = 0; p < count; ++p) {
+          if (screen && !active[p]) continue;
           const bool traced = b.status[p] == kRayOk;
           const int last_valid = traced ? k_count - 1 : b.failed_surface[p];
           T element_dz = K<T>(0.0);  // the travel so far in a split element
