@@ -287,6 +287,44 @@ T tied_hinge(const T& v) {
   }
 }
 
+// Whether T is ceres::Jet<double, N> of a width of core/jet_width.h (traced by trace_bundle_jet).
+template <typename T>
+struct is_listed_jet : std::false_type {};
+template <int N>
+struct is_listed_jet<ceres::Jet<double, N>> : std::bool_constant<is_jet_width(N)> {};
+
+// Sizes a record for `rays` rays at `surfaces` surfaces before a trace. On the Jets of
+// core/jet_width.h the trace (trace_bundle_jet, src/trace/kernel_jet.cpp.in) leaves every travel
+// and zeta entry written or zero, so a record reused at the same shape is not zeroed first (its
+// 2.4 MB per 1024-ray bundle at width 12 were about 1.5 % of an LM run); elsewhere
+// RayRecord::resize, which zeroes every array.
+template <typename T>
+void size_record(RayRecord<T>& record, int surfaces, std::size_t rays) {
+  if constexpr (is_listed_jet<T>::value) {
+    for (auto* arrays :
+         {&record.axial_travel_mm, &record.cos2_incidence, &record.cos2_refraction}) {
+      arrays->resize(surfaces);
+      for (std::vector<T>& a : *arrays) a.resize(rays);
+    }
+    record.optical_path_mm.clear();
+    record.path_start_z.clear();
+    record.path_start_n.clear();
+  } else {
+    record.resize(surfaces, rays);
+  }
+}
+
+// The per-thread buffers of evaluate_design (one set per thread and scalar type, reused).
+template <typename T>
+struct DesignScratch {
+  RayBundle<T> bundle, edge_bundle;
+  RayRecord<T> record, edge_record;
+  std::vector<T> ys, xs, ls, ms, ns, ax, ay;
+  std::vector<double> omega_ray;
+  std::vector<char> ok, active;
+  std::vector<T> path_sq, angle_sq, path_soft, angle_soft;
+};
+
 }  // namespace detail
 
 // Evaluates the design loss of variables x. `residuals` (may be null) receives the least-squares
@@ -386,6 +424,7 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
   std::vector<T> field_wave(wavefront ? field_count : 0, K<T>(0.0));
   std::vector<T> path_linear(all_fields, K<T>(0.0)), angle_linear(all_fields, K<T>(0.0));
   std::vector<int> failed(all_fields, 0);
+  const bool any_split = std::find(split.begin(), split.end(), 1) != split.end();
   std::vector<DesignExtremes> field_extremes(all_fields);
   for (DesignExtremes& e : field_extremes) {
     e.min_travel_mm.assign(k_count, std::numeric_limits<double>::infinity());
@@ -399,14 +438,33 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
   const int nthreads = thread_count(trace_options.threads);
 #pragma omp parallel num_threads(nthreads)
   {
-    RayBundle<T> bundle, edge_bundle;
-    RayRecord<T> record, edge_record;
-    std::vector<T> ys, xs;
-    std::vector<T> ls, ms, ns, ax, ay;  // afocal: exit directions and their projections
-    std::vector<double> omega_ray;
-    std::vector<char> ok;
-    std::vector<T> path_sq(k_count), angle_sq(k_count * 2);
-    std::vector<T> path_soft(k_count), angle_soft(k_count * 2);
+    // Each thread's buffers, kept from one evaluation to the next (an LM run evaluates thousands
+    // of times; allocated per evaluation they were about 3 % of its CPU in malloc, page faults
+    // and zeroing). Every buffer is sized and filled below before it is read.
+    thread_local detail::DesignScratch<T> scratch;
+    RayBundle<T>& bundle = scratch.bundle;
+    RayBundle<T>& edge_bundle = scratch.edge_bundle;
+    RayRecord<T>& record = scratch.record;
+    RayRecord<T>& edge_record = scratch.edge_record;
+    std::vector<T>& ys = scratch.ys;
+    std::vector<T>& xs = scratch.xs;
+    // afocal: exit directions and their projections
+    std::vector<T>& ls = scratch.ls;
+    std::vector<T>& ms = scratch.ms;
+    std::vector<T>& ns = scratch.ns;
+    std::vector<T>& ax = scratch.ax;
+    std::vector<T>& ay = scratch.ay;
+    std::vector<double>& omega_ray = scratch.omega_ray;
+    std::vector<char>& ok = scratch.ok;
+    std::vector<char>& active = scratch.active;  // add_constraints: rays to visit
+    std::vector<T>& path_sq = scratch.path_sq;
+    std::vector<T>& angle_sq = scratch.angle_sq;
+    std::vector<T>& path_soft = scratch.path_soft;
+    std::vector<T>& angle_soft = scratch.angle_soft;
+    path_sq.assign(k_count, K<T>(0.0));
+    angle_sq.assign(static_cast<std::size_t>(k_count) * 2, K<T>(0.0));
+    path_soft.assign(k_count, K<T>(0.0));
+    angle_soft.assign(static_cast<std::size_t>(k_count) * 2, K<T>(0.0));
 #pragma omp for schedule(dynamic, 1)
     for (int hf = 0; hf < all_fields; ++hf) {
       // hf: constraint field; spot field h when sampled.spot_field[hf] = h >= 0.
@@ -427,7 +485,31 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
       T path_sum = K<T>(0.0), angle_sum = K<T>(0.0);
       // Adds the path and angle penalties of the traced rays of `b` (records in `rec`).
       auto add_constraints = [&](const RayBundle<T>& b, const RayRecord<T>& rec) {
-        for (std::size_t p = 0; p < b.size(); ++p) {
+        const std::size_t count = b.size();
+        // Without extremes to report (the LM's evaluations), a ray whose every hinge is inactive
+        // adds nothing. A first pass over the records, surface by surface and branch-free, marks
+        // the rays with an entry past a bound or within kHingeTie of the angle bound, and only
+        // those are visited below, in ray order as before (the same sums, the same bits). The
+        // pass also reads a failed ray's entries past its failure, which the visit does not:
+        // they can only mark more rays. With a split element the travel is summed along the ray:
+        // every ray is visited.
+        const bool screen = !extremes && !any_split;
+        if (screen) {
+          active.assign(count, 0);
+          const double angle_limit = cos2_max + detail::kHingeTie;
+          for (int k = 0; k < k_count; ++k) {
+            const T* travel = rec.axial_travel_mm[k].data();
+            const T* in = rec.cos2_incidence[k].data();
+            const T* out = rec.cos2_refraction[k].data();
+            const double lo = lower[k], hi = upper[k];
+            for (std::size_t p = 0; p < count; ++p)
+              active[p] |= static_cast<char>(
+                  (value_of(travel[p]) < lo) | (value_of(travel[p]) > hi) |
+                  (value_of(in[p]) < angle_limit) | (value_of(out[p]) < angle_limit));
+          }
+        }
+        for (std::size_t p = 0; p < count; ++p) {
+          if (screen && !active[p]) continue;
           const bool traced = b.status[p] == kRayOk;
           const int last_valid = traced ? k_count - 1 : b.failed_surface[p];
           T element_dz = K<T>(0.0);  // the travel so far in a split element
@@ -518,13 +600,13 @@ bool evaluate_design(const LensParameterization& param, const T* x, GlassMode mo
       for (int w = 0; w < wl; ++w) {
         if (spot_field && !wavefront) {
           start_rays(sys, hf, w, bundle);
-          record.resize(k_count, bundle.size());
+          detail::size_record(record, k_count, bundle.size());
           trace_bundle(sys.lens, w, k_count, true, bundle, &record);
           keep_spot_rays(w);
           add_constraints(bundle, record);
         }
         start_rays(sys, hf, w, edge_bundle, &edge);
-        edge_record.resize(k_count, edge_bundle.size());
+        detail::size_record(edge_record, k_count, edge_bundle.size());
         trace_bundle(sys.lens, w, k_count, true, edge_bundle, &edge_record);
         for (std::size_t p = 0; p < edge_bundle.size(); ++p)
           failed[hf] += edge_bundle.status[p] != kRayOk;

@@ -33,6 +33,8 @@ class FreeJacobianCost final : public ceres::CostFunction {
   // Takes ownership of `functor`. `free`: the indices of the free variables (any order).
   FreeJacobianCost(Functor* functor, int n, int residuals, std::vector<int> free)
       : functor_(functor), free_(std::move(free)) {
+    for (int i = 0; i < n; ++i)
+      if (std::find(free_.begin(), free_.end(), i) == free_.end()) frozen_.push_back(i);
     mutable_parameter_block_sizes()->push_back(n);
     set_num_residuals(residuals);
   }
@@ -42,12 +44,18 @@ class FreeJacobianCost final : public ceres::CostFunction {
     const int count = num_residuals();
     const int n = parameter_block_sizes()[0];
     const bool want_jacobian = jacobians != nullptr && jacobians[0] != nullptr;
-    if (want_jacobian) std::fill(jacobians[0], jacobians[0] + std::size_t(count) * n, 0.0);
+    // The frozen columns are zero; every free column is written below, row by row.
+    if (want_jacobian)
+      for (int row = 0; row < count; ++row)
+        for (int i : frozen_) jacobians[0][std::size_t(row) * n + i] = 0.0;
     if (!want_jacobian || free_.empty()) return (*functor_)(parameters, residuals);
     using J = ceres::Jet<double, kWidth>;
     const int m = static_cast<int>(free_.size());
-    std::vector<J> x(n);
-    std::vector<J> r(count);
+    // Scratch reused across evaluations (a Cooke's residual Jets are about 1 MB: allocated per
+    // evaluation, they were fresh pages to fault in and zero, and malloc trimming them again).
+    thread_local std::vector<J> x, r;
+    x.assign(n, J(0.0));
+    r.assign(count, J(0.0));
     for (int first = 0; first < m; first += kWidth) {
       const int width = std::min(kWidth, m - first);
       for (int i = 0; i < n; ++i) x[i] = J(parameters[0][i]);
@@ -66,6 +74,7 @@ class FreeJacobianCost final : public ceres::CostFunction {
  private:
   std::unique_ptr<Functor> functor_;
   std::vector<int> free_;
+  std::vector<int> frozen_;  // the other variables, in increasing order
 };
 
 // The cost function for n variables of which `frozen` are held, at the narrowest Jet width of

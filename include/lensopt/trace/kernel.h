@@ -731,6 +731,8 @@ namespace detail {
 
 // The Jet traces of the widths of core/jet_width.h, compiled once each for several x86-64 levels
 // with every Jet operation inlined (src/trace/kernel_jet.cpp.in, one translation unit per width).
+// Every entry of `record`'s travel and angle (zeta) records for the traced surfaces is left
+// written or zero, so a reused record needs no zeroing (optimize/design_loss.h).
 #define LENSOPT_DECLARE_JET_TRACE(N)                                                  \
   void trace_bundle_jet(const TraceLens<ceres::Jet<double, N>>& lens, int w, int end, \
                         bool to_image, RayBundle<ceres::Jet<double, N>>& rays,        \

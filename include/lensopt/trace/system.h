@@ -239,6 +239,20 @@ void trace_aiming_rays(const TraceLens<ceres::Jet<T, 1>>& lens_a, int w, const S
   stop_derivative[2] = rays.x[2].v[0];
 }
 
+// On the Jets of core/jet_width.h, trace_aiming_rays is specialized in src/trace/system_jet.cpp.in
+// (the aiming on nested duals, trace/aiming_jet.h: the same bits); declared here so that no file
+// instantiates the template above on them.
+#define LENSOPT_AIMING_RAYS_JET(N)                                                   \
+  template <>                                                                        \
+  void trace_aiming_rays<ceres::Jet<double, N>, TraceSystem<ceres::Jet<double, N>>>( \
+      const TraceLens<ceres::Jet<ceres::Jet<double, N>, 1>>&, int,                   \
+      const TraceSystem<ceres::Jet<double, N>>&, int, const ceres::Jet<double, N>&,  \
+      const ceres::Jet<double, N>&, const PupilMap<ceres::Jet<double, N>>&,          \
+      ceres::Jet<double, N>[3], ceres::Jet<double, N>[3],                            \
+      RayBundle<ceres::Jet<ceres::Jet<double, N>, 1>>*);
+LENSOPT_FOR_EACH_JET_WIDTH(LENSOPT_AIMING_RAYS_JET)
+#undef LENSOPT_AIMING_RAYS_JET
+
 }  // namespace detail
 
 // The three aimed rays (upper, lower, sagittal) of field h and wavelength w traced to the stop:
