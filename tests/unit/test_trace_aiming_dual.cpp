@@ -13,6 +13,7 @@
 #include <string>
 #include <vector>
 
+#include "bit_compare.h"
 #include "lensopt/formats/lens_file.h"
 #include "lensopt/trace/aiming_jet.h"
 #include "lensopt/trace/dual.h"
@@ -23,17 +24,7 @@ using namespace lensopt;
 
 namespace {
 
-bool same_bits(double a, double b) {
-  return std::memcmp(&a, &b, sizeof a) == 0;
-}
-
-template <int N>
-bool same_bits(const ceres::Jet<double, N>& a, const ceres::Jet<double, N>& b) {
-  if (!same_bits(a.a, b.a)) return false;
-  for (int j = 0; j < N; ++j)
-    if (!same_bits(a.v[j], b.v[j])) return false;
-  return true;
-}
+using test::same_bits;
 
 template <int N>
 bool finite(const ceres::Jet<double, N>& a) {

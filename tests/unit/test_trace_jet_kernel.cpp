@@ -11,6 +11,7 @@
 #include <type_traits>
 #include <vector>
 
+#include "bit_compare.h"
 #include "lensopt/core/jet_width.h"
 #include "lensopt/formats/lens_file.h"
 #include "lensopt/trace/dual.h"
@@ -20,14 +21,6 @@
 using namespace lensopt;
 
 namespace {
-
-// The same bits, or both NaN: x86 gives an operation on two NaNs the first operand's NaN, and
-// the compiler may order the operands of a commutative operation either way, so a NaN's sign and
-// payload are not part of the result. NaN appears only in the coordinates of a failed ray (after
-// a miss; checked by all_finite_where_traced), which no loss reads.
-bool same_bits(double a, double b) {
-  return std::memcmp(&a, &b, sizeof a) == 0 || (std::isnan(a) && std::isnan(b));
-}
 
 // Every value and derivative of the traced rays (status kRayOk) finite.
 template <int N>
@@ -43,21 +36,17 @@ bool all_finite_where_traced(const RayBundle<ceres::Jet<double, N>>& b) {
   return true;
 }
 
-template <int N>
-bool same_bits(const ceres::Jet<double, N>& a, const ceres::Jet<double, N>& b) {
-  if (!same_bits(a.a, b.a)) return false;
-  for (int j = 0; j < N; ++j)
-    if (!same_bits(a.v[j], b.v[j])) return false;
-  return true;
-}
-
-// Every value and derivative of two vectors of Jets equal bit for bit.
+// Every value and derivative of two vectors of Jets equal bit for bit, or both NaN: x86 gives an
+// operation on two NaNs the first operand's NaN, and the compiler may order the operands of a
+// commutative operation either way, so a NaN's sign and payload are not part of the result. NaN
+// appears only in the coordinates of a failed ray (after a miss; checked by
+// all_finite_where_traced), which no loss reads.
 template <int N>
 int differing(const std::vector<ceres::Jet<double, N>>& a,
               const std::vector<ceres::Jet<double, N>>& b) {
   if (a.size() != b.size()) return -1;
   int count = 0;
-  for (std::size_t i = 0; i < a.size(); ++i) count += !same_bits(a[i], b[i]);
+  for (std::size_t i = 0; i < a.size(); ++i) count += !test::same_bits_or_nan(a[i], b[i]);
   return count;
 }
 

@@ -13,6 +13,7 @@
 #include <string>
 #include <vector>
 
+#include "bit_compare.h"
 #include "lensopt/formats/lens_file.h"
 #include "lensopt/trace/kernel.h"
 #include "test_support.h"
@@ -22,24 +23,14 @@ using namespace lensopt;
 namespace {
 
 template <int N>
-bool same_or_both_nan(const ceres::Jet<double, N>& a, const ceres::Jet<double, N>& b) {
-  auto same = [](double x, double y) {
-    return std::memcmp(&x, &y, sizeof x) == 0 || (std::isnan(x) && std::isnan(y));
-  };
-  if (!same(a.a, b.a)) return false;
-  for (int j = 0; j < N; ++j)
-    if (!same(a.v[j], b.v[j])) return false;
-  return true;
-}
-
-template <int N>
 int differing(const std::vector<std::vector<ceres::Jet<double, N>>>& a,
               const std::vector<std::vector<ceres::Jet<double, N>>>& b) {
   if (a.size() != b.size()) return -1;
   int count = 0;
   for (std::size_t k = 0; k < a.size(); ++k) {
     if (a[k].size() != b[k].size()) return -1;
-    for (std::size_t i = 0; i < a[k].size(); ++i) count += !same_or_both_nan(a[k][i], b[k][i]);
+    for (std::size_t i = 0; i < a[k].size(); ++i)
+      count += !test::same_bits_or_nan(a[k][i], b[k][i]);
   }
   return count;
 }

@@ -530,12 +530,15 @@ void flag_backwards_at_start(std::size_t count, T* n, std::uint8_t* status,
   }
 }
 
-// After the last surface of an unplaced lens: the transfer to the image plane z = t_{K-1}, s =
-// -(z - t) / n along the ray; a ray with n <= 0 is flagged kRayBackwards at the last surface.
-// `opl`: the optical paths to extend by n_image s, or null.
+// After the last surface: the transfer to the image plane z = t_{K-1} (of the last frame), s =
+// -(z - t) / n along the ray. Unplaced (`either_side` false): a ray with n <= 0 is flagged
+// kRayBackwards at the last surface. Placed (`either_side` true): the plane is reached along the
+// ray's line either way (a plane needs no side: after a tilted image frame a beam may arrive along
+// -z), and only a ray with n = 0 (along the plane) is flagged. `opl`: the optical paths to extend
+// by n_image s, or null.
 template <typename T>
 void transfer_to_image(const TraceLens<T>& lens, int w, RayBundle<T>& rays, RayRecord<T>* record,
-                       T* opl) {
+                       T* opl, bool either_side = false) {
   const std::size_t count = rays.size();
   const T zero = K<T>(0.0);
   T* x = rays.x.data();
@@ -547,8 +550,8 @@ void transfer_to_image(const TraceLens<T>& lens, int w, RayBundle<T>& rays, RayR
   const int last = lens.surface_count() - 1;
   const T t = lens.thickness_mm[last];
   T* travel = record ? record->axial_travel_mm[last].data() : nullptr;
-  if (!travel && !opl && !any_not_forward(n, count)) {
-    // Every ray travels forwards: the same transfer without the per-ray branch.
+  if (!travel && !opl && !(either_side ? any_zero(n, count) : any_not_forward(n, count))) {
+    // No ray to flag: the same transfer without the per-ray branch.
     for (std::size_t i = 0; i < count; ++i) {
       const T s = -(z[i] - t) / n[i];
       x[i] = x[i] + s * l[i];
@@ -563,7 +566,7 @@ void transfer_to_image(const TraceLens<T>& lens, int w, RayBundle<T>& rays, RayR
   for (std::size_t i = 0; i < count; ++i) {
     const T z_rel = z[i] - t;
     if (travel) travel[i] = -z_rel;
-    if (!(n[i] > zero)) {
+    if (either_side ? n[i] == zero : !(n[i] > zero)) {
       if (status[i] == kRayOk) {
         status[i] = kRayBackwards;
         failed_at[i] = static_cast<std::int8_t>(last);
@@ -687,40 +690,8 @@ void trace_bundle_placed(const TraceLens<T>& lens, int w, int end, bool to_image
       to_parent(frame, count, x, y, z, l, m, n);
   }
 
-  if (to_image) {
-    // The image plane z = t_{K-1} of the last frame, reached along the ray's line either way
-    // (a plane needs no side: after a tilted image frame a beam may arrive along -z).
-    const int last = lens.surface_count() - 1;
-    const T t = lens.thickness_mm[last];
-    T* travel = record ? record->axial_travel_mm[last].data() : nullptr;
-    const T n_image = lens.index(last, w);
-    if (!travel && !path && !any_zero(n, count)) {
-      // No ray runs along the image plane: the same transfer without the per-ray branch.
-      for (std::size_t i = 0; i < count; ++i) {
-        const T s = -(z[i] - t) / n[i];
-        x[i] = x[i] + s * l[i];
-        y[i] = y[i] + s * m[i];
-        z[i] = zero;
-      }
-    } else {
-      for (std::size_t i = 0; i < count; ++i) {
-        const T z_rel = z[i] - t;
-        if (travel) travel[i] = -z_rel;
-        if (n[i] == zero) {
-          if (status[i] == kRayOk) {
-            status[i] = kRayBackwards;
-            failed_at[i] = static_cast<std::int8_t>(last);
-          }
-          continue;
-        }
-        const T s = -z_rel / n[i];
-        if (path) opl[i] = opl[i] + n_image * s;
-        x[i] = x[i] + s * l[i];
-        y[i] = y[i] + s * m[i];
-        z[i] = zero;
-      }
-    }
-  }
+  // The image plane z = t_{K-1} of the last frame, reached along the ray's line either way.
+  if (to_image) transfer_to_image(lens, w, rays, record, opl, true);
   // Back into the field's frame.
   if (rays.turned()) turn_about_z(rays.frame_cos, -rays.frame_sin, count, x, y, l, m);
 }
