@@ -15,6 +15,8 @@
 #include "lensopt/paraxial/paraxial.h"
 #include "test_support.h"
 
+namespace test_optimize {
+
 using namespace lensopt;
 
 namespace {
@@ -453,3 +455,5 @@ TEST_CASE("optimize: a lens traced as written keeps its own focal length, at a f
   CHECK(std::abs(efl_final - efl_start) <= 1e-6 * efl_start);
   CHECK(result.final_spot_um <= result.start_spot_um);
 }
+
+}  // namespace test_optimize
