@@ -18,7 +18,7 @@
 #include "lensopt/lens/lens_io.h"
 #include "lensopt/lens/trace_lens.h"
 
-namespace lensopt {
+namespace lensopt::test_afocal {
 namespace {
 
 using test::check_contains;
@@ -392,4 +392,4 @@ TEST_CASE("afocal: a .zmx with Afocal Image Space (FTYP's seventh value) imports
 }
 
 }  // namespace
-}  // namespace lensopt
+}  // namespace lensopt::test_afocal

@@ -28,6 +28,8 @@
 #include "lensopt/render/render.h"
 #include "test_support.h"
 
+namespace test_consistency {
+
 namespace fs = std::filesystem;
 using namespace lensopt;
 
@@ -382,3 +384,5 @@ TEST_CASE("consistency: relative illumination needs an on-axis field to normaliz
   CHECK(*with_axis.fields[0].relative_illumination == 1.0);
   CHECK(*with_axis.fields[1].relative_illumination < 1.0);
 }
+
+}  // namespace test_consistency

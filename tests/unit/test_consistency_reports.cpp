@@ -14,6 +14,8 @@
 #include "lensopt/formats/lens_file.h"
 #include "test_support.h"
 
+namespace test_consistency_reports {
+
 using namespace lensopt;
 
 TEST_CASE("consistency: the field sweep and encircled energy read analyze's numbers") {
@@ -87,3 +89,5 @@ TEST_CASE("consistency: the field sweep and encircled energy read analyze's numb
     }
   }
 }
+
+}  // namespace test_consistency_reports

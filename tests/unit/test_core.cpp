@@ -9,6 +9,8 @@
 #include "lensopt/core/error.h"
 #include "lensopt/core/random.h"
 
+namespace test_core {
+
 using namespace lensopt;
 
 TEST_CASE("random: splitmix64 gives the published SplitMix64 outputs") {
@@ -68,3 +70,5 @@ TEST_CASE("random: draws stay in range and are uniform (chi-square)") {
   CHECK(uniform_int(rng, 4, 4) == 4);
   CHECK_THROWS_AS(uniform_int(rng, 5, 4), Error);
 }
+
+}  // namespace test_core

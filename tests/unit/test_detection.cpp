@@ -17,6 +17,8 @@
 #include "lensopt/lens/lens_io.h"
 #include "test_support.h"
 
+namespace test_detection {
+
 using namespace lensopt;
 
 namespace {
@@ -408,3 +410,5 @@ TEST_CASE("dataset: the shipped class map file is the built-in one; bad maps are
   std::ofstream(temp_file("twice.toml")) << "[classes]\na = [\"car\"]\nb = [\"Car\"]\n";
   CHECK_THROWS_WITH_AS(read_class_map(temp_file("twice.toml")), doctest::Contains("twice"), Error);
 }
+
+}  // namespace test_detection

@@ -12,6 +12,8 @@
 #include "lensopt/render/render.h"
 #include "test_support.h"
 
+namespace test_detection_crops {
+
 using namespace lensopt;
 
 namespace {
@@ -110,3 +112,5 @@ TEST_CASE(
     }
   }
 }
+
+}  // namespace test_detection_crops

@@ -21,6 +21,8 @@
 #include "test_joint_support.h"
 #include "test_support.h"
 
+namespace test_detector {
+
 using namespace lensopt;
 
 #ifdef LENSOPT_WITH_TORCH
@@ -226,3 +228,5 @@ def forward(self, images, boxes, labels):
 }
 
 #endif
+
+}  // namespace test_detector

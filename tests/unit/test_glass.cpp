@@ -16,6 +16,8 @@
 #include "lensopt/glass/glass.h"
 #include "test_support.h"
 
+namespace test_glass {
+
 using namespace lensopt;
 
 namespace {
@@ -624,3 +626,5 @@ TEST_CASE("catalog: the shipped catalogs hold every glass of the vendor files, u
     }
   }
 }
+
+}  // namespace test_glass

@@ -16,7 +16,7 @@
 #include "lensopt/glass/glass.h"
 #include "test_support.h"
 
-namespace lensopt {
+namespace lensopt::test_glass_catalogs {
 namespace {
 
 constexpr double kD_nm = 587.5618, kF_nm = 486.1327, kC_nm = 656.2725, kG_nm = 435.8343;
@@ -263,4 +263,4 @@ TEST_CASE("glass: Zemax catalog names find the shipped catalogs") {
   CHECK(std::abs(k8.index(kD_nm) - 1.516373) < 1e-6);
 }
 
-}  // namespace lensopt
+}  // namespace lensopt::test_glass_catalogs

@@ -10,6 +10,8 @@
 #include "lensopt/lens/lens_io.h"
 #include "test_support.h"
 
+namespace test_gradient {
+
 using namespace lensopt;
 
 namespace {
@@ -119,3 +121,5 @@ TEST_CASE("gradient: at a flat refracting surface and on axis") {
   options.fields = 1;
   check_gradient(lens, options);
 }
+
+}  // namespace test_gradient

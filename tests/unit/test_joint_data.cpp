@@ -16,6 +16,8 @@
 #include "test_joint_support.h"
 #include "test_support.h"
 
+namespace test_joint_data {
+
 using namespace lensopt;
 
 namespace {
@@ -174,3 +176,5 @@ TEST_CASE("joint: without the paraxial image solve the last spacing is a plain v
   CHECK(tp == doctest::Approx(ls.surfaces[last].thickness_mm).epsilon(1e-12));
   CHECK(std::abs(ts - tp) > 1e-3);
 }
+
+}  // namespace test_joint_data

@@ -18,6 +18,8 @@
 #include "test_joint_support.h"
 #include "test_support.h"
 
+namespace test_joint_detection {
+
 using namespace lensopt;
 
 namespace {
@@ -227,3 +229,5 @@ TEST_CASE(
   MESSAGE("detection chain: worst relative error ", worst, " over ", checked, " variables");
   std::filesystem::remove_all(dir);
 }
+
+}  // namespace test_joint_detection

@@ -20,6 +20,8 @@
 #include "lensopt/render/render.h"
 #include "test_support.h"
 
+namespace test_joint_imaging {
+
 using namespace lensopt;
 
 namespace {
@@ -417,3 +419,5 @@ TEST_CASE("joint imaging: a window of the scene renders and differentiates as th
   std::vector<double> gx;
   CHECK_THROWS_AS(imaging.backward(view, crop, grad, &gx, &values_only), Error);
 }
+
+}  // namespace test_joint_imaging

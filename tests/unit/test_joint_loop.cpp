@@ -19,6 +19,8 @@
 #include "test_joint_support.h"
 #include "test_support.h"
 
+namespace test_joint_loop {
+
 using namespace lensopt;
 
 namespace {
@@ -244,3 +246,5 @@ TEST_CASE("joint: the learning rate is constant, then a half cosine to 0") {
         doctest::Approx(0.5 * (1 + std::cos(3.14159265358979323846 / 4))));
   CHECK(learning_rate_factor(50, 10, 0) == 1.0);
 }
+
+}  // namespace test_joint_loop

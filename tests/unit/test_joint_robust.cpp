@@ -24,6 +24,8 @@
 #include "test_joint_support.h"
 #include "test_support.h"
 
+namespace test_joint_robust {
+
 using namespace lensopt;
 
 namespace {
@@ -219,3 +221,5 @@ TEST_CASE("render: one Renderer rendering from two threads at once gives the one
   CHECK(sa.pixels == ra.pixels);
   CHECK(sb.pixels == rb.pixels);
 }
+
+}  // namespace test_joint_robust

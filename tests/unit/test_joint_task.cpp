@@ -19,31 +19,7 @@
 #include "lensopt/render/metrics.h"
 #include "test_joint_support.h"
 
-using namespace lensopt;
-
-namespace {
-
-// A batch of two crops: dead leaves, and the same blurred by a 3-tap box in x.
-TaskBatch test_batch() {
-  const FloatImage scene = make_dead_leaves(40, 36, 3);
-  TaskBatch batch;
-  for (int k = 0; k < 2; ++k) {
-    const FloatImage sharp = crop_image(scene, CropWindow{k * 8, k * 4, 24, 20});
-    FloatImage blurred = sharp;
-    for (int y = 0; y < sharp.height; ++y)
-      for (int x = 1; x + 1 < sharp.width; ++x)
-        for (int c = 0; c < 3; ++c)
-          blurred.at(x, y, c) =
-              (sharp.at(x - 1, y, c) + sharp.at(x, y, c) + sharp.at(x + 1, y, c)) / 3.0f;
-    batch.rendered.push_back(blurred);
-    batch.sharp.push_back(sharp);
-    batch.targets.emplace_back();
-  }
-  return batch;
-}
-
-}  // namespace
-
+// Declared in test_joint_support.h: outside this file's namespace.
 namespace lensopt::test {
 
 std::filesystem::path write_test_torchscript_module(const std::filesystem::path& dir) {
@@ -69,6 +45,33 @@ def forward(self, images, targets):
 }
 
 }  // namespace lensopt::test
+
+namespace test_joint_task {
+
+using namespace lensopt;
+
+namespace {
+
+// A batch of two crops: dead leaves, and the same blurred by a 3-tap box in x.
+TaskBatch test_batch() {
+  const FloatImage scene = make_dead_leaves(40, 36, 3);
+  TaskBatch batch;
+  for (int k = 0; k < 2; ++k) {
+    const FloatImage sharp = crop_image(scene, CropWindow{k * 8, k * 4, 24, 20});
+    FloatImage blurred = sharp;
+    for (int y = 0; y < sharp.height; ++y)
+      for (int x = 1; x + 1 < sharp.width; ++x)
+        for (int c = 0; c < 3; ++c)
+          blurred.at(x, y, c) =
+              (sharp.at(x - 1, y, c) + sharp.at(x, y, c) + sharp.at(x + 1, y, c)) / 3.0f;
+    batch.rendered.push_back(blurred);
+    batch.sharp.push_back(sharp);
+    batch.targets.emplace_back();
+  }
+  return batch;
+}
+
+}  // namespace
 
 TEST_CASE("joint task: without libtorch the task says so") {
   if (torch_available()) return;
@@ -195,3 +198,5 @@ def forward(self, images, targets):
 }
 
 #endif
+
+}  // namespace test_joint_task

@@ -22,6 +22,8 @@
 #include "lensopt/lens/lens_io.h"
 #include "test_support.h"
 
+namespace test_lens_io {
+
 using namespace lensopt;
 using lensopt::test::bits;
 
@@ -606,3 +608,5 @@ v: [55.34, 37.13]
     check_contains(e2, "YAML syntax error");
   }
 }
+
+}  // namespace test_lens_io

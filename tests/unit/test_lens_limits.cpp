@@ -13,6 +13,8 @@
 #include "lensopt/lens/lens_io.h"
 #include "test_support.h"
 
+namespace test_lens_limits {
+
 using namespace lensopt;
 
 namespace {
@@ -175,3 +177,5 @@ TEST_CASE("lens limits: weights and apertures are validated where they are writt
   for (FieldPoint& f : l.specs.fields) f.weight = 0.0;
   check_contains(error_of([&] { l.validate(); }), "every field weight is 0");
 }
+
+}  // namespace test_lens_limits

@@ -15,6 +15,8 @@
 #include "lensopt/paraxial/solves.h"
 #include "test_support.h"
 
+namespace test_lens_solves {
+
 using namespace lensopt;
 
 namespace {
@@ -221,3 +223,5 @@ TEST_CASE("lens solves: the marginal-height solve of the achromat at 300 mm agai
           " um, as written ", *as_written.mean_rms_spot_um, " um");
   CHECK(*at_focus.mean_rms_spot_um < 0.2 * *as_written.mean_rms_spot_um);
 }
+
+}  // namespace test_lens_solves

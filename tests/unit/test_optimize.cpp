@@ -15,6 +15,27 @@
 #include "lensopt/paraxial/paraxial.h"
 #include "test_support.h"
 
+// <ceres/dynamic_autodiff_cost_function.h> brings glog's CHECK macros. Where doctest came first
+// (the precompiled header), glog's replaced doctest's: a failed CHECK aborted the binary instead of
+// being reported, and a passed one was not counted. doctest's, here and for the files after this
+// one in its unity batch (CMakeLists.txt), as test_torch.h does for libtorch's.
+#undef CHECK
+#undef CHECK_EQ
+#undef CHECK_NE
+#undef CHECK_GT
+#undef CHECK_LT
+#undef CHECK_GE
+#undef CHECK_LE
+#define CHECK(...) DOCTEST_CHECK(__VA_ARGS__)
+#define CHECK_EQ(...) DOCTEST_CHECK_EQ(__VA_ARGS__)
+#define CHECK_NE(...) DOCTEST_CHECK_NE(__VA_ARGS__)
+#define CHECK_GT(...) DOCTEST_CHECK_GT(__VA_ARGS__)
+#define CHECK_LT(...) DOCTEST_CHECK_LT(__VA_ARGS__)
+#define CHECK_GE(...) DOCTEST_CHECK_GE(__VA_ARGS__)
+#define CHECK_LE(...) DOCTEST_CHECK_LE(__VA_ARGS__)
+
+namespace test_optimize {
+
 using namespace lensopt;
 
 namespace {
@@ -453,3 +474,5 @@ TEST_CASE("optimize: a lens traced as written keeps its own focal length, at a f
   CHECK(std::abs(efl_final - efl_start) <= 1e-6 * efl_start);
   CHECK(result.final_spot_um <= result.start_spot_um);
 }
+
+}  // namespace test_optimize

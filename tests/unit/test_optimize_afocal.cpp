@@ -26,7 +26,7 @@
 #include "lensopt/paraxial/afocal.h"
 #include "test_support.h"
 
-namespace lensopt {
+namespace lensopt::test_optimize_afocal {
 namespace {
 
 using test::check_contains;
@@ -258,4 +258,4 @@ TEST_CASE("optimize afocal: what does not apply to an afocal lens is refused, sa
 }
 
 }  // namespace
-}  // namespace lensopt
+}  // namespace lensopt::test_optimize_afocal

@@ -28,7 +28,7 @@
 #include "lensopt/render/render.h"
 #include "test_support.h"
 
-namespace lensopt {
+namespace lensopt::test_optimize_diverging {
 namespace {
 
 using test::check_contains;
@@ -393,4 +393,4 @@ TEST_CASE("render refuses an afocal lens, naming what measures it; optimize take
 }
 
 }  // namespace
-}  // namespace lensopt
+}  // namespace lensopt::test_optimize_diverging

@@ -26,6 +26,8 @@
 #include "lensopt/trace/system.h"
 #include "test_support.h"
 
+namespace test_optimize_mtf {
+
 using namespace lensopt;
 
 namespace {
@@ -342,3 +344,5 @@ TEST_CASE("mtf target: optimize raises a field's tangential MTF to a bound") {
   for (const TargetRow& t : r.final_targets.rows)
     if (t.target.quantity == TargetQuantity::kEflMm) CHECK(t.pass);
 }
+
+}  // namespace test_optimize_mtf

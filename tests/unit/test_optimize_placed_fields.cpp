@@ -17,6 +17,8 @@
 #include "lensopt/optimize/variables.h"
 #include "test_support.h"
 
+namespace test_optimize_placed_fields {
+
 using namespace lensopt;
 
 namespace {
@@ -155,3 +157,5 @@ TEST_CASE("optimize placed fields: per-field targets number the fields as analyz
                                                                  SourceLocation{"--target"})}),
                     doctest::Contains("the lens has 3 fields"));
 }
+
+}  // namespace test_optimize_placed_fields

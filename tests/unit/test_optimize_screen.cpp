@@ -16,6 +16,8 @@
 #include "lensopt/optimize/optimizer.h"
 #include "test_support.h"
 
+namespace test_optimize_screen {
+
 using namespace lensopt;
 
 namespace {
@@ -92,3 +94,5 @@ TEST_CASE("design loss: screening the constraint rays gives the bits of visiting
     }
   }
 }
+
+}  // namespace test_optimize_screen

@@ -20,6 +20,8 @@
 #include "lensopt/paraxial/solves.h"
 #include "test_support.h"
 
+namespace test_optimize_solves {
+
 using namespace lensopt;
 
 namespace {
@@ -254,3 +256,5 @@ TEST_CASE(
   CHECK(std::abs(check.surfaces.back().thickness_mm - written) <= 1e-9 * written);
   CHECK(std::abs(paraxial_efl(r.lens) - paraxial_efl(with_solves(lens))) <= 1e-6);
 }
+
+}  // namespace test_optimize_solves

@@ -22,6 +22,8 @@
 #include "lensopt/optimize/optimizer.h"
 #include "test_support.h"
 
+namespace test_optimize_split_elements {
+
 using namespace lensopt;
 
 namespace {
@@ -143,3 +145,5 @@ TEST_CASE("optimize split elements: the adjoint gradient of the summed bound mat
     CHECK(jets.gradient[i] == doctest::Approx(fd).epsilon(1e-5).scale(1e-6));
   }
 }
+
+}  // namespace test_optimize_split_elements

@@ -20,6 +20,8 @@
 #include "lensopt/optimize/optimizer.h"
 #include "test_support.h"
 
+namespace test_optimize_split_glass {
+
 using namespace lensopt;
 
 namespace {
@@ -198,3 +200,5 @@ TEST_CASE("split glass: OptimizeResult.glasses names a split element's glass onc
   CHECK(r.glasses == expected);
   CHECK(summarize(r).glasses == expected);
 }
+
+}  // namespace test_optimize_split_glass

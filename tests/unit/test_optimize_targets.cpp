@@ -18,6 +18,8 @@
 #include "lensopt/paraxial/paraxial.h"
 #include "test_support.h"
 
+namespace test_optimize_targets {
+
 using namespace lensopt;
 
 namespace {
@@ -332,3 +334,5 @@ TEST_CASE("optimize targets: lens-derived bounds of a start with failing rays ar
   CHECK(derived.min_glass_mm ==
         doctest::Approx(std::min(s * paper.min_glass_mm, std::max(0.0, 0.5 * thinnest))));
 }
+
+}  // namespace test_optimize_targets

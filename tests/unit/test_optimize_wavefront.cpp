@@ -20,6 +20,8 @@
 #include "lensopt/optimize/optimizer.h"
 #include "test_support.h"
 
+namespace test_optimize_wavefront {
+
 using namespace lensopt;
 
 namespace {
@@ -250,3 +252,5 @@ TEST_CASE("optimize wavefront: bad merit options are rejected") {
   unit.wavefront_unit_mm = -1.0;
   CHECK_THROWS_WITH_AS(unit.validate(), doctest::Contains("wavefront_unit_mm"), Error);
 }
+
+}  // namespace test_optimize_wavefront

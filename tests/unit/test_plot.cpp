@@ -26,6 +26,8 @@
 #include "lensopt/trace/kernel.h"
 #include "test_support.h"
 
+namespace test_plot {
+
 using namespace lensopt;
 using namespace lensopt::plot;
 
@@ -514,3 +516,5 @@ TEST_CASE("plot: canvases leave out non-finite points and clip lines") {
   canvas.line({0, 70}, {100, 70}, Style{});
   CHECK(canvas.str().find("x2=\"60.00\"") != std::string::npos);
 }
+
+}  // namespace test_plot

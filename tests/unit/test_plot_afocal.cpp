@@ -14,7 +14,7 @@
 #include "lensopt/plot/plot.h"
 #include "test_support.h"
 
-namespace lensopt::plot {
+namespace lensopt::plot::test_plot_afocal {
 namespace {
 
 // A Keplerian telescope f1 = 100, f2 = 25 of two plano-convex singlets (OpticStudio model
@@ -72,4 +72,4 @@ TEST_CASE("plot afocal: the spot diagram is drawn in microradians with the analy
 }
 
 }  // namespace
-}  // namespace lensopt::plot
+}  // namespace lensopt::plot::test_plot_afocal

@@ -15,6 +15,8 @@
 #include "lensopt/plot/psf_strip.h"
 #include "test_support.h"
 
+namespace test_plot_fields {
+
 using namespace lensopt;
 using namespace lensopt::plot;
 
@@ -101,3 +103,5 @@ TEST_CASE("plot fields: object- and image-height fields are labelled in mm, not 
   CHECK(fans.fields[2].label == "image 2.00 mm");
   CHECK(report_svg(ctx).find("image 2.00 mm tangential") != std::string::npos);
 }
+
+}  // namespace test_plot_fields

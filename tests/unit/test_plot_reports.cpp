@@ -14,6 +14,8 @@
 #include "lensopt/plot/report_charts.h"
 #include "test_support.h"
 
+namespace test_plot_reports {
+
 using namespace lensopt;
 using namespace lensopt::plot;
 
@@ -122,3 +124,5 @@ TEST_CASE("plot reports: the Airy encircled energy reference is 1 - J0^2 - J1^2"
   CHECK(airy_encircled_energy(10.0 * 3.8317 / (1.22 * kPi), 10.0) ==
         doctest::Approx(0.8378).epsilon(1e-3));
 }
+
+}  // namespace test_plot_reports

@@ -17,6 +17,8 @@
 #include "lensopt/trace/kernel.h"
 #include "test_support.h"
 
+namespace test_profile_downstream {
+
 using namespace lensopt;
 
 namespace {
@@ -348,3 +350,5 @@ TEST_CASE("profile bounds: optimize pulls a too steep asphere back below the slo
     }
   CHECK(met);
 }
+
+}  // namespace test_profile_downstream

@@ -7,6 +7,8 @@
 #include "lensopt/lens/lens_io.h"
 #include "test_support.h"
 
+namespace test_reference {
+
 using namespace lensopt;
 
 namespace {
@@ -81,3 +83,5 @@ TEST_CASE("reference: analysis figures of the Tessar are physically sensible") {
           100 * unaimed.max_aiming_error, " % without ray aiming");
   CHECK(r.max_aiming_error < 0.1 * unaimed.max_aiming_error);
 }
+
+}  // namespace test_reference

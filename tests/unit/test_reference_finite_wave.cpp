@@ -20,6 +20,8 @@
 #include "lensopt/trace/system.h"
 #include "test_support.h"
 
+namespace test_reference_finite_wave {
+
 using namespace lensopt;
 
 namespace {
@@ -346,3 +348,5 @@ TEST_CASE("wave finite: wavefront_mm_per_wave uses the working F-number of a fin
           doctest::Approx(unit * (radius + dz) / radius).epsilon(2e-2).scale(0));
   }
 }
+
+}  // namespace test_reference_finite_wave

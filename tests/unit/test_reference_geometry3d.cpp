@@ -17,6 +17,8 @@
 #include "lensopt/trace/system.h"
 #include "test_support.h"
 
+namespace test_reference_geometry3d {
+
 using namespace lensopt;
 
 TEST_CASE("reference geometry3d: coordinate breaks and tilts match optiland's trace") {
@@ -116,3 +118,5 @@ TEST_CASE("reference geometry3d: coordinate breaks and tilts match optiland's tr
                   "{:.3e} mm",
                   worst_field));
 }
+
+}  // namespace test_reference_geometry3d

@@ -16,6 +16,8 @@
 #include "lensopt/trace/system.h"
 #include "test_support.h"
 
+namespace test_reference_illumination {
+
 using namespace lensopt;
 
 namespace {
@@ -197,3 +199,5 @@ TEST_CASE("illumination: every lens of the corpus has R in [0, 1.5] or a reason"
   }
   CHECK(lenses >= 20);
 }
+
+}  // namespace test_reference_illumination

@@ -27,6 +27,8 @@
 #include "lensopt/trace/system.h"
 #include "test_support.h"
 
+namespace test_reference_independent {
+
 using namespace lensopt;
 
 namespace {
@@ -731,3 +733,5 @@ TEST_CASE("independent: optiland run on real .zmx files, first order and real ra
                   surface_points, worst_surfaces, missed));
   CHECK(lenses == static_cast<int>(doc.at("lenses").size()));
 }
+
+}  // namespace test_reference_independent

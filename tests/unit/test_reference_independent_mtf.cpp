@@ -42,6 +42,8 @@
 #include "lensopt/trace/system.h"
 #include "test_support.h"
 
+namespace test_reference_independent_mtf {
+
 using namespace lensopt;
 
 namespace {
@@ -271,3 +273,5 @@ TEST_CASE("independent: optiland's FFT and geometric MTF of the zmx lenses and t
       worst.compared, worst.fft, worst.fft_clipped, worst.fft_backward, worst.geo,
       worst.native_axis, worst.native_full));
 }
+
+}  // namespace test_reference_independent_mtf

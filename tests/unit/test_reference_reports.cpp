@@ -17,6 +17,8 @@
 #include "lensopt/paraxial/paraxial.h"
 #include "test_support.h"
 
+namespace test_reference_reports {
+
 using namespace lensopt;
 
 namespace {
@@ -250,3 +252,5 @@ TEST_CASE("reports: real-ray lateral colour tends to exact paraxial colour at a 
           doctest::Approx(lc.lateral_colour_um[1]).epsilon(1e-9));
   }
 }
+
+}  // namespace test_reference_reports

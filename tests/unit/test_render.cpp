@@ -23,6 +23,8 @@
 #include "lensopt/render/render.h"
 #include "test_support.h"
 
+namespace test_render {
+
 using namespace lensopt;
 namespace fs = std::filesystem;
 
@@ -642,3 +644,5 @@ TEST_CASE("render: bad inputs are reported, skipped, and leave nothing half-writ
   CHECK_THROWS_WITH_AS(renderer.render(FloatImage(2000, 20, 3, 0.5f)),
                        doctest::Contains("smaller than"), Error);
 }
+
+}  // namespace test_render

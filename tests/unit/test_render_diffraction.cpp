@@ -22,6 +22,8 @@
 #include "lensopt/render/render.h"
 #include "test_support.h"
 
+namespace test_render_diffraction {
+
 using namespace lensopt;
 
 namespace {
@@ -259,3 +261,5 @@ TEST_CASE("render diffraction: the metrics' settings record the PSF kind and aut
   CHECK(noted);
   fs::remove_all(dir);
 }
+
+}  // namespace test_render_diffraction

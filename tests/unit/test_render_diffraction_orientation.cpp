@@ -23,6 +23,8 @@
 #include "lensopt/render/render.h"
 #include "test_support.h"
 
+namespace test_render_diffraction_orientation {
+
 using namespace lensopt;
 
 namespace {
@@ -212,3 +214,5 @@ TEST_CASE("diffraction orientation: render kernels and point sources land on the
   INFO("largest point-source centroid difference ", worst_spot, " px");
   CHECK(worst_spot < 0.15);
 }
+
+}  // namespace test_render_diffraction_orientation

@@ -12,6 +12,8 @@
 #include "lensopt/render/render.h"
 #include "test_support.h"
 
+namespace test_render_fields {
+
 using namespace lensopt;
 
 namespace {
@@ -79,3 +81,5 @@ TEST_CASE("render fields: a lens with only an on-axis field renders its blurred 
   MESSAGE("reported PSNR ", result.psnr_db, " dB, of the written image ", written, " dB");
   CHECK(result.psnr_db == doctest::Approx(written).epsilon(1e-4));
 }
+
+}  // namespace test_render_fields

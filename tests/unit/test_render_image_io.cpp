@@ -13,6 +13,8 @@
 #include "lensopt/render/image.h"
 #include "test_support.h"
 
+namespace test_render_image_io {
+
 using namespace lensopt;
 namespace fs = std::filesystem;
 
@@ -157,3 +159,5 @@ TEST_CASE("render image io: EXR goes through the OpenImageIO module, float-exact
   const LoadedImage h2 = read_image(half);
   CHECK(h2.image.pixels[5] == doctest::Approx(image.pixels[5]).epsilon(1e-3));
 }
+
+}  // namespace test_render_image_io

@@ -18,6 +18,8 @@
 #include "lensopt/render/image.h"
 #include "test_support.h"
 
+namespace test_render_image_limits {
+
 using namespace lensopt;
 namespace fs = std::filesystem;
 
@@ -108,3 +110,5 @@ TEST_CASE("render image limits: the pixel limit refuses large headers; it can be
     CHECK(max_image_pixels() == kDefaultMaxImagePixels);
   }
 }
+
+}  // namespace test_render_image_limits

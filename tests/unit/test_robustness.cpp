@@ -30,6 +30,8 @@
 #include "lensopt/render/psf_resample.h"
 #include "test_support.h"
 
+namespace test_robustness {
+
 using namespace lensopt;
 namespace fs = std::filesystem;
 
@@ -362,3 +364,5 @@ TEST_CASE("fuzz: mutated TOML, YAML, .zmx and AGF inputs give a lens or an Error
   CHECK(errors > 0);
   CHECK(lenses > 0);
 }
+
+}  // namespace test_robustness

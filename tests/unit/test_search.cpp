@@ -20,6 +20,8 @@
 #include "optimize/summary_json.h"
 #include "test_support.h"
 
+namespace test_search {
+
 using namespace lensopt;
 namespace fs = std::filesystem;
 
@@ -528,3 +530,5 @@ TEST_CASE("search: a lens file keeps its own specs unless the search gives them"
   }
   std::filesystem::remove_all(dir);
 }
+
+}  // namespace test_search

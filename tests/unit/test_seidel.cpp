@@ -14,6 +14,8 @@
 #include "lensopt/trace/system.h"
 #include "test_support.h"
 
+namespace test_seidel {
+
 using namespace lensopt;
 
 namespace {
@@ -270,3 +272,5 @@ TEST_CASE("seidel: primary colour is the first-order limit of exact paraxial col
     }
   }
 }
+
+}  // namespace test_seidel

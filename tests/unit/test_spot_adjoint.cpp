@@ -17,6 +17,8 @@
 #include "test_support.h"
 #include "trace_checks.h"
 
+namespace test_spot_adjoint {
+
 using namespace lensopt;
 
 namespace {
@@ -630,3 +632,5 @@ TEST_CASE("spot weights: the design loss weighs wavelengths as the analysis (adj
                           DesignLossOptions{}, nullptr, nullptr, &plain_loss);
   CHECK(std::abs(plain_loss.spot_mm - loss.spot_mm) > 1e-4 * loss.spot_mm);
 }
+
+}  // namespace test_spot_adjoint

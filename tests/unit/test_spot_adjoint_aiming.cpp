@@ -20,6 +20,8 @@
 #include "test_support.h"
 #include "trace_checks.h"
 
+namespace test_spot_adjoint_aiming {
+
 using namespace lensopt;
 
 namespace {
@@ -220,3 +222,5 @@ TEST_CASE("design loss: the ray-angle hinge exactly at its bound on plane plates
     }
   }
 }
+
+}  // namespace test_spot_adjoint_aiming

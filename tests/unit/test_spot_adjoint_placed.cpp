@@ -19,6 +19,8 @@
 #include "test_support.h"
 #include "trace_checks.h"
 
+namespace test_spot_adjoint_placed {
+
 using namespace lensopt;
 
 namespace {
@@ -259,3 +261,5 @@ TEST_CASE("spot adjoint: a finite object's ray directions follow their start poi
   lens.specs.fields = {field_at(0.0, 0.0), field_at(4.0, 6.0), field_at(-8.0, 0.0)};
   check_spot(lens, small_sampling());
 }
+
+}  // namespace test_spot_adjoint_placed

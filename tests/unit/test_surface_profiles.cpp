@@ -18,6 +18,8 @@
 #include "lensopt/trace/kernel.h"
 #include "test_support.h"
 
+namespace test_surface_profiles {
+
 using namespace lensopt;
 
 namespace {
@@ -466,3 +468,5 @@ TEST_CASE("asphere intersection finds every steep ray that meets the surface bel
   CHECK(checked > 15000);
   CHECK(hits == checked);
 }
+
+}  // namespace test_surface_profiles

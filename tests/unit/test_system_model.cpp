@@ -21,6 +21,8 @@
 #include "test_support.h"
 #include "trace_checks.h"
 
+namespace test_system_model {
+
 using namespace lensopt;
 
 namespace {
@@ -533,3 +535,5 @@ TEST_CASE("apertures: crossing surfaces are found at the vertex and inside the c
   CHECK(rim[0].gap_mm ==
         doctest::Approx(0.5 - 2.0 * (10.0 - std::sqrt(100.0 - r * r))).epsilon(1e-12));
 }
+
+}  // namespace test_system_model

@@ -21,6 +21,8 @@
 #include "lensopt/tolerance/tolerance.h"
 #include "test_support.h"
 
+namespace test_tolerance {
+
 using namespace lensopt;
 
 namespace {
@@ -491,3 +493,5 @@ TEST_CASE("tolerance: through-focus moments equal the per-ray sums, failed rays 
   CHECK(moments.sum_sx2 == sum_sx2);
   CHECK(moments.rms(0.0) > 0.0);
 }
+
+}  // namespace test_tolerance

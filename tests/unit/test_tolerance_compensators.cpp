@@ -15,6 +15,8 @@
 #include "lensopt/tolerance/tolerance.h"
 #include "test_support.h"
 
+namespace test_tolerance_compensators {
+
 using namespace lensopt;
 
 namespace {
@@ -290,3 +292,5 @@ TEST_CASE("tolerance compensators: the Tessar's table and yield with a decentred
   CHECK(format_trials_csv(plain).find("comp_") == std::string::npos);
   CHECK(format_tolerance_text(compensated).find("decenter x, y of group 2") != std::string::npos);
 }
+
+}  // namespace test_tolerance_compensators

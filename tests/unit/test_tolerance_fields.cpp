@@ -11,6 +11,8 @@
 #include "lensopt/tolerance/tolerance.h"
 #include "test_support.h"
 
+namespace test_tolerance_fields {
+
 using namespace lensopt;
 
 TEST_CASE("tolerance fields: a decentred trial sees the +y, -y and x fields apart") {
@@ -72,3 +74,5 @@ TEST_CASE("tolerance fields: the summary counts the full pupil of a decentred tr
   const ToleranceModel symmetric(lens, o);
   CHECK(symmetric.rays_per_field_wavelength() == 36);
 }
+
+}  // namespace test_tolerance_fields

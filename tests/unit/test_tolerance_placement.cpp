@@ -13,6 +13,8 @@
 #include "lensopt/tolerance/tolerance.h"
 #include "test_support.h"
 
+namespace test_tolerance_placement {
+
 using namespace lensopt;
 
 namespace {
@@ -150,3 +152,5 @@ TEST_CASE("tolerance placement: the Tessar with decenter and tilt tolerances") {
                       r.nominal.mean_spot_um, r.spot.mean, r.spot.p90, r.yield.value_or(-1.0)));
   CHECK(r.spot.mean > r0.nominal.mean_spot_um);
 }
+
+}  // namespace test_tolerance_placement

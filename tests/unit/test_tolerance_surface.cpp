@@ -14,6 +14,8 @@
 #include "lensopt/trace/kernel.h"
 #include "test_support.h"
 
+namespace test_tolerance_surface {
+
 using namespace lensopt;
 
 namespace {
@@ -285,3 +287,5 @@ TEST_CASE("tolerance surface: a tilted mirror turns the reflected axial ray by t
   const TrialResult tilted = model.evaluate(d);
   REQUIRE(tilted.valid);
 }
+
+}  // namespace test_tolerance_surface

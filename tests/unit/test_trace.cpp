@@ -10,6 +10,8 @@
 #include "lensopt/trace/kernel.h"
 #include "test_support.h"
 
+namespace test_trace {
+
 using namespace lensopt;
 
 namespace {
@@ -238,3 +240,5 @@ TEST_CASE("trace: a failed ray in the bundle leaves the other rays' bits unchang
     CHECK(far.x[i] == alone.x[i]);
   }
 }
+
+}  // namespace test_trace

@@ -20,6 +20,8 @@
 #include "lensopt/trace/system.h"
 #include "test_support.h"
 
+namespace test_trace_aiming_dual {
+
 using namespace lensopt;
 
 namespace {
@@ -125,3 +127,5 @@ TEST_CASE("aiming on nested duals: the nested Jets' bits on a double Gauss") {
   check_aiming<12>(path, false);
   check_aiming<16>(path, false);
 }
+
+}  // namespace test_trace_aiming_dual

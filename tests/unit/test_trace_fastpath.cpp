@@ -18,7 +18,7 @@
 #include "lensopt/trace/system.h"
 #include "test_support.h"
 
-namespace lensopt {
+namespace lensopt::test_trace_fastpath {
 namespace {
 
 // ---- main @ b3e6a74, include/lensopt/trace/kernel.h trace_bundle, renamed. ----
@@ -231,9 +231,6 @@ void compare_on(const TraceSystem<T>& sys, const std::string& name, int& compare
 }
 
 }  // namespace
-}  // namespace lensopt
-
-using namespace lensopt;
 
 TEST_CASE("trace fast path: bit-identical to main's driver on every shipped lens") {
   std::vector<std::filesystem::path> files;
@@ -285,3 +282,5 @@ TEST_CASE("trace fast path: Jets bit-identical to main's driver") {
   compare_on(sj, "tessar (Jet)", compared);
   CHECK(compared > 10);
 }
+
+}  // namespace lensopt::test_trace_fastpath

@@ -15,6 +15,8 @@
 #include "lensopt/plot/plot_data.h"
 #include "test_support.h"
 
+namespace test_trace_field_xy {
+
 using namespace lensopt;
 using namespace lensopt::plot;
 
@@ -185,3 +187,5 @@ TEST_CASE("field xy: TOML fields_x and .zmx XFLN round trip, vignetting factors 
   bad.replace(at, 4, "[89.0");
   CHECK_THROWS_WITH_AS(parse_lens_toml(bad, "bad.toml"), doctest::Contains("below 89"), Error);
 }
+
+}  // namespace test_trace_field_xy

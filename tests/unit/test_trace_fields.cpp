@@ -15,6 +15,8 @@
 #include "lensopt/trace/system.h"
 #include "test_support.h"
 
+namespace test_trace_fields {
+
 using namespace lensopt;
 
 namespace {
@@ -156,3 +158,5 @@ TEST_CASE("fields: an image height no chief ray reaches is refused, naming the f
   CHECK_FALSE(sys.field_solve_failure.empty());
   CHECK(sys.field_solve_failure.find("field 3") != std::string::npos);
 }
+
+}  // namespace test_trace_fields

@@ -18,6 +18,8 @@
 #include "lensopt/trace/system.h"
 #include "test_support.h"
 
+namespace test_trace_geometry3d {
+
 using namespace lensopt;
 
 namespace {
@@ -607,3 +609,5 @@ TEST_CASE("geometry3d: the axial field of a decentred lens is aimed (its pupil i
     CHECK(std::abs(m.offset_y) < 1e-14);
   }
 }
+
+}  // namespace test_trace_geometry3d

@@ -18,6 +18,8 @@
 #include "lensopt/trace/kernel.h"
 #include "test_support.h"
 
+namespace test_trace_jet_kernel {
+
 using namespace lensopt;
 
 namespace {
@@ -286,3 +288,5 @@ TEST_CASE(
     }
   }
 }
+
+}  // namespace test_trace_jet_kernel

@@ -18,6 +18,8 @@
 #include "lensopt/trace/kernel.h"
 #include "test_support.h"
 
+namespace test_trace_jet_records {
+
 using namespace lensopt;
 
 namespace {
@@ -100,3 +102,5 @@ TEST_CASE("compiled Jet trace: records written or zero (packs: a lens of spheres
 TEST_CASE("compiled Jet trace: records written or zero (the template: an asphere)") {
   check_records<12>("doublet-asphere.toml");
 }
+
+}  // namespace test_trace_jet_records

@@ -24,6 +24,8 @@
 #include "test_support.h"
 #include "trace_checks.h"
 
+namespace test_trace_vignetting {
+
 using namespace lensopt;
 
 namespace {
@@ -430,3 +432,5 @@ TEST_CASE("vignetting: gradients with VDX and VAN stay exact (adjoint, Jets, fin
     expected += l.field_weights[h] / phi_sum * l.field_rms_mm[h] * l.field_rms_mm[h];
   CHECK(sum_squares == doctest::Approx(expected).epsilon(1e-12));
 }
+
+}  // namespace test_trace_vignetting

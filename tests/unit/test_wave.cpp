@@ -18,6 +18,8 @@
 #include "lensopt/lens/lens_io.h"
 #include "test_support.h"
 
+namespace test_wave {
+
 using namespace lensopt;
 
 namespace {
@@ -472,3 +474,5 @@ TEST_CASE("wave: a known defocus gives the Zernike defocus term of the OPD's qua
   CHECK(json.find("\"zernike_ordering\":\"fringe\"") != std::string::npos);
   CHECK(format_wave_text(r).find("Zernike fringe coefficients") != std::string::npos);
 }
+
+}  // namespace test_wave

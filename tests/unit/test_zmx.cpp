@@ -25,6 +25,8 @@
 #include "lensopt/paraxial/paraxial.h"
 #include "test_support.h"
 
+namespace test_zmx {
+
 using namespace lensopt;
 using lensopt::test::bits;
 
@@ -377,3 +379,5 @@ TEST_CASE("zmx: read_lens and write_lens dispatch on .zmx") {
   test::check_identical_lenses(lens, back);
   std::filesystem::remove_all(dir);
 }
+
+}  // namespace test_zmx

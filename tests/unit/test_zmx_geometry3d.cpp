@@ -22,6 +22,8 @@
 #include "lensopt/trace/system.h"
 #include "test_support.h"
 
+namespace test_zmx_geometry3d {
+
 using namespace lensopt;
 
 namespace {
@@ -324,3 +326,5 @@ TEST_CASE("zmx-geometry3d: bad coordinate breaks and apertures are named with fi
   CHECK(good.lens.surfaces[1].placement.tilt_x_deg == 10.0);
   CHECK(good.lens.surfaces[2].mirror);
 }
+
+}  // namespace test_zmx_geometry3d

@@ -19,7 +19,7 @@
 #include "lensopt/paraxial/paraxial.h"
 #include "test_support.h"
 
-namespace lensopt {
+namespace lensopt::test_zmx_glasses {
 namespace {
 
 constexpr double kD_nm = 587.5618;
@@ -270,4 +270,4 @@ TEST_CASE("zmx real: Edmund 55278 (ray-optics) with GCAT SCHOTT INFRARED MISC") 
   CHECK(std::abs(lensopt_efl - efl) < 1e-12 * std::abs(efl));
 }
 
-}  // namespace lensopt
+}  // namespace lensopt::test_zmx_glasses

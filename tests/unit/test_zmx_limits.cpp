@@ -11,6 +11,8 @@
 #include "lensopt/formats/zmx.h"
 #include "test_support.h"
 
+namespace test_zmx_limits {
+
 using namespace lensopt;
 
 namespace {
@@ -80,3 +82,5 @@ TEST_CASE("zmx limits: more than 1000 surfaces, fields or wavelengths are refuse
   check_contains(zmx_error(doublet_zmx("PWAV", "WAVM 1001 0.55 1")),
                  "wavelength number 1001 is out of range");
 }
+
+}  // namespace test_zmx_limits

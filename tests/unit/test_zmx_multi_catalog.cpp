@@ -14,7 +14,7 @@
 #include "lensopt/lens/trace_lens.h"
 #include "lensopt/paraxial/paraxial.h"
 
-namespace lensopt {
+namespace lensopt::test_zmx_multi_catalog {
 namespace {
 
 // A cemented doublet: N-BK7 from SCHOTT and S-TIH6 from OHARA, two fields, F, d, C.
@@ -132,4 +132,4 @@ TEST_CASE("zmx multi-catalog: a TOML material names its glass's catalog, with cl
   CHECK(extra.find("nd") != std::string::npos);
 }
 
-}  // namespace lensopt
+}  // namespace lensopt::test_zmx_multi_catalog

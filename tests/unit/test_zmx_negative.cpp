@@ -20,7 +20,7 @@
 #include "lensopt/render/render.h"
 #include "test_support.h"
 
-namespace lensopt {
+namespace lensopt::test_zmx_negative {
 namespace {
 
 struct Independent {
@@ -207,4 +207,4 @@ TEST_CASE("zmx negative: off-axis fields of a diverging lens; render refuses wit
   }
 }
 
-}  // namespace lensopt
+}  // namespace lensopt::test_zmx_negative

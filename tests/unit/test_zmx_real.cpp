@@ -25,6 +25,8 @@
 #include "lensopt/paraxial/paraxial.h"
 #include "test_support.h"
 
+namespace test_zmx_real {
+
 using namespace lensopt;
 
 namespace {
@@ -327,3 +329,5 @@ TEST_CASE("zmx catalogs: an unknown glass names the catalogs and the nearest gla
   CHECK(bare.find("closest by name") != std::string::npos);
   CHECK(bare.find("nearest to nd") == std::string::npos);
 }
+
+}  // namespace test_zmx_real

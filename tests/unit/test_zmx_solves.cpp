@@ -12,6 +12,8 @@
 #include "lensopt/paraxial/solves.h"
 #include "test_support.h"
 
+namespace test_zmx_solves {
+
 using namespace lensopt;
 
 namespace {
@@ -158,3 +160,5 @@ TEST_CASE("zmx solves: variables, pickups and the focus solve survive a .zmx rou
     CHECK(reread.surfaces[k].thickness_mm ==
           doctest::Approx(lens.surfaces[k].thickness_mm).epsilon(1e-12));
 }
+
+}  // namespace test_zmx_solves
