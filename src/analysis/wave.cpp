@@ -138,7 +138,7 @@ MonoWave mono_wave(const TraceSystem<double>& sys, int h, int w, const PupilGrid
     v[1] = a * std::sin(phase);
     amplitude_sum += a;
     // Sampling check: the wavefront step to the right and upper neighbours.
-    for (const auto [dr, dc] : {std::pair{0, 1}, std::pair{1, 0}}) {
+    for (const auto& [dr, dc] : {std::pair{0, 1}, std::pair{1, 0}}) {
       const int r2 = grid.row[i] + dr, c2 = grid.column[i] + dc;
       if (r2 >= n || c2 >= n) continue;
       const int j = cell_index[static_cast<std::size_t>(r2) * n + c2];

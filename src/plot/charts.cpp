@@ -10,8 +10,6 @@
 namespace lensopt::plot {
 namespace {
 
-const char* kMicro = "\u00b5m";
-
 // Channel legend entries "R 584-666 nm" with the middle wavelength's colour.
 std::vector<LegendEntry> wavelength_legend(const SpotData& spots) {
   std::vector<LegendEntry> out;
